@@ -10,14 +10,18 @@ from .camera import (
     to_camera,
     world_to_cv,
 )
+from .geodesy import EARTH_RADIUS_M, RunwayFrame, runway_db_entry
 
 __all__ = [
     "CORNER_NAMES",
+    "EARTH_RADIUS_M",
+    "RunwayFrame",
     "intrinsics",
     "lard_attitude",
     "lard_rotation",
     "project",
     "runway_corners",
+    "runway_db_entry",
     "to_camera",
     "world_to_cv",
 ]
