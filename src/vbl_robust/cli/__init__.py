@@ -1,0 +1,41 @@
+"""The ``vbl-robust`` command line (typer). Each sub-command lives in its own module of this package.
+
+Heavy imports (torch, ultralytics, OpenCV) happen inside the commands, so ``vbl-robust --help`` is instant.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+
+import typer
+
+app = typer.Typer(
+    name="vbl-robust",
+    help="Find the perturbations (camera roll, contrast, …) that make a vision-based landing pipeline fail.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+# Sub-command modules; each defines `register(app)`. A module that is not there yet is skipped.
+_COMMAND_MODULES = ("scenes", "audit", "reproduce", "report", "train")
+
+
+@app.callback()
+def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log progress details (INFO).")) -> None:
+    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+
+
+for _name in _COMMAND_MODULES:
+    try:
+        _mod = importlib.import_module(f"{__name__}.{_name}")
+    except ModuleNotFoundError as exc:  # command not written yet
+        if exc.name != f"{__name__}.{_name}":
+            raise
+        continue
+    _mod.register(app)
+
+
+def main() -> None:  # pragma: no cover - console entry
+    app()
