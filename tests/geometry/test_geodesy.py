@@ -137,3 +137,17 @@ def test_camera_through_lat_lon_alt_reprojects_identically(site):
         assert np.linalg.norm(C2 - C) < 1e-3
         np.testing.assert_allclose(R2, R, atol=1e-12)
         np.testing.assert_allclose(project(corners, R2, C2, K), uv, atol=1e-6)
+
+
+def test_heading_is_the_wgs84_geodesic_azimuth():
+    # along a meridian or the equator sphere and ellipsoid agree; on a diagonal at mid-latitude they differ by
+    # about e²·cos²φ·sin(2·az)/2 (the reason the yaw reference is the WGS84 heading, see module docstring)
+    for lat, az in ((0.0, 90.0), (45.0, 0.0), (45.0, 180.0)):
+        f = RunwayFrame.from_corners(runway_db_entry(lat, 10.0, 0.0, az, 3000.0, 45.0))
+        assert abs(((f.heading_deg - az + 180) % 360) - 180) < 1e-4
+    f = RunwayFrame.from_corners(runway_db_entry(53.33, -113.57, 712.0, 214.86, 3300.0, 62.0))
+    e2 = 6.69438e-3
+    expected = math.degrees(e2 * math.cos(math.radians(53.33)) ** 2 * math.sin(2 * math.radians(214.86)) / 2)
+    assert f.heading_deg - f.azimuth_deg == pytest.approx(expected, rel=0.05)
+    R = f.camera_rotation(f.heading_deg, 90.0, 0.0)
+    np.testing.assert_allclose(R, np.eye(3), atol=1e-12)  # yaw = heading: camera looks down the runway axis

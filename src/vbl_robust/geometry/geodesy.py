@@ -23,12 +23,28 @@ ends have the same altitude has its far end slightly below it (``−L²/2R``, 1.
 exact, the runway follows the Earth.
 
 **Camera attitude of a LARD row** (:meth:`RunwayFrame.camera_rotation`): the LARD V2 labeller convention —
-the camera starts aligned with the runway-frame axes and is rotated intrinsically by ``az − yaw`` about z,
-``90 − pitch`` about the new y and ``roll`` about the new x (:func:`.camera.lard_rotation`). The attitude is thus
-taken relative to the level at the LTP, not at the aircraft; the alternative (NED at the aircraft) tilts the
-camera by the angle between the two verticals (0.054° at 6 km, ≈ 0.8 px at f = 887 px). On the published LARD
-V2 row of ``tests/fixtures/lard/`` the chosen convention reproduces the labels as reported in
-``tests/data/test_lard_real.py``.
+the camera starts aligned with the runway-frame axes and is rotated intrinsically by ``heading − yaw`` about z,
+``90 − pitch`` about the new y and ``roll`` about the new x (:func:`.camera.lard_rotation`), where ``heading``
+(:attr:`RunwayFrame.heading_deg`) is the runway's true azimuth as the labeller computes it: the forward azimuth
+of the WGS84 geodesic from the lat/lon average of C, D to that of A, B. The attitude is thus relative to the
+runway axes (level at the LTP), not to the local level at the aircraft.
+
+Why this choice (measured on the published LARD V2 row of ``tests/fixtures/lard/``, CYEG runway 20 at 5.75 km;
+labels are truncated, so a perfect model gives ``projection − label`` in [0, 1) px):
+
+=========================================================  ==============================  ====================
+convention                                                 projection − label (u; v) px    outside [0, 1)
+=========================================================  ==============================  ====================
+sphere frame, yaw relative to ``heading_deg`` (chosen)      u 0.10…0.89; v −0.42…0.51        0.42 px
+sphere frame, yaw relative to the sphere ``azimuth_deg``    u −0.90…−0.12; v −0.45…0.48      0.90 px
+sphere ECEF → NED at the aircraft → body → camera           u −0.32…0.46; v 0.37…1.30        0.32 / 0.30 px
+LARD labeller itself (WGS84 geodesics, flat vertical)       u 0.08…0.87; v −0.09…0.63        0.09 px
+=========================================================  ==============================  ====================
+
+The sphere azimuth and the WGS84 azimuth differ by up to ``e²·cos²φ·sin(2az)/2`` (0.065° here, 1 px at f = 887
+px), which is why the yaw reference matters. The positions stay on the sphere (the project's convention): the
+labeller's own frame (WGS84 geodesic distances, ``z = alt − alt_LTP``) places that camera 8.4 m farther and
+2.6 m higher (Earth curvature), a similarity-like difference that moves the corners by < 0.3 px.
 """
 
 from __future__ import annotations
@@ -39,6 +55,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pymap3d
+from pymap3d.vincenty import vdist
 
 from .camera import lard_attitude, lard_rotation, runway_corners
 
@@ -48,6 +65,7 @@ EARTH_RADIUS_M = 6_371_010.0
 SPHERE = pymap3d.Ellipsoid(EARTH_RADIUS_M, EARTH_RADIUS_M, name="LARD sphere", model="lard-sphere")
 
 DB_CORNERS = ("A", "B", "C", "D")
+_WGS84 = pymap3d.Ellipsoid.from_name("wgs84")
 
 
 def geodetic_to_ecef(lat_deg, lon_deg, alt_m) -> np.ndarray:
@@ -89,11 +107,13 @@ class RunwayFrame:
     Attributes:
         ltp: (lat_deg, lon_deg, alt_m) of the landing threshold point, the frame origin.
         azimuth_deg: true bearing of the runway axis LTP → FPAP, degrees in [0, 360).
+        heading_deg: true runway azimuth on WGS84 (the LARD labeller's), the reference of the camera yaw.
         corners_geodetic: (4, 3) DB corners A, B, C, D as (lat, lon, alt), or None when built from the LTP.
     """
 
     ltp: tuple[float, float, float]
     azimuth_deg: float
+    heading_deg: float
     corners_geodetic: np.ndarray | None = None
 
     # ----------------------------------------------------------------------------------------- construction
@@ -103,7 +123,10 @@ class RunwayFrame:
         _check_geodetic("RunwayFrame.from_ltp", lat_deg, lon_deg, alt_m)
         if not math.isfinite(float(azimuth_deg)):
             raise ValueError(f"RunwayFrame.from_ltp: azimuth_deg must be finite, got {azimuth_deg}")
-        return cls((float(lat_deg), float(lon_deg), float(alt_m)), float(azimuth_deg) % 360.0)
+        ltp = (float(lat_deg), float(lon_deg), float(alt_m))
+        probe = cls(ltp, float(azimuth_deg) % 360.0, 0.0)
+        far_lat, far_lon, _ = probe.to_geodetic(np.array([1000.0, 0.0, 0.0]))
+        return cls(ltp, probe.azimuth_deg, _geodesic_azimuth(ltp[:2], (float(far_lat), float(far_lon))))
 
     @classmethod
     def from_corners(cls, corners) -> RunwayFrame:
@@ -122,7 +145,8 @@ class RunwayFrame:
         if math.hypot(e, n) < 1e-6:
             raise ValueError("RunwayFrame.from_corners: LTP and FPAP coincide (degenerate runway corners)")
         az = math.degrees(math.atan2(e, n)) % 360.0
-        return cls((lat0, lon0, alt0), az, llh)
+        heading = _geodesic_azimuth(_mean_lat_lon(llh[2], llh[3]), _mean_lat_lon(llh[0], llh[1]))
+        return cls((lat0, lon0, alt0), az, heading, llh)
 
     # ----------------------------------------------------------------------------------------- mappings
     @property
@@ -161,11 +185,24 @@ class RunwayFrame:
     # ----------------------------------------------------------------------------------------- attitude
     def camera_rotation(self, yaw_deg: float, pitch_lard_deg: float, roll_deg: float) -> np.ndarray:
         """Camera → runway rotation (3, 3) from a LARD row's ``yaw, pitch, roll`` (module conventions)."""
-        return lard_rotation(yaw_deg, pitch_lard_deg, roll_deg, self.azimuth_deg)
+        return lard_rotation(yaw_deg, pitch_lard_deg, roll_deg, self.heading_deg)
 
     def camera_attitude(self, R) -> tuple[float, float, float]:
         """Inverse of :meth:`camera_rotation`: LARD ``(yaw_deg in [0, 360), pitch_lard_deg, roll_deg)``."""
-        return lard_attitude(R, self.azimuth_deg)
+        return lard_attitude(R, self.heading_deg)
+
+
+def _mean_lat_lon(p, q) -> tuple[float, float]:
+    """Average of two (lat, lon, ...) points in degrees, as the LARD labeller does (safe across ±180°)."""
+    dlon = (float(q[1]) - float(p[1]) + 180.0) % 360.0 - 180.0
+    lon = (float(p[1]) + 0.5 * dlon + 180.0) % 360.0 - 180.0
+    return 0.5 * (float(p[0]) + float(q[0])), lon
+
+
+def _geodesic_azimuth(p, q) -> float:
+    """Forward azimuth (degrees in [0, 360)) of the WGS84 geodesic from (lat, lon) ``p`` to ``q``."""
+    _, az = vdist(p[0], p[1], q[0], q[1], ell=_WGS84)
+    return float(az) % 360.0
 
 
 def _corners_array(corners) -> np.ndarray:
