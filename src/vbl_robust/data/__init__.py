@@ -1,5 +1,19 @@
 """Samples and datasets (LARD V2 reader and writer)."""
 
+from .lard import LARD_COLUMNS, approach_metrics, load_runway_db, normalize_runway
+from .lard_read import read_lard
+from .lard_write import write_lard
+from .paths import resolve_within
 from .sample import Sample, load_rgb
 
-__all__ = ["Sample", "load_rgb"]
+__all__ = [
+    "LARD_COLUMNS",
+    "Sample",
+    "approach_metrics",
+    "load_rgb",
+    "load_runway_db",
+    "normalize_runway",
+    "read_lard",
+    "resolve_within",
+    "write_lard",
+]
