@@ -1,0 +1,77 @@
+"""Contrast: blend each image with the mean of its grayscale (torchvision's definition of a contrast factor).
+
+Convention
+----------
+For an RGB image ``x`` with values in ``[0, 1]`` and a factor ``α ≥ 0``::
+
+    m  = mean over all pixels of (0.2989 R + 0.587 G + 0.114 B)      # ITU-R 601-2 luma, per image
+    x' = clamp(α · x + (1 − α) · m, 0, 1)
+
+``α = 1`` is the identity, ``α = 0`` a uniform grey image, ``α > 1`` more contrast. Identical to
+``torchvision.transforms.functional.adjust_contrast`` on float images (tested). Single-channel images use the
+channel mean. Contrast does not move pixels: its point transform is the identity.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+__all__ = ["LUMA_WEIGHTS", "Contrast", "contrast", "contrast_numpy"]
+
+#: ITU-R 601-2 luma weights used by torchvision's ``rgb_to_grayscale``.
+LUMA_WEIGHTS = (0.2989, 0.587, 0.114)
+
+
+def contrast(images: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
+    """Scale the contrast of each image by ``factor`` (see module *Convention*).
+
+    Args:
+        images: ``(B, C, H, W)`` or ``(1, C, H, W)`` (broadcast over the factors), float in ``[0, 1]``, ``C`` ∈ {1, 3}.
+        factor: ``(B,)`` non-negative contrast factors (dimensionless).
+
+    Returns:
+        ``(B, C, H, W)`` in ``[0, 1]``; differentiable w.r.t. ``factor`` and ``images`` (zero gradient where clamped).
+
+    >>> x = torch.tensor([0.2, 0.4, 0.6], dtype=torch.float64).view(1, 1, 1, 3)   # one channel, mean 0.4
+    >>> [round(v, 6) for v in contrast(x, torch.tensor([2.0])).flatten().tolist()]
+    [0.0, 0.4, 0.8]
+    """
+    if images.ndim != 4 or images.shape[1] not in (1, 3):
+        raise ValueError(f"contrast: images must have shape (B, 1 or 3, H, W), got {tuple(images.shape)}")
+    if not images.is_floating_point():
+        raise ValueError(f"contrast: images must be floating point in [0, 1], got {images.dtype}")
+    f = torch.as_tensor(factor, device=images.device).to(images.dtype).reshape(-1)
+    if images.shape[0] not in (1, f.shape[0]):
+        raise ValueError(f"contrast: {images.shape[0]} images for {f.shape[0]} factors (give 1 image or one per factor)")
+    mean = _gray_mean(images)  # (B or 1,)
+    f4 = f[:, None, None, None]
+    return (f4 * images + (1.0 - f4) * mean[:, None, None, None]).clamp(0.0, 1.0)
+
+
+def _gray_mean(images: torch.Tensor) -> torch.Tensor:
+    if images.shape[1] == 3:
+        w = torch.tensor(LUMA_WEIGHTS, dtype=images.dtype, device=images.device)
+        return torch.einsum("bchw,c->b", images, w) / (images.shape[-1] * images.shape[-2])
+    return images.mean(dim=(1, 2, 3))
+
+
+def contrast_numpy(image: np.ndarray, factor: float) -> np.ndarray:
+    """NumPy twin of :func:`contrast` for one float image ``(H, W, C)`` in ``[0, 1]`` (C ∈ {1, 3}); no gradient."""
+    if image.ndim != 3 or image.shape[2] not in (1, 3):
+        raise ValueError(f"contrast_numpy: image must have shape (H, W, 1 or 3), got {image.shape}")
+    if image.shape[2] == 3:
+        mean = float(np.tensordot(image.mean(axis=(0, 1), dtype=np.float64), LUMA_WEIGHTS, axes=1))
+    else:
+        mean = float(image.mean(dtype=np.float64))
+    f = float(factor)
+    out = image * np.asarray(f, dtype=image.dtype) + np.asarray((1.0 - f) * mean, dtype=image.dtype)
+    return np.clip(out, 0.0, 1.0, out=out)
+
+
+class Contrast(nn.Module):
+    """Module form of :func:`contrast`: ``Contrast()(images, factor)``."""
+
+    def forward(self, images: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
+        return contrast(images, factor)
