@@ -125,7 +125,7 @@ def approach_metrics(position: np.ndarray, corners_3d: np.ndarray) -> dict[str, 
     fpap = 0.5 * (k[0] + k[1])
     x = (fpap - ltp) / np.linalg.norm(fpap - ltp)
     y = (k[2] - ltp) / np.linalg.norm(k[2] - ltp)
-    z = np.cross(x, y)
+    z = np.array([x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]])
     basis = np.stack([x, y, z])
 
     rel = c - ltp

@@ -44,7 +44,9 @@ LARD labeller itself (WGS84 geodesics, flat vertical)       u 0.08…0.87; v −
 The sphere azimuth and the WGS84 azimuth differ by up to ``e²·cos²φ·sin(2az)/2`` (0.065° here, 1 px at f = 887
 px), which is why the yaw reference matters. The positions stay on the sphere (the project's convention): the
 labeller's own frame (WGS84 geodesic distances, ``z = alt − alt_LTP``) places that camera 8.4 m farther and
-2.6 m higher (Earth curvature), a similarity-like difference that moves the corners by < 0.3 px.
+2.6 m higher (Earth curvature), a near-similarity that moves that row's corners by at most 0.33 px. (The
+fixture's runway corners are rebuilt from LARD's FLSim runway list, see its README; the last table row is a
+re-implementation of the labeller's computation on them.)
 """
 
 from __future__ import annotations
