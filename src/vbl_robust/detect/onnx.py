@@ -1,0 +1,102 @@
+"""Runway-corner detectors from ONNX files, run with ONNX Runtime (no pickle, hence no trust flag).
+
+The ONNX graph is an ultralytics pose export (``dynamic=True``): input ``images`` (B, 3, S, S) float RGB in
+[0, 1], output (B, 4 + nc + K·3, A), the same layout as the ``.pt`` raw predictions, so all pre- and
+post-processing is shared with :class:`~vbl_robust.detect.ultralytics.PoseDetector`. ONNX Runtime does not give
+gradients: :meth:`OnnxDetector.top` works as a (non-differentiable) black box.
+"""
+
+from __future__ import annotations
+
+import ast
+import logging
+import shutil
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .offline import import_ultralytics
+from .ultralytics import PoseDetector, load_pose_model
+
+logger = logging.getLogger(__name__)
+
+
+def export_onnx(pt_path: str | Path, out_path: str | Path, *, trust: bool = False, imgsz: int | None = None) -> Path:
+    """Export an ultralytics pose ``.pt`` to ONNX with dynamic batch (``dynamic=True``); returns ``out_path``.
+
+    ``trust`` as for :class:`~vbl_robust.detect.ultralytics.UltralyticsDetector` (the ``.pt`` is unpickled).
+    """
+    _, ckpt = load_pose_model(pt_path, trust=trust)  # checks trust, pose head, 4 keypoints
+    import_ultralytics()
+    from ultralytics import YOLO
+
+    size = imgsz or (ckpt.get("train_args") or {}).get("imgsz", 640)
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    # ultralytics writes next to the .pt: export from a temporary copy so the source directory is untouched
+    tmp = out_path.parent / f".{out_path.stem}_export.pt"
+    shutil.copyfile(pt_path, tmp)
+    try:
+        f = YOLO(str(tmp), task="pose").export(format="onnx", imgsz=size, dynamic=True, simplify=True,
+                                               verbose=False)
+        Path(f).replace(out_path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return out_path
+
+
+class OnnxDetector(PoseDetector):
+    """A YOLO-pose ONNX export as a runway-corner detector (black box).
+
+    Args:
+        path: ``.onnx`` file (e.g. from :func:`export_onnx` or ``yolo export format=onnx dynamic=True``).
+        imgsz: input side; None → the ``imgsz`` stored in the file's metadata.
+        chunk: images per inference call.
+        threads: ONNX Runtime intra-op threads (None: its default).
+    """
+
+    differentiable = False
+
+    def __init__(self, path: str | Path, *, imgsz: int | None = None, chunk: int = 16,
+                 threads: int | None = None) -> None:
+        import onnxruntime as ort
+
+        p = Path(path)
+        if not p.is_file():
+            raise FileNotFoundError(f"{p}: ONNX file not found")
+        opts = ort.SessionOptions()
+        if threads:
+            opts.intra_op_num_threads = int(threads)
+        try:
+            self.session = ort.InferenceSession(str(p), opts, providers=["CPUExecutionProvider"])
+        except Exception as e:  # noqa: BLE001 - any ORT load failure means the same to the user
+            raise ValueError(f"{p}: not a loadable ONNX model ({type(e).__name__}: {e})") from e
+        meta = self.session.get_modelmeta().custom_metadata_map
+        kpt = meta.get("kpt_shape")
+        if kpt is None:
+            raise ValueError(f"{p}: no 'kpt_shape' in the ONNX metadata; not an ultralytics pose export")
+        kpt_shape = ast.literal_eval(kpt)
+        if int(kpt_shape[0]) != 4:
+            raise ValueError(f"{p}: pose model has {kpt_shape[0]} keypoints; runway corners need 4")
+        names = ast.literal_eval(meta.get("names", "{0: 'runway'}"))
+        self.nc = max(1, len(names))
+        inp = self.session.get_inputs()[0]
+        self.input_name = inp.name
+        out_shape = self.session.get_outputs()[0].shape
+        if len(out_shape) == 3 and isinstance(out_shape[2], int) and out_shape[2] == 6 + 12:
+            raise ValueError(f"{p}: end-to-end (NMS-free) output layout is not supported")
+        size = ast.literal_eval(meta.get("imgsz", "[640, 640]"))
+        self.imgsz = int(imgsz or (size if isinstance(size, int) else max(size)))
+        if not isinstance(inp.shape[0], str) and not isinstance(inp.shape[2], str):
+            if imgsz is not None and int(inp.shape[2]) != self.imgsz:
+                raise ValueError(f"{p}: static input size {inp.shape[2]}, got imgsz={imgsz}")
+            self.chunk = int(inp.shape[0])
+        else:
+            self.chunk = int(chunk)
+        self.path = p
+
+    def raw(self, views: torch.Tensor) -> torch.Tensor:
+        x = views.detach().cpu().numpy().astype(np.float32, copy=False)
+        y = self.session.run(None, {self.input_name: x})[0]
+        return torch.from_numpy(y).to(views.dtype)

@@ -1,0 +1,223 @@
+"""Train the runway-corner keypoint model (YOLOv8n-pose) with ultralytics, offline, resumable and cumulative.
+
+Data: each :class:`~vbl_robust.data.Sample` gives square *views* (see :mod:`vbl_robust.detect.views`), rendered
+at the training size with the same resampling the detectors use at inference:
+
+- the letterboxed full image (what a single-pass detector, or the first pass of the two-stage one, sees);
+- for the two-stage design, ``crops_per_sample`` crops around the runway's corner box, jittered in centre and
+  size the way a first-pass box is wrong (what the second pass sees).
+
+One network learns both (the two passes share the weights), so one training run serves ``detector="single"``
+and ``detector="twostage"``. Labels follow :mod:`vbl_robust.data.yolo` (half-pixel convention handled there).
+
+Runs: every call of :func:`train` is a *stage* ``out_dir/stageNN``. ``resume=True`` continues an interrupted
+stage from its ``last.pt``; when the latest stage is finished, it starts a new stage initialised from that
+stage's ``best.pt`` — hours of training accumulate over several calls. Augmentation keeps corners exact: no
+vertical flip, horizontal flip with ``flip_idx``, translation only (no mosaic, scale, rotation or shear: the crop
+jitter provides position and scale diversity, and ultralytics' affine warps are not half-pixel exact).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..data.sample import Sample
+from ..data.yolo import write_data_yaml, write_pose_images
+from .offline import import_ultralytics
+from .views import box_window, image_to_view, letterbox_window, resample, to_tensor
+
+logger = logging.getLogger(__name__)
+
+#: ultralytics overrides that keep labels exact and the run offline
+TRAIN_DEFAULTS = dict(
+    mosaic=0.0, mixup=0.0, copy_paste=0.0, degrees=0.0, shear=0.0, perspective=0.0, scale=0.0,
+    translate=0.1, fliplr=0.5, flipud=0.0, hsv_h=0.015, hsv_s=0.5, hsv_v=0.4, erasing=0.0,
+    amp=False, plots=False, val=True, cache=False, device="cpu", verbose=False, deterministic=True,
+    close_mosaic=0, warmup_epochs=1.0, patience=1000,
+)
+
+
+@dataclass
+class CropJitter:
+    """How training crops are drawn around the true corner box (see :func:`~vbl_robust.detect.views.box_window`).
+
+    margin/min_side: nominal window; shift: centre shift, uniform in ± shift·side per axis; scale: side factor,
+    log-uniform in [1/scale, scale].
+    """
+
+    margin: float = 1.5
+    min_side: float = 64.0
+    shift: float = 0.12
+    scale: float = 1.25
+
+
+def corner_box_edge(corners_2d: np.ndarray) -> np.ndarray:
+    """(4,) xyxy bounding box in edge coordinates of (4, 2) OpenCV-pixel corners."""
+    e = np.asarray(corners_2d, dtype=np.float64) + 0.5
+    return np.concatenate([e.min(0), e.max(0)])
+
+
+def sample_views(
+    sample: Sample, imgsz: int, *, crops: int, rng: np.random.Generator, jitter: CropJitter | None = None,
+    full: bool = True,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Render the training views of one sample: ``[(image (imgsz, imgsz, 3) uint8, corners (4, 2) view px)]``."""
+    jitter = jitter or CropJitter()
+    wins = []
+    if full:
+        wins.append(letterbox_window(sample.height, sample.width))
+    if crops:
+        box = torch.as_tensor(corner_box_edge(sample.corners_2d))[None]
+        base = box_window(box, margin=jitter.margin, min_side=jitter.min_side,
+                          max_side=2.0 * max(sample.width, sample.height))[0].numpy()
+        for _ in range(crops):
+            side = base[2] * float(np.exp(rng.uniform(-np.log(jitter.scale), np.log(jitter.scale))))
+            c = base[:2] + base[2] / 2 + rng.uniform(-jitter.shift, jitter.shift, 2) * side
+            wins.append((float(c[0] - side / 2), float(c[1] - side / 2), float(side)))
+    if not wins:
+        return []
+    img = to_tensor(sample.image).expand(len(wins), -1, -1, -1)
+    views = resample(img, torch.tensor(wins, dtype=torch.float32), imgsz)
+    arr = (views.clamp(0, 1) * 255.0).round().to(torch.uint8).permute(0, 2, 3, 1).numpy()
+    return [(arr[i], image_to_view(sample.corners_2d, w, imgsz)) for i, w in enumerate(wins)]
+
+
+def build_dataset(
+    train_samples: Sequence[Sample], val_samples: Sequence[Sample], root: str | Path, *, imgsz: int = 320,
+    crops_per_sample: int = 2, seed: int = 0, jitter: CropJitter | None = None,
+) -> Path:
+    """Render and write a YOLO-pose dataset; returns the path of its ``data.yaml``.
+
+    Validation gets one full view and (if ``crops_per_sample > 0``) one jittered crop per sample.
+    Reuses an existing dataset built with the same arguments (``root/build.json``).
+    """
+    root = Path(root).resolve()
+    spec = dict(n_train=len(train_samples), n_val=len(val_samples), imgsz=imgsz, crops=crops_per_sample,
+                seed=seed, jitter=(jitter or CropJitter()).__dict__,
+                ids=[s.id for s in list(train_samples)[:3]] + [s.id for s in list(val_samples)[:3]])
+    marker = root / "build.json"
+    if marker.exists() and json.loads(marker.read_text()) == spec and (root / "data.yaml").exists():
+        logger.info("reusing dataset %s", root)
+        return root / "data.yaml"
+    rng = np.random.default_rng(seed)
+    for split, samples, crops in (("train", train_samples, crops_per_sample),
+                                  ("val", val_samples, min(crops_per_sample, 1))):
+        def items(samples=samples, crops=crops):
+            for i, s in enumerate(samples):
+                for j, (img, c) in enumerate(sample_views(s, imgsz, crops=crops, rng=rng, jitter=jitter)):
+                    yield f"{i:06d}_{j}", img, c
+                s.drop_pixels()
+        n = write_pose_images(items(), root, split)
+        logger.info("wrote %d %s views to %s", n, split, root)
+    marker.write_text(json.dumps(spec))
+    return write_data_yaml(root)
+
+
+@dataclass
+class TrainResult:
+    """Outcome of one :func:`train` call: the stage directory and its best / last weights."""
+
+    stage_dir: Path
+    best: Path
+    last: Path
+    resumed: bool
+
+
+def _stages(out_dir: Path) -> list[Path]:
+    return sorted(p for p in out_dir.glob("stage[0-9][0-9]") if p.is_dir())
+
+
+def _finished(last: Path) -> bool:
+    ck = torch.load(last, map_location="cpu", weights_only=False)
+    return ck.get("epoch", -1) == -1 or ck.get("optimizer") is None
+
+
+def train(
+    out_dir: str | Path, *, samples: Sequence[Sample] | None = None, n_train: int = 1000, n_val: int = 100,
+    imgsz: int = 320, epochs: int = 10, batch: int = 16, seed: int = 0, resume: bool = False,
+    init_weights: str | Path | None = None, detector: str = "twostage", crops_per_sample: int = 2,
+    workers: int = 2, lr0: float | None = None, **overrides,
+) -> TrainResult:
+    """Train (or continue training) the runway-corner YOLOv8n-pose.
+
+    Args:
+        out_dir: working directory (dataset + stages); created if missing.
+        samples: training data (e.g. ``vbl_robust.data.read_lard(...)``); None → ``n_train + n_val`` synthetic
+            approaches from ``vbl_robust.scenes.generate(seed=seed)``. Split train/val with ``seed``.
+        n_train, n_val: synthetic set sizes (with ``samples``: ``n_val`` is taken from them for validation).
+        imgsz: network input side (views are rendered at this size).
+        epochs: epochs of this stage.
+        batch, workers: ultralytics batch size and data-loader workers.
+        seed: seed for data generation, split, crop jitter and ultralytics.
+        resume: continue the latest stage (interrupted) or start a new stage from its ``best.pt`` (finished).
+        init_weights: initial weights of a new first stage (e.g. the shipped model); None → from
+            ``yolov8n-pose.yaml`` (random init, no hub weights).
+        detector: ``"twostage"`` (full views + crops) or ``"single"`` (full views only).
+        crops_per_sample: crops per training sample for ``"twostage"``.
+        lr0: initial learning rate (None: ultralytics' choice).
+        **overrides: further ultralytics training arguments.
+
+    Returns:
+        :class:`TrainResult`.
+    """
+    if detector not in ("single", "twostage"):
+        raise ValueError(f"train: detector must be 'single' or 'twostage', got {detector!r}")
+    if imgsz % 32:
+        raise ValueError(f"train: imgsz must be a multiple of 32, got {imgsz}")
+    out_dir = Path(out_dir).resolve()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    import_ultralytics()
+    from ultralytics import YOLO
+
+    stages = _stages(out_dir)
+    if stages and not resume:
+        raise ValueError(f"train: {out_dir} already holds training stages; pass resume=True (--resume) to continue")
+    if stages:
+        last = stages[-1] / "weights" / "last.pt"
+        if last.exists() and not _finished(last):
+            logger.info("resuming %s", last)
+            YOLO(str(last)).train(resume=True)
+            w = stages[-1] / "weights"
+            return TrainResult(stages[-1], w / "best.pt", w / "last.pt", True)
+        prev = stages[-1] / "weights" / "best.pt"
+        init = prev if prev.exists() else init_weights
+        stage = out_dir / f"stage{len(stages):02d}"
+    else:
+        init = init_weights
+        stage = out_dir / "stage00"
+
+    crops = crops_per_sample if detector == "twostage" else 0
+    data_root = out_dir / f"dataset_{detector}_{imgsz}"
+    if samples is None:
+        from ..scenes import generate
+
+        all_s = generate(n_train + n_val, seed=seed)
+        tr, va = all_s[:n_train], all_s[n_train:]
+    else:
+        samples = list(samples)
+        if len(samples) < 2:
+            raise ValueError(f"train: need at least 2 samples, got {len(samples)}")
+        order = np.random.default_rng(seed).permutation(len(samples))
+        nv = max(1, min(n_val, len(samples) // 5))
+        va = [samples[i] for i in order[:nv]]
+        tr = [samples[i] for i in order[nv:]]
+    data = build_dataset(tr, va, data_root, imgsz=imgsz, crops_per_sample=crops, seed=seed)
+
+    model = YOLO(str(init)) if init is not None else YOLO("yolov8n-pose.yaml")
+    args = dict(TRAIN_DEFAULTS)
+    args.update(data=str(data), imgsz=imgsz, epochs=epochs, batch=batch, workers=workers, seed=seed,
+                project=str(out_dir), name=stage.name, exist_ok=True, pretrained=False)
+    if lr0 is not None:
+        args["lr0"] = lr0
+    args.update(overrides)
+    logger.info("training %s from %s", stage, init or "yolov8n-pose.yaml")
+    model.train(**args)
+    w = stage / "weights"
+    return TrainResult(stage, w / "best.pt", w / "last.pt", False)

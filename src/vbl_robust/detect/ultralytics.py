@@ -1,0 +1,233 @@
+"""YOLOv8/YOLO11-pose runway-corner detectors from ultralytics ``.pt`` checkpoints.
+
+Input: images as (B, 3, H, W) float RGB in [0, 1] (or uint8 (H, W, 3) / (B, H, W, 3) arrays). Each image is
+letterboxed to a square ``imgsz`` view with :func:`~vbl_robust.detect.views.resample` (differentiable; grey 114
+padding). Output keypoints/boxes are in **original image pixels, OpenCV convention** (pixel centres at integer
+coordinates); keypoint order TR, TL, BL, BR.
+
+Two paths over the same raw predictions ``y`` (B, 4 + nc + K·3, A) of the network (before NMS):
+
+- :meth:`PoseDetector.detect` — black box: batched (chunks of ``chunk`` images), ``no_grad``, NMS; returns
+  :class:`Detections` per image (highest confidence first).
+- :meth:`PoseDetector.top` — differentiable: the anchor of maximum confidence (``argmax`` + ``gather``);
+  gradients flow to the input images. NMS always keeps the global maximum, so ``top`` equals ``detect``'s first
+  candidate.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from .offline import import_ultralytics
+from .views import letterbox_window, resample, to_tensor, view_to_image
+
+logger = logging.getLogger(__name__)
+
+MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
+DEFAULT_MODEL = MODELS_DIR / "runway_yolov8n_pose.pt"
+
+
+@dataclass
+class Detections:
+    """Candidates of one image, highest confidence first (original image pixels, OpenCV convention).
+
+    boxes: (N, 4) xyxy; conf: (N,); keypoints: (N, 4, 2) TR, TL, BL, BR.
+    """
+
+    boxes: torch.Tensor
+    conf: torch.Tensor
+    keypoints: torch.Tensor
+
+    def __len__(self) -> int:
+        return int(self.conf.shape[0])
+
+
+@dataclass
+class Top:
+    """Max-confidence candidate per image (differentiable): conf (B,), keypoints (B, 4, 2), boxes (B, 4)."""
+
+    conf: torch.Tensor
+    keypoints: torch.Tensor
+    boxes: torch.Tensor
+
+
+def split_raw(y: torch.Tensor, nc: int, nk: int = 4, kdim: int = 3) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Raw predictions (B, 4 + nc + nk·kdim, A) → (boxes xyxy (B, A, 4), conf (B, A), keypoints (B, A, nk, 2)).
+
+    Coordinates stay in view-pixel edge coordinates (ultralytics' convention).
+    """
+    y = y.transpose(1, 2)
+    xy, wh = y[..., :2], y[..., 2:4]
+    boxes = torch.cat([xy - wh / 2, xy + wh / 2], -1)
+    conf = y[..., 4:4 + nc].amax(-1) if nc > 1 else y[..., 4]
+    k = y[..., 4 + nc:].reshape(*y.shape[:2], nk, kdim)[..., :2]
+    return boxes, conf, k
+
+
+class PoseDetector:
+    """Shared logic of the ``.pt`` and ONNX detectors; subclasses implement :meth:`raw`.
+
+    Attributes: ``imgsz`` (view side), ``nc`` (classes), ``chunk`` (images per forward pass).
+    """
+
+    imgsz: int
+    nc: int = 1
+    chunk: int = 16
+    differentiable: bool = True
+
+    def raw(self, views: torch.Tensor) -> torch.Tensor:
+        """Network on views (B, 3, imgsz, imgsz) in [0, 1] → raw predictions (B, 4 + nc + 12, A)."""
+        raise NotImplementedError
+
+    def raw_chunked(self, views: torch.Tensor) -> torch.Tensor:
+        """:meth:`raw` in chunks of ``chunk`` images (bounds memory)."""
+        if views.shape[0] <= self.chunk:
+            return self.raw(views)
+        return torch.cat([self.raw(v) for v in views.split(self.chunk)], 0)
+
+    def windows(self, images: torch.Tensor) -> torch.Tensor:
+        """(B, 3) letterbox windows of the batch (see :mod:`~vbl_robust.detect.views`)."""
+        h, w = images.shape[-2:]
+        return torch.tensor(letterbox_window(h, w), dtype=images.dtype).expand(images.shape[0], 3)
+
+    def candidates(self, images) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """All anchors: boxes (B, A, 4), conf (B, A), keypoints (B, A, 4, 2), in image pixels (OpenCV)."""
+        x = to_tensor(images)
+        win = self.windows(x)
+        views = resample(x, win, self.imgsz)
+        boxes, conf, k = split_raw(self.raw_chunked(views), self.nc)
+        b, a = conf.shape
+        kp = view_to_image(k.reshape(b, a * 4, 2), win, self.imgsz).reshape(b, a, 4, 2)
+        bx = view_to_image(boxes.reshape(b, a * 2, 2), win, self.imgsz).reshape(b, a, 4)
+        return bx, conf, kp
+
+    def top(self, images) -> Top:
+        """Differentiable max-confidence candidate per image (gradients flow to float input images)."""
+        boxes, conf, kp = self.candidates(images)
+        i = conf.argmax(dim=1)
+        c = conf.gather(1, i[:, None])[:, 0]
+        k = kp.gather(1, i[:, None, None, None].expand(-1, 1, 4, 2))[:, 0]
+        bx = boxes.gather(1, i[:, None, None].expand(-1, 1, 4))[:, 0]
+        return Top(c, k, bx)
+
+    @torch.no_grad()
+    def detect(self, images, *, conf_min: float = 0.01, iou: float = 0.7, max_det: int = 10) -> list[Detections]:
+        """Black-box path: candidates after NMS per image, highest confidence first."""
+        import torchvision
+
+        boxes, conf, kp = self.candidates(images)
+        out = []
+        for b in range(conf.shape[0]):
+            keep = torch.nonzero(conf[b] >= conf_min)[:, 0]
+            if keep.numel() == 0:  # the global maximum is always a candidate (selection applies the threshold)
+                keep = conf[b].argmax()[None]
+            sel = keep[torchvision.ops.nms(boxes[b, keep], conf[b, keep], iou)][:max_det]
+            out.append(Detections(boxes[b, sel], conf[b, sel], kp[b, sel]))
+        return out
+
+    def __call__(self, images) -> list[Detections]:
+        return self.detect(images)
+
+
+def _is_packaged(path: Path) -> bool:
+    try:
+        path.resolve().relative_to(MODELS_DIR)
+        return True
+    except ValueError:
+        return False
+
+
+def load_pose_model(path: str | Path, *, trust: bool = False) -> tuple[torch.nn.Module, dict]:
+    """Load an ultralytics pose checkpoint and check it: returns ``(model in eval mode, checkpoint dict)``.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: untrusted pickle outside the package (``trust=False``), corrupt file, not a pose model,
+            not 4 keypoints, or an end-to-end (YOLO26-style, NMS-free) head.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: model file not found")
+    if p.suffix.lower() == ".onnx":
+        raise ValueError(f"{p}: an ONNX file; use OnnxDetector (vr.OnnxDetector) for it")
+    if not (trust or _is_packaged(p)):
+        raise ValueError(
+            f"{p}: a .pt checkpoint is a pickle and loading it runs code; pass trust=True (CLI: --trust-model) "
+            "if you trust this file"
+        )
+    import_ultralytics()
+    try:
+        ckpt = torch.load(p, map_location="cpu", weights_only=False)
+    except Exception as e:  # noqa: BLE001 - any unpickling failure means the same thing to the user
+        raise ValueError(f"{p}: not a loadable PyTorch checkpoint ({type(e).__name__}: {e})") from e
+    model = ckpt
+    if isinstance(ckpt, dict):
+        model = ckpt.get("ema") if ckpt.get("ema") is not None else ckpt.get("model")
+    if not isinstance(model, torch.nn.Module) or not hasattr(model, "model"):
+        raise ValueError(f"{p}: not an ultralytics model checkpoint (no 'model' entry)")
+    head = model.model[-1]
+    kpt_shape = getattr(head, "kpt_shape", None)
+    if kpt_shape is None:
+        raise ValueError(f"{p}: not a pose model (head {type(head).__name__}); a YOLO-pose model is required")
+    if int(kpt_shape[0]) != 4:
+        raise ValueError(f"{p}: pose model has {kpt_shape[0]} keypoints; runway corners need 4 (TR, TL, BL, BR)")
+    if getattr(head, "end2end", False):
+        raise ValueError(f"{p}: end-to-end (NMS-free, YOLO26-style) pose heads are not supported; "
+                         "use a YOLOv8/YOLO11-pose model")
+    model = model.float().eval()
+    for q in model.parameters():
+        q.requires_grad_(False)
+    return model, ckpt if isinstance(ckpt, dict) else {}
+
+
+class UltralyticsDetector(PoseDetector):
+    """A YOLO-pose ``.pt`` checkpoint as a runway-corner detector (single pass).
+
+    Args:
+        path: checkpoint; None → the model shipped in ``vbl_robust/models`` (trusted as part of the package).
+        trust: required (True) to load a ``.pt`` from outside the package: a pickle runs code when loaded.
+        imgsz: input side (multiple of 32); None → the size the model was trained at (or 640).
+        device: torch device (CPU in this project).
+        chunk: images per forward pass.
+    """
+
+    def __init__(self, path: str | Path | None = None, *, trust: bool = False, imgsz: int | None = None,
+                 device: str = "cpu", chunk: int = 16) -> None:
+        self.path = Path(path) if path is not None else DEFAULT_MODEL
+        model, ckpt = load_pose_model(self.path, trust=trust)
+        self.model = model.fuse().to(device) if hasattr(model, "fuse") else model.to(device)
+        self.nc = len(getattr(model, "names", {0: "runway"})) or 1
+        stride = int(max(getattr(model, "stride", torch.tensor([32.0]))))
+        train_imgsz = (ckpt.get("train_args") or {}).get("imgsz", 640)
+        self.imgsz = int(imgsz or (train_imgsz if isinstance(train_imgsz, int) else max(train_imgsz)))
+        if self.imgsz % stride:
+            raise ValueError(f"UltralyticsDetector: imgsz must be a multiple of {stride}, got {self.imgsz}")
+        self.device = torch.device(device)
+        self.chunk = int(chunk)
+
+    def raw(self, views: torch.Tensor) -> torch.Tensor:
+        out = self.model(views.to(self.device))
+        return (out[0] if isinstance(out, (tuple, list)) else out).to(views.device)
+
+
+def default_detector(*, imgsz: int | None = None, chunk: int = 16) -> PoseDetector:
+    """The detector shipped with the package (see ``vbl_robust/models/MODEL_CARD.md``)."""
+    from .twostage import TwoStageDetector
+
+    meta = MODELS_DIR / "default.json"
+    kind = "single"
+    if meta.exists():
+        import json
+
+        kind = json.loads(meta.read_text()).get("detector", "single")
+    if kind == "twostage":
+        return TwoStageDetector(UltralyticsDetector(None, imgsz=imgsz, chunk=chunk))
+    return UltralyticsDetector(None, imgsz=imgsz, chunk=chunk)
+
+
+__all__ = ["Detections", "PoseDetector", "Top", "UltralyticsDetector", "default_detector", "load_pose_model",
+           "split_raw"]

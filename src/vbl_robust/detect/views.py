@@ -1,0 +1,125 @@
+"""Square views of an image: letterbox and crops, resampled differentiably to a detector's input size.
+
+A *view* is a square window ``(x0, y0, side)`` in **edge coordinates** of the image (0 at the left/top edge of
+the image; an OpenCV pixel centre ``u`` is at ``u + 0.5``, see :mod:`vbl_robust.data.yolo`), resampled to
+``size × size`` pixels. The whole image, letterboxed, is the window ``(−pad_x, −pad_y, max(H, W))``; a crop
+around the runway is any other window. Parts of a window outside the image are filled with grey 114/255
+(ultralytics' letterbox colour).
+
+Mapping between a view pixel (edge coordinates ``p`` in ``[0, size]``) and the image::
+
+    image_edge = (x0, y0) + p · side / size
+
+Resampling: bilinear ``grid_sample`` (``align_corners=False``, which samples the exact view-pixel centres).
+When a window shrinks the image by ``k = side / size ≥ 2``, the image is first average-pooled by ``⌊k⌋`` (an
+anti-aliasing prefilter; pooled pixel ``j`` covers image edge coordinates ``[j·p, (j+1)·p)``, so the mapping
+above still holds). Everything is differentiable with respect to the image and the window.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+PAD_VALUE = 114.0 / 255.0
+
+
+def letterbox_window(height: int, width: int) -> tuple[float, float, float]:
+    """Window ``(x0, y0, side)`` of the centred square letterbox of an ``height × width`` image."""
+    side = float(max(height, width))
+    return (-(side - width) / 2.0, -(side - height) / 2.0, side)
+
+
+def box_window(
+    box_xyxy: torch.Tensor, *, margin: float = 1.5, min_side: float = 64.0, max_side: float | None = None
+) -> torch.Tensor:
+    """Square crop windows around boxes.
+
+    Args:
+        box_xyxy: (B, 4) boxes in edge coordinates (e.g. the bounding box of the four corners).
+        margin: side = ``margin · max(w, h)`` …
+        min_side: … but at least this many image pixels (a far runway is a few pixels; the crop keeps context);
+        max_side: … and at most this (None: unbounded).
+
+    Returns:
+        (B, 3) windows ``(x0, y0, side)`` centred on the boxes.
+    """
+    c = (box_xyxy[:, :2] + box_xyxy[:, 2:]) / 2
+    wh = (box_xyxy[:, 2:] - box_xyxy[:, :2]).abs()
+    side = (margin * wh.max(dim=1).values).clamp(min=min_side)
+    if max_side is not None:
+        side = side.clamp(max=max_side)
+    return torch.cat([c - side[:, None] / 2, side[:, None]], dim=1)
+
+
+def _pool_factor(side: float, size: int) -> int:
+    k = side / size
+    return int(k) if k >= 2.0 else 1
+
+
+def resample(images: torch.Tensor, windows: torch.Tensor, size: int) -> torch.Tensor:
+    """Resample square windows of images to ``size × size``.
+
+    Args:
+        images: (B, 3, H, W) float in [0, 1] (RGB).
+        windows: (B, 3) ``(x0, y0, side)`` in image edge coordinates, or (3,) broadcast to the batch.
+        size: output side in pixels.
+
+    Returns:
+        (B, 3, size, size) float; outside the image: grey 114/255. Differentiable w.r.t. images and windows.
+    """
+    if images.ndim != 4:
+        raise ValueError(f"resample: images must be (B, 3, H, W), got {tuple(images.shape)}")
+    b, _, h, w = images.shape
+    windows = torch.as_tensor(windows, dtype=images.dtype, device=images.device)
+    if windows.ndim == 1:
+        windows = windows.expand(b, 3)
+    factors = [_pool_factor(float(s), size) for s in windows[:, 2].detach().cpu().tolist()]
+    out = torch.empty(b, images.shape[1], size, size, dtype=images.dtype, device=images.device)
+    t = (torch.arange(size, dtype=images.dtype, device=images.device) + 0.5) / size  # view-pixel centres in [0, 1]
+    for p in sorted(set(factors)):
+        idx = torch.tensor([i for i, f in enumerate(factors) if f == p], device=images.device)
+        src = images[idx]
+        if p > 1:
+            src = F.avg_pool2d(src, p, stride=p)
+        hp, wp = src.shape[-2:]
+        win = windows[idx]
+        # image edge coordinate of each view pixel centre, then normalised by the (pooled) source extent
+        xs = win[:, 0:1] + t[None, :] * win[:, 2:3]  # (n, size)
+        ys = win[:, 1:2] + t[None, :] * win[:, 2:3]
+        gx = 2.0 * xs / (wp * p) - 1.0
+        gy = 2.0 * ys / (hp * p) - 1.0
+        grid = torch.stack(torch.broadcast_tensors(gx[:, None, :], gy[:, :, None]), dim=-1)  # (n, size, size, 2)
+        ones = torch.ones_like(src[:, :1])
+        sampled = F.grid_sample(torch.cat([src, ones], 1), grid, mode="bilinear", padding_mode="zeros",
+                                align_corners=False)
+        mask = sampled[:, -1:]
+        out[idx] = sampled[:, :-1] + PAD_VALUE * (1.0 - mask)
+    return out
+
+
+def view_to_image(points: torch.Tensor, windows: torch.Tensor, size: int) -> torch.Tensor:
+    """View-pixel edge coordinates (B, N, 2) → image **OpenCV** pixel coordinates (B, N, 2)."""
+    windows = torch.as_tensor(windows, dtype=points.dtype, device=points.device)
+    if windows.ndim == 1:
+        windows = windows.expand(points.shape[0], 3)
+    return windows[:, None, :2] + points * (windows[:, None, 2:3] / size) - 0.5
+
+
+def image_to_view(uv: np.ndarray, window: tuple[float, float, float], size: int) -> np.ndarray:
+    """Image OpenCV pixel coordinates (N, 2) → view-pixel **OpenCV** coordinates (N, 2) (for label export)."""
+    x0, y0, side = window
+    return (np.asarray(uv, dtype=np.float64) + 0.5 - [x0, y0]) * (size / side) - 0.5
+
+
+def to_tensor(images: np.ndarray | torch.Tensor) -> torch.Tensor:
+    """(H, W, 3) or (B, H, W, 3) uint8 RGB, or a float (B, 3, H, W) tensor → float32 (B, 3, H, W) in [0, 1]."""
+    if isinstance(images, torch.Tensor) and images.is_floating_point():
+        return images if images.ndim == 4 else images[None]
+    a = torch.as_tensor(np.asarray(images))
+    if a.ndim == 3:
+        a = a[None]
+    if a.ndim != 4 or a.shape[-1] != 3:
+        raise ValueError(f"to_tensor: expected (H, W, 3) or (B, H, W, 3) RGB, got {tuple(a.shape)}")
+    return a.permute(0, 3, 1, 2).float().div_(255.0)

@@ -1,0 +1,125 @@
+"""UltralyticsDetector: loading checks, black-box vs differentiable paths, agreement with YOLO.predict()."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from detect_helpers import runway_image
+
+from vbl_robust.detect.twostage import TwoStageDetector
+from vbl_robust.detect.ultralytics import UltralyticsDetector
+
+
+@pytest.fixture(scope="module")
+def det(tiny_pose_pt):
+    return UltralyticsDetector(tiny_pose_pt, trust=True)
+
+
+def test_untrusted_pickle_is_refused(tiny_pose_pt):
+    with pytest.raises(ValueError, match="--trust-model"):
+        UltralyticsDetector(tiny_pose_pt)
+
+
+def test_missing_and_corrupt_files(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nope.pt"):
+        UltralyticsDetector(tmp_path / "nope.pt", trust=True)
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"this is not a checkpoint")
+    with pytest.raises(ValueError, match="not a loadable"):
+        UltralyticsDetector(bad, trust=True)
+    junk = tmp_path / "junk.pt"
+    torch.save({"something": 1}, junk)
+    with pytest.raises(ValueError, match="not an ultralytics model"):
+        UltralyticsDetector(junk, trust=True)
+
+
+def test_wrong_keypoint_count(make_pose_ckpt):
+    p = make_pose_ckpt("kp17.pt", nk=17)
+    with pytest.raises(ValueError, match="17 keypoints"):
+        UltralyticsDetector(p, trust=True)
+
+
+def test_not_a_pose_model(tmp_path):
+    from vbl_robust.detect.offline import import_ultralytics
+
+    import_ultralytics()
+    from ultralytics.nn.tasks import DetectionModel
+
+    p = tmp_path / "det.pt"
+    torch.save({"model": DetectionModel("yolov8n.yaml", nc=1, verbose=False)}, p)
+    with pytest.raises(ValueError, match="not a pose model"):
+        UltralyticsDetector(p, trust=True)
+
+
+def test_end_to_end_head_rejected(tiny_pose_pt, tmp_path):
+    ck = torch.load(tiny_pose_pt, weights_only=False)
+    head = ck["model"].model[-1]
+    head.one2one_cv2 = head.cv2  # makes the head report end2end
+    head._end2end = True
+    p = tmp_path / "e2e.pt"
+    torch.save(ck, p)
+    with pytest.raises(ValueError, match="end-to-end"):
+        UltralyticsDetector(p, trust=True)
+
+
+def test_onnx_path_points_to_onnx_detector(tmp_path):
+    p = tmp_path / "m.onnx"
+    p.write_bytes(b"x")
+    with pytest.raises(ValueError, match="OnnxDetector"):
+        UltralyticsDetector(p, trust=True)
+
+
+def test_paths_agree_and_match_predict(det, tiny_pose_pt):
+    from ultralytics import YOLO
+
+    img, _ = runway_image(64)
+    d = det.detect(img)[0]
+    t = det.top(img)
+    assert torch.equal(d.keypoints[0], t.keypoints[0]) and torch.equal(d.conf[0], t.conf[0])
+    r = YOLO(str(tiny_pose_pt)).predict(img[:, :, ::-1].copy(), imgsz=64, conf=1e-9, verbose=False)[0]
+    # predict(): ultralytics edge coordinates (ours + 0.5), clipped to the image
+    ours = (t.keypoints[0] + 0.5).clamp(0, 64)
+    assert float(r.boxes.conf[0]) == pytest.approx(float(t.conf[0]), abs=1e-6)
+    assert torch.allclose(r.keypoints.xy[0], ours, atol=1e-3)
+    assert ((t.keypoints[0] + 0.5 > 0) & (t.keypoints[0] + 0.5 < 64)).all()  # the comparison is not all clipping
+
+
+def test_batch_equals_single_and_chunking(det):
+    imgs = torch.stack([torch.as_tensor(runway_image(64, seed=s)[0]) for s in range(5)])
+    det.chunk = 2
+    t = det.top(imgs)
+    det.chunk = 16
+    for b in range(5):
+        tb = det.top(imgs[b].numpy())
+        assert torch.allclose(tb.keypoints[0], t.keypoints[b], atol=1e-4)
+
+
+def test_letterbox_maps_back_to_image_pixels(det):
+    """A non-square image: detection on it equals detection on its explicit 114-padded square version."""
+    img, _ = runway_image(64)
+    crop = img[8:56]  # 48 x 64
+    padded = img.copy()
+    padded[:8] = 114
+    padded[56:] = 114
+    a = det.top(crop).keypoints[0]
+    b = det.top(padded).keypoints[0]
+    assert torch.allclose(a + torch.tensor([0.0, 8.0]), b, atol=1e-3)
+
+
+def test_gradients_reach_the_image(det):
+    img, _ = runway_image(64)
+    x = torch.as_tensor(img).permute(2, 0, 1)[None].float().div(255).requires_grad_(True)
+    t = det.top(x)
+    (t.keypoints.sum() + t.conf.sum()).backward()
+    assert x.grad is not None and torch.isfinite(x.grad).all() and x.grad.abs().sum() > 0
+
+
+def test_two_stage_paths_agree_and_differentiate(det):
+    two = TwoStageDetector(det, min_side=32)
+    img, _ = runway_image(128)
+    x = torch.as_tensor(img).permute(2, 0, 1)[None].float().div(255).requires_grad_(True)
+    t = two.top(x)
+    d = two.detect(img)[0]
+    assert torch.allclose(d.keypoints[0], t.keypoints[0].detach(), atol=1e-5)
+    t.keypoints.sum().backward()
+    assert torch.isfinite(x.grad).all() and x.grad.abs().sum() > 0
