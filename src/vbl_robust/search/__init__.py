@@ -1,0 +1,45 @@
+"""Searches that maximise a batched function over a :class:`~vbl_robust.space.ParameterBox`.
+
+They know nothing of images: ``f`` maps ``(n, d)`` real-unit points to ``(n,)`` values. Every method has the
+same ask/tell interface (:class:`Optimizer`) and is registered by name in :data:`METHODS`:
+``"georobust"``, ``"direct"``, ``"direct-l"`` (the DIRECT family), ``"random"``, ``"sobol"``, ``"apgd"``
+(needs a torch-differentiable ``f``) and ``"grid"`` (ground truth in low dimension).
+
+>>> import numpy as np
+>>> from vbl_robust.space import ParameterBox
+>>> box = ParameterBox({"roll_deg": (-15, 15), "contrast": (0.7, 1.4)})
+>>> r = maximize(lambda x: -np.abs(x[:, 0] - 5) - np.abs(x[:, 1] - 1), box, "direct", max_evals=300)
+>>> r.status.value, r.nfev <= 300, bool(abs(r.x[0] - 5) < 0.1)
+('budget_exhausted', True, True)
+"""
+
+from .apgd import APGD, apgd_checkpoints
+from .api import METHODS, make_optimizer, maximize, method_options
+from .base import Optimizer
+from .bounds import sound_upper_bound
+from .direct import Direct, DirectL, GeoRobust
+from .po import potentially_optimal
+from .result import SearchResult, Status, TraceRow, Verdict
+from .sampling import GridSearch, RandomSearch, SobolSearch
+
+__all__ = [
+    "APGD",
+    "METHODS",
+    "Direct",
+    "DirectL",
+    "GeoRobust",
+    "GridSearch",
+    "Optimizer",
+    "RandomSearch",
+    "SearchResult",
+    "SobolSearch",
+    "Status",
+    "TraceRow",
+    "Verdict",
+    "apgd_checkpoints",
+    "make_optimizer",
+    "maximize",
+    "method_options",
+    "potentially_optimal",
+    "sound_upper_bound",
+]

@@ -1,0 +1,284 @@
+"""The ask/tell core shared by every search method.
+
+:class:`Optimizer` does the bookkeeping — budgets, best point, trace, failed evaluations — and subclasses
+implement two hooks on the unit cube:
+
+* ``_ask(remaining) -> (n, d)`` unit-cube points of the next batch (all points of one iteration), with
+  ``n <= remaining`` when an evaluation budget is set; an empty batch means "nothing left" (the subclass may
+  call :meth:`Optimizer._finish` first to say why).
+* ``_tell(u, values, failed, grad)`` with the batch's unit-cube points, raw values, a failure mask
+  (value NaN/±inf) and, for gradient methods, the gradient w.r.t. the *real-unit* point.
+
+Budgets: ``max_evals`` is never exceeded (subclasses size their batches to fit); ``max_iters`` counts batches;
+``max_seconds`` is checked between batches (a batch is never interrupted), the clock starting at the first ask.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ..space import ParameterBox
+from .bounds import check_lipschitz, sound_upper_bound
+from .result import SearchResult, Status, TraceRow, Verdict, verdict_for
+
+logger = logging.getLogger(__name__)
+_clock = time.perf_counter  # module-level so tests can drive the clock
+
+
+def _check_budget(name: str, value: float | None, *, integer: bool) -> None:
+    if value is None:
+        return
+    ok = isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= 1 if integer else (
+        isinstance(value, int | float | np.number) and not isinstance(value, bool) and math.isfinite(value) and value > 0
+    )
+    if not ok:
+        kind = "an integer >= 1" if integer else "a finite number > 0"
+        raise ValueError(f"{name} must be {kind} or None, got {value!r}")
+
+
+class Optimizer:
+    """Base class of the ask/tell searches (maximisation over a :class:`ParameterBox`).
+
+    Args:
+        box: the search space (real units).
+        max_evals: evaluation budget (exact: never exceeded), or None.
+        max_iters: batch budget, or None.
+        max_seconds: wall-clock budget checked between batches, or None.
+        stop_above: stop after the batch containing the first finite value ``> stop_above`` (a breach).
+        seed: seed of every random choice of the method.
+        lipschitz, lipschitz_norm: optional Lipschitz constant of the objective in real units (see
+            :mod:`vbl_robust.search.bounds`); methods that keep a cover of the box then report a sound
+            ``upper_bound``.
+
+    Usage::
+
+        opt = Direct(box, max_evals=500)
+        while len(x := opt.ask()):
+            opt.tell(x, f(x))
+        result = opt.result()
+    """
+
+    name: ClassVar[str] = ""
+    needs_gradient: ClassVar[bool] = False
+
+    def __init__(
+        self,
+        box: ParameterBox,
+        *,
+        max_evals: int | None = None,
+        max_iters: int | None = None,
+        max_seconds: float | None = None,
+        stop_above: float | None = None,
+        seed: int = 0,
+        lipschitz: float | tuple[float, ...] | None = None,
+        lipschitz_norm: str = "2",
+    ):
+        if not isinstance(box, ParameterBox):
+            raise ValueError(f"box must be a vbl_robust.ParameterBox, got {type(box).__name__}")
+        _check_budget("max_evals", max_evals, integer=True)
+        _check_budget("max_iters", max_iters, integer=True)
+        _check_budget("max_seconds", max_seconds, integer=False)
+        if stop_above is not None and not (isinstance(stop_above, int | float | np.number) and not math.isnan(stop_above)):
+            raise ValueError(f"stop_above must be a number or None, got {stop_above!r}")
+        if not isinstance(seed, int | np.integer) or isinstance(seed, bool):
+            raise ValueError(f"seed must be an integer, got {seed!r}")
+        self.box = box
+        self.dim = box.dim
+        self.max_evals = None if max_evals is None else int(max_evals)
+        self.max_iters = None if max_iters is None else int(max_iters)
+        self.max_seconds = None if max_seconds is None else float(max_seconds)
+        self.stop_above = None if stop_above is None else float(stop_above)
+        self.seed = int(seed)
+        self.lipschitz = check_lipschitz(lipschitz, lipschitz_norm, box.dim)
+        self.lipschitz_norm = lipschitz_norm if self.lipschitz is not None else None
+
+        self.nfev = 0
+        self.nit = 0
+        self.n_failed = 0
+        self.status = Status.RUNNING
+        self.message = "running"
+        self.trace: list[TraceRow] = []
+        self._xs: list[np.ndarray] = []
+        self._fs: list[np.ndarray] = []
+        self._best_value = math.nan
+        self._best_x: np.ndarray | None = None
+        self._t0: float | None = None
+        self._t_last = 0.0
+        self._pending: tuple[np.ndarray, np.ndarray] | None = None  # (real, unit) of the last ask
+
+    # -- public ask/tell -----------------------------------------------------------------------------------
+    @property
+    def done(self) -> bool:
+        return self.status is not Status.RUNNING
+
+    def elapsed(self) -> float:
+        return 0.0 if self._t0 is None else _clock() - self._t0
+
+    def ask(self) -> np.ndarray:
+        """Next batch ``(n, d)`` in real units; an empty ``(0, d)`` array once the search has stopped."""
+        if self._pending is not None:
+            raise RuntimeError(f"{type(self).__name__}.ask: the previous batch was not told yet")
+        if self._t0 is None:
+            self._t0 = _clock()
+        self._check_time()
+        empty = np.zeros((0, self.dim))
+        if self.done:
+            return empty
+        remaining = None if self.max_evals is None else self.max_evals - self.nfev
+        u = np.asarray(self._ask(remaining), dtype=np.float64).reshape(-1, self.dim)
+        if remaining is not None and len(u) > remaining:
+            raise RuntimeError(f"{type(self).__name__}._ask returned {len(u)} points with {remaining} evaluations left")
+        if len(u) == 0:
+            if not self.done:
+                self._finish(Status.CONVERGED, f"{self.name}: no points left to evaluate")
+            return empty
+        u = np.clip(u, 0.0, 1.0)
+        x = self.box.from_unit(u)
+        self._pending = (x, u)
+        return x.copy()
+
+    def tell(self, x: np.ndarray, values: np.ndarray, *, grad: np.ndarray | None = None) -> None:
+        """Record the values ``(n,)`` of the batch ``x`` ``(n, d)`` returned by the last :meth:`ask`.
+
+        NaN/±inf values are failed evaluations (recorded, never the best). ``grad`` ``(n, d)`` is the gradient
+        w.r.t. the real-unit point, required by gradient methods (``needs_gradient``) and ignored otherwise.
+        """
+        if self._pending is None:
+            raise RuntimeError(f"{type(self).__name__}.tell: no batch pending; call ask() first")
+        xr, u = self._pending
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape != xr.shape or not np.array_equal(x, xr):
+            raise ValueError(f"tell: x must be the batch returned by the last ask() (shape {xr.shape}), got shape {x.shape}")
+        v = np.asarray(values, dtype=np.float64)
+        if v.shape != (len(xr),):
+            v = v.reshape(-1) if v.size == len(xr) else v
+        if v.shape != (len(xr),):
+            raise ValueError(f"tell: values must have shape ({len(xr)},), got {np.shape(values)}")
+        if grad is not None:
+            grad = np.asarray(grad, dtype=np.float64)
+            if grad.shape != xr.shape:
+                raise ValueError(f"tell: grad must have shape {xr.shape}, got {grad.shape}")
+        elif self.needs_gradient:
+            raise ValueError(f"tell: method {self.name!r} needs grad= (gradient of the values w.r.t. x, shape {xr.shape})")
+        self._pending = None
+        failed = ~np.isfinite(v)
+        self._xs.append(xr)
+        self._fs.append(v.copy())
+        self.nfev += len(v)
+        self.nit += 1
+        self.n_failed += int(failed.sum())
+        if not failed.all():
+            i = int(np.argmax(np.where(failed, -np.inf, v)))
+            if self._best_x is None or v[i] > self._best_value:
+                self._best_value, self._best_x = float(v[i]), xr[i].copy()
+        extras = self._tell(u, v, failed, grad) or {}
+        self._t_last = self.elapsed()
+        self.trace.append(self._row(len(v), extras))
+        self._check_stops(v, failed)
+
+    def stop(self, message: str = "stopped by the caller") -> None:
+        """End the search now (status STOPPED) unless it already stopped."""
+        if self._pending is not None:
+            raise RuntimeError(f"{type(self).__name__}.stop: a batch is pending; tell it first")
+        if not self.done:
+            self._finish(Status.STOPPED, message)
+
+    def result(self) -> SearchResult:
+        """The current :class:`SearchResult` (status RUNNING while the search has not stopped)."""
+        xs = np.concatenate(self._xs) if self._xs else np.zeros((0, self.dim))
+        fs = np.concatenate(self._fs) if self._fs else np.zeros(0)
+        last = self.trace[-1] if self.trace else None
+        return SearchResult(
+            x=None if self._best_x is None else self._best_x.copy(),
+            fun=self._best_value,
+            nfev=self.nfev,
+            nit=self.nit,
+            status=self.status,
+            message=self.message,
+            elapsed=self._t_last,
+            trace=tuple(self.trace),
+            xs=xs,
+            fs=fs,
+            method=self.name,
+            names=self.box.names,
+            seed=self.seed,
+            n_failed=self.n_failed,
+            lipschitz_estimate=None if last is None else last.lipschitz_estimate,
+            bound_estimate=None if last is None else last.bound_estimate,
+            upper_bound=self.upper_bound(),
+            lipschitz=self.lipschitz,
+            lipschitz_norm=self.lipschitz_norm,
+        )
+
+    def verdict(self, threshold: float) -> Verdict:
+        return verdict_for(self._best_value, self.upper_bound(), float(threshold))
+
+    def upper_bound(self) -> float | None:
+        """Sound upper bound over the box (needs ``lipschitz`` and a cover from the method), else None."""
+        if self.lipschitz is None:
+            return None
+        cover = self._cover()
+        if cover is None:
+            return None
+        values, half_widths_unit = cover
+        return sound_upper_bound(values, half_widths_unit * self.box.width, self.lipschitz, self.lipschitz_norm or "2")
+
+    # -- hooks ----------------------------------------------------------------------------------------------
+    def _ask(self, remaining: int | None) -> np.ndarray:
+        raise NotImplementedError
+
+    def _tell(self, u: np.ndarray, values: np.ndarray, failed: np.ndarray, grad: np.ndarray | None) -> dict[str, Any] | None:
+        """Update the method's state; may return TraceRow fields (``po_count_before`` …, or ``extra``)."""
+        raise NotImplementedError
+
+    def _complete(self) -> str | None:
+        """A message when the method has nothing left to evaluate (checked after each tell), else None."""
+        return None
+
+    def _cover(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(values (m,), unit-cube half-widths (m, d))`` of cells covering the box, or None."""
+        return None
+
+    # -- internals --------------------------------------------------------------------------------------
+    def _finish(self, status: Status, message: str) -> None:
+        self.status, self.message = status, message
+        logger.debug("%s stopped: %s (%s) after %d evaluations", self.name, status.value, message, self.nfev)
+
+    def _check_time(self) -> None:
+        if not self.done and self.max_seconds is not None and self.elapsed() >= self.max_seconds:
+            self._finish(Status.TIME_OUT, f"max_seconds={self.max_seconds:g} reached after {self.nfev} evaluations")
+
+    def _check_stops(self, v: np.ndarray, failed: np.ndarray) -> None:
+        if self.done:
+            return
+        if self.stop_above is not None and np.any(~failed & (v > self.stop_above)):
+            self._finish(Status.TARGET_REACHED, f"value {self._best_value:g} > stop_above={self.stop_above:g}")
+        elif (why := self._complete()) is not None:
+            self._finish(Status.CONVERGED, why)
+        elif self.max_evals is not None and self.nfev >= self.max_evals:
+            self._finish(Status.BUDGET_EXHAUSTED, f"max_evals={self.max_evals} evaluations used")
+        elif self.max_iters is not None and self.nit >= self.max_iters:
+            self._finish(Status.BUDGET_EXHAUSTED, f"max_iters={self.max_iters} iterations done")
+        else:
+            self._check_time()
+
+    def _row(self, batch_size: int, extras: dict[str, Any]) -> TraceRow:
+        bx = None if self._best_x is None else tuple(float(a) for a in self._best_x)
+        ub = self.upper_bound()
+        if ub is not None:
+            extras = {**extras, "upper_bound": ub}
+        return TraceRow(
+            iteration=self.nit,
+            nfev=self.nfev,
+            elapsed=self._t_last,
+            best_value=self._best_value,
+            best_x=bx,
+            batch_size=batch_size,
+            n_failed=self.n_failed,
+            **extras,
+        )

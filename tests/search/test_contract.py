@@ -1,0 +1,170 @@
+"""One contract over every registered method: bounds, budgets, determinism, failures, stop_above, best."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import vbl_robust.search.base as base_module
+from vbl_robust.search import METHODS, SearchResult, Status, maximize, method_options
+from vbl_robust.space import ParameterBox
+
+from .conftest import bumpy
+
+ALL = sorted(METHODS)
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_stays_in_bounds_and_best_is_best_told(method, box2):
+    r = maximize(bumpy, box2, method, max_evals=150)
+    assert r.xs.shape == (r.nfev, 2) and r.fs.shape == (r.nfev,)
+    assert box2.contains(r.xs).all()
+    i = int(np.argmax(r.fs))
+    assert r.fun == r.fs[i] and np.array_equal(r.x, r.xs[i])
+    assert r.method == method and r.names == box2.names
+    assert [row.iteration for row in r.trace] == list(range(1, r.nit + 1))
+    assert [row.nfev for row in r.trace] == list(np.cumsum([row.batch_size for row in r.trace]))
+    assert r.trace[-1].best_value == r.fun
+
+
+@pytest.mark.parametrize("method", ALL)
+@pytest.mark.parametrize("budget", [1, 7, 60])
+def test_never_exceeds_max_evals(method, budget, box2):
+    r = maximize(bumpy, box2, method, max_evals=budget)
+    assert 1 <= r.nfev <= budget
+    assert r.status in (Status.BUDGET_EXHAUSTED, Status.CONVERGED)
+    assert "max_evals" in r.message or r.status is Status.CONVERGED
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_honours_max_iters(method, box2):
+    r = maximize(bumpy, box2, method, max_iters=3)
+    assert r.nit == 3 and r.status is Status.BUDGET_EXHAUSTED and "max_iters=3" in r.message
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_honours_max_seconds_between_batches(method, box2, monkeypatch):
+    clock = {"t": 0.0}
+    monkeypatch.setattr(base_module, "_clock", lambda: clock["t"])
+
+    def slow(x):  # every objective call takes one (fake) second
+        clock["t"] += 1.0
+        return bumpy(x)
+
+    r = maximize(slow, box2, method, max_seconds=3.5)
+    assert r.status is Status.TIME_OUT and "max_seconds=3.5" in r.message
+    assert r.nit == 4  # the batch running when time ran out completes; no batch starts after
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_same_seed_same_run(method, box2):
+    a = maximize(bumpy, box2, method, max_evals=120, seed=3)
+    b = maximize(bumpy, box2, method, max_evals=120, seed=3)
+    assert np.array_equal(a.xs, b.xs) and np.array_equal(a.fs, b.fs)
+    assert a.fun == b.fun and a.nfev == b.nfev and a.nit == b.nit
+
+
+@pytest.mark.parametrize("method", ["random", "sobol", "apgd"])
+def test_seed_changes_random_methods(method, box2):
+    a = maximize(bumpy, box2, method, max_evals=40, seed=1)
+    b = maximize(bumpy, box2, method, max_evals=40, seed=2)
+    assert not np.array_equal(a.xs, b.xs)
+
+
+def _holey(x):
+    """bumpy, but NaN where roll < 0 and +inf where roll > 4.5 (failed evaluations)."""
+    y = bumpy(x)
+    if isinstance(y, torch.Tensor):
+        y = torch.where(x[:, 0] < 0, torch.full_like(y, float("nan")), y)
+        return torch.where(x[:, 0] > 4.5, torch.full_like(y, float("inf")), y)
+    y = np.where(x[:, 0] < 0, np.nan, y)
+    return np.where(x[:, 0] > 4.5, np.inf, y)
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_nan_and_inf_are_failed_evaluations(method, box2):
+    r = maximize(_holey, box2, method, max_evals=200)
+    failed = ~np.isfinite(r.fs)
+    assert r.n_failed == failed.sum() > 0
+    assert np.isfinite(r.fun) and r.fun == r.fs[~failed].max()
+    assert 0 <= r.x[0] <= 4.5
+    assert r.trace[-1].n_failed == r.n_failed
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_all_failed_gives_no_best(method, box2):
+    def nan(x):
+        return x[:, 0] * float("nan")
+
+    r = maximize(nan, box2, method, max_evals=30)
+    assert r.x is None and np.isnan(r.fun) and not r.success and r.n_failed == r.nfev > 0
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_stop_above_stops_at_the_batch_of_the_first_breach(method, box2):
+    threshold = 1.2
+    r = maximize(bumpy, box2, method, max_evals=3000, stop_above=threshold)
+    assert r.status is Status.TARGET_REACHED and r.fun > threshold
+    last = r.trace[-1].batch_size
+    assert np.all(r.fs[:-last] <= threshold) and np.any(r.fs[-last:] > threshold)
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_ask_tell_by_hand_and_misuse(method, box2):
+    opt = METHODS[method](box2, max_evals=2000)
+    with pytest.raises(RuntimeError, match="no batch pending"):
+        opt.tell(np.zeros((1, 2)), np.zeros(1))
+    x = opt.ask()
+    with pytest.raises(RuntimeError, match="not told"):
+        opt.ask()
+    with pytest.raises(ValueError, match="batch returned by the last ask"):
+        opt.tell(x + 1.0, np.zeros(len(x)))
+    with pytest.raises(ValueError, match="values must have shape"):
+        opt.tell(x, np.zeros(len(x) + 1), grad=np.zeros_like(x))
+    opt.tell(x, bumpy(x), grad=np.ones_like(x))
+    assert opt.result().status is Status.RUNNING and opt.nfev == len(x)
+    opt.stop()
+    assert opt.result().status is Status.STOPPED and len(opt.ask()) == 0
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_result_to_dict_is_json_and_round_trips(method, box2):
+    r = maximize(_holey, box2, method, max_evals=40)
+    d = json.loads(json.dumps(r.to_dict(), allow_nan=False))
+    back = SearchResult.from_dict(d)
+    assert back.nfev == r.nfev and back.status is r.status and back.fun == r.fun
+    assert np.array_equal(back.xs, r.xs) and np.array_equal(np.isfinite(back.fs), np.isfinite(r.fs))
+    assert back.to_dict() == d
+
+
+def test_callback_can_stop(box2):
+    seen = []
+    r = maximize(bumpy, box2, "random", max_evals=1000, batch_size=10, callback=lambda row: seen.append(row) or len(seen) == 3)
+    assert r.status is Status.STOPPED and r.nit == 3 and r.nfev == 30 and seen[-1].nfev == 30
+
+
+def test_user_errors_name_the_argument(box2):
+    with pytest.raises(ValueError, match="at least one budget"):
+        maximize(bumpy, box2, "direct")
+    with pytest.raises(ValueError, match="unknown search method 'nope'"):
+        maximize(bumpy, box2, "nope", max_evals=10)
+    with pytest.raises(ValueError, match=r"no option\(s\) \['alfa'\]"):
+        maximize(bumpy, box2, "georobust", max_evals=10, alfa=2)
+    with pytest.raises(ValueError, match="max_evals must be an integer >= 1"):
+        maximize(bumpy, box2, "direct", max_evals=0)
+    with pytest.raises(ValueError, match="max_seconds"):
+        maximize(bumpy, box2, "direct", max_seconds=-1.0)
+    with pytest.raises(ValueError, match="must return shape"):
+        maximize(lambda x: bumpy(x)[:, None], box2, "random", max_evals=10)
+    with pytest.raises(ValueError, match="ParameterBox"):
+        maximize(bumpy, {"a": (0, 1)}, "random", max_evals=10)
+    assert "alpha" in method_options("georobust") and "counts" in method_options("grid")
+
+
+def test_plain_numpy_function_in_real_units():
+    r = maximize(lambda x: -((x[:, 0] - 3.0) ** 2), ParameterBox({"a": (-10, 10)}), method="direct", max_evals=2000)
+    assert abs(r.x[0] - 3.0) < 1e-3 and r.nfev <= 2000
+    assert r.x_dict() == {"a": float(r.x[0])}
