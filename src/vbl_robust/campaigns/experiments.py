@@ -1,0 +1,200 @@
+"""The paper's experiments (and the ``audit`` job) as data: each is a function returning a :class:`CampaignSpec`.
+
+Defaults are the paper's (ε_safe = 1000 m, τ_conf = 0.25, penalty 5000 m, GeoRobust / random / APGD, 100
+images, 1000 for the PnP validation). Where the paper leaves a choice open we fix it here and state it in
+``notes`` (shown in the report):
+
+- spatial experiments: 200 evaluations per image and box, early stop at the first breach;
+- runtime experiments: no early stop (the size of the worst error is measured), time budgets 0.1–5 s and, since
+  CPU and GPU times differ, evaluation budgets 10–200 as a machine-independent axis;
+- distance profile: roll budgets 5°, 10°, …, 45° chained per image (a breach at ±b implies one at every larger
+  budget, so larger budgets are not searched again), 200 evaluations each;
+- a dense-grid reference (1-D: 0.05° steps) so each figure shows how far each method is from the true worst
+  case; 2-D: a landscape grid on the first image for the heat map.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+
+from .spec import Block, BoxSpec, Budget, CampaignSpec, roll_box, roll_contrast_box
+
+METHODS = ("georobust", "random", "apgd")
+ROLL_BUDGETS_DEG = (2.0, 5.0, 10.0, 15.0, 20.0, 30.0)
+BOXES_2D = ((2.0, (0.9, 1.1)), (5.0, (0.8, 1.25)), (10.0, (0.7, 1.4)), (15.0, (0.6, 1.6)), (20.0, (0.5, 2.0)),
+            (30.0, (0.4, 2.5)))
+TIME_BUDGETS_S = (0.1, 0.5, 1.0, 2.0, 5.0)
+EVAL_BUDGETS = (10, 25, 50, 100, 200)
+DISTANCE_BUDGETS_DEG = (5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 40.0, 45.0)
+ROLL_LIMIT_DEG = 45.0
+
+
+@dataclass(frozen=True)
+class Options:
+    """Knobs of the experiments (CLI options of ``reproduce``); defaults are the documented ones.
+
+    Attributes:
+        methods: searches compared.
+        max_evals: per-image evaluation budget of the spatial experiments (and the distance profile).
+        grid_step_deg: spacing of the 1-D dense-grid reference; 0 disables it.
+        landscape: (roll, contrast) grid counts of the 2-D landscape (first image); (0, 0) disables it.
+        time_budgets, eval_budgets: the runtime experiments' budgets.
+        iterations: GeoRobust iterations of the convergence experiment.
+    """
+
+    methods: tuple[str, ...] = METHODS
+    max_evals: int = 200
+    grid_step_deg: float = 0.05
+    landscape: tuple[int, int] = (61, 36)
+    time_budgets: tuple[float, ...] = TIME_BUDGETS_S
+    eval_budgets: tuple[int, ...] = EVAL_BUDGETS
+    iterations: int = 30
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A named experiment: its paper section, default number of images and its spec builder."""
+
+    name: str
+    title: str
+    images: int
+    build: Callable[[int, Options], CampaignSpec]
+    figures: tuple[str, ...] = field(default=())
+
+
+def _grid_block(box: BoxSpec, counts: Sequence[int], role: str = "reference", max_samples: int | None = None) -> Block:
+    n = 1
+    for c in counts:
+        n *= int(c)
+    return Block(boxes=(box,), methods=("grid",), budgets=(Budget(max_evals=n, stop_at_breach=False),), role=role,
+                 max_samples=max_samples, options={"grid": {"counts": [int(c) for c in counts]}})
+
+
+def _roll_grid(half_width: float, step: float) -> Block | None:
+    if step <= 0:
+        return None
+    return _grid_block(roll_box(half_width), [int(round(2 * half_width / step)) + 1])
+
+
+def _landscape(box: BoxSpec, counts: tuple[int, int]) -> Block | None:
+    if min(counts) <= 0:
+        return None
+    return _grid_block(box, counts, role="landscape", max_samples=1)
+
+
+def _blocks(*blocks: Block | None) -> tuple[Block, ...]:
+    return tuple(b for b in blocks if b is not None)
+
+
+def _runtime_blocks(box: BoxSpec, o: Options) -> list[Block]:
+    return [
+        Block(boxes=(box,), methods=o.methods, budgets=tuple(Budget(max_seconds=t, stop_at_breach=False) for t in o.time_budgets)),
+        Block(boxes=(box,), methods=o.methods, budgets=tuple(Budget(max_evals=n, stop_at_breach=False) for n in o.eval_budgets)),
+    ]
+
+
+def pnp_validation(seed: int, o: Options) -> CampaignSpec:
+    return CampaignSpec("pnp-validation", (Block(kind="pnp"),), seed=seed, notes=(
+        "Every PnP solver on the ground-truth corners and on the detector's corners of the unperturbed image; "
+        "errors relative to the slant distance to the runway threshold. The differentiable layer's forward pass "
+        "is the ippe_lm solver itself, so its positions equal ippe_lm's (its 'exact' and 'bpnp' modes differ "
+        "only in gradients; their agreement is reported as a cosine)."))
+
+
+def spatial_1d(seed: int, o: Options) -> CampaignSpec:
+    main = Block(boxes=tuple(roll_box(b) for b in ROLL_BUDGETS_DEG), methods=o.methods,
+                 budgets=(Budget(max_evals=o.max_evals),))
+    return CampaignSpec("spatial-1d", _blocks(main, _roll_grid(max(ROLL_BUDGETS_DEG), o.grid_step_deg)), seed=seed, notes=(
+        f"Roll budgets ±{', '.join(f'{b:g}' for b in ROLL_BUDGETS_DEG)}°; {o.max_evals} evaluations per image and "
+        f"budget, early stop at the first breach. Reference: a dense grid over ±{max(ROLL_BUDGETS_DEG):g}° in "
+        f"{o.grid_step_deg:g}° steps, restricted to each budget."))
+
+
+def runtime_1d(seed: int, o: Options) -> CampaignSpec:
+    box = roll_box(15.0)
+    return CampaignSpec("runtime-1d", _blocks(*_runtime_blocks(box, o), _roll_grid(15.0, o.grid_step_deg)), seed=seed, notes=(
+        f"Roll ±15°; time budgets {', '.join(f'{t:g}' for t in o.time_budgets)} s and evaluation budgets "
+        f"{', '.join(map(str, o.eval_budgets))} per image, no early stop. Reference: dense grid in "
+        f"{o.grid_step_deg:g}° steps."))
+
+
+def spatial_2d(seed: int, o: Options) -> CampaignSpec:
+    boxes = tuple(roll_contrast_box(b, c) for b, c in BOXES_2D)
+    main = Block(boxes=boxes, methods=o.methods, budgets=(Budget(max_evals=o.max_evals),))
+    return CampaignSpec("spatial-2d", _blocks(main, _landscape(boxes[-1], o.landscape)), seed=seed, notes=(
+        f"Roll × contrast boxes from (±2°, [0.9, 1.1]) to (±30°, [0.4, 2.5]); {o.max_evals} evaluations per image "
+        f"and box, early stop at the first breach. Landscape: a {o.landscape[0]} × {o.landscape[1]} grid over the "
+        "largest box on the first image."))
+
+
+def runtime_2d(seed: int, o: Options) -> CampaignSpec:
+    box = roll_contrast_box(10.0, (0.7, 1.4))
+    return CampaignSpec("runtime-2d", _blocks(*_runtime_blocks(box, o), _landscape(box, o.landscape)), seed=seed, notes=(
+        f"Roll ±10°, contrast [0.7, 1.4]; time budgets {', '.join(f'{t:g}' for t in o.time_budgets)} s and "
+        f"evaluation budgets {', '.join(map(str, o.eval_budgets))} per image, no early stop. Landscape: a "
+        f"{o.landscape[0]} × {o.landscape[1]} grid on the first image."))
+
+
+def distance_profile(seed: int, o: Options) -> CampaignSpec:
+    main = Block(boxes=tuple(roll_box(b) for b in DISTANCE_BUDGETS_DEG), methods=o.methods,
+                 budgets=(Budget(max_evals=o.max_evals),), chain=True)
+    step = 2 * o.grid_step_deg if o.grid_step_deg > 0 else 0.0  # 0.1° by default: 901 points over ±45°
+    return CampaignSpec("distance-profile", _blocks(main, _roll_grid(ROLL_LIMIT_DEG, step)), seed=seed, notes=(
+        f"Images in quartiles of slant distance. Per image and method, the smallest roll budget of "
+        f"{', '.join(f'{b:g}' for b in DISTANCE_BUDGETS_DEG)}° at which a breach is found ({o.max_evals} evaluations "
+        f"per budget, early stop; budgets above a breach are implied). φ_crit = the smallest budget at which the "
+        f"quartile's survival drops below 10 %, else ≥ {ROLL_LIMIT_DEG:g}°. Reference: dense grid over ±45° in "
+        f"{step:g}° steps."))
+
+
+def convergence(seed: int, o: Options) -> CampaignSpec:
+    main = Block(boxes=(roll_box(15.0),), methods=("georobust",),
+                 budgets=(Budget(max_iters=o.iterations, stop_at_breach=False),))
+    return CampaignSpec("convergence", (main,), seed=seed, notes=(
+        f"GeoRobust (α = 2), {o.iterations} iterations at ±15°, no early stop: |PO_k| (as selected) and RA(k) = "
+        "Σ vol(PO_k) / vol(Θ) when PO_k is selected."))
+
+
+EXPERIMENTS: dict[str, Experiment] = {
+    e.name: e
+    for e in (
+        Experiment("pnp-validation", "Validation of the PnP solvers", 1000, pnp_validation, ("pnp",)),
+        Experiment("spatial-1d", "Spatial robustness to 1-D camera roll", 100, spatial_1d, ("survival_level",)),
+        Experiment("runtime-1d", "Runtime robustness, roll ±15°", 100, runtime_1d, ("runtime",)),
+        Experiment("spatial-2d", "Spatial robustness to roll and contrast", 100, spatial_2d, ("survival_level", "landscape")),
+        Experiment("runtime-2d", "Runtime robustness, roll ±10° and contrast [0.7, 1.4]", 100, runtime_2d,
+                   ("runtime", "landscape")),
+        Experiment("distance-profile", "Vulnerability profile by approach distance", 100, distance_profile,
+                   ("distance",)),
+        Experiment("convergence", "GeoRobust convergence and search-space reduction", 100, convergence,
+                   ("convergence",)),
+    )
+}
+
+
+def audit_spec(box: BoxSpec, *, methods: Sequence[str] = METHODS, budget: Budget, seed: int = 0,
+               lipschitz: float | tuple[float, ...] | None = None, pnp: str = "ippe_lm",
+               landscape: tuple[int, ...] | None = None) -> CampaignSpec:
+    """The ``audit`` job: one box, the given methods and budget; optionally a landscape grid on the first image
+    (counts per parameter) for the heat map."""
+    blocks = [Block(boxes=(box,), methods=tuple(methods), budgets=(budget,))]
+    if landscape and min(landscape) > 0:
+        blocks.append(_grid_block(box, landscape, role="landscape", max_samples=1))
+    stop = "early stop at the first breach" if budget.stop_at_breach else "no early stop"
+    return CampaignSpec("audit", tuple(blocks), seed=seed, lipschitz=lipschitz, pnp=pnp, notes=(
+        f"Box {box.label}; methods {', '.join(methods)}; budget per image: {budget.label} ({stop})."
+        + ("" if lipschitz is None else f" Lipschitz bound given: {lipschitz} m per unit (certificates possible).")))
+
+
+def experiment(name: str) -> Experiment:
+    """The experiment called ``name`` (``ValueError`` listing the names otherwise)."""
+    try:
+        return EXPERIMENTS[name]
+    except KeyError:
+        raise ValueError(f"unknown experiment {name!r}; experiments are: {', '.join(EXPERIMENTS)}") from None
+
+
+def with_options(o: Options, **changes: object) -> Options:
+    """``o`` with the non-None ``changes`` applied (CLI overrides)."""
+    return replace(o, **{k: v for k, v in changes.items() if v is not None})

@@ -1,0 +1,60 @@
+"""Flat exports of a store's job rows: CSV (standard library) and Parquet (pyarrow).
+
+One line per job with the identifying columns, the worst error and point (one column per parameter, real
+units), verdict, counts and timings; traces and evaluated points stay in the store.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Any
+
+from .store import ResultStore
+
+COLUMNS = (
+    "experiment", "kind", "role", "method", "sample_id", "sample_index", "slant_distance_m", "envelope", "box_label",
+    "box_level", "budget_label", "max_evals", "max_seconds", "max_iters", "stop_at_breach", "seed", "status",
+    "reason", "worst_m", "verdict", "nfev", "nit", "search_status", "search_s", "job_s", "upper_bound",
+    "bound_estimate", "run_id", "key",
+)
+
+
+def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
+    """Job rows as flat dicts, and the column names (``COLUMNS`` then ``worst_<parameter>`` columns)."""
+    samples = store.samples()
+    rows, params = [], []
+    for r in store.jobs(with_trace=False):
+        s = samples.get(r["sample_id"], {})
+        b = r.get("budget") or {}
+        d = {c: r.get(c) for c in COLUMNS}
+        d.update(slant_distance_m=s.get("slant_distance_m"), envelope=s.get("envelope"), max_evals=b.get("max_evals"),
+                 max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"), stop_at_breach=b.get("stop_at_breach"))
+        for name, v in (r.get("worst_x") or {}).items():
+            col = f"worst_{name}"
+            if col not in params:
+                params.append(col)
+            d[col] = v
+        rows.append(d)
+    return rows, [*COLUMNS, *params]
+
+
+def export(store: ResultStore, path: str | Path) -> Path:
+    """Write the job rows to ``path``: ``.csv`` or ``.parquet`` (by suffix; ``ValueError`` otherwise)."""
+    p = Path(path)
+    rows, cols = flat_rows(store)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    if p.suffix.lower() == ".csv":
+        with open(p, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
+            w.writeheader()
+            w.writerows(rows)
+    elif p.suffix.lower() == ".parquet":
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        table = pa.table({c: [r.get(c) for r in rows] for c in cols})
+        pq.write_table(table, p)
+    else:
+        raise ValueError(f"export {p}: unknown format (use a .csv or .parquet file name)")
+    return p

@@ -1,0 +1,235 @@
+"""The paper's metrics over store rows: survival rate, median worst error, φ_crit, |PO_k| and RA(k), PnP errors.
+
+Conventions: a row's ``worst_m`` is the worst error the search found for that image (metres); a failed sample
+counts with the failure penalty (5000 m by default), so it is never a survivor. An image *survives* a box when
+its worst error is ≤ ε_safe: S_rate = 100 · #survivors / N (%).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+
+def survival_rate(worst: Sequence[float], eps_safe_m: float) -> float:
+    """Percentage of images whose worst error is ≤ ``eps_safe_m`` (NaN for no images)."""
+    w = np.asarray(worst, dtype=np.float64)
+    if w.size == 0:
+        return math.nan
+    return float(100.0 * np.mean(np.isfinite(w) & (w <= eps_safe_m)))
+
+
+def _stats(values: Sequence[float]) -> dict[str, float]:
+    v = np.asarray(values, dtype=np.float64)
+    if v.size == 0:
+        return {"median": math.nan, "mean": math.nan}
+    return {"median": float(np.median(v)), "mean": float(np.mean(v))}
+
+
+def budget_value(row: Mapping[str, Any], axis: str) -> float:
+    """The numeric budget of a row on ``axis`` ("max_seconds", "max_evals", "max_iters") or NaN."""
+    b = row.get("budget") or {}
+    v = b.get(axis)
+    return math.nan if v is None else float(v)
+
+
+def summarize(rows: Iterable[Mapping[str, Any]], eps_safe_m: float,
+              by: Sequence[str] = ("method", "box_label", "budget_label")) -> list[dict[str, Any]]:
+    """One line per group: n images, survival %, median / mean worst error, breaches, failed, mean evaluations,
+    median search seconds, plus the group's ``box_level`` and numeric budgets. Groups keep first-seen order."""
+    groups: dict[tuple, list[Mapping[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault(tuple(r.get(k) for k in by), []).append(r)
+    out = []
+    for key, rs in groups.items():
+        worst = [r["worst_m"] for r in rs]
+        s = _stats(worst)
+        line = dict(zip(by, key, strict=True))
+        line.update(
+            box_level=rs[0].get("box_level"),
+            max_evals=budget_value(rs[0], "max_evals"), max_seconds=budget_value(rs[0], "max_seconds"),
+            max_iters=budget_value(rs[0], "max_iters"),
+            n=len(rs), survival=survival_rate(worst, eps_safe_m), median_worst_m=s["median"], mean_worst_m=s["mean"],
+            breaches=sum(r["verdict"] == "breach" for r in rs), certified=sum(r["verdict"] == "certified" for r in rs),
+            failed=sum(r["status"] == "failed" for r in rs),
+            mean_nfev=float(np.mean([r["nfev"] or 0 for r in rs])),
+            median_search_s=float(np.median([r.get("search_s") or 0.0 for r in rs])),
+        )
+        out.append(line)
+    return out
+
+
+def worst_within(xs: np.ndarray, fs: np.ndarray, lower: Sequence[float], upper: Sequence[float],
+                 penalty_m: float) -> float:
+    """Largest value among the evaluated points inside the box ``[lower, upper]`` (failed values count as the
+    penalty; NaN when no point is inside). Used to restrict a dense grid to a nested sub-box."""
+    x = np.asarray(xs, dtype=np.float64)
+    if x.size == 0:
+        return math.nan
+    lo = np.asarray(lower) - 1e-9
+    hi = np.asarray(upper) + 1e-9
+    inside = np.all((x >= lo) & (x <= hi), axis=1)
+    if not inside.any():
+        return math.nan
+    f = np.where(np.isfinite(fs), fs, penalty_m)[inside]
+    return float(np.max(f))
+
+
+def reference_rows(ref_rows: Iterable[Mapping[str, Any]], boxes: Sequence[Mapping[str, Any]], eps_safe_m: float,
+                   penalty_m: float) -> list[dict[str, Any]]:
+    """Pseudo-rows ``method="grid (reference)"`` giving, per image and per box of ``boxes`` (``BoxSpec`` dicts),
+    the dense grid's worst value restricted to that box — the true worst case up to the grid spacing.
+
+    ``ref_rows`` need ``xs``/``fs`` (``store.jobs(role="reference", with_points=True)``); a box not inside a
+    grid's box is skipped for that image.
+    """
+    out = []
+    for r in ref_rows:
+        if r["status"] != "done":
+            continue
+        gbox = r["box"]["box"]["bounds"]
+        for b in boxes:
+            bounds = b["box"]["bounds"]
+            if list(bounds) != list(gbox):
+                continue
+            lo = [bounds[k][0] for k in bounds]
+            hi = [bounds[k][1] for k in bounds]
+            if any(lo[i] < gbox[k][0] - 1e-9 or hi[i] > gbox[k][1] + 1e-9 for i, k in enumerate(bounds)):
+                continue
+            w = worst_within(r["xs"], r["fs"], lo, hi, penalty_m)
+            if math.isnan(w):
+                continue
+            out.append({"method": "grid (reference)", "sample_id": r["sample_id"], "box_label": b["label"],
+                        "box_level": b["level"], "budget_label": f"grid {r['budget']['max_evals']} pts", "budget": r["budget"],
+                        "worst_m": w, "verdict": "breach" if w > eps_safe_m else "no breach found",
+                        "status": "done", "nfev": r["nfev"], "search_s": r.get("search_s")})
+    return out
+
+
+def smallest_breach_levels(rows: Iterable[Mapping[str, Any]]) -> dict[tuple[str, str], float]:
+    """Per (sample id, method): the smallest box level (roll half-width) at which a breach was found (a failed
+    sample counts as breached at its smallest level), ``inf`` when none up to the largest level."""
+    out: dict[tuple[str, str], float] = {}
+    for r in rows:
+        key = (r["sample_id"], r["method"])
+        cur = out.setdefault(key, math.inf)
+        if r["verdict"] in ("breach", "failed"):
+            out[key] = min(cur, float(r["box_level"]))
+    return out
+
+
+def survival_curve(levels: Sequence[float], budgets: Sequence[float]) -> list[float]:
+    """Survival % at each budget b when image i first breaches at ``levels[i]`` (breached at b iff level ≤ b)."""
+    lv = np.asarray(levels, dtype=np.float64)
+    if lv.size == 0:
+        return [math.nan for _ in budgets]
+    return [float(100.0 * np.mean(lv > b)) for b in budgets]
+
+
+def phi_crit(levels: Sequence[float], budgets: Sequence[float], threshold_pct: float = 10.0) -> float:
+    """φ_crit: the smallest budget at which survival drops below ``threshold_pct`` %; ``inf`` when it never does
+    within ``budgets`` (reported as "≥ the largest budget")."""
+    for b, s in zip(budgets, survival_curve(levels, budgets), strict=True):
+        if s < threshold_pct:
+            return float(b)
+    return math.inf
+
+
+def quartile_edges(distances: Sequence[float], q: int = 4) -> np.ndarray:
+    """``q + 1`` edges (metres) splitting slant distances into ``q`` groups of (nearly) equal size."""
+    d = np.asarray(distances, dtype=np.float64)
+    return np.quantile(d, np.linspace(0.0, 1.0, q + 1))
+
+
+def quartile_of(distance: float, edges: np.ndarray) -> int:
+    """Index (0 = closest) of the quartile ``distance`` falls in (the last edge belongs to the last quartile)."""
+    return int(min(np.searchsorted(edges, distance, side="right") - 1, len(edges) - 2))
+
+
+def distance_profile(rows: Iterable[Mapping[str, Any]], distances: Mapping[str, float], budgets: Sequence[float],
+                     q: int = 4, threshold_pct: float = 10.0) -> list[dict[str, Any]]:
+    """Per distance quartile and method: n, slant-distance range, median smallest breaching level, survival per
+    budget and φ_crit (``inf`` = no drop below ``threshold_pct`` within the budgets)."""
+    lv = smallest_breach_levels(rows)
+    ids = sorted({sid for sid, _ in lv if sid in distances}, key=lambda s: distances[s])
+    if not ids:
+        return []
+    edges = quartile_edges([distances[s] for s in ids], q)
+    methods = list(dict.fromkeys(m for _, m in lv))
+    out = []
+    for k in range(q):
+        members = [s for s in ids if quartile_of(distances[s], edges) == k]
+        for m in methods:
+            levels = [lv[(s, m)] for s in members if (s, m) in lv]
+            finite = [v for v in levels if math.isfinite(v)]
+            out.append({
+                "quartile": k + 1, "d_min_m": float(edges[k]), "d_max_m": float(edges[k + 1]), "method": m,
+                "n": len(levels), "median_level": float(np.median(levels)) if levels else math.nan,
+                "n_breached": len(finite), "survival": survival_curve(levels, budgets),
+                "phi_crit": phi_crit(levels, budgets, threshold_pct) if levels else math.nan,
+            })
+    return out
+
+
+def convergence(rows: Iterable[Mapping[str, Any]], max_iter: int | None = None) -> list[dict[str, Any]]:
+    """Per iteration k (1-based) over the rows' DIRECT-family traces: |PO_k| (as selected, and after the budget
+    filter) and RA(k) in % — mean, standard deviation, 25/50/75th percentiles over images."""
+    per_k: dict[int, dict[str, list[float]]] = {}
+    for r in rows:
+        for t in r.get("trace") or []:
+            if t.get("po_count_before") is None:
+                continue
+            k = int(t["iteration"])
+            if max_iter is not None and k > max_iter:
+                continue
+            d = per_k.setdefault(k, {"po": [], "po_after": [], "ra": [], "best": [], "nfev": []})
+            d["po"].append(float(t["po_count_before"]))
+            d["po_after"].append(float(t["po_count_after"] if t.get("po_count_after") is not None else math.nan))
+            d["ra"].append(100.0 * float(t["remaining_area"] if t.get("remaining_area") is not None else math.nan))
+            d["best"].append(float(t["best_value"]) if t.get("best_value") is not None else math.nan)
+            d["nfev"].append(float(t["nfev"]))
+    out = []
+    for k in sorted(per_k):
+        d = per_k[k]
+        line: dict[str, Any] = {"iteration": k, "n": len(d["po"])}
+        for name in ("po", "ra"):
+            v = np.asarray(d[name])
+            line[f"{name}_mean"] = float(np.nanmean(v))
+            line[f"{name}_std"] = float(np.nanstd(v))
+            line[f"{name}_q25"], line[f"{name}_median"], line[f"{name}_q75"] = (float(x) for x in np.nanpercentile(v, [25, 50, 75]))
+        line["po_after_mean"] = float(np.nanmean(d["po_after"]))
+        line["nfev_mean"] = float(np.mean(d["nfev"]))
+        line["best_median"] = float(np.nanmedian(d["best"])) if np.isfinite(d["best"]).any() else math.nan
+        out.append(line)
+    return out
+
+
+def pnp_summary(rows: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Per (keypoint source, solver) over the PnP-comparison rows: n, failures, median and mean absolute error
+    (MAE) of the position (m) and of the relative error (% of slant distance), over successful solves."""
+    acc: dict[tuple[str, str], dict[str, list[float]]] = {}
+    for r in rows:
+        if r["status"] != "done" or not r.get("payload"):
+            continue
+        for src, solvers in r["payload"]["errors"].items():
+            for solver, e in solvers.items():
+                d = acc.setdefault((src, solver), {"abs": [], "rel": [], "fail": []})
+                ok = e["abs_m"] is not None
+                d["fail"].append(0.0 if ok else 1.0)
+                if ok:
+                    d["abs"].append(e["abs_m"])
+                    d["rel"].append(e["rel_pct"])
+    out = []
+    for (src, solver), d in acc.items():
+        a, rl = np.asarray(d["abs"]), np.asarray(d["rel"])
+        out.append({
+            "source": src, "solver": solver, "n": len(d["fail"]), "failures": int(sum(d["fail"])),
+            "median_abs_m": float(np.median(a)) if a.size else math.nan, "mae_abs_m": float(np.mean(a)) if a.size else math.nan,
+            "median_rel_pct": float(np.median(rl)) if rl.size else math.nan,
+            "mae_rel_pct": float(np.mean(rl)) if rl.size else math.nan,
+            "p95_rel_pct": float(np.percentile(rl, 95)) if rl.size else math.nan,
+        })
+    return out

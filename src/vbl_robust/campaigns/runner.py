@@ -1,0 +1,209 @@
+"""Run a campaign: expand the spec, skip what the store already holds, execute the rest, commit job by job.
+
+Executors:
+
+- ``"local"`` (default): the jobs run in this process, sample after sample, the detector built once.
+- ``"ray"``: one Ray task per sample (a streaming generator: each finished job's rows come back as soon as they
+  are ready); workers build the detector once each; this process writes every row into the same store.
+  ``address`` = an existing cluster (``"auto"``, ``"ray://host:10001"``), else a local Ray instance is started.
+
+Progress goes through a callback receiving :class:`Progress` after every committed job; the CLI renders it.
+"""
+
+from __future__ import annotations
+
+import logging
+import platform
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from .provenance import DetectorSpec, code_version, dataset_identity, sample_fingerprint
+from .spec import CampaignSpec, Job
+from .store import ResultStore
+from .work import VERDICT_BREACH, SampleTask, Settings, detector_for, run_sample_task
+
+logger = logging.getLogger(__name__)
+
+EXECUTORS = ("local", "ray")
+
+
+@dataclass(frozen=True)
+class Progress:
+    """State after a committed job. ``done`` counts jobs finished in earlier runs too (``skipped``)."""
+
+    done: int
+    total: int
+    skipped: int
+    breaches: int
+    failed: int
+    elapsed: float
+    last: dict[str, Any] | None = None
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    run_id: int
+    total: int
+    skipped: int
+    done: int
+    failed: int
+    breaches: int
+    seconds: float
+    status: str
+
+
+def sample_record(sample: Any, index: int) -> dict[str, Any]:
+    """Row of the ``samples`` table."""
+    import json
+
+    meta = {k: v for k, v in (sample.meta or {}).items() if isinstance(v, str | int | float | bool)}
+    return {"sample_id": sample.id, "sample_index": index, "slant_distance_m": float(sample.slant_distance_m),
+            "envelope": (sample.meta or {}).get("envelope"), "width": int(sample.width), "height": int(sample.height),
+            "fingerprint": sample_fingerprint(sample), "meta_json": json.dumps(meta, sort_keys=True, default=str)}
+
+
+def plan(spec: CampaignSpec, samples: Sequence[Any], detector: DetectorSpec) -> list[Job]:
+    """All jobs of ``spec`` on ``samples`` for ``detector`` (keys depend on all three)."""
+    det_id = detector.identity()
+    return spec.expand([(s.id, sample_fingerprint(s)) for s in samples],
+                       detector_id=f"{det_id['kind']}:{det_id['sha256']}:{det_id.get('factory')}")
+
+
+def run_campaign(
+    spec: CampaignSpec,
+    samples: Sequence[Any],
+    store: ResultStore,
+    *,
+    detector: DetectorSpec,
+    executor: str = "local",
+    address: str | None = None,
+    ray_num_cpus: int | None = None,
+    progress: Callable[[Progress], None] | None = None,
+    dataset_source: dict[str, Any] | None = None,
+    config: dict[str, Any] | None = None,
+) -> RunSummary:
+    """Run every job of ``spec`` on ``samples`` that ``store`` does not hold yet.
+
+    Args:
+        spec: the campaign.
+        samples: the samples (ids unique).
+        store: where rows go; bound to this campaign on first use (a different campaign is refused).
+        detector: how to build the detector (its identity is part of every job key).
+        executor: "local" or "ray"; ``address``/``ray_num_cpus`` for Ray.
+        progress: called after every committed job.
+        dataset_source: where the samples came from (provenance), e.g. ``{"kind": "synthetic", "n": 10, "seed": 0}``.
+        config: the full user configuration (provenance; e.g. the CLI options).
+    """
+    if executor not in EXECUTORS:
+        raise ValueError(f"executor must be one of {EXECUTORS}, got {executor!r}")
+    t0 = time.perf_counter()
+    det_identity = detector.identity()
+    store.bind_campaign(spec.name, spec.to_dict(), det_identity)
+    jobs = plan(spec, samples, detector)
+    store.add_samples(sample_record(s, i) for i, s in enumerate(samples))
+    done_keys = store.done_keys()
+    pending = [j for j in jobs if j.key not in done_keys]
+    skipped = len(jobs) - len(pending)
+    dataset = dataset_identity(samples, dataset_source or {})
+    run_id = store.begin_run({
+        "code_version": code_version(), "model_sha256": det_identity["sha256"], "detector": det_identity,
+        "dataset_id": dataset["sha256"], "dataset": dataset, "seed": spec.seed, "executor": executor,
+        "config": {"campaign": spec.to_dict(), "user": config or {}, "executor": executor, "address": address},
+        "host": platform.node(), "jobs_total": len(jobs), "jobs_skipped": skipped,
+    })
+    logger.info("campaign %s: %d jobs, %d already done, %d to run (%s executor)", spec.name, len(jobs), skipped,
+                len(pending), executor)
+
+    by_sample: dict[str, list[Job]] = {}
+    for j in pending:
+        by_sample.setdefault(j.sample_id, []).append(j)
+    sample_of = {s.id: s for s in samples}
+    tasks = [SampleTask(sample_of[sid], js) for sid, js in by_sample.items()]
+    settings = Settings.from_spec(spec)
+
+    state = {"new": 0, "failed": 0, "breaches": _stored_breaches(store)}
+
+    def on_rows(rows: list[dict[str, Any]]) -> None:
+        store.commit(rows)
+        state["new"] += len(rows)
+        state["failed"] += sum(r["status"] == "failed" for r in rows)
+        state["breaches"] += sum(r["verdict"] == VERDICT_BREACH and r["role"] == "main" for r in rows)
+        if progress is not None:
+            progress(Progress(skipped + state["new"], len(jobs), skipped, state["breaches"], state["failed"],
+                              time.perf_counter() - t0, rows[0]))
+
+    if progress is not None:
+        progress(Progress(skipped, len(jobs), skipped, state["breaches"], 0, 0.0, None))
+    status = "finished"
+    try:
+        if executor == "local":
+            det = detector_for(detector) if tasks else None
+            for task in tasks:
+                for rows in run_sample_task(task, det, settings, run_id):
+                    on_rows(rows)
+        else:
+            for rows in _ray_rows(tasks, detector, settings, run_id, address, ray_num_cpus):
+                on_rows(rows)
+    except BaseException:
+        status = "interrupted"
+        raise
+    finally:
+        seconds = time.perf_counter() - t0
+        if status == "finished" and skipped + state["new"] < len(jobs):
+            status = "incomplete"
+        store.end_run(run_id, status, state["new"], seconds)
+    return RunSummary(run_id, len(jobs), skipped, state["new"], state["failed"], state["breaches"], seconds, status)
+
+
+def _stored_breaches(store: ResultStore) -> int:
+    return sum(r["verdict"] == VERDICT_BREACH for r in store.jobs(role="main", with_trace=False))
+
+
+# -- Ray -------------------------------------------------------------------------------------------------------
+def _ray_sample_task(task: SampleTask, detector: DetectorSpec, settings: Settings, run_id: int) -> Iterator[list[dict]]:
+    """Body of a Ray task: the same code as the local executor, in a worker (detector cached per worker)."""
+    yield from run_sample_task(task, detector_for(detector), settings, run_id)
+
+
+def _ray_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Settings, run_id: int,
+              address: str | None, num_cpus: int | None) -> Iterator[list[dict[str, Any]]]:
+    """Submit one streaming task per sample and yield rows as they arrive (in completion order)."""
+    if not tasks:
+        return
+    try:
+        import ray
+    except ImportError as exc:  # pragma: no cover - ray is a dependency
+        raise ValueError("--executor ray needs the 'ray' package (pip install 'ray[default]')") from exc
+    started = False
+    if not ray.is_initialized():
+        kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
+        if address:
+            ray.init(address=address, **kw)
+        else:
+            ray.init(num_cpus=num_cpus, **kw)
+        started = True
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(_ray_sample_task)
+        for s in (t.sample for t in tasks):
+            if hasattr(s, "drop_pixels"):
+                s.drop_pixels()  # ship geometry and the loader, not megabytes of pixels
+        gens = [remote.remote(t, detector, settings, run_id) for t in tasks]
+        pending = list(gens)
+        while pending:
+            ready, _ = ray.wait(pending, num_returns=1)
+            for gen in ready:
+                try:
+                    ref = next(gen)
+                except StopIteration:
+                    pending.remove(gen)
+                    continue
+                try:
+                    yield ray.get(ref)
+                except Exception as exc:  # a crashed worker: its unfinished jobs stay pending for a rerun
+                    logger.error("a Ray task failed; its remaining jobs stay pending (rerun to resume): %s", exc)
+                    pending.remove(gen)
+    finally:
+        if started:
+            ray.shutdown()

@@ -1,0 +1,61 @@
+"""Where a campaign's samples come from: generated synthetic approaches, or a LARD V2 dataset directory."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .provenance import file_sha256
+
+
+def find_lard_files(directory: str | Path) -> tuple[Path, Path]:
+    """The metadata CSV and runway-DB JSON of a LARD V2 dataset directory (searched at the top, then one level
+    down); ``ValueError`` naming the candidates when there is not exactly one of each."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise FileNotFoundError(f"--lard {d}: not a directory")
+    found: dict[str, list[Path]] = {}
+    for pattern, kind in (("*.csv", "csv"), ("*.json", "json")):
+        hits = sorted(d.glob(pattern)) or sorted(d.glob(f"*/{pattern}"))
+        found[kind] = hits
+    for kind, what in (("csv", "metadata CSV"), ("json", "runway database JSON")):
+        hits = found[kind]
+        if not hits:
+            raise FileNotFoundError(f"--lard {d}: no {what} (*.{kind}) found")
+        if len(hits) > 1:
+            names = ", ".join(str(h.relative_to(d)) for h in hits[:6])
+            raise ValueError(f"--lard {d}: several {what} files ({names}); point --lard at a directory with exactly one")
+    return found["csv"][0], found["json"][0]
+
+
+def load_samples(n: int, seed: int, *, lard: str | Path | None = None, width: int = 1024, height: int = 1024,
+                 **read_options: Any) -> tuple[list[Any], dict[str, Any]]:
+    """``n`` samples and a description of their source (provenance).
+
+    Synthetic (``lard`` None): ``vbl_robust.scenes.generate(n, seed=seed, width=, height=)``. LARD: all rows of the
+    dataset read with :func:`vbl_robust.data.read_lard`, then ``n`` of them drawn at random with ``seed`` (all of
+    them when the dataset has ``n`` or fewer), kept in file order.
+    """
+    if n < 1:
+        raise ValueError(f"number of images must be >= 1, got {n}")
+    if lard is None:
+        from ..scenes import generate
+
+        samples = list(generate(n, seed=seed, width=width, height=height))
+        return samples, {"kind": "synthetic", "n": n, "seed": seed, "width": width, "height": height}
+    from ..data import read_lard
+
+    csv_path, db_path = find_lard_files(lard)
+    allrows = list(read_lard(csv_path, db_path, **read_options))
+    if not allrows:
+        raise ValueError(f"--lard {lard}: the dataset has no usable rows")
+    if n < len(allrows):
+        idx = np.sort(np.random.default_rng(seed).choice(len(allrows), size=n, replace=False))
+        samples = [allrows[i] for i in idx]
+    else:
+        samples = allrows
+    return samples, {"kind": "lard", "csv": str(csv_path), "csv_sha256": file_sha256(csv_path), "db": str(db_path),
+                     "db_sha256": file_sha256(db_path), "rows": len(allrows), "n": len(samples), "seed": seed,
+                     "options": {k: str(v) for k, v in read_options.items()}}

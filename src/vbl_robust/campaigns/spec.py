@@ -1,0 +1,320 @@
+"""Campaigns as data: a spec (boxes × methods × budgets, per block) expands into jobs with a seed stream.
+
+A :class:`CampaignSpec` holds the settings shared by all its jobs (ε_safe, τ_conf, failure penalty, PnP
+solver, base seed) and a tuple of :class:`Block` s. A block is one cross product *samples × boxes × methods ×
+budgets*; experiments use several blocks (the searches, a dense-grid reference, a landscape on one image).
+
+Every :class:`Job` has a stable ``key``: the SHA-256 of its canonical JSON (sorted keys, plain floats) together
+with the *context* (detector identity, dataset identity, shared settings). The key is what makes a campaign
+resumable: the results store holds one row per key, so a rerun of the same command skips finished jobs.
+
+Seed stream: each job's seed is derived from the base seed and the job's identity (sample, method, box,
+budget) by hashing, so it does not depend on the order of jobs or on which jobs were already done.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..space import ParameterBox
+
+#: Operational safety threshold ε_safe (metres) and failure penalty (metres) of the paper.
+EPS_SAFE_M = 1000.0
+PENALTY_M = 5000.0
+CONF_THRESHOLD = 0.25
+
+#: Job kinds: a worst-case search, or the PnP-solver comparison of one image.
+KINDS = ("search", "pnp")
+#: Roles of a block: the compared searches, a dense-grid reference, a landscape grid for one image.
+ROLES = ("main", "reference", "landscape")
+
+
+def canonical_json(obj: Any) -> str:
+    """Deterministic JSON (sorted keys, no spaces, non-finite floats as strings) used for keys and hashes."""
+    return json.dumps(_plain(obj), sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def _plain(v: Any) -> Any:
+    if isinstance(v, Mapping):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_plain(x) for x in v]
+    if isinstance(v, ParameterBox):
+        return _plain(v.to_dict())
+    if hasattr(v, "item") and not isinstance(v, str):  # numpy scalars
+        v = v.item()
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            return repr(v)
+        return int(v) if v.is_integer() and abs(v) < 2**53 else v  # 15.0 and 15 give the same key
+    return v
+
+
+def digest(obj: Any, n: int = 64) -> str:
+    """Hex SHA-256 (first ``n`` characters) of :func:`canonical_json` of ``obj``."""
+    return hashlib.sha256(canonical_json(obj).encode()).hexdigest()[:n]
+
+
+def derive_seed(base_seed: int, *parts: Any) -> int:
+    """A seed in ``[0, 2**31)`` derived from ``base_seed`` and the identity ``parts`` (order independent of jobs)."""
+    h = hashlib.sha256(canonical_json([int(base_seed), *parts]).encode()).digest()
+    return int.from_bytes(h[:4], "big") & 0x7FFFFFFF
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Per-image search budget. At least one of ``max_evals``, ``max_seconds``, ``max_iters`` is set.
+
+    ``stop_at_breach``: stop at the first value above ε_safe (the question "is there a breach?"); off when the
+    size of the worst error itself is measured (runtime experiments, convergence).
+    """
+
+    max_evals: int | None = None
+    max_seconds: float | None = None
+    max_iters: int | None = None
+    stop_at_breach: bool = True
+
+    def __post_init__(self) -> None:
+        if self.max_evals is None and self.max_seconds is None and self.max_iters is None:
+            raise ValueError("Budget: give at least one of max_evals, max_seconds, max_iters")
+        for name in ("max_evals", "max_iters"):
+            v = getattr(self, name)
+            if v is not None and (not isinstance(v, int) or isinstance(v, bool) or v < 1):
+                raise ValueError(f"Budget: {name} must be an integer >= 1 or None, got {v!r}")
+        if self.max_seconds is not None and not (math.isfinite(self.max_seconds) and self.max_seconds > 0):
+            raise ValueError(f"Budget: max_seconds must be a finite number > 0 or None, got {self.max_seconds!r}")
+
+    @property
+    def label(self) -> str:
+        parts = []
+        if self.max_evals is not None:
+            parts.append(f"{self.max_evals} evals")
+        if self.max_seconds is not None:
+            parts.append(f"{self.max_seconds:g} s")
+        if self.max_iters is not None:
+            parts.append(f"{self.max_iters} iters")
+        return " / ".join(parts) + ("" if self.stop_at_breach else ", no early stop")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"max_evals": self.max_evals, "max_seconds": self.max_seconds, "max_iters": self.max_iters,
+                "stop_at_breach": self.stop_at_breach}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Budget:
+        return cls(max_evals=d.get("max_evals"), max_seconds=d.get("max_seconds"), max_iters=d.get("max_iters"),
+                   stop_at_breach=bool(d.get("stop_at_breach", True)))
+
+
+@dataclass(frozen=True)
+class BoxSpec:
+    """A labelled perturbation box; ``level`` is the number plotted on a budget axis (e.g. the roll half-width)."""
+
+    box: ParameterBox
+    label: str
+    level: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"box": self.box.to_dict(), "label": self.label, "level": self.level}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> BoxSpec:
+        return cls(ParameterBox.from_dict(d["box"]), d["label"], float(d["level"]))
+
+
+def roll_box(half_width_deg: float) -> BoxSpec:
+    """The 1-D box roll ∈ [−b, b] degrees."""
+    b = abs(float(half_width_deg))
+    return BoxSpec(ParameterBox({"roll_deg": (-b, b)}), f"±{b:g}°", b)
+
+
+def roll_contrast_box(half_width_deg: float, contrast: tuple[float, float]) -> BoxSpec:
+    """The 2-D box roll ∈ [−b, b] degrees × contrast ∈ [lo, hi]."""
+    b = abs(float(half_width_deg))
+    lo, hi = float(contrast[0]), float(contrast[1])
+    return BoxSpec(ParameterBox({"roll_deg": (-b, b), "contrast": (lo, hi)}), f"±{b:g}°, c∈[{lo:g}, {hi:g}]", b)
+
+
+@dataclass(frozen=True)
+class Block:
+    """One cross product samples × boxes × methods × budgets.
+
+    Attributes:
+        boxes, methods, budgets: the factors.
+        role: "main" (compared searches), "reference" (dense grid: the true worst case), "landscape" (dense
+            grid on a few images for the heat map).
+        kind: "search" or "pnp" (the PnP-solver comparison: one job per image; boxes/methods/budgets unused).
+        max_samples: only the first ``max_samples`` samples (None: all).
+        chain: per (sample, method), run boxes in order and, once a breach is found at a box, record the larger
+            boxes as implied breaches without searching (used for the smallest breaching roll budget; boxes
+            must be nested and sorted by level).
+        options: per-method keyword options for the search (e.g. ``{"grid": {"counts": [1201]}}``).
+    """
+
+    boxes: tuple[BoxSpec, ...] = ()
+    methods: tuple[str, ...] = ()
+    budgets: tuple[Budget, ...] = ()
+    role: str = "main"
+    kind: str = "search"
+    max_samples: int | None = None
+    chain: bool = False
+    options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.role not in ROLES:
+            raise ValueError(f"Block: role must be one of {ROLES}, got {self.role!r}")
+        if self.kind not in KINDS:
+            raise ValueError(f"Block: kind must be one of {KINDS}, got {self.kind!r}")
+        if self.kind == "search" and not (self.boxes and self.methods and self.budgets):
+            raise ValueError("Block: a search block needs at least one box, one method and one budget")
+        if self.chain:
+            levels = [b.level for b in self.boxes]
+            if levels != sorted(levels):
+                raise ValueError(f"Block: chained boxes must be sorted by level, got {levels}")
+
+
+@dataclass(frozen=True)
+class Job:
+    """One unit of work: one search (or PnP comparison) on one sample. Rows of the store are keyed by ``key``."""
+
+    experiment: str
+    sample_id: str
+    sample_fp: str
+    sample_index: int
+    kind: str
+    role: str
+    method: str
+    box: BoxSpec | None
+    budget: Budget | None
+    seed: int
+    options: Mapping[str, Any]
+    context: str
+    chain: str | None = None
+
+    def identity(self) -> dict[str, Any]:
+        """Everything that determines the job's result (the key is its digest)."""
+        return {
+            "experiment": self.experiment,
+            "sample_id": self.sample_id,
+            "sample_fp": self.sample_fp,
+            "kind": self.kind,
+            "role": self.role,
+            "method": self.method,
+            "box": None if self.box is None else self.box.to_dict(),
+            "budget": None if self.budget is None else self.budget.to_dict(),
+            "seed": self.seed,
+            "options": dict(self.options),
+            "context": self.context,
+        }
+
+    @property
+    def key(self) -> str:
+        return digest(self.identity(), 40)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = self.identity()
+        d.update(sample_index=self.sample_index, chain=self.chain)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Job:
+        return cls(
+            experiment=d["experiment"], sample_id=d["sample_id"], sample_fp=d["sample_fp"],
+            sample_index=int(d["sample_index"]),
+            kind=d["kind"], role=d["role"], method=d["method"],
+            box=None if d["box"] is None else BoxSpec.from_dict(d["box"]),
+            budget=None if d["budget"] is None else Budget.from_dict(d["budget"]),
+            seed=int(d["seed"]), options=dict(d["options"]), context=d["context"], chain=d.get("chain"),
+        )
+
+
+@dataclass(frozen=True)
+class CampaignSpec:
+    """A campaign: shared settings plus blocks. :meth:`expand` turns it into jobs for a list of sample ids.
+
+    Attributes:
+        name: experiment name ("audit", "spatial-1d", …); part of every job key.
+        blocks: the cross products.
+        seed: base of the seed stream.
+        eps_safe_m, penalty_m, conf_threshold, pnp: the pipeline settings (paper: 1000 m, 5000 m, 0.25).
+        lipschitz: optional Lipschitz constant of L in real units (m per unit of each parameter, or one number
+            for the Euclidean norm) — with it, searches that keep a cover of the box can *certify* a sample.
+        notes: free text for the report (budgets chosen, deviations from the paper).
+    """
+
+    name: str
+    blocks: tuple[Block, ...]
+    seed: int = 0
+    eps_safe_m: float = EPS_SAFE_M
+    penalty_m: float = PENALTY_M
+    conf_threshold: float = CONF_THRESHOLD
+    pnp: str = "ippe_lm"
+    lipschitz: float | tuple[float, ...] | None = None
+    notes: str = ""
+
+    def settings(self) -> dict[str, Any]:
+        """The settings that change results (part of the job context)."""
+        return {"eps_safe_m": self.eps_safe_m, "penalty_m": self.penalty_m, "conf_threshold": self.conf_threshold,
+                "pnp": self.pnp, "lipschitz": self.lipschitz}
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name, "seed": self.seed, **self.settings(), "notes": self.notes,
+            "blocks": [
+                {"boxes": [b.to_dict() for b in blk.boxes], "methods": list(blk.methods),
+                 "budgets": [b.to_dict() for b in blk.budgets], "role": blk.role, "kind": blk.kind,
+                 "max_samples": blk.max_samples, "chain": blk.chain, "options": {k: dict(v) for k, v in blk.options.items()}}
+                for blk in self.blocks
+            ],
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> CampaignSpec:
+        blocks = tuple(
+            Block(boxes=tuple(BoxSpec.from_dict(b) for b in blk["boxes"]), methods=tuple(blk["methods"]),
+                  budgets=tuple(Budget.from_dict(b) for b in blk["budgets"]), role=blk["role"], kind=blk["kind"],
+                  max_samples=blk["max_samples"], chain=blk["chain"], options=blk["options"])
+            for blk in d["blocks"]
+        )
+        lip = d.get("lipschitz")
+        return cls(name=d["name"], blocks=blocks, seed=int(d["seed"]), eps_safe_m=float(d["eps_safe_m"]),
+                   penalty_m=float(d["penalty_m"]), conf_threshold=float(d["conf_threshold"]), pnp=d["pnp"],
+                   lipschitz=tuple(lip) if isinstance(lip, list) else lip, notes=d.get("notes", ""))
+
+    def context(self, detector_id: str) -> str:
+        """Digest of what every job of this campaign shares: the settings and the detector identity."""
+        return digest({"settings": self.settings(), "detector": detector_id}, 24)
+
+    def expand(self, samples: Sequence[tuple[str, str]], *, detector_id: str = "") -> list[Job]:
+        """All jobs for ``samples`` = ``(id, geometry fingerprint)`` pairs, ordered by sample, then block, then
+        method, budget, box (chained jobs in box order).
+
+        The fingerprint (see :func:`vbl_robust.campaigns.provenance.sample_fingerprint`) makes a job key change
+        when a sample with the same id has other geometry, while growing a dataset keeps the existing keys.
+        """
+        ids = [sid for sid, _ in samples]
+        if len(set(ids)) != len(ids):
+            raise ValueError("CampaignSpec.expand: sample ids must be unique")
+        ctx = self.context(detector_id)
+        jobs: list[Job] = []
+        for i, (sid, fp) in enumerate(samples):
+            for blk in self.blocks:
+                if blk.max_samples is not None and i >= blk.max_samples:
+                    continue
+                if blk.kind == "pnp":
+                    jobs.append(Job(self.name, sid, fp, i, "pnp", blk.role, "pnp", None, None,
+                                    derive_seed(self.seed, sid, "pnp"), {}, ctx))
+                    continue
+                for method in blk.methods:
+                    opts = dict(blk.options.get(method, {}))
+                    for budget in blk.budgets:
+                        chain = digest([sid, blk.role, method, budget.to_dict()], 16) if blk.chain else None
+                        for box in blk.boxes:
+                            seed = derive_seed(self.seed, sid, method, box.label, budget.label)
+                            jobs.append(Job(self.name, sid, fp, i, "search", blk.role, method, box, budget, seed, opts,
+                                            ctx, chain))
+        return jobs

@@ -1,0 +1,404 @@
+"""Assemble the HTML report of a run directory from its results store (``vbl-robust report RUN``).
+
+The report is rebuilt from the store alone: every figure is drawn from the stored rows, every figure comes with
+the table of the numbers behind it, and the provenance of every run (code version, model SHA-256, dataset
+identity, configuration) closes the page. Figures are also written as PNG files next to the report.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from ..campaigns import metrics as mx
+from ..campaigns.experiments import DISTANCE_BUDGETS_DEG, EXPERIMENTS, ROLL_LIMIT_DEG
+from ..campaigns.spec import CampaignSpec
+from ..campaigns.store import ResultStore
+from . import figures as F
+from .html import esc, figure_png, fmt_num, img, page, table
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class Section:
+    title: str
+    html: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Context:
+    """What every section builder needs: the stored rows, the spec and where figures go."""
+
+    store: ResultStore
+    spec: CampaignSpec
+    out_dir: Path
+    main: list[dict[str, Any]]
+    samples: dict[str, dict[str, Any]]
+    figures: list[Path] = field(default_factory=list)
+
+    @property
+    def eps(self) -> float:
+        return self.spec.eps_safe_m
+
+    def figure(self, fig: Any, name: str, caption: str) -> str:
+        png = figure_png(fig)
+        plt.close(fig)
+        path = self.out_dir / "figures" / f"{name}.png"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(png)
+        self.figures.append(path)
+        return img(png, name, caption)
+
+
+_SUMMARY_COLS = [
+    ("method", "method", None), ("box_label", "box", None), ("budget_label", "budget per image", None),
+    ("n", "images", None), ("survival", "survival %", None), ("median_worst_m", "median worst (m)", None),
+    ("breaches", "breaches", None), ("certified", "certified", None), ("failed", "failed", None),
+    ("mean_nfev", "mean evals", None), ("median_search_s", "median s", None),
+]
+
+
+def _summary_table(summary: Sequence[Mapping[str, Any]]) -> str:
+    return table(summary, _SUMMARY_COLS, left=("method", "box_label", "budget_label"))
+
+
+def _reference(ctx: Context, boxes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    ref = ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
+    return mx.reference_rows(ref, boxes, ctx.eps, ctx.spec.penalty_m)
+
+
+def _main_boxes(ctx: Context) -> list[dict[str, Any]]:
+    seen: dict[str, dict[str, Any]] = {}
+    for r in ctx.main:
+        seen.setdefault(r["box_label"], r["box"])
+    return list(seen.values())
+
+
+# -- sections ------------------------------------------------------------------------------------------------
+def section_overview(ctx: Context, title: str) -> Section:
+    s = Section("Summary")
+    runs = ctx.store.runs()
+    last = runs[-1] if runs else {}
+    det = (last.get("detector") or {})
+    n_done = ctx.store.count()
+    total = last.get("jobs_total")
+    s.html.append(
+        f"<p><b>{esc(title)}</b>. Detector: <b>{esc(det.get('name', '?'))}</b>; {len(ctx.samples)} images; "
+        f"ε_safe = {ctx.eps:g} m, τ_conf = {ctx.spec.conf_threshold:g}, failure penalty {ctx.spec.penalty_m:g} m, "
+        f"PnP solver <code>{esc(ctx.spec.pnp)}</code>, seed {ctx.spec.seed}. Jobs in the store: {n_done}"
+        + (f" of {total}" if total else "") + ".</p>")
+    if ctx.spec.notes:
+        s.html.append(f'<p class="note">{esc(ctx.spec.notes)}</p>')
+    if det.get("kind") == "oracle":
+        s.html.append('<p class="warn">The oracle detector returns the exact projected runway corners: these results '
+                      "describe a perfect detector (roll about the optical axis does not move the camera), not a "
+                      "trained model.</p>")
+    if total and n_done < total:
+        s.html.append(f'<p class="warn">The campaign is incomplete ({n_done} of {total} jobs): rerun the same '
+                      "command to resume.</p>")
+    if ctx.main:
+        s.html.append(_summary_table(mx.summarize(ctx.main, ctx.eps)))
+    failed = [r for r in ctx.store.jobs(with_trace=False) if r["status"] == "failed"]
+    if failed:
+        s.html.append(f'<p class="warn">{len(failed)} job(s) failed and count with the {ctx.spec.penalty_m:g} m '
+                      "penalty (never as survivors):</p>")
+        s.html.append(table(failed[:50], [("sample_id", "sample", None), ("method", "method", None),
+                                          ("box_label", "box", None), ("reason", "reason", None)],
+                            left=("sample_id", "method", "box_label", "reason")))
+    return s
+
+
+def section_survival_level(ctx: Context) -> Section | None:
+    rows = [r for r in ctx.main if r.get("chain") is None]
+    if len({r["box_level"] for r in rows}) < 2:
+        return None
+    boxes = _main_boxes(ctx)
+    summary = mx.summarize(rows, ctx.eps, by=("method", "box_label"))
+    ref = mx.summarize(_reference(ctx, boxes), ctx.eps, by=("method", "box_label"))
+    two_d = any(len(b["box"]["bounds"]) > 1 for b in boxes)
+    ticks = {b["level"]: b["label"] for b in boxes} if two_d else None
+    title = "Survival vs roll and contrast budget" if two_d else "Survival vs roll budget"
+    s = Section(title)
+    fig = F.survival_vs_level(summary + ref, title=title, tick_labels=ticks,
+                              xlabel="perturbation box (roll half-width, contrast range)" if two_d else "roll budget")
+    s.html.append(ctx.figure(fig, "survival_2d" if two_d else "survival_1d",
+                             "Survival rate S_rate: share of images whose worst error found stays ≤ ε_safe. Lower "
+                             "means the search found more breaches (a stronger search)."))
+    s.html.append(_summary_table(summary + ref))
+    return s
+
+
+def section_runtime(ctx: Context) -> Section | None:
+    rows = [r for r in ctx.main if r.get("budget")]
+    time_rows = [r for r in rows if r["budget"].get("max_seconds") is not None]
+    eval_rows = [r for r in rows if r["budget"].get("max_seconds") is None and r["budget"].get("max_evals") is not None]
+    if len({r["budget_label"] for r in time_rows}) < 2 and len({r["budget_label"] for r in eval_rows}) < 2:
+        return None
+    boxes = _main_boxes(ctx)
+    ref_rows = _reference(ctx, boxes)
+    ref = None
+    if ref_rows:
+        w = [r["worst_m"] for r in ref_rows]
+        ref = {"survival": mx.survival_rate(w, ctx.eps), "median_worst_m": float(np.median(w))}
+    box_label = boxes[0]["label"] if boxes else ""
+    s = Section(f"Runtime budgets ({box_label})")
+    for axis, rs, name in (("max_seconds", time_rows, "time"), ("max_evals", eval_rows, "evals")):
+        if len({r["budget_label"] for r in rs}) < 2:
+            continue
+        summary = mx.summarize(rs, ctx.eps, by=("method", "budget_label"))
+        for line in summary:
+            line["box_label"] = box_label
+        dims = "2d" if boxes and len(boxes[0]["box"]["bounds"]) > 1 else "1d"
+        fig = F.runtime(summary, axis=axis, eps_safe_m=ctx.eps, reference=ref,
+                        title=f"{'Time' if axis == 'max_seconds' else 'Evaluation'} budget per image, box {box_label}")
+        s.html.append(ctx.figure(fig, f"runtime_{dims}_{name}",
+                                 "Left: survival rate; right: median over images of the worst error found "
+                                 "(no early stop). Dashed black: the dense grid's true worst case."))
+        s.html.append(_summary_table(summary))
+    if ref:
+        s.html.append(f"<p>Dense-grid reference on {len(ref_rows)} images: survival {fmt_num(ref['survival'])} %, "
+                      f"median worst {fmt_num(ref['median_worst_m'])} m.</p>")
+    return s
+
+
+def section_distance(ctx: Context) -> Section | None:
+    rows = [r for r in ctx.main if r.get("chain") is not None]
+    if not rows:
+        return None
+    distances = {sid: s["slant_distance_m"] for sid, s in ctx.samples.items()}
+    budgets = sorted({r["box_level"] for r in rows}) or list(DISTANCE_BUDGETS_DEG)
+    limit = max(budgets) if budgets else ROLL_LIMIT_DEG
+    ref = _reference(ctx, _main_boxes(ctx))
+    profile = mx.distance_profile(rows + ref, distances, budgets)
+    s = Section("Vulnerability profile by approach distance")
+    fig = F.distance_profile(profile, limit_deg=limit, budgets=budgets)
+    s.html.append(ctx.figure(fig, "distance_profile",
+                             "φ_crit per slant-distance quartile: the smallest roll budget at which the quartile's "
+                             f"survival drops below 10 %. Bars in the red band: survival never dropped below 10 % "
+                             f"within ±{limit:g}°."))
+    lines = [{**p, "survival_str": " / ".join(fmt_num(v) for v in p["survival"]),
+              "phi": f"≥ {limit:g}°" if not math.isfinite(p["phi_crit"]) else f"{p['phi_crit']:g}°",
+              "range": f"{p['d_min_m']:.0f}–{p['d_max_m']:.0f}"} for p in profile]
+    s.html.append(table(lines, [("quartile", "quartile", None), ("range", "slant distance (m)", None),
+                                ("method", "method", None), ("n", "images", None), ("n_breached", "breached ≤ limit", None),
+                                ("median_level", "median smallest breaching budget (°)", None), ("phi", "φ_crit", None),
+                                ("survival_str", f"survival % at {', '.join(f'{b:g}' for b in budgets)}°", None)],
+                        left=("method", "survival_str")))
+    return s
+
+
+def section_convergence(ctx: Context) -> Section | None:
+    rows = [r for r in ctx.main if r["method"] in ("georobust", "direct", "direct-l")]
+    conv = mx.convergence(rows)
+    if not conv or ctx.spec.name not in ("convergence", "audit"):
+        return None
+    s = Section("GeoRobust convergence: |PO_k| and RA(k)")
+    s.html.append(ctx.figure(F.convergence(conv, title="GeoRobust convergence"), "convergence",
+                             "|PO_k|: potentially optimal boxes selected at iteration k. RA(k): their total volume "
+                             "as % of the box, when selected (it need not decrease monotonically)."))
+    k10 = next((c for c in conv if c["iteration"] == 10), None)
+    if k10:
+        s.html.append(f"<p>At k = 10: RA mean {fmt_num(k10['ra_mean'])} % (median {fmt_num(k10['ra_median'])} %), "
+                      f"|PO| mean {fmt_num(k10['po_mean'])}.</p>")
+    cols = [("iteration", "k", None), ("n", "images", None), ("po_mean", "|PO_k| mean", None), ("po_std", "std", None),
+            ("po_median", "median", None), ("po_after_mean", "after budget filter", None), ("ra_mean", "RA(k) % mean", None),
+            ("ra_std", "std", None), ("ra_q25", "25th", None), ("ra_median", "median", None), ("ra_q75", "75th", None),
+            ("nfev_mean", "evals (mean)", None), ("best_median", "median best L (m)", None)]
+    s.html.append(table(conv, cols))
+    return s
+
+
+def section_pnp(ctx: Context) -> Section | None:
+    rows = ctx.store.jobs(kind="pnp", with_trace=False)
+    summary = mx.pnp_summary(rows)
+    if not summary:
+        return None
+    s = Section("PnP solvers")
+    s.html.append(ctx.figure(F.pnp_comparison(summary), "pnp_solvers",
+                             "Median and mean absolute relative error of the camera position per solver, on the "
+                             "ground-truth corners and on the detector's corners (unperturbed images)."))
+    s.html.append(table(summary, [("source", "keypoints", None), ("solver", "solver", None), ("n", "images", None),
+                                  ("failures", "failures", None), ("median_abs_m", "median (m)", None),
+                                  ("mae_abs_m", "MAE (m)", None), ("median_rel_pct", "median (%)", None),
+                                  ("mae_rel_pct", "MAE (%)", None), ("p95_rel_pct", "95th pct (%)", None)],
+                        left=("source", "solver")))
+    cos = [r["payload"].get("grad_cosine_bpnp_vs_exact") for r in rows if r.get("payload")]
+    cos = [c for c in cos if c is not None]
+    if cos:
+        s.html.append(f"<p>Gradient agreement of the differentiable layer's BPnP mode with the exact implicit "
+                      f"gradient (cosine over the 8 keypoint coordinates, {len(cos)} images): median "
+                      f"{np.median(cos):.4f}, 5th percentile {np.percentile(cos, 5):.4f}.</p>")
+    return s
+
+
+def section_landscapes(ctx: Context) -> Section | None:
+    grids = ctx.store.jobs(kind="search", role="landscape", with_points=True, with_trace=False)
+    if not grids:
+        refs = ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
+        first = min((r["sample_index"] for r in refs), default=None)
+        grids = [r for r in refs if r["sample_index"] == first]
+    grids = [g for g in grids if g["status"] == "done" and len(g["fs"])]
+    if not grids:
+        return None
+    s = Section("Loss landscape of one image")
+    for g in grids[:2]:
+        names = list(g["box"]["box"]["bounds"])
+        sid = g["sample_id"]
+        pts = ctx.store.jobs(kind="search", role="main", with_points=True, with_trace=False)
+        same = [r for r in pts if r["sample_id"] == sid and r["status"] == "done"
+                and list(r["box"]["box"]["bounds"]) == names]
+        # the methods' runs on the grid's box, else on the largest box inside it
+        on_box = [r for r in same if r["box"]["box"]["bounds"] == g["box"]["box"]["bounds"]]
+        if not on_box and same:
+            top = max(r["box_level"] for r in same)
+            on_box = [r for r in same if r["box_level"] == top]
+        by_method: dict[str, dict[str, Any]] = {}
+        for r in sorted(on_box, key=lambda r: -(r.get("nfev") or 0)):
+            by_method.setdefault(r["method"], r)
+        dist = ctx.samples.get(sid, {}).get("slant_distance_m")
+        where = f"image {sid}" + (f" (slant distance {dist:.0f} m)" if dist else "")
+        if len(names) == 2:
+            fig = F.landscape_2d(g["xs"], g["fs"], names, {m: r["xs"] for m, r in by_method.items()}, eps_safe_m=ctx.eps,
+                                 worst={m: r["xs"][int(np.nanargmax(r["fs"]))] if len(r["fs"]) else None
+                                        for m, r in by_method.items()},
+                                 title=f"L over {g['box_label']}, {where}")
+            name = "landscape_2d"
+        else:
+            fig = F.landscape_1d(g["xs"], g["fs"], names[0], {m: (r["xs"], r["fs"]) for m, r in by_method.items()},
+                                 eps_safe_m=ctx.eps, title=f"L over {g['box_label']}, {where}")
+            name = "landscape_1d"
+        lab = ", ".join(f"{F.style(m)['label']} on {r['box_label']} ({r['budget_label']})" for m, r in by_method.items())
+        s.html.append(ctx.figure(fig, name, f"Dense grid of {len(g['fs'])} points ({esc(g['box_label'])}); markers: "
+                                            f"the points each method evaluated — {esc(lab)}; stars: each method's worst "
+                                            "point. Red: the ε_safe level set."))
+        lines = [{"method": F.style(m)["label"], "box": r["box_label"], "budget": r["budget_label"], "nfev": r["nfev"],
+                  "worst": r["worst_m"], "x": json.dumps(r["worst_x"]), "verdict": r["verdict"]} for m, r in by_method.items()]
+        lines.append({"method": "dense grid", "box": g["box_label"], "budget": g["budget_label"], "nfev": g["nfev"],
+                      "worst": g["worst_m"], "x": json.dumps(g["worst_x"]), "verdict": g["verdict"]})
+        s.html.append(table(lines, [("method", "method", None), ("box", "box", None), ("budget", "budget", None),
+                                    ("nfev", "evals", None), ("worst", "worst (m)", None), ("x", "worst θ", esc),
+                                    ("verdict", "verdict", None)], left=("method", "box", "budget", "x", "verdict")))
+    return s
+
+
+def section_best_vs_evals(ctx: Context) -> Section | None:
+    if ctx.spec.name != "audit" or not ctx.main:
+        return None
+    rows = [r for r in ctx.main if r["status"] == "done" and r.get("trace")]
+    if not rows:
+        return None
+    n_max = max(r["nfev"] for r in rows)
+    grid_n = np.unique(np.linspace(1, max(n_max, 1), 200).astype(int))
+    curves = {}
+    for m in F._methods(rows):
+        mats = []
+        for r in (r for r in rows if r["method"] == m):
+            n = np.array([t["nfev"] for t in r["trace"]])
+            b = np.array([np.nan if t["best_value"] is None else t["best_value"] for t in r["trace"]])
+            idx = np.searchsorted(n, grid_n, side="right") - 1
+            v = np.where(idx >= 0, b[np.clip(idx, 0, None)], np.nan)
+            v[grid_n > n[-1]] = b[-1]  # stopped early (breach): keeps its best
+            mats.append(v)
+        curves[m] = (grid_n, np.nanmedian(np.array(mats), axis=0))
+    s = Section("Worst error found vs evaluations")
+    s.html.append(ctx.figure(F.best_vs_evals(curves, eps_safe_m=ctx.eps, title="Search progress (median over images)"),
+                             "best_vs_evals", "A search that stopped at a breach keeps its final value."))
+    return s
+
+
+def section_per_image(ctx: Context) -> Section | None:
+    if ctx.spec.name != "audit" or not ctx.main:
+        return None
+    methods = F._methods(ctx.main)
+    by: dict[str, dict[str, Any]] = {}
+    for r in ctx.main:
+        line = by.setdefault(r["sample_id"], {"sample_id": r["sample_id"], **_sample_cols(ctx, r["sample_id"])})
+        line[f"{r['method']}_worst"] = r["worst_m"]
+        line[f"{r['method']}_verdict"] = r["verdict"]
+        line[f"{r['method']}_x"] = ", ".join(f"{k}={v:.3g}" for k, v in (r.get("worst_x") or {}).items())
+    lines = list(by.values())
+    for line in lines:
+        line["worst"] = max(line.get(f"{m}_worst", -math.inf) for m in methods)
+        line["verdict"] = ("breach" if line["worst"] > ctx.eps else
+                           "certified" if any(line.get(f"{m}_verdict") == "certified" for m in methods) else "no breach found")
+    cols = [("sample_id", "image", None), ("slant_distance_m", "slant dist. (m)", None), ("envelope", "envelope", None)]
+    for m in methods:
+        cols += [(f"{m}_worst", f"{F.style(m)['label']} worst (m)", None), (f"{m}_x", "at θ", esc)]
+    cols += [("worst", "worst of all (m)", None), ("verdict", "verdict", None)]
+    s = Section("Per image: worst case found")
+    s.html.append(table(lines, cols, row_class=lambda r: "breach" if r["verdict"] == "breach" else "",
+                        left=("sample_id", "envelope", "verdict", *[f"{m}_x" for m in methods])))
+    return s
+
+
+def _sample_cols(ctx: Context, sid: str) -> dict[str, Any]:
+    s = ctx.samples.get(sid, {})
+    return {"slant_distance_m": s.get("slant_distance_m"), "envelope": s.get("envelope")}
+
+
+def section_provenance(ctx: Context) -> Section:
+    s = Section("Provenance")
+    runs = ctx.store.runs()
+    s.html.append(table(runs, [("run_id", "run", None), ("started_at", "started (UTC)", None),
+                               ("finished_at", "finished", None), ("status", "status", None),
+                               ("code_version", "code version", None), ("executor", "executor", None),
+                               ("host", "host", None), ("jobs_total", "jobs", None), ("jobs_skipped", "already done", None),
+                               ("jobs_done", "done in run", None), ("seconds", "seconds", None)],
+                        left=("started_at", "finished_at", "status", "code_version", "executor", "host")))
+    if runs:
+        last = runs[-1]
+        det = last.get("detector") or {}
+        ds = last.get("dataset") or {}
+        s.html.append(f"<p>Detector: {esc(det.get('name'))}; model file SHA-256 <code>{esc(det.get('sha256'))}</code>.<br>"
+                      f"Dataset: {esc(json.dumps(ds.get('source')))}; {ds.get('n')} images; identity "
+                      f"<code>{esc(ds.get('sha256'))}</code>.</p>")
+        s.html.append("<details><summary>Full configuration of the last run (JSON)</summary><pre>"
+                      f"{esc(json.dumps(last.get('config'), indent=1))}</pre></details>")
+    return s
+
+
+SECTIONS = (section_pnp, section_survival_level, section_runtime, section_distance, section_convergence,
+            section_landscapes, section_best_vs_evals, section_per_image)
+
+
+def build_report(run: str | Path, out: str | Path | None = None) -> Path:
+    """Write ``report.html`` (self-contained) and ``figures/*.png`` for the run directory (or store file) ``run``;
+    returns the HTML path. ``out`` defaults to the run directory."""
+    run = Path(run)
+    with ResultStore.open_existing(run) as store:
+        camp = store.campaign()
+        if camp is None:
+            raise ValueError(f"{run}: the results store holds no campaign yet")
+        spec = CampaignSpec.from_dict(camp["spec"])
+        out_dir = Path(out) if out is not None else (run if run.is_dir() else run.parent)
+        ctx = Context(store, spec, out_dir, store.jobs(kind="search", role="main"), store.samples())
+        exp = EXPERIMENTS.get(spec.name)
+        title = exp.title if exp else "Robustness audit"
+        sections = [section_overview(ctx, title)]
+        for build in SECTIONS:
+            try:
+                sec = build(ctx)
+            except Exception:  # one broken section must not hide the others
+                logger.exception("report section %s failed", build.__name__)
+                sec = Section(build.__name__.removeprefix("section_"), ['<p class="warn">This section failed to build; '
+                                                                         "see the log.</p>"])
+            if sec is not None:
+                sections.append(sec)
+        sections.append(section_provenance(ctx))
+    body = [f"<h1>vbl-robust — {esc(title)} <small>({esc(spec.name)})</small></h1>"]
+    for sec in sections:
+        body.append(f"<h2>{esc(sec.title)}</h2>")
+        body.extend(sec.html)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / "report.html"
+    path.write_text(page(f"vbl-robust {spec.name}", "\n".join(body)))
+    return path

@@ -1,0 +1,273 @@
+"""The report's figures (matplotlib, Agg): one function per paper figure, each taking metric tables.
+
+Every function returns a :class:`matplotlib.figure.Figure` (the caller saves and closes it). Conventions shared
+by all: survival rate in %, errors in metres, ε_safe drawn as a dashed red line, one colour and marker per
+method (:data:`STYLE`), the dense-grid reference (true worst case up to the grid spacing) in black dashes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.colors import LogNorm  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+REFERENCE = "grid (reference)"
+STYLE: dict[str, dict[str, Any]] = {
+    "georobust": {"color": "#1f77b4", "marker": "o", "label": "GeoRobust"},
+    "random": {"color": "#2ca02c", "marker": "s", "label": "Random"},
+    "apgd": {"color": "#d62728", "marker": "^", "label": "APGD"},
+    "sobol": {"color": "#9467bd", "marker": "D", "label": "Sobol"},
+    "direct": {"color": "#8c564b", "marker": "v", "label": "DIRECT"},
+    "direct-l": {"color": "#e377c2", "marker": "<", "label": "DIRECT-L"},
+    "grid": {"color": "black", "marker": ".", "label": "grid"},
+    REFERENCE: {"color": "black", "marker": "", "label": "grid (true worst case)", "linestyle": "--"},
+}
+AXIS_LABELS = {"roll_deg": "roll φ (°)", "contrast": "contrast factor α"}
+EPS_STYLE = {"color": "#d62728", "linestyle": ":", "linewidth": 1.2}
+
+
+def style(method: str) -> dict[str, Any]:
+    """Plot style of a method (a grey default for unknown names)."""
+    s = STYLE.get(method, {"color": "grey", "marker": "x", "label": method})
+    return {"linestyle": "-", **s}
+
+
+def _methods(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    ms = list(dict.fromkeys(r["method"] for r in rows))
+    return sorted(ms, key=lambda m: (m == REFERENCE, list(STYLE).index(m) if m in STYLE else 99, m))
+
+
+def _fig(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (6.4, 4.0), **kw: Any) -> tuple[Figure, Any]:
+    fig, ax = plt.subplots(nrows, ncols, figsize=size, layout="constrained", **kw)
+    return fig, ax
+
+
+def survival_vs_level(summary: Sequence[Mapping[str, Any]], *, title: str, xlabel: str,
+                      tick_labels: Mapping[float, str] | None = None) -> Figure:
+    """Survival rate (%) against the perturbation budget (box level), one line per method (+ grid reference)."""
+    fig, ax = _fig()
+    for m in _methods(summary):
+        rs = sorted((r for r in summary if r["method"] == m), key=lambda r: r["box_level"])
+        st = style(m)
+        ax.plot([r["box_level"] for r in rs], [r["survival"] for r in rs], marker=st["marker"], color=st["color"],
+                linestyle=st["linestyle"], label=st["label"], markersize=6, linewidth=1.8)
+    levels = sorted({r["box_level"] for r in summary})
+    ax.set_xticks(levels)
+    if tick_labels:
+        ax.set_xticklabels([tick_labels.get(v, f"{v:g}") for v in levels], rotation=20, ha="right", fontsize=8)
+    else:
+        ax.set_xticklabels([f"±{v:g}°" for v in levels])
+    ax.set_ylim(-3, 103)
+    ax.axhline(10, **{**EPS_STYLE, "color": "grey"}, label="10 % (φ_crit level)")
+    n = max((r["n"] for r in summary), default=0)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(f"survival rate S_rate (%)   [N = {n} images]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    return fig
+
+
+def runtime(summary: Sequence[Mapping[str, Any]], *, axis: str, title: str, eps_safe_m: float,
+            reference: Mapping[str, float] | None = None) -> Figure:
+    """Two panels against the per-image budget (``axis`` "max_seconds" or "max_evals"): survival rate and
+    median worst error, one line per method; ``reference`` = {"survival", "median_worst_m"} of the dense grid."""
+    fig, (a1, a2) = _fig(1, 2, size=(10.5, 4.4))
+    rows = [r for r in summary if r.get(axis) is not None and math.isfinite(r.get(axis, math.nan))]
+    for m in _methods(rows):
+        rs = sorted((r for r in rows if r["method"] == m), key=lambda r: r[axis])
+        st = style(m)
+        x = [r[axis] for r in rs]
+        kw = {"marker": st["marker"], "color": st["color"], "label": st["label"], "linewidth": 1.8}
+        a1.plot(x, [r["survival"] for r in rs], **kw)
+        a2.plot(x, [r["median_worst_m"] for r in rs], **kw)
+    if reference:
+        st = style(REFERENCE)
+        a1.axhline(reference["survival"], color="black", linestyle="--", label=st["label"])
+        a2.axhline(reference["median_worst_m"], color="black", linestyle="--", label=st["label"])
+    a2.axhline(eps_safe_m, **EPS_STYLE, label=f"ε_safe = {eps_safe_m:g} m")
+    xl = "time budget per image (s)" if axis == "max_seconds" else "evaluation budget per image"
+    for a in (a1, a2):
+        a.set_xscale("log")
+        xs = sorted({r[axis] for r in rows})
+        a.set_xticks(xs)
+        a.set_xticklabels([f"{v:g}" for v in xs])
+        a.minorticks_off()
+        a.set_xlabel(xl)
+        a.grid(alpha=0.3)
+    a1.set_ylim(-3, 103)
+    a1.set_ylabel("survival rate S_rate (%)")
+    a2.set_yscale("log")
+    a2.set_ylabel("median worst error over images (m)")
+    fig.legend(*a2.get_legend_handles_labels(), fontsize=8, loc="outside lower center", ncol=5)
+    fig.suptitle(title)
+    return fig
+
+
+def pnp_comparison(summary: Sequence[Mapping[str, Any]]) -> Figure:
+    """Median and mean (MAE) relative position error per PnP solver, for ground-truth and detector keypoints."""
+    sources = list(dict.fromkeys(r["source"] for r in summary))
+    fig, axes = _fig(1, len(sources), size=(5.2 * len(sources), 4.0), squeeze=False)
+    for ax, src in zip(axes[0], sources, strict=True):
+        rs = [r for r in summary if r["source"] == src]
+        x = np.arange(len(rs))
+        med = [r["median_rel_pct"] for r in rs]
+        mae = [r["mae_rel_pct"] for r in rs]
+        b1 = ax.bar(x - 0.2, med, 0.4, label="median", color="#1f77b4")
+        b2 = ax.bar(x + 0.2, mae, 0.4, label="mean (MAE)", color="#ff7f0e")
+        for bars, rsv, key in ((b1, rs, "median_abs_m"), (b2, rs, "mae_abs_m")):
+            for b, r in zip(bars, rsv, strict=True):
+                if math.isfinite(b.get_height()):
+                    ax.annotate(f"{r[key]:.3g} m", (b.get_x() + b.get_width() / 2, b.get_height()), ha="center",
+                                va="bottom", fontsize=7, rotation=90, xytext=(0, 2), textcoords="offset points")
+        ax.set_xticks(x)
+        ax.set_xticklabels([f"{r['solver']}\n({r['failures']} fail)" for r in rs], fontsize=8)
+        ax.set_yscale("log")
+        ax.set_ylabel("position error (% of slant distance)")
+        ax.set_title(f"{src} keypoints (N = {rs[0]['n'] if rs else 0})")
+        ax.grid(alpha=0.3, axis="y")
+        ax.legend(fontsize=8, loc="upper left")
+        ax.margins(y=0.25)
+    fig.suptitle("PnP solvers: relative 3-D position error (labels: absolute error)")
+    return fig
+
+
+def distance_profile(profile: Sequence[Mapping[str, Any]], *, limit_deg: float, budgets: Sequence[float],
+                     title: str = "Vulnerability profile by approach distance") -> Figure:
+    """φ_crit (roll budget dropping survival below 10 %) per slant-distance quartile, one marker per method; the
+    red band ≥ ``limit_deg`` is the experimental limit ("no φ_crit within the limit")."""
+    fig, ax = _fig(size=(7.0, 4.2))
+    quartiles = sorted({r["quartile"] for r in profile})
+    methods = _methods(profile)
+    width = 0.8 / max(len(methods), 1)
+    top = limit_deg * 1.15
+    ax.axhspan(limit_deg, top, color="#d62728", alpha=0.15, label=f"≥ {limit_deg:g}° (experimental limit)")
+    for i, m in enumerate(methods):
+        st = style(m)
+        rs = {r["quartile"]: r for r in profile if r["method"] == m}
+        xs = [q + (i - (len(methods) - 1) / 2) * width for q in quartiles]
+        vals = [rs[q]["phi_crit"] if q in rs else math.nan for q in quartiles]
+        shown = [v if math.isfinite(v) else limit_deg * 1.07 for v in vals]
+        ax.bar(xs, shown, width * 0.9, color=st["color"], alpha=0.85, label=st["label"])
+        for x, v, s in zip(xs, vals, shown, strict=True):
+            ax.annotate("≥45°" if not math.isfinite(v) else f"{v:g}°", (x, s), ha="center", va="bottom", fontsize=7)
+    first = [r for r in profile if r["method"] == methods[0]] if methods else []
+    lab = {r["quartile"]: f"Q{r['quartile']}\n{r['d_min_m'] / 1000:.1f}–{r['d_max_m'] / 1000:.1f} km\n(n={r['n']})" for r in first}
+    ax.set_xticks(quartiles)
+    ax.set_xticklabels([lab.get(q, f"Q{q}") for q in quartiles], fontsize=8)
+    ax.set_ylim(0, top)
+    ax.set_yticks([b for b in budgets if b <= limit_deg])
+    ax.set_ylabel("φ_crit: roll budget for S_rate < 10 % (°)")
+    ax.set_xlabel("slant-distance quartile (closest first)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    return fig
+
+
+def convergence(conv: Sequence[Mapping[str, Any]], *, title: str = "GeoRobust convergence (roll ±15°)") -> Figure:
+    """Top: |PO_k| per iteration (mean, ± one standard deviation, interquartile range). Bottom: RA(k) in %."""
+    fig, (a1, a2) = _fig(2, 1, size=(6.4, 6.0), sharex=True)
+    k = np.array([r["iteration"] for r in conv])
+    for ax, name, ylabel in ((a1, "po", "|PO_k| (potentially optimal boxes)"), (a2, "ra", "RA(k): remaining area (%)")):
+        mean = np.array([r[f"{name}_mean"] for r in conv])
+        std = np.array([r[f"{name}_std"] for r in conv])
+        q25 = np.array([r[f"{name}_q25"] for r in conv])
+        q75 = np.array([r[f"{name}_q75"] for r in conv])
+        ax.fill_between(k, q25, q75, color="#1f77b4", alpha=0.25, label="25–75th percentile")
+        ax.plot(k, mean, color="#1f77b4", marker="o", markersize=3, label="mean")
+        ax.plot(k, mean + std, color="#1f77b4", linestyle=":", linewidth=1, label="mean ± 1 std")
+        ax.plot(k, np.maximum(mean - std, 0), color="#1f77b4", linestyle=":", linewidth=1)
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+    a2.axhline(20, color="grey", linestyle="--", linewidth=1, label="20 % (paper: reached by k = 10)")
+    a2.axvline(10, color="grey", linestyle=":", linewidth=1)
+    a2.set_ylim(0, 105)
+    a2.set_xlabel("iteration k")
+    a1.legend(fontsize=8)
+    a2.legend(fontsize=8)
+    n = conv[0]["n"] if conv else 0
+    fig.suptitle(f"{title}, N = {n} images")
+    return fig
+
+
+def landscape_2d(xs: np.ndarray, fs: np.ndarray, names: Sequence[str], overlays: Mapping[str, np.ndarray], *,
+                 eps_safe_m: float, title: str, worst: Mapping[str, np.ndarray] | None = None) -> Figure:
+    """Heat map of L over a complete 2-D grid (``xs`` (n, 2), ``fs`` (n,)), the ε_safe contour, and each
+    method's evaluated points (``overlays`` method -> (m, 2)); ``worst`` marks each method's worst point."""
+    fig, ax = _fig(size=(7.2, 6.2))
+    u0, u1 = np.unique(xs[:, 0]), np.unique(xs[:, 1])
+    grid = np.full((len(u1), len(u0)), np.nan)
+    i0 = np.searchsorted(u0, xs[:, 0])
+    i1 = np.searchsorted(u1, xs[:, 1])
+    grid[i1, i0] = fs
+    g = np.clip(np.where(np.isfinite(grid), grid, np.nanmax(grid)), 1e-2, None)
+    vmin = max(float(np.nanmin(g)), 1e-2)
+    vmax = max(float(np.nanmax(g)), vmin * 10, eps_safe_m * 1.5)
+    im = ax.pcolormesh(u0, u1, g, shading="nearest", norm=LogNorm(vmin=vmin, vmax=vmax), cmap="viridis")
+    cb = fig.colorbar(im, ax=ax)
+    cb.set_label("position error L (m), log scale")
+    if np.nanmax(g) > eps_safe_m > np.nanmin(g):
+        ax.contour(u0, u1, g, levels=[eps_safe_m], colors="#ff4040", linewidths=1.4)
+    for m in _methods([{"method": m} for m in overlays]):
+        pts = overlays[m]
+        if len(pts):
+            st = style(m)
+            ax.scatter(pts[:, 0], pts[:, 1], s=14, marker=st["marker"], facecolors="none", edgecolors=st["color"],
+                       linewidths=1.0, label=f"{st['label']} ({len(pts)} points)")
+    for m, p in (worst or {}).items():
+        if p is not None:
+            st = style(m)
+            ax.scatter([p[0]], [p[1]], s=160, marker="*", color=st["color"], edgecolors="white", linewidths=0.8, zorder=5)
+    ax.plot([], [], color="#ff4040", label=f"L = ε_safe = {eps_safe_m:g} m")
+    ax.scatter([], [], s=100, marker="*", color="grey", label="worst point found")
+    ax.set_xlabel(AXIS_LABELS.get(names[0], names[0]))
+    ax.set_ylabel(AXIS_LABELS.get(names[1], names[1]))
+    ax.set_title(title, fontsize=10)
+    fig.legend(fontsize=8, loc="outside lower center", ncol=3)
+    return fig
+
+
+def landscape_1d(xs: np.ndarray, fs: np.ndarray, name: str, overlays: Mapping[str, tuple[np.ndarray, np.ndarray]], *,
+                 eps_safe_m: float, title: str) -> Figure:
+    """L over a dense 1-D grid (line) with each method's evaluated points ``(x, f)`` on it (markers)."""
+    fig, ax = _fig(size=(8.0, 4.0))
+    o = np.argsort(xs[:, 0])
+    ax.plot(xs[o, 0], np.clip(fs[o], 1e-2, None), color="black", linewidth=1.0, label="dense grid")
+    for m, (px, pf) in overlays.items():
+        if len(px):
+            st = style(m)
+            ax.scatter(px[:, 0], np.clip(pf, 1e-2, None), s=18, marker=st["marker"], facecolors="none",
+                       edgecolors=st["color"], label=f"{st['label']} ({len(px)} points)")
+    ax.axhline(eps_safe_m, **EPS_STYLE, label=f"ε_safe = {eps_safe_m:g} m")
+    ax.set_yscale("log")
+    ax.set_xlabel(AXIS_LABELS.get(name, name))
+    ax.set_ylabel("position error L (m)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    return fig
+
+
+def best_vs_evals(curves: Mapping[str, tuple[np.ndarray, np.ndarray]], *, eps_safe_m: float, title: str) -> Figure:
+    """Median over images of the best error found so far against evaluations, one line per method."""
+    fig, ax = _fig()
+    for m, (n, best) in curves.items():
+        st = style(m)
+        ax.step(n, np.clip(best, 1e-2, None), where="post", color=st["color"], label=st["label"], linewidth=1.8)
+    ax.axhline(eps_safe_m, **EPS_STYLE, label=f"ε_safe = {eps_safe_m:g} m")
+    ax.set_yscale("log")
+    ax.set_xlabel("evaluations")
+    ax.set_ylabel("median over images of the worst error so far (m)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig
