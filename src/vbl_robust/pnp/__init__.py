@@ -4,6 +4,7 @@ See :mod:`.solvers` for conventions (OpenCV pixels, world → camera ``rvec``/``
 ``notes/pnp.md`` for the facts behind the choice of solvers.
 """
 
+from .differentiable import GRAD_MODES, PnPPosition, pnp_position_torch
 from .solvers import SOLVERS, PnPResult, solve
 
-__all__ = ["SOLVERS", "PnPResult", "solve"]
+__all__ = ["GRAD_MODES", "SOLVERS", "PnPPosition", "PnPResult", "pnp_position_torch", "solve"]

@@ -14,7 +14,9 @@ Solvers (``SOLVERS``; facts in ``notes/pnp.md``)
 -----------------------------------------------
 ``"ippe_lm"`` (default)
     ``SOLVEPNP_IPPE`` returns the two poses of the planar ambiguity; each is refined with ``solvePnPRefineLM``
-    (criteria EPS|COUNT, 100, 1e-12, float64) and the one with the lower *final* reprojection error is kept.
+    (criteria EPS|COUNT, 100, 1e-12, float64) then polished with Gauss–Newton steps to the stationary point
+    (OpenCV's LM stops early at far range, see :func:`_polish`), and the one with the lower *final*
+    reprojection error is kept.
     Keeping the lower IPPE solution *before* refinement (the textbook recipe) ends in a worse local minimum in
     about 3 % of poses with 2 px corner noise (23 of 800 measured over 500–6000 m; none of 800 with 0.5 px);
     refining both costs one extra LM run and never does worse.
@@ -50,6 +52,9 @@ SOLVERS: tuple[str, ...] = ("ippe_lm", "iterative", "sqpnp", "ippe")
 
 #: LM refinement criteria: (type, max iterations, epsilon).
 LM_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
+
+#: Maximum Gauss–Newton steps after OpenCV's LM (``ippe_lm``); 3–6 are used in practice.
+POLISH_STEPS = 10
 
 #: Three keypoints count as collinear when the triangle's height is below this fraction of its longest side.
 COLLINEAR_TOL = 1e-6
@@ -182,6 +187,38 @@ def _rms(z: np.ndarray, x: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np
     return float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - x) ** 2, axis=1))))
 
 
+def _polish(
+    z: np.ndarray, x: np.ndarray, K: np.ndarray, rvec: np.ndarray, tvec: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Newton steps from an LM result to the stationary point of the reprojection objective.
+
+    OpenCV 5.0's ``solvePnPRefineLM`` stops early on ill-conditioned (far) views whatever its criteria: measured
+    0.26 m from the optimum at 6 km. The implicit gradient of :mod:`.differentiable` assumes the stationary
+    point, and a few Gauss–Newton steps (quadratic convergence on these near-zero residuals) reach it.
+    """
+    y = np.concatenate([np.asarray(rvec, np.float64).ravel(), np.asarray(tvec, np.float64).ravel()])
+
+    def residual(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p, jac = cv2.projectPoints(z, y[:3], y[3:], K, None)
+        return (p.reshape(-1, 2) - x).ravel(), jac[:, :6]
+
+    r, J = residual(y)
+    cost = float(r @ r)
+    for _ in range(POLISH_STEPS):
+        ok, step = cv2.solve(J, -r.reshape(-1, 1), flags=cv2.DECOMP_QR)  # least squares, QR
+        step = step.ravel()
+        if not ok or not np.all(np.isfinite(step)):
+            break
+        r_new, J_new = residual(y + step)
+        cost_new = float(r_new @ r_new)
+        if not cost_new <= cost * (1.0 + 1e-12) + 1e-300:
+            break
+        y, r, J, cost = y + step, r_new, J_new, cost_new
+        if np.linalg.norm(step) <= 1e-12 * (1.0 + np.linalg.norm(y)):
+            break
+    return y[:3].reshape(3, 1), y[3:].reshape(3, 1)
+
+
 def _candidates(method: str, z: np.ndarray, x: np.ndarray, K: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     """Pose candidates (rvec (3, 1), tvec (3, 1)) of one row; may raise ``cv2.error``."""
     if method in ("ippe", "ippe_lm"):
@@ -191,7 +228,8 @@ def _candidates(method: str, z: np.ndarray, x: np.ndarray, K: np.ndarray) -> lis
         if method == "ippe":
             order = np.argsort(np.asarray(errs, dtype=np.float64).ravel()[:n])
             return [cands[int(i)] for i in order[:1]]
-        return [cv2.solvePnPRefineLM(z, x, K, None, r.copy(), t.copy(), LM_CRITERIA) for r, t in cands]
+        return [_polish(z, x, K, *cv2.solvePnPRefineLM(z, x, K, None, r.copy(), t.copy(), LM_CRITERIA))
+                for r, t in cands]
     flag = {"iterative": cv2.SOLVEPNP_ITERATIVE, "sqpnp": cv2.SOLVEPNP_SQPNP}[method]
     ok, rvec, tvec = cv2.solvePnP(z, x, K, None, flags=flag)
     return [(rvec, tvec)] if ok else []
