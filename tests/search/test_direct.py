@@ -179,8 +179,9 @@ def test_classic_functions_reach_target_within_factor_of_peers():
     lines = []
     for k, (name, t) in enumerate(CLASSIC.items()):
         ours = {m: count_ours(t, m) for m in ("direct", "direct-l", "georobust")}
-        peers = {"scipy": count_scipy(t, locally_biased=False), "scipy-l": count_scipy(t, locally_biased=True)}
-        peers |= {a: count_nlopt(t, a) for a in PEERS_NLOPT}
+        peers = {"scipy": count_scipy(t, locally_biased=False, max_evals=6000),
+                 "scipy-l": count_scipy(t, locally_biased=True, max_evals=6000)}
+        peers |= {a: count_nlopt(t, a, max_evals=6000) for a in PEERS_NLOPT}
         best_peer = min(c.nfev for c in peers.values() if c.nfev is not None)
         lines.append(f"{name:16s} " + " ".join(f"{m}={c.nfev}" for m, c in (ours | peers).items()))
         for m, c in ours.items():
