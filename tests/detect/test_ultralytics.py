@@ -75,13 +75,25 @@ def test_paths_agree_and_match_predict(det, tiny_pose_pt):
     img, _ = runway_image(64)
     d = det.detect(img)[0]
     t = det.top(img)
-    assert torch.equal(d.keypoints[0], t.keypoints[0]) and torch.equal(d.conf[0], t.conf[0])
+    assert torch.equal(torch.as_tensor(d.keypoints[0]).float(), t.keypoints[0]) and float(d.conf[0]) == float(t.conf[0])
     r = YOLO(str(tiny_pose_pt)).predict(img[:, :, ::-1].copy(), imgsz=64, conf=1e-9, verbose=False)[0]
     # predict(): ultralytics edge coordinates (ours + 0.5), clipped to the image
     ours = (t.keypoints[0] + 0.5).clamp(0, 64)
     assert float(r.boxes.conf[0]) == pytest.approx(float(t.conf[0]), abs=1e-6)
     assert torch.allclose(r.keypoints.xy[0], ours, atol=1e-3)
     assert ((t.keypoints[0] + 0.5 > 0) & (t.keypoints[0] + 0.5 < 64)).all()  # the comparison is not all clipping
+
+
+def test_protocol_and_selection_agree(det):
+    from vbl_robust.detect.base import DifferentiableDetector, select
+
+    assert isinstance(det, DifferentiableDetector) and det.input_size == 64
+    imgs = torch.stack([torch.as_tensor(runway_image(64, seed=s)[0]) for s in range(3)])
+    x = imgs.permute(0, 3, 1, 2).float() / 255
+    sel = select(det.detect(x), conf_threshold=0.0)
+    conf, kp = det.detect_top(x)
+    assert torch.allclose(torch.as_tensor(sel.keypoints).float(), kp, atol=1e-5)
+    assert torch.allclose(torch.as_tensor(sel.conf).float(), conf, atol=1e-7)
 
 
 def test_batch_equals_single_and_chunking(det):
@@ -120,6 +132,6 @@ def test_two_stage_paths_agree_and_differentiate(det):
     x = torch.as_tensor(img).permute(2, 0, 1)[None].float().div(255).requires_grad_(True)
     t = two.top(x)
     d = two.detect(img)[0]
-    assert torch.allclose(d.keypoints[0], t.keypoints[0].detach(), atol=1e-5)
+    assert torch.allclose(torch.as_tensor(d.keypoints[0]).float(), t.keypoints[0].detach(), atol=1e-5)
     t.keypoints.sum().backward()
     assert torch.isfinite(x.grad).all() and x.grad.abs().sum() > 0

@@ -94,6 +94,7 @@ class OnnxDetector(PoseDetector):
             self.chunk = int(inp.shape[0])
         else:
             self.chunk = int(chunk)
+        self.input_size = self.imgsz
         self.path = p
 
     def raw(self, views: torch.Tensor) -> torch.Tensor:

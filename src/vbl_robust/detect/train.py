@@ -44,6 +44,10 @@ TRAIN_DEFAULTS = dict(
 )
 
 
+#: synthetic validation samples come from ``generate(n_val, seed + VAL_SEED_OFFSET)``
+VAL_SEED_OFFSET = 1_000_003
+
+
 @dataclass
 class CropJitter:
     """How training crops are drawn around the true corner box (see :func:`~vbl_robust.detect.views.box_window`).
@@ -95,28 +99,42 @@ def build_dataset(
 ) -> Path:
     """Render and write a YOLO-pose dataset; returns the path of its ``data.yaml``.
 
-    Validation gets one full view and (if ``crops_per_sample > 0``) one jittered crop per sample.
-    Reuses an existing dataset built with the same arguments (``root/build.json``).
+    Sample ``i`` of a split gives the files ``{i:06d}_{j}`` (view ``j``; crop jitter from the seed stream
+    ``(seed, split, i)``), so the build is incremental: a sample whose views all exist is not rendered again
+    (a growing prefix-stable sample list, such as ``scenes.generate(n, seed)``, only renders the new samples).
+    Validation gets one full view and (if ``crops_per_sample > 0``) one jittered crop per sample. Extra files
+    beyond the requested sizes are removed, so the directory always matches the arguments.
     """
     root = Path(root).resolve()
-    spec = dict(n_train=len(train_samples), n_val=len(val_samples), imgsz=imgsz, crops=crops_per_sample,
-                seed=seed, jitter=(jitter or CropJitter()).__dict__,
-                ids=[s.id for s in list(train_samples)[:3]] + [s.id for s in list(val_samples)[:3]])
+    spec = dict(imgsz=imgsz, crops=crops_per_sample, seed=seed, jitter=(jitter or CropJitter()).__dict__)
     marker = root / "build.json"
-    if marker.exists() and json.loads(marker.read_text()) == spec and (root / "data.yaml").exists():
-        logger.info("reusing dataset %s", root)
-        return root / "data.yaml"
-    rng = np.random.default_rng(seed)
-    for split, samples, crops in (("train", train_samples, crops_per_sample),
-                                  ("val", val_samples, min(crops_per_sample, 1))):
-        def items(samples=samples, crops=crops):
+    if marker.exists() and json.loads(marker.read_text()) != spec:
+        raise ValueError(f"build_dataset: {root} was built with {marker.read_text()}, now {spec}; "
+                         "use another directory")
+    root.mkdir(parents=True, exist_ok=True)
+    marker.write_text(json.dumps(spec))
+    for k, (split, samples, crops) in enumerate((("train", train_samples, crops_per_sample),
+                                                  ("val", val_samples, min(crops_per_sample, 1)))):
+        nviews = 1 + crops
+        img_dir, lbl_dir = root / "images" / split, root / "labels" / split
+
+        def items(samples=samples, crops=crops, nviews=nviews, img_dir=img_dir, k=k):
             for i, s in enumerate(samples):
+                if all((img_dir / f"{i:06d}_{j}.png").exists() for j in range(nviews)):
+                    continue
+                rng = np.random.default_rng([seed, k, i])
                 for j, (img, c) in enumerate(sample_views(s, imgsz, crops=crops, rng=rng, jitter=jitter)):
                     yield f"{i:06d}_{j}", img, c
                 s.drop_pixels()
+
         n = write_pose_images(items(), root, split)
-        logger.info("wrote %d %s views to %s", n, split, root)
-    marker.write_text(json.dumps(spec))
+        keep = {f"{i:06d}_{j}" for i in range(len(samples)) for j in range(nviews)}
+        for d in (img_dir, lbl_dir):
+            for f in d.glob("*"):
+                if f.suffix in (".png", ".txt") and f.stem not in keep:
+                    f.unlink()
+        (lbl_dir.parent / f"{split}.cache").unlink(missing_ok=True)
+        logger.info("wrote %d new %s views to %s (%d in all)", n, split, root, len(keep))
     return write_data_yaml(root)
 
 
@@ -194,12 +212,12 @@ def train(
         stage = out_dir / "stage00"
 
     crops = crops_per_sample if detector == "twostage" else 0
-    data_root = out_dir / f"dataset_{detector}_{imgsz}"
+    data_root = out_dir / f"dataset_{imgsz}px_{crops}crops"
     if samples is None:
         from ..scenes import generate
 
-        all_s = generate(n_train + n_val, seed=seed)
-        tr, va = all_s[:n_train], all_s[n_train:]
+        tr = generate(n_train, seed=seed)
+        va = generate(n_val, seed=seed + VAL_SEED_OFFSET)
     else:
         samples = list(samples)
         if len(samples) < 2:

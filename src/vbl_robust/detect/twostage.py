@@ -6,13 +6,16 @@ box (:func:`~vbl_robust.detect.views.box_window`: ``margin`` × the box, at leas
 network's input size and runs a pose network on it; its max-confidence keypoints, mapped back to image pixels,
 are the output. Both passes are differentiable (``grid_sample`` crop), and by default share one network trained
 on full views and jittered crops (:mod:`vbl_robust.detect.train`).
+
+``input_size`` is None: the crop needs the full-resolution image, so the pipeline must not downsample first.
 """
 
 from __future__ import annotations
 
 import torch
 
-from .ultralytics import Detections, PoseDetector, Top, split_raw
+from .base import DetectContext, Detections
+from .ultralytics import PoseDetector, Top, split_raw
 from .views import box_window, resample, to_tensor, view_to_image
 
 
@@ -32,6 +35,7 @@ class TwoStageDetector(PoseDetector):
         self.second = second or first
         self.margin, self.min_side = float(margin), float(min_side)
         self.imgsz = self.first.imgsz
+        self.input_size = None
         self.chunk = self.first.chunk
         self.differentiable = self.first.differentiable and self.second.differentiable
 
@@ -55,7 +59,8 @@ class TwoStageDetector(PoseDetector):
         return Top(t1.conf, kp, t1.boxes)
 
     @torch.no_grad()
-    def detect(self, images, *, conf_min: float = 0.01, iou: float = 0.7, max_det: int = 10) -> list[Detections]:
+    def detect(self, images, *, context: DetectContext | None = None, conf_min: float = 0.01, iou: float = 0.7,
+               max_det: int = 10) -> list[Detections]:
         """Black box: one candidate per image (the refined max-confidence one)."""
         t = self.top(images)
         return [Detections(t.boxes[b:b + 1], t.conf[b:b + 1], t.keypoints[b:b + 1]) for b in range(t.conf.shape[0])]

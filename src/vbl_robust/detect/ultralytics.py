@@ -8,10 +8,13 @@ coordinates); keypoint order TR, TL, BL, BR.
 Two paths over the same raw predictions ``y`` (B, 4 + nc + K·3, A) of the network (before NMS):
 
 - :meth:`PoseDetector.detect` — black box: batched (chunks of ``chunk`` images), ``no_grad``, NMS; returns
-  :class:`Detections` per image (highest confidence first).
-- :meth:`PoseDetector.top` — differentiable: the anchor of maximum confidence (``argmax`` + ``gather``);
-  gradients flow to the input images. NMS always keeps the global maximum, so ``top`` equals ``detect``'s first
-  candidate.
+  :class:`~vbl_robust.detect.base.Detections` per image (highest confidence first).
+- :meth:`PoseDetector.detect_top` (and :meth:`PoseDetector.top`, which also gives the box) — differentiable:
+  the anchor of maximum confidence (``argmax`` + ``gather``); gradients flow to the input images. NMS always
+  keeps the global maximum, so it equals ``select(detect(...))``'s candidate.
+
+Both implement the protocol of :mod:`vbl_robust.detect.base` (``input_size`` = ``imgsz``: the pipeline may
+hand over images already resampled to that size).
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from pathlib import Path
 
 import torch
 
+from .base import DetectContext, Detections
 from .offline import import_ultralytics
 from .views import letterbox_window, resample, to_tensor, view_to_image
 
@@ -29,21 +33,6 @@ logger = logging.getLogger(__name__)
 
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 DEFAULT_MODEL = MODELS_DIR / "runway_yolov8n_pose.pt"
-
-
-@dataclass
-class Detections:
-    """Candidates of one image, highest confidence first (original image pixels, OpenCV convention).
-
-    boxes: (N, 4) xyxy; conf: (N,); keypoints: (N, 4, 2) TR, TL, BL, BR.
-    """
-
-    boxes: torch.Tensor
-    conf: torch.Tensor
-    keypoints: torch.Tensor
-
-    def __len__(self) -> int:
-        return int(self.conf.shape[0])
 
 
 @dataclass
@@ -76,6 +65,7 @@ class PoseDetector:
 
     imgsz: int
     nc: int = 1
+    input_size: int | None
     chunk: int = 16
     differentiable: bool = True
 
@@ -114,9 +104,15 @@ class PoseDetector:
         bx = boxes.gather(1, i[:, None, None].expand(-1, 1, 4))[:, 0]
         return Top(c, k, bx)
 
+    def detect_top(self, images, *, context: DetectContext | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Protocol form of :meth:`top`: ``(conf (B,), keypoints (B, 4, 2))``, differentiable."""
+        t = self.top(images)
+        return t.conf, t.keypoints
+
     @torch.no_grad()
-    def detect(self, images, *, conf_min: float = 0.01, iou: float = 0.7, max_det: int = 10) -> list[Detections]:
-        """Black-box path: candidates after NMS per image, highest confidence first."""
+    def detect(self, images, *, context: DetectContext | None = None, conf_min: float = 0.01, iou: float = 0.7,
+               max_det: int = 10) -> list[Detections]:
+        """Black-box path: candidates after NMS per image, highest confidence first (``context`` is ignored)."""
         import torchvision
 
         boxes, conf, kp = self.candidates(images)
@@ -128,9 +124,6 @@ class PoseDetector:
             sel = keep[torchvision.ops.nms(boxes[b, keep], conf[b, keep], iou)][:max_det]
             out.append(Detections(boxes[b, sel], conf[b, sel], kp[b, sel]))
         return out
-
-    def __call__(self, images) -> list[Detections]:
-        return self.detect(images)
 
 
 def _is_packaged(path: Path) -> bool:
@@ -206,6 +199,7 @@ class UltralyticsDetector(PoseDetector):
         self.imgsz = int(imgsz or (train_imgsz if isinstance(train_imgsz, int) else max(train_imgsz)))
         if self.imgsz % stride:
             raise ValueError(f"UltralyticsDetector: imgsz must be a multiple of {stride}, got {self.imgsz}")
+        self.input_size = self.imgsz
         self.device = torch.device(device)
         self.chunk = int(chunk)
 
@@ -229,5 +223,5 @@ def default_detector(*, imgsz: int | None = None, chunk: int = 16) -> PoseDetect
     return UltralyticsDetector(None, imgsz=imgsz, chunk=chunk)
 
 
-__all__ = ["Detections", "PoseDetector", "Top", "UltralyticsDetector", "default_detector", "load_pose_model",
+__all__ = ["PoseDetector", "Top", "UltralyticsDetector", "default_detector", "load_pose_model",
            "split_raw"]
