@@ -132,7 +132,8 @@ class Direct(Optimizer):
         return self.dim * k + (levels > k[:, None]).sum(axis=1)
 
     def _sizes(self, keys: np.ndarray) -> np.ndarray:
-        return np.array([_size_of_key(int(k), self.dim, self.size) for k in keys])
+        uniq, inv = np.unique(keys, return_inverse=True)
+        return np.array([_size_of_key(int(k), self.dim, self.size) for k in uniq])[inv.reshape(-1)]
 
     def _effective_g(self) -> np.ndarray:
         g, failed = self._g[: self._m], self._failed[: self._m]

@@ -63,7 +63,10 @@ class SobolSearch(_Batched):
 
     def __init__(self, box: ParameterBox, *, batch_size: int = 64, **budget: Any):
         super().__init__(box, batch_size=batch_size, **budget)
-        self._sampler = qmc.Sobol(self.dim, scramble=True, rng=np.random.default_rng(self.seed))
+        try:
+            self._sampler = qmc.Sobol(self.dim, scramble=True, rng=np.random.default_rng(self.seed))
+        except TypeError:  # scipy < 1.15 names it seed
+            self._sampler = qmc.Sobol(self.dim, scramble=True, seed=np.random.default_rng(self.seed))
 
     def _draw(self, n: int) -> np.ndarray:
         with warnings.catch_warnings():
