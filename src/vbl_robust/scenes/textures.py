@@ -1,0 +1,131 @@
+"""Procedural textures shared by all scenes (built once per process from fixed seeds, then cached).
+
+* **World rasters** (:func:`world_pyramid`): a few 16 km × 16 km albedo maps at 8 m/texel — a patchwork of
+  fields with hedges, forests, lakes, villages and roads — with a Gaussian pyramid for minification.
+* **Detail noise** (:func:`detail_pyramid`): a tileable 1/f noise at 0.1 m/texel (period 51.2 m) and its box
+  pyramid, multiplied into the ground at texel sizes below the world raster's.
+* **Sensor noise** (:func:`sensor_noise`): a fixed buffer of Gaussian noise; images take random crops of it, which
+  is much cheaper than drawing fresh normal numbers for every pixel.
+
+Everything is deterministic (fixed seeds), so cached or not, a scene renders to the same pixels.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import cv2
+import numpy as np
+
+N_WORLDS = 4
+WORLD_SIZE = 2048
+WORLD_TEXEL_M = 8.0
+DETAIL_SIZE = 512
+DETAIL_TEXEL_M = 0.1
+SENSOR_NOISE_STD = 16.0
+
+_PALETTE = np.array([
+    (0.20, 0.30, 0.12), (0.25, 0.35, 0.15), (0.30, 0.38, 0.18), (0.38, 0.45, 0.22),  # greens
+    (0.55, 0.50, 0.30), (0.62, 0.55, 0.36), (0.50, 0.44, 0.26),  # cereal / stubble
+    (0.40, 0.32, 0.22), (0.33, 0.27, 0.20), (0.46, 0.38, 0.28),  # bare soil
+    (0.15, 0.22, 0.10),  # dark green
+], dtype=np.float32)
+
+
+def fft_noise(rng: np.random.Generator, n: int, beta: float, n_out: int | None = None) -> np.ndarray:
+    """Tileable (n, n) float32 noise with power spectrum ∝ 1/f^(2·beta), zero mean, unit std.
+
+    With ``n_out`` the noise is made at ``n`` and upsampled (bicubic) to ``n_out`` (cheap low-frequency noise).
+    """
+    white = rng.standard_normal((n, n))
+    f = np.fft.fftfreq(n)
+    rad = np.sqrt(f[:, None] ** 2 + f[None, :] ** 2)
+    rad[0, 0] = 1.0
+    spec = np.fft.fft2(white) / rad**beta
+    spec[0, 0] = 0.0
+    out = np.real(np.fft.ifft2(spec))
+    out = ((out - out.mean()) / out.std()).astype(np.float32)
+    if n_out is not None and n_out != n:
+        out = cv2.resize(out, (n_out, n_out), interpolation=cv2.INTER_CUBIC)
+    return out
+
+
+def _world(index: int) -> np.ndarray:
+    rng = np.random.default_rng(10_000 + index)
+    n, s = WORLD_SIZE, WORLD_TEXEL_M
+    coords = (np.arange(n, dtype=np.float32) - (n - 1) / 2) * s
+    theta = rng.uniform(0, np.pi)
+    ca, sa = np.float32(np.cos(theta)), np.float32(np.sin(theta))
+    a = coords[None, :] * ca + coords[:, None] * sa
+    b = -coords[None, :] * sa + coords[:, None] * ca
+    # parcels: rows of random height, each row cut into columns of its own width and phase
+    half = n * s
+    row_h = rng.uniform(80.0, 350.0, 400)
+    edges = np.cumsum(row_h) - half
+    r = np.searchsorted(edges, b)
+    col_w = rng.uniform(80.0, 500.0, len(edges) + 1).astype(np.float32)[r]
+    col_off = rng.uniform(0.0, 500.0, len(edges) + 1).astype(np.float32)[r]
+    cpos = (a - col_off) / col_w
+    c = np.floor(cpos).astype(np.int64)
+    pid = (r.astype(np.int64) * 73856093) ^ (c * 19349663)
+    pid = np.abs(pid) % 65521
+    weights = rng.dirichlet(np.full(len(_PALETTE), 0.8))
+    lut = rng.choice(len(_PALETTE), size=65521, p=weights)
+    bright = rng.uniform(0.85, 1.15, 65521).astype(np.float32)
+    img = _PALETTE[lut[pid]] * bright[pid][..., None]
+    # hedges / tracks along some parcel borders
+    e_lo = np.concatenate([[-np.inf], edges]).astype(np.float32)[r]
+    e_hi = np.concatenate([edges, [np.inf]]).astype(np.float32)[r]
+    row_dist = np.minimum(b - e_lo, e_hi - b)
+    border = (np.minimum(cpos - c, 1 - (cpos - c)) * col_w < 5.0) | (row_dist < 5.0)
+    hedge = border & (bright[pid] > 0.95)
+    img[hedge] = img[hedge] * 0.6 + np.float32([0.12, 0.16, 0.08]) * 0.4
+    # forests, lakes, villages from low-frequency noise
+    forest = fft_noise(rng, 512, 1.6, n)
+    fine = fft_noise(rng, 1024, 0.6, n)
+    fmask = forest > np.quantile(forest, 0.86)
+    img[fmask] = np.float32([0.10, 0.17, 0.08]) * (1.0 + 0.25 * fine[fmask])[:, None]
+    lake = fft_noise(rng, 512, 1.8, n)
+    img[lake > np.quantile(lake, 0.985)] = np.float32([0.10, 0.14, 0.17])
+    town = fft_noise(rng, 512, 1.7, n)
+    tmask = town > np.quantile(town, 0.965)
+    roofs = np.float32([[0.45, 0.42, 0.40], [0.55, 0.30, 0.22], [0.60, 0.60, 0.58], [0.30, 0.30, 0.30]])
+    img[tmask] = roofs[rng.integers(0, 4, int(tmask.sum()))]
+    img *= (1.0 + 0.08 * fft_noise(rng, 512, 1.2, n))[..., None]
+    out = np.clip(img * 255.0, 0, 255).astype(np.uint8)
+    for _ in range(int(rng.integers(4, 9))):  # roads
+        p = rng.uniform(0, n, 2)
+        ang = rng.uniform(0, np.pi)
+        d = np.array([np.cos(ang), np.sin(ang)]) * 2 * n
+        col = (np.array([0.36, 0.36, 0.35]) * 255 * rng.uniform(0.8, 1.3)).tolist()
+        cv2.line(out, tuple(int(v) for v in p - d), tuple(int(v) for v in p + d), col,
+                 int(rng.integers(1, 3)), cv2.LINE_AA)
+    return out
+
+
+@functools.lru_cache(maxsize=N_WORLDS)
+def world_pyramid(index: int) -> tuple[np.ndarray, ...]:
+    """Gaussian pyramid of world raster ``index`` (uint8 RGB albedo); level m has texel ``8·2^m`` m."""
+    levels = [_world(int(index) % N_WORLDS)]
+    while levels[-1].shape[0] > 32:
+        levels.append(cv2.pyrDown(levels[-1], borderType=cv2.BORDER_REFLECT_101))
+    return tuple(levels)
+
+
+@functools.lru_cache(maxsize=1)
+def detail_pyramid() -> tuple[np.ndarray, ...]:
+    """Box pyramid of the tileable detail noise (float32, std 1 at level 0); level l has texel ``0.1·2^l`` m."""
+    base = fft_noise(np.random.default_rng(20_000), DETAIL_SIZE, 0.9)
+    levels = [base]
+    while levels[-1].shape[0] > 8:
+        x = levels[-1]
+        levels.append(0.25 * (x[0::2, 0::2] + x[1::2, 0::2] + x[0::2, 1::2] + x[1::2, 1::2]))
+    return tuple(levels)
+
+
+@functools.lru_cache(maxsize=4)
+def sensor_noise(height: int, width: int) -> np.ndarray:
+    """(height + 64, width + 64, 3) uint8 Gaussian noise, mean 128, std :data:`SENSOR_NOISE_STD`."""
+    rng = np.random.default_rng(30_000)
+    x = rng.normal(128.0, SENSOR_NOISE_STD, (height + 64, width + 64, 3))
+    return np.clip(np.rint(x), 0, 255).astype(np.uint8)
