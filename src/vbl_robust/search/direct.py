@@ -298,7 +298,9 @@ class DirectL(Direct):
 
 class GeoRobust(Direct):
     """GeoRobust (Wang et al., AAAI 2023): half-longest-side size, α-expanded PO set (default α = 2), all
-    children of all PO rectangles of an iteration in one batch. ``alpha=1`` is plain DIRECT with this size."""
+    children of all PO rectangles of an iteration in one batch, ε test floored for values near 0
+    (``f_scale="auto"``). ``alpha=1`` is plain DIRECT with this size. Their experiments also cap the depth
+    (``max_depth`` 5–6) and iterations (50–150); pass ``max_depth=``/``max_iters=`` to reproduce them."""
 
     name: ClassVar[str] = "georobust"
     defaults: ClassVar[dict[str, Any]] = {"size": "side", "ties": "all", "alpha": 2, "f_scale": "auto"}
