@@ -139,8 +139,14 @@ class Perturbation:
         angles, factors = self.column(t, "roll_deg"), self.column(t, "contrast")
         out = np.empty((t.shape[0], *base.shape), dtype=np.float32)
         for k in range(t.shape[0]):
-            x = base if angles[k] == 0.0 else roll_numpy(base, angles[k], center).reshape(base.shape)
-            out[k] = x if factors[k] == 1.0 else contrast_numpy(x, factors[k])
+            if angles[k] == 0.0:
+                out[k] = base
+            else:
+                rolled = roll_numpy(base, angles[k], center, out=out[k])
+                if not np.shares_memory(rolled, out[k]):  # OpenCV could not write in place (e.g. 1 channel)
+                    out[k] = rolled
+            if factors[k] != 1.0:
+                contrast_numpy(out[k], factors[k], out=out[k])
         return out
 
     def images_torch(self, image, theta, *, center=None) -> torch.Tensor:

@@ -140,10 +140,11 @@ def roll_points(points, angle_deg, center):
     return stack([c[..., 0] + co * du + si * dv, c[..., 1] - si * du + co * dv], -1)
 
 
-def roll_numpy(image: np.ndarray, angle_deg: float, center=None) -> np.ndarray:
+def roll_numpy(image: np.ndarray, angle_deg: float, center=None, out: np.ndarray | None = None) -> np.ndarray:
     """OpenCV twin of :func:`roll` for one image ``(H, W, C)`` (any dtype OpenCV warps); no gradient.
 
-    Same convention as :func:`roll` (``cv2.warpAffine`` with ``BORDER_REFLECT_101``, bilinear).
+    Same convention as :func:`roll` (``cv2.warpAffine`` with ``BORDER_REFLECT_101``, bilinear). ``out``: an
+    optional contiguous array of the same shape and dtype to write into (not ``image`` itself).
     """
     import cv2
 
@@ -152,7 +153,8 @@ def roll_numpy(image: np.ndarray, angle_deg: float, center=None) -> np.ndarray:
     h, w = image.shape[:2]
     cx, cy = default_center(w, h) if center is None else (float(center[0]), float(center[1]))
     m = cv2.getRotationMatrix2D((cx, cy), float(angle_deg), 1.0)
-    return cv2.warpAffine(image, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
+    res = cv2.warpAffine(image, m, (w, h), dst=out, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
+    return res.reshape(image.shape)
 
 
 class Roll(nn.Module):
