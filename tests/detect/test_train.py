@@ -59,3 +59,46 @@ def test_bad_arguments(tmp_path):
         train(tmp_path, samples=_samples(3), detector="three")
     with pytest.raises(ValueError, match="imgsz"):
         train(tmp_path, samples=_samples(3), imgsz=100)
+
+
+class _ShiftedTruth:
+    """Fake detector: the true corners of the sample in the batch, shifted by a constant."""
+
+    input_size = None
+
+    def __init__(self, samples, shift):
+        self.samples, self.shift, self.i = samples, np.asarray(shift), 0
+
+    def detect(self, images, *, context=None):
+        from vbl_robust.detect.base import Detections
+
+        out = []
+        for _ in range(images.shape[0]):
+            s = self.samples[self.i]
+            self.i += 1
+            out.append(Detections(np.zeros((1, 4)), np.array([0.9]), (s.corners_2d + self.shift)[None]))
+        return out
+
+
+def test_evaluate_scores_known_errors():
+    from vbl_robust.detect.evaluate import evaluate_detector, score, summarize
+    from vbl_robust.geometry.camera import project, rot_y, runway_corners
+
+    samples = []
+    for i, (d, env) in enumerate([(1500.0, "close"), (3000.0, "medium"), (5000.0, "far")]):
+        K = intrinsics(512, 512)
+        R = rot_y(3.0)  # looking along the runway, 3° down
+        C = np.array([-d, 0.0, d * np.tan(np.radians(3.0))])
+        z = runway_corners(3000.0, 45.0)
+        samples.append(Sample(id=str(i), K=K, corners_3d=z, corners_2d=project(z, R, C, K), position=C, width=512,
+                              height=512, _image=np.zeros((512, 512, 3), np.uint8), meta={"envelope": env}))
+    r = evaluate_detector(_ShiftedTruth(samples, [0.25, -0.5]), samples, batch=2)
+    assert r.detected.all()
+    assert np.allclose(r.corner_err, np.hypot(0.25, 0.5) * 2)  # 1024-px units: twice the 512-px error
+    rows = summarize(r)
+    assert [row["envelope"] for row in rows] == ["far", "medium", "close", "all"]
+    assert rows[-1]["bias_u_px"] == pytest.approx(0.5) and rows[-1]["bias_v_px"] == pytest.approx(-1.0)
+    assert np.all(r.pos_err_m["ippe_lm"] > 0) and np.all(np.isfinite(r.pos_err_m["ippe_lm"]))
+    exact = evaluate_detector(_ShiftedTruth(samples, [0.0, 0.0]), samples)
+    assert np.all(exact.pos_err_m["ippe_lm"] < 1e-3)
+    assert score(exact) >= score(r)

@@ -135,3 +135,18 @@ def test_two_stage_paths_agree_and_differentiate(det):
     assert torch.allclose(torch.as_tensor(d.keypoints[0]).float(), t.keypoints[0].detach(), atol=1e-5)
     t.keypoints.sum().backward()
     assert torch.isfinite(x.grad).all() and x.grad.abs().sum() > 0
+
+
+def test_ship_and_default_detector(tiny_pose_pt, tmp_path, monkeypatch):
+    import vbl_robust.detect.ultralytics as ul
+    from vbl_robust.detect.train import ship
+
+    out = ship(tiny_pose_pt, detector="twostage", imgsz=64, models_dir=tmp_path, info={"note": "test"})
+    monkeypatch.setattr(ul, "MODELS_DIR", tmp_path.resolve())
+    monkeypatch.setattr(ul, "DEFAULT_MODEL", out)
+    d = ul.default_detector()  # packaged: no trust flag needed
+    assert isinstance(d, TwoStageDetector) and d.imgsz == 64 and d.input_size is None
+    img, _ = runway_image(64)
+    assert len(d.detect(torch.as_tensor(img).permute(2, 0, 1)[None] / 255.0)[0]) == 1
+    with pytest.raises(ValueError, match="twostage"):
+        ship(tiny_pose_pt, detector="double", imgsz=64, models_dir=tmp_path)

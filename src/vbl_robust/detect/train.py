@@ -239,3 +239,26 @@ def train(
     model.train(**args)
     w = stage / "weights"
     return TrainResult(stage, w / "best.pt", w / "last.pt", False)
+
+
+def ship(weights: str | Path, *, detector: str, imgsz: int, models_dir: str | Path | None = None,
+         info: dict | None = None) -> Path:
+    """Copy trained weights into the package as the default model (optimizer stripped, fp16: a few MB).
+
+    Writes ``runway_yolov8n_pose.pt`` and ``default.json`` (``detector``, ``imgsz`` and ``info``) to
+    ``models_dir`` (default: ``vbl_robust/models``). Returns the weights path.
+    """
+    if detector not in ("single", "twostage"):
+        raise ValueError(f"ship: detector must be 'single' or 'twostage', got {detector!r}")
+    import_ultralytics()
+    from ultralytics.utils.torch_utils import strip_optimizer
+
+    from .ultralytics import DEFAULT_MODEL
+
+    d = Path(models_dir) if models_dir is not None else DEFAULT_MODEL.parent
+    d.mkdir(parents=True, exist_ok=True)
+    out = d / DEFAULT_MODEL.name
+    strip_optimizer(str(weights), s=str(out))
+    (d / "default.json").write_text(json.dumps(dict(detector=detector, imgsz=int(imgsz), **(info or {})),
+                                               indent=1) + "\n")
+    return out

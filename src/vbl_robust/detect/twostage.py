@@ -27,10 +27,14 @@ class TwoStageDetector(PoseDetector):
         second: pass-2 detector (default: ``first``).
         margin, min_side: crop window around the pass-1 corner box (must match training, see
             :class:`~vbl_robust.detect.train.CropJitter`).
+        refine: number of crop passes (2: crop again around the first crop's corners).
     """
 
     def __init__(self, first: PoseDetector, second: PoseDetector | None = None, *, margin: float = 1.5,
-                 min_side: float = 64.0) -> None:
+                 min_side: float = 64.0, refine: int = 1) -> None:
+        if refine < 1:
+            raise ValueError(f"TwoStageDetector: refine must be >= 1, got {refine}")
+        self.refine = int(refine)
         self.first = first
         self.second = second or first
         self.margin, self.min_side = float(margin), float(min_side)
@@ -49,13 +53,15 @@ class TwoStageDetector(PoseDetector):
         """Differentiable: pass-1 max-confidence conf and box, pass-2 keypoints (image px, OpenCV)."""
         x = to_tensor(images)
         t1 = self.first.top(x)
-        win = self.crop_windows(t1.keypoints, *x.shape[-2:])
+        kp = t1.keypoints
         s2 = self.second
-        views = resample(x, win, s2.imgsz)
-        _, conf2, k2 = split_raw(s2.raw_chunked(views), s2.nc)
-        i = conf2.argmax(1)
-        k = k2.gather(1, i[:, None, None, None].expand(-1, 1, 4, 2))[:, 0]
-        kp = view_to_image(k, win, s2.imgsz)
+        for _ in range(self.refine):
+            win = self.crop_windows(kp, *x.shape[-2:])
+            views = resample(x, win, s2.imgsz)
+            _, conf2, k2 = split_raw(s2.raw_chunked(views), s2.nc)
+            i = conf2.argmax(1)
+            k = k2.gather(1, i[:, None, None, None].expand(-1, 1, 4, 2))[:, 0]
+            kp = view_to_image(k, win, s2.imgsz)
         return Top(t1.conf, kp, t1.boxes)
 
     @torch.no_grad()

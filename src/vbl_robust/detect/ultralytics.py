@@ -217,7 +217,11 @@ def default_detector(*, imgsz: int | None = None, chunk: int = 16) -> PoseDetect
     if meta.exists():
         import json
 
-        kind = json.loads(meta.read_text()).get("detector", "single")
+        info = json.loads(meta.read_text())
+        kind = info.get("detector", "single")
+        imgsz = imgsz or info.get("imgsz")
+    if not DEFAULT_MODEL.exists():
+        raise FileNotFoundError(f"{DEFAULT_MODEL}: the shipped model is missing (reinstall vbl-robust)")
     if kind == "twostage":
         return TwoStageDetector(UltralyticsDetector(None, imgsz=imgsz, chunk=chunk))
     return UltralyticsDetector(None, imgsz=imgsz, chunk=chunk)

@@ -1,0 +1,113 @@
+"""Accuracy of a runway-corner detector on samples with known geometry (no perturbation).
+
+Per sample: top candidate (σ_select at ``conf_threshold``), corner errors in **1024-px image units** (pixel
+error × 1024 / image width), PnP position error for each solver, slant distance. :func:`summarize` aggregates
+per envelope (``sample.meta["envelope"]``) and overall; a failure (no detection, PnP failure) counts as an
+infinite position error, so medians and survival rates are over *all* samples.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..data.sample import Sample
+from .base import DEFAULT_CONF_THRESHOLD, select
+from .views import to_tensor
+
+#: nominal survival: position error ≤ this many metres with no perturbation
+SURVIVAL_M = 1000.0
+
+
+@dataclass
+class EvalResult:
+    """Per-sample results (N samples).
+
+    envelope (N,) str; detected (N,) bool; conf (N,); corner_err (N, 4) 1024-px units (NaN if not detected);
+    corner_delta (N, 4, 2) signed errors (predicted − true), 1024-px units; slant_m (N,);
+    pos_err_m: solver → (N,) metres (inf on failure).
+    """
+
+    envelope: np.ndarray
+    detected: np.ndarray
+    conf: np.ndarray
+    corner_err: np.ndarray
+    corner_delta: np.ndarray
+    slant_m: np.ndarray
+    pos_err_m: dict[str, np.ndarray]
+
+
+def evaluate_detector(
+    detector, samples: Sequence[Sample], *, conf_threshold: float = DEFAULT_CONF_THRESHOLD,
+    pnp_methods: Sequence[str] = ("ippe_lm", "iterative"), batch: int = 8, drop_pixels: bool = True,
+) -> EvalResult:
+    """Run ``detector.detect`` on every sample (batches of same-size images) and score it."""
+    from ..pnp import solve
+
+    n = len(samples)
+    delta = np.full((n, 4, 2), np.nan)
+    conf = np.full(n, np.nan)
+    ok = np.zeros(n, bool)
+    i = 0
+    while i < n:
+        j = i + 1
+        while j < n and j - i < batch and (samples[j].height, samples[j].width) == (samples[i].height,
+                                                                                    samples[i].width):
+            j += 1
+        x = torch.cat([to_tensor(s.image) for s in samples[i:j]], 0)
+        with torch.no_grad():
+            sel = select(detector.detect(x), conf_threshold)
+        for k, s in enumerate(samples[i:j]):
+            conf[i + k] = sel.conf[k]
+            ok[i + k] = sel.ok[k]
+            if sel.ok[k]:
+                delta[i + k] = (sel.keypoints[k] - s.corners_2d) * (1024.0 / s.width)
+            if drop_pixels:
+                s.drop_pixels()
+        i = j
+    pos = {}
+    for m in pnp_methods:
+        e = np.full(n, np.inf)
+        for k, s in enumerate(samples):
+            if not ok[k]:
+                continue
+            kp = s.corners_2d + delta[k] * (s.width / 1024.0)
+            r = solve(kp[None], s.corners_3d, s.K, method=m)
+            if bool(r.success[0]) and np.all(np.isfinite(r.position[0])):
+                e[k] = float(np.linalg.norm(r.position[0] - s.position))
+        pos[m] = e
+    return EvalResult(
+        envelope=np.array([str(s.meta.get("envelope", "all")) for s in samples]),
+        detected=ok, conf=conf, corner_err=np.linalg.norm(delta, axis=-1), corner_delta=delta,
+        slant_m=np.array([s.slant_distance_m for s in samples]), pos_err_m=pos,
+    )
+
+
+def summarize(r: EvalResult, groups: Sequence[str] = ("far", "medium", "close")) -> list[dict]:
+    """Rows per envelope present in ``groups`` order, then ``"all"``: counts, rates, medians, percentiles."""
+    rows = []
+    names = [g for g in groups if np.any(r.envelope == g)] + ["all"]
+    for g in names:
+        m = np.ones(len(r.envelope), bool) if g == "all" else r.envelope == g
+        ce = r.corner_err[m][r.detected[m]].ravel()
+        dl = r.corner_delta[m][r.detected[m]].reshape(-1, 2)
+        row = dict(envelope=g, n=int(m.sum()), detection_rate=float(r.detected[m].mean()) if m.any() else np.nan,
+                   corner_median_px=float(np.median(ce)) if ce.size else np.nan,
+                   corner_p95_px=float(np.percentile(ce, 95)) if ce.size else np.nan,
+                   bias_u_px=float(dl[:, 0].mean()) if dl.size else np.nan,
+                   bias_v_px=float(dl[:, 1].mean()) if dl.size else np.nan)
+        for meth, e in r.pos_err_m.items():
+            em = e[m]
+            row[f"survival_{meth}"] = float(np.mean(em <= SURVIVAL_M)) if m.any() else np.nan
+            row[f"pos_err_pct_{meth}"] = float(np.median(100.0 * em / r.slant_m[m])) if m.any() else np.nan
+        rows.append(row)
+    return rows
+
+
+def score(r: EvalResult, method: str = "ippe_lm") -> tuple[float, float]:
+    """Model-comparison key (higher is better): (nominal survival, − median position error % of slant)."""
+    e = r.pos_err_m[method]
+    return float(np.mean(e <= SURVIVAL_M)), -float(np.median(100.0 * e / r.slant_m))
