@@ -8,6 +8,7 @@
 
 from .airports import REFERENCE_LAT_LON_ALT, Airport, designation, make_airports
 from .envelopes import ENVELOPES, Approach, Envelope, corners_visible, sample_approach, sample_approaches
+from .export import write_dataset
 from .generate import generate, render_sample
 from .render import Look, debug_look, ground_homography, render_scene, sample_look
 
@@ -29,4 +30,5 @@ __all__ = [
     "sample_approach",
     "sample_approaches",
     "sample_look",
+    "write_dataset",
 ]

@@ -314,13 +314,13 @@ def _render_ground(R, C, K, width, height, layout, look, g: _Grid, r_max: float)
             else:
                 col = cv2.warpPerspective(pyr[m], T @ Hw, size, flags=cv2.INTER_LINEAR,
                                           borderMode=cv2.BORDER_REFLECT_101).astype(np.float32)
-                mult = gain * np.float32(1.0 / 255.0)
                 if dl is not None:
                     det = cv2.warpPerspective(dpyr[dl], T @ Hd, size, flags=cv2.INTER_LINEAR,
                                               borderMode=cv2.BORDER_WRAP)
-                    col *= (1.0 + amp * det)[..., None] * mult
-                else:
-                    col *= mult
+                    det *= amp
+                    det += 1.0
+                    col *= det[..., None]
+                col *= gain * np.float32(1.0 / 255.0)
             if tile is not None:
                 rgba = cv2.warpPerspective(tile[0], T @ H @ tile[1], size, flags=cv2.INTER_LINEAR,
                                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
@@ -374,12 +374,12 @@ def render_scene(R: np.ndarray, C: np.ndarray, K: np.ndarray, width: int, height
     r_max = min(6.0 * look.visibility_m, MAX_RANGE_M)
     ground = _render_ground(R, C, K, width, height, layout, look, g, r_max)
     if look.debug:
-        return np.clip(np.rint(ground * 255.0), 0, 255).astype(np.uint8)
+        return cv2.convertScaleAbs(ground, alpha=255.0)
     sky, w = _sky_and_weight(look, g)
     sky_f = _upsample(sky, width, height)
     w_f = _upsample(w, width, height)
     img = cv2.blendLinear(ground, sky_f, w_f, 1.0 - w_f)
-    img8 = np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    img8 = cv2.convertScaleAbs(img, alpha=255.0)  # rounds and saturates to uint8 (values are >= 0)
     if look.blur_sigma > 0.3:
         img8 = cv2.GaussianBlur(img8, (0, 0), look.blur_sigma)
     if look.noise_scale > 0:
