@@ -154,6 +154,30 @@ def test_user_errors_are_value_errors_at_construction(samples):
 
 
 # -- batching, resolution, records --------------------------------------------------------------------------------
+def test_detectors_without_context_and_with_tensor_containers(samples):
+    """A user's detector may omit the context keyword and return tensors in its own container type."""
+    s = samples[1]
+
+    class Candidates:  # duck-typed: conf and keypoints as tensors
+        def __init__(self, kp):
+            self.conf, self.keypoints = torch.tensor([0.1, 0.8]), torch.stack([kp + 50.0, kp])
+
+        def __len__(self):
+            return 2
+
+    class Plain:
+        def detect(self, images):
+            return [Candidates(torch.from_numpy(s.corners_2d)) for _ in range(images.shape[0])]
+
+        def detect_top(self, images):
+            n = images.shape[0]
+            return torch.full((n,), 0.8), torch.from_numpy(s.corners_2d).expand(n, 4, 2)
+
+    obj = Objective(s, Plain(), BOX)
+    theta = np.array([[0.0, 1.0], [0.0, 2.0]])
+    assert obj(theta).max() < 1e-3 and obj.torch(torch.tensor(theta)).max() < 1e-3
+
+
 def test_chunks_bound_the_detector_batch_and_do_not_change_results(samples):
     s = samples[0]
     theta = grid(n_roll=5)

@@ -127,6 +127,17 @@ class EvalRecord:
         )
 
 
+def _takes_context(fn) -> bool:
+    """True when ``fn`` accepts a ``context`` keyword (or ``**kwargs``); detectors may omit it."""
+    import inspect
+
+    try:
+        params = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):
+        return True
+    return any(p.name == "context" or p.kind is inspect.Parameter.VAR_KEYWORD for p in params)
+
+
 class Objective:
     """``L(θ)`` for one sample: ``objective(theta (N, d)) -> (N,)`` metres; ``objective.torch`` differentiable.
 
@@ -289,8 +300,9 @@ class Objective:
             x = torch.from_numpy(imgs).permute(0, 3, 1, 2)  # a (B, 3, H, W) view; detectors copy if they need to
         else:
             x = self._base_t[None].expand(n, -1, -1, -1)
+        kw = {"context": self._context(t)} if _takes_context(self.detector.detect) else {}
         with torch.no_grad():
-            dets = self.detector.detect(x, context=self._context(t))
+            dets = self.detector.detect(x, **kw)
         if len(dets) != n:
             raise ValueError(f"Objective: detector {self.detector!r} returned {len(dets)} results for {n} images")
         sel = select(dets, self.conf_threshold)
@@ -354,7 +366,7 @@ class Objective:
                 imgs = self.perturbation.images_torch(self._base_t, th, center=center)
             else:
                 imgs = self._base_t[None].expand(th.shape[0], -1, -1, -1)
-            conf, kp = top(imgs, context=self._context(th))
+            conf, kp = top(imgs, **({"context": self._context(th)} if _takes_context(top) else {}))
             confs.append(conf.reshape(-1))
             kps.append(kp.reshape(-1, 4, 2))
         conf, kp = torch.cat(confs), self._scale.to_original(torch.cat(kps).to(torch.float64))

@@ -4,7 +4,7 @@ What a detector is (for adapter writers)
 ----------------------------------------
 Any object with
 
-* ``input_size: int | None`` — the long side, in pixels, of the view the detector resamples its input to (e.g.
+* ``input_size: int | None`` (optional, default ``None``) — the long side, in pixels, of the view the detector resamples its input to (e.g.
   640 for a YOLOv8-Pose letterboxed to 640 × 640), or ``None`` if it uses images at any size as given. The
   :class:`~vbl_robust.pipeline.Objective` uses it to perturb images at that resolution instead of the full one
   (rotation about the principal point commutes with isotropic scaling), so the detector then receives images
@@ -25,7 +25,7 @@ Any object with
   unperturbed image broadcast over the batch.
 
 ``context`` (a :class:`DetectContext`) tells the detector which sample and which θ produced the images. Real
-detectors ignore it; the :class:`~vbl_robust.detect.oracle.OracleDetector` uses it to return the ground-truth
+detectors ignore it (a ``detect``/``detect_top`` without a ``context`` parameter is called without it); the :class:`~vbl_robust.detect.oracle.OracleDetector` uses it to return the ground-truth
 corners moved by the same perturbation. The pipeline always passes it; direct callers may pass ``None``.
 
 Selection (the paper's σ_select)
@@ -194,13 +194,14 @@ def select(detections: Sequence[Detections] | Detections, conf_threshold: float 
         if len(d) == 0:
             reason.append("no_detection")
             continue
-        c = np.where(np.isfinite(d.conf), d.conf, -np.inf)
+        dc = _np(d.conf).reshape(-1)  # tolerate tensors from detectors with their own containers
+        c = np.where(np.isfinite(dc), dc, -np.inf)
         m = int(np.argmax(c))
-        conf[i] = d.conf[m]
+        conf[i] = dc[m]
         if not conf[i] >= conf_threshold:
             reason.append("low_confidence")
             continue
-        kp[i] = d.keypoints[m]
+        kp[i] = _np(d.keypoints)[m]
         ok[i] = True
         reason.append("")
     return Selection(kp, conf, ok, tuple(reason))
