@@ -130,6 +130,17 @@ def implied_row(job: Job, breach_row: Mapping[str, Any], settings: Settings, run
     return row
 
 
+def worst_details(objective: Any, x: np.ndarray) -> dict[str, Any]:
+    """What happened at the worst point (one more evaluation): failure reason ("" = a wrong pose, not a
+    detection failure), top confidence, position error and estimated position."""
+    rec = objective.evaluate(np.asarray(x, dtype=np.float64)[None])
+    conf = float(rec.conf[0])
+    err = float(rec.error_m[0])
+    return {"reason": rec.reason[0], "conf": conf if math.isfinite(conf) else None,
+            "error_m": err if math.isfinite(err) else None,
+            "position": [float(v) if math.isfinite(v) else None for v in rec.position[0]]}
+
+
 def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
     """Run one search job on a built objective; returns the :class:`~vbl_robust.search.SearchResult`."""
     from ..search import METHODS, maximize
@@ -175,8 +186,15 @@ def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id:
             if label not in objectives:
                 objectives[label] = Objective(task.sample, detector, job.box.box, pnp=settings.pnp,
                                               conf_threshold=settings.conf_threshold, penalty_m=settings.penalty_m)
-            result = run_search_job(job, objectives[label], settings)
+            objective = objectives[label]
+            result = run_search_job(job, objective, settings)
+            image_error = getattr(objective, "image_error", "")
+            if image_error:  # the pipeline penalised every evaluation: a failed sample, not a breach
+                yield [failed_row(job, f"image unavailable: {image_error}", settings, run_id, time.perf_counter() - t0)]
+                continue
             row = search_row(job, result, settings, run_id, time.perf_counter() - t0)
+            if job.role == "main" and result.x is not None and hasattr(objective, "evaluate"):
+                row["payload_json"] = json.dumps({"worst": worst_details(objective, result.x)})
         except Exception as exc:  # a sample the pipeline cannot handle is a recorded failure
             logger.warning("sample %s, job %s/%s failed: %s", job.sample_id, job.method, job.box and job.box.label,
                            _reason(exc))
@@ -190,10 +208,3 @@ def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id:
         yield rows
     if hasattr(task.sample, "drop_pixels"):
         task.sample.drop_pixels()
-
-
-def summarize_points(xs: np.ndarray, fs: np.ndarray) -> dict[str, float]:
-    """Small summary of evaluated values (for logs): count, max, failures."""
-    f = np.asarray(fs, dtype=np.float64)
-    return {"n": float(len(f)), "max": float(np.nanmax(f)) if len(f) else math.nan,
-            "failed": float(np.sum(~np.isfinite(f)))}

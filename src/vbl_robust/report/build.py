@@ -308,7 +308,11 @@ def section_best_vs_evals(ctx: Context) -> Section | None:
             v = np.where(idx >= 0, b[np.clip(idx, 0, None)], np.nan)
             v[grid_n > n[-1]] = b[-1]  # stopped early (breach): keeps its best
             mats.append(v)
-        curves[m] = (grid_n, np.nanmedian(np.array(mats), axis=0))
+        mat = np.array(mats)
+        med = np.full(len(grid_n), np.nan)
+        some = np.isfinite(mat).any(axis=0)
+        med[some] = np.nanmedian(mat[:, some], axis=0)
+        curves[m] = (grid_n, med)
     s = Section("Worst error found vs evaluations")
     s.html.append(ctx.figure(F.best_vs_evals(curves, eps_safe_m=ctx.eps, title="Search progress (median over images)"),
                              "best_vs_evals", "A search that stopped at a breach keeps its final value."))

@@ -1,0 +1,253 @@
+"""``vbl-robust audit`` (the main job) and ``vbl-robust demo`` (a small audit on the defaults, with its report).
+
+Also the helpers the campaign commands share: choosing the detector, running a campaign with a rich progress
+bar, printing the summary, exporting and writing the report.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from .common import fail, parse_range
+
+METHODS_DEFAULT = "georobust,random,apgd"
+
+
+# -- shared by audit / demo / reproduce ---------------------------------------------------------------------------
+def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_noise: float) -> Any:
+    """The detector the user asked for: --oracle, --model PATH, else the shipped model (oracle if not installed)."""
+    from vbl_robust.campaigns import DetectorSpec
+
+    if oracle and model is not None:
+        fail("--oracle and --model are exclusive")
+    if oracle:
+        return DetectorSpec("oracle", options={"noise_px": oracle_noise} if oracle_noise else {})
+    if model is not None:
+        try:
+            spec = DetectorSpec.from_path(model, trust=trust_model)
+        except (ValueError, FileNotFoundError) as exc:
+            fail(str(exc))
+        return spec
+    spec = DetectorSpec.auto()
+    if spec.kind == "oracle":
+        typer.secho("note: the shipped detector model is not installed; using the oracle detector (exact corners). "
+                    "Pass --model PATH for a trained model.", fg=typer.colors.YELLOW, err=True)
+    return spec
+
+
+def box_label(bounds: dict[str, tuple[float, float]]) -> str:
+    """Short label of a box: "±15°, c∈[0.7, 1.4]"."""
+    parts = []
+    for k, (lo, hi) in bounds.items():
+        if k == "roll_deg":
+            parts.append(f"±{hi:g}°" if lo == -hi else f"roll∈[{lo:g}, {hi:g}]°")
+        else:
+            parts.append(f"{'c' if k == 'contrast' else k}∈[{lo:g}, {hi:g}]")
+    return ", ".join(parts)
+
+
+def parse_methods(text: str) -> tuple[str, ...]:
+    from vbl_robust.search import METHODS
+
+    methods = tuple(m.strip() for m in text.split(",") if m.strip())
+    bad = [m for m in methods if m not in METHODS]
+    if not methods or bad:
+        raise typer.BadParameter(f"--methods: unknown method(s) {bad or text!r}; methods are {', '.join(METHODS)}")
+    return methods
+
+
+def parse_lipschitz(text: str | None) -> float | tuple[float, ...] | None:
+    if text is None:
+        return None
+    try:
+        vals = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise typer.BadParameter(f"--lipschitz: expected a number or one number per parameter, got {text!r}") from None
+    if not vals or any(not math.isfinite(v) or v < 0 for v in vals):
+        raise typer.BadParameter(f"--lipschitz: expected finite numbers >= 0, got {text!r}")
+    return vals[0] if len(vals) == 1 else vals
+
+
+def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, executor: str, address: str | None,
+                      source: dict, config: dict, quiet: bool = False) -> Any:
+    """Run ``spec`` into ``out/results.sqlite`` with a rich progress bar; returns the run summary."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    from vbl_robust.campaigns import ResultStore, run_campaign
+
+    out.mkdir(parents=True, exist_ok=True)
+    columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("jobs"),
+               TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), TextColumn("{task.fields[status]}"))
+    with ResultStore(out / "results.sqlite") as store, Progress(*columns, disable=quiet, transient=False) as bar:
+        task = bar.add_task(spec.name, total=None, status="")
+
+        def on_progress(p: Any) -> None:
+            bar.update(task, total=p.total, completed=p.done,
+                       status=f"breaches {p.breaches}" + (f", failed {p.failed}" if p.failed else "")
+                       + (f" ({p.skipped} resumed)" if p.skipped else ""))
+
+        try:
+            summary = run_campaign(spec, samples, store, detector=detector, executor=executor, address=address,
+                                   progress=on_progress, dataset_source=source, config=config)
+        except ValueError as exc:
+            fail(str(exc))
+    return summary
+
+
+def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, report: bool, quiet: bool = False) -> None:
+    """Print the summary table, export, and write the HTML report."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from vbl_robust.campaigns import ResultStore, export, summarize
+    from vbl_robust.campaigns.spec import CampaignSpec
+
+    with ResultStore.open_existing(out) as store:
+        spec = CampaignSpec.from_dict(store.campaign()["spec"])
+        rows = store.jobs(kind="search", role="main", with_trace=False)
+        for path in (csv, parquet):
+            if path is not None:
+                try:
+                    export(store, path)
+                except ValueError as exc:
+                    fail(str(exc))
+                typer.echo(f"exported {path}")
+    if rows and not quiet:
+        lines = summarize(rows, spec.eps_safe_m)
+        cols = ["method"] + [c for c in ("box_label", "budget_label") if len({ln[c] for ln in lines}) > 1]
+        fixed = ", ".join(f"{lines[0][c]}" for c in ("box_label", "budget_label") if c not in cols)
+        table = Table(title=f"{spec.name}: survival (worst error ≤ {spec.eps_safe_m:g} m)" + (f" — {fixed}" if fixed else ""))
+        heads = {"method": "method", "box_label": "box", "budget_label": "budget"}
+        for c in cols:
+            table.add_column(heads[c])
+        for col in ("images", "survival %", "median worst (m)", "breaches", "failed"):
+            table.add_column(col, justify="right")
+        for line in lines:
+            table.add_row(*(str(line[c]) for c in cols), str(line["n"]), f"{line['survival']:.1f}",
+                          f"{line['median_worst_m']:.1f}", str(line["breaches"]), str(line["failed"]))
+        Console().print(table)
+    status = f"{summary.done} new jobs, {summary.skipped} already done, {summary.failed} failed, {summary.seconds:.0f} s"
+    typer.echo(f"{spec.name}: {status}; results in {out / 'results.sqlite'}")
+    if summary.status != "finished":
+        typer.secho(f"run {summary.status}: rerun the same command to resume", fg=typer.colors.YELLOW, err=True)
+    if report:
+        from vbl_robust.report import build_report
+
+        typer.echo(f"report: {build_report(out)}")
+
+
+def load(n: int, seed: int, lard: Path | None, width: int, height: int) -> tuple[list, dict]:
+    from vbl_robust.campaigns import load_samples
+
+    try:
+        return load_samples(n, seed, lard=lard, width=width, height=height)
+    except (ValueError, FileNotFoundError) as exc:
+        fail(str(exc))
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+# -- commands -------------------------------------------------------------------------------------------------
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def audit(
+        out: Path = typer.Option(Path("runs/audit"), "--out", help="Run directory (results.sqlite, report.html)."),
+        n: int = typer.Option(20, "--n", "--images", min=1, help="Number of images."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the image choice and of the searches."),
+        lard: Path | None = typer.Option(None, "--lard", help="LARD V2 dataset directory (CSV + runway DB JSON) "
+                                         "instead of generated synthetic approaches."),
+        width: int = typer.Option(1024, help="Synthetic image width (px)."),
+        height: int = typer.Option(1024, help="Synthetic image height (px)."),
+        model: Path | None = typer.Option(None, "--model", help="Detector: a YOLO-pose .pt or .onnx file (default: "
+                                          "the shipped model)."),
+        trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading a .pt pickle from outside the package."),
+        oracle: bool = typer.Option(False, "--oracle", help="Use the oracle detector (exact projected corners)."),
+        oracle_noise: float = typer.Option(0.0, "--oracle-noise", help="Oracle: fixed per-image corner noise (px)."),
+        roll: str = typer.Option("15", "--roll", help="Roll range in degrees: '15' (= ±15) or 'lo,hi'; 'none' to omit."),
+        contrast: str | None = typer.Option(None, "--contrast", help="Contrast factor range 'lo,hi' (e.g. 0.7,1.4)."),
+        methods: str = typer.Option(METHODS_DEFAULT, "--methods", help="Comma-separated search methods."),
+        max_evals: int | None = typer.Option(200, "--max-evals", help="Evaluations per image and method (0 = none)."),
+        max_seconds: float | None = typer.Option(None, "--max-seconds", help="Seconds per image and method."),
+        early_stop: bool = typer.Option(True, "--early-stop/--no-early-stop", help="Stop an image's search at its "
+                                        "first breach (answers 'is there a breach?')."),
+        lipschitz: str | None = typer.Option(None, "--lipschitz", help="Lipschitz constant of the error (m per unit, "
+                                             "one number or one per parameter): enables 'certified' verdicts."),
+        pnp: str = typer.Option("ippe_lm", "--pnp", help="PnP solver: ippe_lm, iterative, sqpnp, ippe."),
+        landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="Dense grid on the first image for the "
+                                       "report's landscape figure."),
+        executor: str = typer.Option("local", "--executor", help="local or ray."),
+        address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: start a local Ray)."),
+        csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to this CSV file."),
+        parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to this Parquet file."),
+        report: bool = typer.Option(True, "--report/--no-report", help="Write report.html into --out."),
+        quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or table."),
+    ) -> None:
+        """Find each image's worst case over a perturbation box: worst θ, worst error, verdict, survival, report."""
+        from vbl_robust.campaigns import BoxSpec, Budget, audit_spec
+        from vbl_robust.space import ParameterBox
+
+        bounds: dict[str, tuple[float, float]] = {}
+        if roll.strip().lower() != "none":
+            bounds["roll_deg"] = parse_range(roll, name="--roll", symmetric=True)
+        if contrast is not None:
+            bounds["contrast"] = parse_range(contrast, name="--contrast")
+        if not bounds:
+            fail("give at least one of --roll, --contrast")
+        if executor not in ("local", "ray"):
+            fail(f"--executor must be 'local' or 'ray', got {executor!r}")
+        try:
+            box = ParameterBox(bounds)
+            budget = Budget(max_evals=max_evals or None, max_seconds=max_seconds, stop_at_breach=early_stop)
+        except ValueError as exc:
+            fail(str(exc))
+        level = max(abs(v) for v in bounds["roll_deg"]) if "roll_deg" in bounds else 0.0
+        label = box_label(bounds)
+        method_list = parse_methods(methods)
+        counts = (21, 11)[: box.dim] if landscape and box.dim <= 2 else None
+        spec = audit_spec(BoxSpec(box, label, level), methods=method_list, budget=budget, seed=seed,
+                          lipschitz=parse_lipschitz(lipschitz), pnp=pnp, landscape=counts)
+        det = detector_spec(model, trust_model, oracle, oracle_noise)
+        samples, source = load(n, seed, lard, width, height)
+        config = {"command": "audit", "n": n, "seed": seed, "lard": str(lard) if lard else None, "roll": roll,
+                  "contrast": contrast, "methods": list(method_list), "max_evals": max_evals, "max_seconds": max_seconds,
+                  "early_stop": early_stop, "lipschitz": lipschitz, "pnp": pnp, "width": width, "height": height}
+        summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
+                                    config=config, quiet=quiet)
+        finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
+
+    @app.command()
+    def demo(
+        out: Path = typer.Option(Path("runs/demo"), "--out", help="Run directory."),
+        n: int = typer.Option(10, "--n", min=1, help="Number of synthetic images."),
+        seed: int = typer.Option(0, "--seed"),
+        max_evals: int = typer.Option(40, "--max-evals", min=1, help="Evaluations per image and method."),
+        oracle: bool = typer.Option(False, "--oracle", help="Use the oracle detector instead of the shipped model."),
+        quiet: bool = typer.Option(False, "--quiet", "-q"),
+    ) -> None:
+        """A small audit on the defaults (10 synthetic images, GeoRobust / random / APGD, roll ±15° and contrast
+        [0.7, 1.4], early stop at a breach) with its HTML report — a few minutes on a laptop CPU."""
+        import torch
+
+        from vbl_robust.campaigns import Budget, audit_spec, roll_contrast_box
+
+        if "OMP_NUM_THREADS" not in os.environ:
+            torch.set_num_threads(max(1, min(4, os.cpu_count() or 1)))
+        spec = audit_spec(roll_contrast_box(15.0, (0.7, 1.4)), budget=Budget(max_evals=max_evals), seed=seed,
+                          landscape=(21, 11))
+        det = detector_spec(None, False, oracle, 0.0)
+        samples, source = load(n, seed, None, 1024, 1024)
+        config = {"command": "demo", "n": n, "seed": seed, "max_evals": max_evals}
+        summary = run_with_progress(spec, samples, out, det, executor="local", address=None, source=source,
+                                    config=config, quiet=quiet)
+        finish(out, summary, csv=out / "jobs.csv", parquet=None, report=True, quiet=quiet)

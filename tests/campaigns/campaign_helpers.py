@@ -1,0 +1,54 @@
+"""Detectors and a campaign script for the runner tests (importable by name: DetectorSpec kind "factory").
+
+Run as a script, it is the campaign the kill test interrupts: ``python campaign_helpers.py OUT N DELAY``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from vbl_robust.detect.oracle import OracleDetector
+
+
+class BrokenDetector(OracleDetector):
+    """Raises inside the pipeline: the sample's jobs must be recorded as failed, the campaign must go on."""
+
+    def detect(self, images, *, context=None):
+        raise RuntimeError("detector exploded")
+
+
+class SlowOracle(OracleDetector):
+    """The oracle, sleeping ``delay`` seconds per batch (so a campaign is reliably killed mid-run)."""
+
+    def __init__(self, delay: float = 0.05, **kw):
+        super().__init__(**kw)
+        self.delay = delay
+
+    def detect(self, images, *, context=None):
+        time.sleep(self.delay)
+        return super().detect(images, context=context)
+
+
+def kill_campaign_spec():
+    from vbl_robust.campaigns import Block, Budget, CampaignSpec, roll_box
+
+    blk = Block(boxes=(roll_box(5), roll_box(10)), methods=("random", "georobust"), budgets=(Budget(max_evals=12),))
+    return CampaignSpec("kill-test", (blk,), seed=5)
+
+
+def main(out: str, n: int, delay: float) -> None:
+    import torch
+
+    from vbl_robust.campaigns import DetectorSpec, ResultStore, run_campaign
+    from vbl_robust.scenes import generate
+
+    torch.set_num_threads(1)
+    samples = generate(n, seed=3, width=96, height=96)
+    det = DetectorSpec("factory", "campaign_helpers:SlowOracle", options={"delay": delay, "noise_px": 0.5})
+    with ResultStore(out) as store:
+        run_campaign(kill_campaign_spec(), samples, store, detector=det)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], int(sys.argv[2]), float(sys.argv[3]))

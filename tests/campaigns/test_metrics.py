@@ -1,0 +1,84 @@
+import math
+
+import numpy as np
+import pytest
+
+from vbl_robust.campaigns import metrics as mx
+
+
+def test_survival_rate_counts_failures_as_breaches():
+    assert mx.survival_rate([10.0, 999.0, 1000.0, 1000.5, 5000.0], 1000.0) == pytest.approx(60.0)
+    assert mx.survival_rate([np.nan, 1.0], 1000.0) == 50.0
+    assert math.isnan(mx.survival_rate([], 1000.0))
+
+
+def test_phi_crit_is_the_first_budget_below_ten_percent():
+    budgets = [5, 10, 15, 20]
+    # 10 images breaching at 5,5,10,10,10,10,10,10,15 and one never: survival 80, 20, 10, 10 -> never < 10
+    levels = [5, 5, 10, 10, 10, 10, 10, 10, 15, math.inf]
+    assert mx.survival_curve(levels, budgets) == [80.0, 20.0, 10.0, 10.0]
+    assert mx.phi_crit(levels, budgets) == math.inf
+    assert mx.phi_crit(levels[:-1], budgets) == 15
+
+
+def test_smallest_breach_levels_and_distance_profile():
+    rows = []
+    for sid, first in (("near", 5.0), ("mid", 15.0), ("far", math.inf), ("far2", 45.0)):
+        for lv in (5.0, 15.0, 45.0):
+            v = "breach" if lv >= first else "no breach found"
+            rows.append({"sample_id": sid, "method": "georobust", "box_level": lv, "verdict": v})
+    lv = mx.smallest_breach_levels(rows)
+    assert lv[("near", "georobust")] == 5 and lv[("far", "georobust")] == math.inf
+    prof = mx.distance_profile(rows, {"near": 600.0, "mid": 2000.0, "far": 5000.0, "far2": 6000.0}, [5, 15, 45])
+    assert [p["quartile"] for p in prof] == [1, 2, 3, 4]
+    assert [p["phi_crit"] for p in prof] == [5, 15, math.inf, 45]
+    assert prof[0]["d_min_m"] == 600.0 and prof[-1]["d_max_m"] == 6000.0
+
+
+def test_reference_rows_restrict_a_dense_grid_to_nested_boxes():
+    xs = np.linspace(-30, 30, 61)[:, None]
+    fs = np.where(np.abs(xs[:, 0]) > 12, 3000.0, 10.0)
+    fs[30] = np.nan  # a failed evaluation counts as the penalty
+    ref = [{"status": "done", "sample_id": "s", "box": {"box": {"bounds": {"roll_deg": [-30, 30]}}},
+            "budget": {"max_evals": 61}, "nfev": 61, "xs": xs, "fs": fs}]
+    boxes = [{"box": {"bounds": {"roll_deg": [-b, b]}}, "label": f"±{b}", "level": b} for b in (5, 10, 15, 40)]
+    out = mx.reference_rows(ref, boxes, 1000.0, 5000.0)
+    assert [r["box_level"] for r in out] == [5, 10, 15]  # ±40 is not inside the grid
+    assert [r["worst_m"] for r in out] == [5000.0, 5000.0, 5000.0]
+    fs[30] = 10.0
+    out = mx.reference_rows(ref, boxes, 1000.0, 5000.0)
+    assert [r["worst_m"] for r in out] == [10.0, 10.0, 3000.0]
+    assert [r["verdict"] for r in out] == ["no breach found", "no breach found", "breach"]
+
+
+def test_convergence_aggregates_traces():
+    def trace(po, ra):
+        return [{"iteration": k + 1, "nfev": 2 * k + 1, "best_value": 1.0, "po_count_before": p, "po_count_after": p,
+                 "remaining_area": a} for k, (p, a) in enumerate(zip(po, ra, strict=True))]
+
+    rows = [{"trace": trace([1, 2, 4], [1.0, 0.5, 0.2])}, {"trace": trace([1, 4, 2], [1.0, 0.3, 0.1])}]
+    conv = mx.convergence(rows)
+    assert [c["iteration"] for c in conv] == [1, 2, 3]
+    assert conv[0]["ra_mean"] == 100.0 and conv[1]["po_mean"] == 3.0
+    assert conv[2]["ra_mean"] == pytest.approx(15.0) and conv[2]["ra_std"] == pytest.approx(5.0)
+    assert mx.convergence([{"trace": [{"iteration": 1, "nfev": 5, "best_value": 1.0, "po_count_before": None}]}]) == []
+
+
+def test_summarize_groups_in_first_seen_order():
+    rows = [{"method": m, "box_label": "±5°", "budget_label": "10 evals", "box_level": 5.0, "budget": {"max_evals": 10},
+             "worst_m": w, "verdict": "breach" if w > 1000 else "no breach found", "status": "done", "nfev": 10,
+             "search_s": 0.1} for m, w in (("random", 10.0), ("apgd", 2000.0), ("random", 3000.0))]
+    s = mx.summarize(rows, 1000.0)
+    assert [x["method"] for x in s] == ["random", "apgd"]
+    assert s[0]["n"] == 2 and s[0]["survival"] == 50.0 and s[0]["median_worst_m"] == 1505.0 and s[0]["breaches"] == 1
+    assert s[0]["max_evals"] == 10 and math.isnan(s[0]["max_seconds"])
+
+
+def test_pnp_summary():
+    def payload(abs_m, dist=1000.0):
+        e = {"abs_m": abs_m, "rel_pct": None if abs_m is None else 100 * abs_m / dist, "reason": ""}
+        return {"errors": {"ground truth": {"ippe_lm": e}}}
+
+    rows = [{"status": "done", "payload": payload(v)} for v in (10.0, 30.0, None)]
+    (s,) = mx.pnp_summary(rows)
+    assert s["n"] == 3 and s["failures"] == 1 and s["median_abs_m"] == 20.0 and s["mae_rel_pct"] == 2.0

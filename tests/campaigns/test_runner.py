@@ -1,0 +1,103 @@
+import dataclasses
+
+import pytest
+
+from vbl_robust.campaigns import (
+    Block,
+    Budget,
+    CampaignSpec,
+    DetectorSpec,
+    ResultStore,
+    plan,
+    roll_box,
+    run_campaign,
+)
+from vbl_robust.data.sample import Sample
+
+
+def small_spec(name="t", methods=("georobust", "random"), **kw):
+    blk = Block(boxes=(roll_box(10),), methods=methods, budgets=(Budget(max_evals=12),))
+    return CampaignSpec(name, (blk,), seed=1, **kw)
+
+
+def test_local_run_records_rows_and_a_rerun_skips_them(tmp_path, small_samples, oracle):
+    samples = small_samples[:3]
+    events = []
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        s1 = run_campaign(small_spec(), samples, st, detector=oracle, progress=events.append,
+                          dataset_source={"kind": "test"}, config={"x": 1})
+        rows = st.jobs(with_points=True)
+        s2 = run_campaign(small_spec(), samples, st, detector=oracle)
+        runs = st.runs()
+        assert st.count() == 6
+    assert (s1.total, s1.done, s1.skipped, s1.status) == (6, 6, 0, "finished")
+    assert (s2.done, s2.skipped, s2.status) == (0, 6, "finished")
+    assert [e.done for e in events] == list(range(7)) and events[-1].total == 6
+    assert {r["key"] for r in rows} == {j.key for j in plan(small_spec(), samples, oracle)}
+    for r in rows:
+        assert r["status"] == "done" and 1 <= r["nfev"] <= 12 and len(r["fs"]) == r["nfev"]
+        assert r["worst_m"] == pytest.approx(max(r["fs"]))
+        assert r["verdict"] == ("breach" if r["worst_m"] > 1000 else "no breach found")
+        assert r["trace"] and r["trace"][-1]["nfev"] == r["nfev"]
+        assert set(r["worst_x"]) == {"roll_deg"} and abs(r["worst_x"]["roll_deg"]) <= 10
+        assert r["payload"]["worst"]["error_m"] is None or r["payload"]["worst"]["error_m"] == pytest.approx(r["worst_m"])
+    assert [r["status"] for r in runs] == ["finished", "finished"]
+    assert runs[0]["dataset"]["source"] == {"kind": "test"} and runs[0]["config"]["user"] == {"x": 1}
+    assert runs[0]["code_version"] and runs[1]["jobs_skipped"] == 6
+
+
+def test_same_seed_same_results(tmp_path, small_samples, oracle):
+    out = []
+    for d in ("a", "b"):
+        with ResultStore(tmp_path / d / "r.sqlite") as st:
+            run_campaign(small_spec(), small_samples[:2], st, detector=oracle)
+            out.append([(r["key"], r["worst_m"], r["nfev"]) for r in st.jobs(with_trace=False)])
+    assert out[0] == out[1]
+
+
+def test_unreadable_image_is_a_recorded_failure_and_the_campaign_goes_on(tmp_path, small_samples, oracle):
+    good = small_samples[0]
+    bad = dataclasses.replace(small_samples[1], id="missing", image_path=tmp_path / "nope.png", _image=None, _loader=None)
+    assert isinstance(bad, Sample)
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        s = run_campaign(small_spec(), [bad, good], st, detector=oracle)
+        rows = st.jobs()
+    assert s.failed == 2 and s.status == "finished"
+    failed = [r for r in rows if r["sample_id"] == "missing"]
+    assert {r["status"] for r in failed} == {"failed"} and {r["verdict"] for r in failed} == {"failed"}
+    assert all(r["worst_m"] == 5000.0 and "nope.png" in r["reason"] for r in failed)
+    assert {r["status"] for r in rows if r["sample_id"] != "missing"} == {"done"}
+
+
+def test_pipeline_exception_is_recorded_with_its_reason(tmp_path, small_samples):
+    det = DetectorSpec("factory", "campaign_helpers:BrokenDetector")
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        s = run_campaign(small_spec(methods=("random",)), small_samples[:2], st, detector=det)
+        rows = st.jobs()
+    assert s.failed == 2 and len(rows) == 2
+    assert all(r["status"] == "failed" and "RuntimeError: detector exploded" in r["reason"] for r in rows)
+
+
+def test_chain_stops_at_the_first_breach_and_records_implied_rows(tmp_path, small_samples):
+    # a detector 40 px off: every image breaches at the smallest box already
+    det = DetectorSpec("oracle", options={"noise_px": 40.0})
+    blk = Block(boxes=(roll_box(5), roll_box(10), roll_box(20)), methods=("random",), budgets=(Budget(max_evals=8),),
+                chain=True)
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        run_campaign(CampaignSpec("chain", (blk,)), small_samples[:2], st, detector=det)
+        rows = st.jobs(with_trace=False)
+    assert len(rows) == 6
+    for sid in {r["sample_id"] for r in rows}:
+        mine = sorted((r for r in rows if r["sample_id"] == sid), key=lambda r: r["box_level"])
+        assert [r["status"] for r in mine] == ["done", "implied", "implied"]
+        assert all(r["verdict"] == "breach" for r in mine)
+        assert mine[1]["nfev"] == 0 and mine[1]["worst_m"] == mine[0]["worst_m"]
+
+
+def test_store_refuses_another_campaign(tmp_path, small_samples, oracle):
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        run_campaign(small_spec(methods=("random",)), small_samples[:1], st, detector=oracle)
+        with pytest.raises(ValueError, match="other settings"):
+            run_campaign(small_spec(methods=("random",), eps_safe_m=10.0), small_samples[:1], st, detector=oracle)
+        with pytest.raises(ValueError, match="executor"):
+            run_campaign(small_spec(methods=("random",)), small_samples[:1], st, detector=oracle, executor="gpu")

@@ -1,0 +1,86 @@
+import pytest
+
+from vbl_robust.campaigns import Block, Budget, CampaignSpec, experiment, roll_box, roll_contrast_box
+from vbl_robust.campaigns.experiments import EXPERIMENTS, Options
+from vbl_robust.campaigns.spec import canonical_json, derive_seed
+
+SAMPLES = [("a", "fa"), ("b", "fb"), ("c", "fc")]
+
+
+def spec(**kw):
+    blk = Block(boxes=(roll_box(5), roll_box(15)), methods=("georobust", "random"), budgets=(Budget(max_evals=50),))
+    return CampaignSpec("t", (blk,), **kw)
+
+
+def test_expand_is_the_cross_product_with_unique_stable_keys():
+    jobs = spec().expand(SAMPLES, detector_id="d")
+    assert len(jobs) == 3 * 2 * 2
+    keys = [j.key for j in jobs]
+    assert len(set(keys)) == len(keys)
+    assert keys == [j.key for j in spec().expand(SAMPLES, detector_id="d")]
+
+
+def test_keys_change_with_what_changes_results():
+    base = {j.key for j in spec().expand(SAMPLES, detector_id="d")}
+    assert base.isdisjoint(j.key for j in spec().expand(SAMPLES, detector_id="other"))
+    assert base.isdisjoint(j.key for j in spec(eps_safe_m=500.0).expand(SAMPLES, detector_id="d"))
+    assert base.isdisjoint(j.key for j in spec().expand([("a", "changed")], detector_id="d"))
+    # growing the dataset keeps the existing jobs' keys (and seeds): a rerun with more images resumes
+    grown = {j.key for j in spec().expand([*SAMPLES, ("d", "fd")], detector_id="d")}
+    assert base < grown
+
+
+def test_seed_stream_depends_on_identity_not_order():
+    fwd = {(j.sample_id, j.method, j.box.label): j.seed for j in spec(seed=1).expand(SAMPLES)}
+    rev = {(j.sample_id, j.method, j.box.label): j.seed for j in spec(seed=1).expand(SAMPLES[::-1])}
+    assert fwd == rev
+    assert len(set(fwd.values())) == len(fwd)
+    assert fwd != {k: j.seed for k, j in zip(fwd, spec(seed=2).expand(SAMPLES), strict=True)}
+    assert derive_seed(0, "x") == derive_seed(0, "x") < 2**31
+
+
+def test_canonical_json_treats_integral_floats_as_ints():
+    assert canonical_json({"b": 15.0, "a": [1.5]}) == canonical_json({"a": [1.5], "b": 15})
+
+
+def test_spec_round_trips_through_dict():
+    for name, exp in EXPERIMENTS.items():
+        s = exp.build(4, Options())
+        again = CampaignSpec.from_dict(s.to_dict())
+        assert again.to_dict() == s.to_dict(), name
+        assert [j.key for j in again.expand(SAMPLES)] == [j.key for j in s.expand(SAMPLES)]
+
+
+def test_block_and_budget_validation():
+    with pytest.raises(ValueError, match="at least one of max_evals"):
+        Budget()
+    with pytest.raises(ValueError, match="max_evals"):
+        Budget(max_evals=0)
+    with pytest.raises(ValueError, match="role"):
+        Block(boxes=(roll_box(5),), methods=("random",), budgets=(Budget(max_evals=5),), role="x")
+    with pytest.raises(ValueError, match="sorted by level"):
+        Block(boxes=(roll_box(15), roll_box(5)), methods=("random",), budgets=(Budget(max_evals=5),), chain=True)
+    with pytest.raises(ValueError, match="unique"):
+        spec().expand([("a", "1"), ("a", "2")])
+    with pytest.raises(ValueError, match="unknown experiment 'nope'"):
+        experiment("nope")
+
+
+def test_experiment_defaults_follow_the_paper():
+    s1 = experiment("spatial-1d").build(0, Options())
+    main = s1.blocks[0]
+    assert [b.level for b in main.boxes] == [2, 5, 10, 15, 20, 30]
+    assert main.methods == ("georobust", "random", "apgd")
+    assert main.budgets == (Budget(max_evals=200, stop_at_breach=True),)
+    ref = s1.blocks[1]
+    assert ref.role == "reference" and ref.options["grid"]["counts"] == [1201]  # 0.05° over ±30°
+    s2 = experiment("spatial-2d").build(0, Options())
+    assert s2.blocks[0].boxes[-1] == roll_contrast_box(30, (0.4, 2.5))
+    conv = experiment("convergence").build(0, Options())
+    assert conv.blocks[0].budgets[0].max_iters == 30 and conv.blocks[0].methods == ("georobust",)
+    rt = experiment("runtime-1d").build(0, Options())
+    assert sorted(b.max_seconds for b in rt.blocks[0].budgets) == [0.1, 0.5, 1.0, 2.0, 5.0]
+    assert all(not b.stop_at_breach for b in rt.blocks[0].budgets)
+    dp = experiment("distance-profile").build(0, Options())
+    assert dp.blocks[0].chain and dp.blocks[0].boxes[-1].level == 45
+    assert [e.images for e in EXPERIMENTS.values()].count(100) == 6 and EXPERIMENTS["pnp-validation"].images == 1000
