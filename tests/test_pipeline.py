@@ -60,6 +60,15 @@ def test_oracle_ippe_lm_is_roll_and_contrast_invariant(samples):
         assert rec.loss.max() < 1e-3  # in fact PnP on exact corners is exact to float precision
 
 
+def test_oracle_on_generated_scenes_of_every_envelope():
+    from vbl_robust.scenes import generate
+
+    theta = grid(n_roll=5)
+    for env in ("close", "medium", "far"):
+        for s in generate(1, seed=7, width=512, height=512, envelopes=(env,)):
+            assert Objective(s, OracleDetector(), BOX)(theta).max() < 1.0, (env, s.id)
+
+
 def test_iterative_is_never_better_than_ippe_lm(samples):
     """ITERATIVE without a start (the paper's solver) can fall into wrong minima; ippe_lm is the reference."""
     theta = grid(n_roll=7, contrasts=(1.0,))
