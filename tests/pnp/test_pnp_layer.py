@@ -12,6 +12,7 @@ import torch
 
 from vbl_robust.pnp import PnPPosition, pnp_position_torch, solve
 from vbl_robust.pnp import differentiable as diff_mod
+from vbl_robust.pnp.differentiable import position_jacobian_fd
 
 FD_STEP_PX = 1e-3
 
@@ -35,17 +36,6 @@ def jacobian_layer(x: np.ndarray, Z: np.ndarray, K: np.ndarray, grad: str = "exa
     return np.stack(rows)
 
 
-def jacobian_fd(x: np.ndarray, Z: np.ndarray, K: np.ndarray, h: float = FD_STEP_PX) -> np.ndarray:
-    """Central finite differences (3, 8) of the converged ippe_lm solver."""
-    out = np.zeros((3, 8))
-    for k in range(8):
-        e = np.zeros(8)
-        e[k] = h
-        e = e.reshape(4, 2)
-        out[:, k] = (solve(x + e, Z, K).position[0] - solve(x - e, Z, K).position[0]) / (2 * h)
-    return out
-
-
 def rel_err(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
@@ -65,7 +55,8 @@ def test_forward_is_the_stationary_point_of_the_reprojection_objective(view, dis
 def test_exact_gradient_matches_finite_differences(view, distance_m: float) -> None:
     for seed in range(2):
         v, x = noisy_view(view, distance_m, seed=seed)
-        assert rel_err(jacobian_layer(x, v.corners_3d, v.K), jacobian_fd(x, v.corners_3d, v.K)) < 1e-4
+        fd = position_jacobian_fd(x, v.corners_3d, v.K, FD_STEP_PX)
+        assert rel_err(jacobian_layer(x, v.corners_3d, v.K), fd) < 1e-4
 
 
 def test_gradcheck_float64(view) -> None:
@@ -156,7 +147,7 @@ def test_bpnp_mode_same_forward_biased_gradient(view) -> None:
         assert torch.equal(pos_exact, pos_bpnp)
         Jb = jacobian_layer(x, v.corners_3d, v.K, grad="bpnp")
         assert np.all(np.isfinite(Jb))
-        diffs.append(rel_err(Jb, jacobian_fd(x, v.corners_3d, v.K)))
+        diffs.append(rel_err(Jb, position_jacobian_fd(x, v.corners_3d, v.K, FD_STEP_PX)))
     # notes/pnp.md: BPnP's depth weighting is 12-23 % off on runway geometry
     assert min(diffs) > 0.02, diffs
 

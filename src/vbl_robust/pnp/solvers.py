@@ -13,13 +13,14 @@ Conventions
 Solvers (``SOLVERS``; facts in ``notes/pnp.md``)
 -----------------------------------------------
 ``"ippe_lm"`` (default)
-    ``SOLVEPNP_IPPE`` returns the two poses of the planar ambiguity; each is refined with ``solvePnPRefineLM``
-    (criteria EPS|COUNT, 100, 1e-12, float64) then polished with Gauss–Newton steps to the stationary point
-    (OpenCV's LM stops early at far range, see :func:`_polish`), and the one with the lower *final*
-    reprojection error is kept.
-    Keeping the lower IPPE solution *before* refinement (the textbook recipe) ends in a worse local minimum in
-    about 3 % of poses with 2 px corner noise (23 of 800 measured over 500–6000 m; none of 800 with 0.5 px);
-    refining both costs one extra LM run and never does worse.
+    ``SOLVEPNP_IPPE`` returns the two poses of the planar ambiguity; both are refined with Levenberg–Marquardt in
+    float64 to the stationary point of the reprojection objective (:func:`.refine.refine_lm`, batched numpy)
+    and the one with the lower *final* reprojection error is kept. Two deliberate departures from the recipe
+    "lower IPPE solution, then ``cv2.solvePnPRefineLM``": (1) OpenCV 5.0's LM ignores its termination criteria
+    and stops 0.26–0.5 m short of the optimum at 6 km (the implicit gradient needs the true stationary point),
+    and costs several IPPE solves; (2) keeping the lower IPPE solution *before* refinement ends in a worse
+    local minimum for about 3 % of poses with 2 px corner noise (23 of 800 measured over 500–6000 m; none of
+    800 with 0.5 px). ``benchmarks/bench_pnp.py`` measures the recipe side by side.
 ``"ippe"``
     ``SOLVEPNP_IPPE``, lower-reprojection solution, no refinement.
 ``"iterative"``
@@ -32,8 +33,8 @@ Failures
 --------
 A row the solver cannot handle is a recorded failure (``success`` False, NaN position/pose/error and a short
 ``reason``), never an exception: non-finite keypoints, collinear or coincident keypoints, a row of the wrong
-shape (ragged input), keypoints beyond :data:`MAX_COORD_PX`, an OpenCV error, no solution, a non-finite solution, or a solution that puts a runway
-corner behind the camera. Only whole-call mistakes (shape of ``points_2d``, ``corners_3d``, ``K``, unknown
+shape (ragged input), keypoints beyond :data:`MAX_COORD_PX`, an OpenCV error, no solution, a non-finite
+solution, or a solution that puts a runway corner behind the camera. Only whole-call mistakes (shape of ``points_2d``, ``corners_3d``, ``K``, unknown
 ``method``) raise ``ValueError``.
 """
 
@@ -46,15 +47,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .refine import refine_lm, residuals, rotvec_to_matrix
+
 logger = logging.getLogger(__name__)
 
 SOLVERS: tuple[str, ...] = ("ippe_lm", "iterative", "sqpnp", "ippe")
-
-#: LM refinement criteria: (type, max iterations, epsilon).
-LM_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-12)
-
-#: Maximum Gauss–Newton steps after OpenCV's LM (``ippe_lm``); 3–6 are used in practice.
-POLISH_STEPS = 10
 
 #: Three keypoints count as collinear when the triangle's height is below this fraction of its longest side.
 COLLINEAR_TOL = 1e-6
@@ -67,6 +64,7 @@ MIN_SPREAD_PX = 1e-6
 MAX_COORD_PX = 1e8
 
 _N_CORNERS = 4
+_TRIPLES = np.array(list(itertools.combinations(range(_N_CORNERS), 3)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,13 +141,12 @@ def _degenerate_rows(x: np.ndarray) -> np.ndarray:
     scale = np.max(np.linalg.norm(c, axis=2), axis=1)
     bad = ~(scale > MIN_SPREAD_PX)
     c = c / np.where(bad, 1.0, scale)[:, None, None]
-    for i, j, k in itertools.combinations(range(_N_CORNERS), 3):
-        ab, ac, bc = c[:, j] - c[:, i], c[:, k] - c[:, i], c[:, k] - c[:, j]
-        cross = np.abs(ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0])
-        longest_sq = np.max(np.stack([(ab**2).sum(1), (ac**2).sum(1), (bc**2).sum(1)]), axis=0)
-        # height / longest side = cross / longest²; coincident points give cross = 0 as well
-        bad |= ~(cross > COLLINEAR_TOL * longest_sq)
-    return bad
+    a, b, d = c[:, _TRIPLES[:, 0]], c[:, _TRIPLES[:, 1]], c[:, _TRIPLES[:, 2]]  # (B, 4 triples, 2)
+    ab, ad, bd = b - a, d - a, d - b
+    cross = np.abs(ab[..., 0] * ad[..., 1] - ab[..., 1] * ad[..., 0])
+    longest_sq = np.maximum(np.maximum((ab * ab).sum(-1), (ad * ad).sum(-1)), (bd * bd).sum(-1))
+    # height / longest side = cross / longest²; coincident points give cross = 0 as well
+    return bad | np.any(~(cross > COLLINEAR_TOL * longest_sq), axis=1)
 
 
 def _rows(points_2d: object) -> tuple[np.ndarray, list[str]]:
@@ -182,84 +179,48 @@ def _rows(points_2d: object) -> tuple[np.ndarray, list[str]]:
     raise ValueError(f"points_2d: expected shape (4, 2) or (B, 4, 2), got {shape}")
 
 
-def _rms(z: np.ndarray, x: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray) -> float:
-    proj, _ = cv2.projectPoints(z, rvec, tvec, K, None)
-    return float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - x) ** 2, axis=1))))
-
-
-def _polish(
-    z: np.ndarray, x: np.ndarray, K: np.ndarray, rvec: np.ndarray, tvec: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss–Newton steps from an LM result to the stationary point of the reprojection objective.
-
-    OpenCV 5.0's ``solvePnPRefineLM`` stops early on ill-conditioned (far) views whatever its criteria: measured
-    0.26 m from the optimum at 6 km. The implicit gradient of :mod:`.differentiable` assumes the stationary
-    point, and a few Gauss–Newton steps (quadratic convergence on these near-zero residuals) reach it.
-    """
-    y = np.concatenate([np.asarray(rvec, np.float64).ravel(), np.asarray(tvec, np.float64).ravel()])
-
-    def residual(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        p, jac = cv2.projectPoints(z, y[:3], y[3:], K, None)
-        return (p.reshape(-1, 2) - x).ravel(), jac[:, :6]
-
-    r, J = residual(y)
-    cost = float(r @ r)
-    for _ in range(POLISH_STEPS):
-        ok, step = cv2.solve(J, -r.reshape(-1, 1), flags=cv2.DECOMP_QR)  # least squares, QR
-        step = step.ravel()
-        if not ok or not np.all(np.isfinite(step)):
-            break
-        r_new, J_new = residual(y + step)
-        cost_new = float(r_new @ r_new)
-        if not cost_new <= cost * (1.0 + 1e-12) + 1e-300:
-            break
-        y, r, J, cost = y + step, r_new, J_new, cost_new
-        if np.linalg.norm(step) <= 1e-12 * (1.0 + np.linalg.norm(y)):
-            break
-    return y[:3].reshape(3, 1), y[3:].reshape(3, 1)
-
-
-def _candidates(method: str, z: np.ndarray, x: np.ndarray, K: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Pose candidates (rvec (3, 1), tvec (3, 1)) of one row; may raise ``cv2.error``."""
+def _opencv_candidates(method: str, z: np.ndarray, x: np.ndarray, K: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Pose candidates (rvec (3,), tvec (3,)) of one row from OpenCV; may raise ``cv2.error``."""
     if method in ("ippe", "ippe_lm"):
         n, rvecs, tvecs, errs = cv2.solvePnPGeneric(z, x, K, None, flags=cv2.SOLVEPNP_IPPE)
-        cands = [(np.asarray(r, np.float64).reshape(3, 1), np.asarray(t, np.float64).reshape(3, 1))
+        cands = [(np.asarray(r, np.float64).reshape(3), np.asarray(t, np.float64).reshape(3))
                  for r, t in zip(rvecs[:n], tvecs[:n], strict=True)]
         if method == "ippe":
             order = np.argsort(np.asarray(errs, dtype=np.float64).ravel()[:n])
             return [cands[int(i)] for i in order[:1]]
-        return [_polish(z, x, K, *cv2.solvePnPRefineLM(z, x, K, None, r.copy(), t.copy(), LM_CRITERIA))
-                for r, t in cands]
+        return cands
     flag = {"iterative": cv2.SOLVEPNP_ITERATIVE, "sqpnp": cv2.SOLVEPNP_SQPNP}[method]
     ok, rvec, tvec = cv2.solvePnP(z, x, K, None, flags=flag)
-    return [(rvec, tvec)] if ok else []
+    return [(np.asarray(rvec, np.float64).reshape(3), np.asarray(tvec, np.float64).reshape(3))] if ok else []
 
 
-def _solve_row(method: str, z: np.ndarray, x: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, str]:
-    """(rvec (3,), tvec (3,), rms, reason) of one row; reason ``""`` on success."""
-    try:
-        cands = _candidates(method, z, x, K)
-    except cv2.error as e:
-        msg = str(e).strip().splitlines()[-1] if str(e).strip() else "cv2.error"
-        logger.debug("PnP %s: OpenCV error %s", method, msg)
-        return np.full(3, np.nan), np.full(3, np.nan), np.nan, f"OpenCV error: {msg}"
-    best: tuple[np.ndarray, np.ndarray, float] | None = None
-    reason = "no solution"
-    for rvec, tvec in cands:
-        r, t = np.asarray(rvec, np.float64).reshape(3), np.asarray(tvec, np.float64).reshape(3)
-        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(t))):
-            reason = "non-finite solution"
+def _pick_best(
+    method: str, z: np.ndarray, x: np.ndarray, K: np.ndarray, owner: np.ndarray, rv: np.ndarray, tv: np.ndarray,
+    reasons: list[str], rvec: np.ndarray, tvec: np.ndarray, err: np.ndarray, position: np.ndarray,
+) -> None:
+    """Refine (``ippe_lm``) and validate the candidates, and write each row's best one into the outputs."""
+    finite = np.all(np.isfinite(rv), axis=1) & np.all(np.isfinite(tv), axis=1)
+    R = rotvec_to_matrix(np.where(finite[:, None], rv, 0.0))
+    xs = x[owner]
+    if method == "ippe_lm":
+        R, tv, _ = refine_lm(z, xs, K, R, np.where(finite[:, None], tv, 0.0), groups=owner)
+        finite &= np.all(np.isfinite(tv), axis=1)
+    Xc, _, r = residuals(z, xs, K, R, np.where(finite[:, None], tv, 0.0))
+    rms = np.sqrt(np.mean(np.sum(r * r, axis=2), axis=1))
+    in_front = np.all(Xc[..., 2] > 0, axis=1)
+    valid = finite & in_front & np.isfinite(rms)
+    for b in np.unique(owner):
+        mine = np.flatnonzero(owner == b)
+        ok = mine[valid[mine]]
+        if ok.size == 0:
+            reasons[b] = ("non-finite solution" if not finite[mine].all()
+                          else "solution puts the runway behind the camera")
             continue
-        depth = (z @ cv2.Rodrigues(r)[0].T + t)[:, 2]
-        if not np.all(depth > 0):
-            reason = "solution puts the runway behind the camera"
-            continue
-        err = _rms(z, x, r, t, K)
-        if np.isfinite(err) and (best is None or err < best[2]):
-            best = (r, t, err)
-    if best is None:
-        return np.full(3, np.nan), np.full(3, np.nan), np.nan, reason
-    return best[0], best[1], best[2], ""
+        i = ok[np.argmin(rms[ok])]
+        reasons[b] = ""
+        rvec[b] = cv2.Rodrigues(R[i])[0].ravel() if method == "ippe_lm" else rv[i]
+        tvec[b], err[b] = tv[i], rms[i]
+        position[b] = -R[i].T @ tv[i]
 
 
 def solve(points_2d: object, corners_3d: object, K: object, method: str = "ippe_lm") -> PnPResult:
@@ -290,26 +251,37 @@ def solve(points_2d: object, corners_3d: object, K: object, method: str = "ippe_
     usable = finite & in_range
     if usable.any():
         degenerate[usable] = _degenerate_rows(x[usable])
-    rvec = np.full((B, 3), np.nan)
-    tvec = np.full((B, 3), np.nan)
-    err = np.full(B, np.nan)
+    owner: list[int] = []
+    cand_r: list[np.ndarray] = []
+    cand_t: list[np.ndarray] = []
     for b in range(B):
         if reasons[b]:
             continue
         if not finite[b]:
             reasons[b] = "non-finite keypoints"
-            continue
-        if not in_range[b]:
+        elif not in_range[b]:
             reasons[b] = f"keypoints farther than {MAX_COORD_PX:.0e} px from the image origin"
-            continue
-        if degenerate[b]:
+        elif degenerate[b]:
             reasons[b] = "collinear or coincident keypoints"
-            continue
-        rvec[b], tvec[b], err[b], reasons[b] = _solve_row(method, z, np.ascontiguousarray(x[b]), k)
+        else:
+            try:
+                cands = _opencv_candidates(method, z, np.ascontiguousarray(x[b]), k)
+            except cv2.error as e:
+                msg = str(e).strip().splitlines()[-1] if str(e).strip() else "cv2.error"
+                logger.debug("PnP %s: OpenCV error %s", method, msg)
+                reasons[b] = f"OpenCV error: {msg}"
+                continue
+            reasons[b] = "no solution"  # until a valid candidate is found below
+            for r, t in cands:
+                owner.append(b)
+                cand_r.append(r)
+                cand_t.append(t)
+    rvec, tvec, err, position = (np.full((B, 3), np.nan), np.full((B, 3), np.nan), np.full(B, np.nan),
+                                 np.full((B, 3), np.nan))
+    if owner:
+        _pick_best(method, z, x, k, np.asarray(owner), np.stack(cand_r), np.stack(cand_t),
+                   reasons, rvec, tvec, err, position)
     success = np.array([r == "" for r in reasons], dtype=bool)
-    position = np.full((B, 3), np.nan)
-    for b in np.flatnonzero(success):
-        position[b] = -cv2.Rodrigues(rvec[b])[0].T @ tvec[b]
     return PnPResult(
         position=position, success=success, reproj_error_px=err, rvec=rvec, tvec=tvec,
         method=method, reason=tuple(reasons),
