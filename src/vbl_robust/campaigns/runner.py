@@ -129,7 +129,7 @@ def run_campaign(
         store.commit(rows)
         state["new"] += len(rows)
         state["failed"] += sum(r["status"] == "failed" for r in rows)
-        state["breaches"] += sum(r["verdict"] == VERDICT_BREACH and r["role"] == "main" for r in rows)
+        state["breaches"] += sum(r.get("verdict") == VERDICT_BREACH and r["role"] == "main" for r in rows)
         if progress is not None:
             progress(Progress(skipped + state["new"], len(jobs), skipped, state["breaches"], state["failed"],
                               time.perf_counter() - t0, rows[0]))

@@ -178,7 +178,7 @@ def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id:
                 from .pnpcheck import pnp_comparison
 
                 row = _base_row(job, run_id)
-                row.update(status="done", payload_json=json.dumps(pnp_comparison(task.sample, detector, settings)),
+                row.update(status="done", verdict=None, payload_json=json.dumps(pnp_comparison(task.sample, detector, settings)),
                            nfev=1, nit=1, job_s=time.perf_counter() - t0)
                 yield [row]
                 continue

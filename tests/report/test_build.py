@@ -1,0 +1,61 @@
+import dataclasses
+import re
+
+import pytest
+
+from vbl_robust.campaigns import (
+    Block,
+    Budget,
+    CampaignSpec,
+    DetectorSpec,
+    ResultStore,
+    roll_box,
+    run_campaign,
+)
+from vbl_robust.campaigns.experiments import audit_spec
+from vbl_robust.campaigns.spec import roll_contrast_box
+from vbl_robust.report import build_report
+
+
+@pytest.fixture(scope="module")
+def samples():
+    from vbl_robust.scenes import generate
+
+    return generate(3, seed=5, width=128, height=128)
+
+
+def test_audit_report_is_self_contained_with_figures_tables_and_provenance(tmp_path, samples):
+    spec = audit_spec(roll_contrast_box(10, (0.7, 1.4)), methods=("georobust", "random"), budget=Budget(max_evals=10),
+                      landscape=(7, 5))
+    det = DetectorSpec("oracle", options={"noise_px": 0.5})
+    with ResultStore(tmp_path / "results.sqlite") as st:
+        run_campaign(spec, samples, st, detector=det, dataset_source={"kind": "synthetic", "n": 3})
+    html = build_report(tmp_path).read_text()
+    assert not re.search(r'src="(?!data:)', html)  # nothing external
+    for needle in ("Per image: worst case found", "Loss landscape", "Worst error found vs evaluations", "Provenance",
+                   "oracle detector returns the exact", "GeoRobust worst (m)", "synth"):
+        assert needle in html, needle
+    assert {p.name for p in (tmp_path / "figures").glob("*.png")} >= {"landscape_2d.png", "best_vs_evals.png"}
+    # rebuilding into another directory works from the store alone
+    other = build_report(tmp_path / "results.sqlite", tmp_path / "copy")
+    assert other.parent == tmp_path / "copy" and (tmp_path / "copy" / "figures" / "landscape_2d.png").exists()
+
+
+def test_report_warns_about_incomplete_runs_and_failures(tmp_path, samples):
+    spec = CampaignSpec("audit", (Block(boxes=(roll_box(5),), methods=("random",), budgets=(Budget(max_evals=4),)),))
+    missing = dataclasses.replace(samples[0], id="gone", image_path=tmp_path / "gone.png", _image=None, _loader=None)
+    with ResultStore(tmp_path / "results.sqlite") as st:
+        run_campaign(spec, [missing], st, detector=DetectorSpec("oracle"))
+        rid = st.begin_run({"jobs_total": 9, "jobs_skipped": 1})
+        st.end_run(rid, "interrupted", 0, 1.0)
+    html = build_report(tmp_path).read_text()
+    assert "job(s) failed" in html and "gone.png" in html
+    assert "campaign is incomplete (1 of 9 jobs)" in html
+
+
+def test_report_errors_name_the_run(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no results store"):
+        build_report(tmp_path)
+    ResultStore(tmp_path / "results.sqlite").close()
+    with pytest.raises(ValueError, match="holds no campaign"):
+        build_report(tmp_path)

@@ -1,0 +1,72 @@
+import math
+
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+
+from vbl_robust.report import figures as F
+
+
+def summary_rows():
+    out = []
+    for m, base in (("georobust", 20.0), ("random", 50.0), ("apgd", 70.0), (F.REFERENCE, 10.0)):
+        for lv in (2.0, 5.0, 10.0):
+            out.append({"method": m, "box_level": lv, "box_label": f"±{lv:g}°", "survival": base / lv * 2, "n": 5,
+                        "max_seconds": lv / 10, "max_evals": float(lv * 10), "median_worst_m": 100.0 * lv})
+    return out
+
+
+def labels(ax):
+    return [t.get_text() for t in ax.get_legend().get_texts()]
+
+
+def test_survival_vs_level_has_one_line_per_method_and_the_reference():
+    fig = F.survival_vs_level(summary_rows(), title="t", xlabel="roll budget")
+    ax = fig.axes[0]
+    assert isinstance(fig, Figure)
+    assert labels(ax)[:4] == ["GeoRobust", "Random", "APGD", "grid (true worst case)"]
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["±2°", "±5°", "±10°"]
+    assert ax.get_ylim() == (-3, 103)
+
+
+def test_runtime_has_survival_and_median_panels_with_eps():
+    fig = F.runtime(summary_rows(), axis="max_seconds", title="t", eps_safe_m=1000.0,
+                    reference={"survival": 5.0, "median_worst_m": 3000.0})
+    a1, a2 = fig.axes[:2]
+    assert a1.get_xscale() == "log" and a2.get_yscale() == "log"
+    assert any(line.get_ydata()[0] == 1000.0 for line in a2.get_lines())  # ε_safe line
+    assert "ε_safe = 1000 m" in [t.get_text() for t in fig.legends[0].get_texts()]
+
+
+def test_distance_profile_marks_no_phi_crit_at_the_limit():
+    prof = [{"quartile": q, "d_min_m": 1000.0 * q, "d_max_m": 1000.0 * (q + 1), "method": "georobust", "n": 3,
+             "phi_crit": v} for q, v in ((1, 10.0), (2, math.inf))]
+    fig = F.distance_profile(prof, limit_deg=45.0, budgets=[5, 10, 45])
+    texts = [t.get_text() for t in fig.axes[0].texts]
+    assert texts == ["10°", "≥45°"]
+    bars = [p for p in fig.axes[0].patches if p.get_width() < 1]
+    assert bars[1].get_height() > 45.0
+
+
+def test_convergence_and_landscapes_and_pnp():
+    conv = [{"iteration": k, "n": 3, **{f"{n}_{s}": v for n in ("po", "ra") for s, v in
+             (("mean", 10.0 / k), ("std", 1.0), ("q25", 9.0 / k), ("q75", 11.0 / k))}} for k in range(1, 6)]
+    assert len(F.convergence(conv).axes) == 2
+    r, c = np.meshgrid(np.linspace(-10, 10, 9), np.linspace(0.7, 1.4, 5), indexing="ij")
+    xs = np.stack([r.ravel(), c.ravel()], axis=1)
+    fs = 10.0 + 300.0 * np.abs(xs[:, 0])
+    fig = F.landscape_2d(xs, fs, ["roll_deg", "contrast"], {"random": xs[:4]}, eps_safe_m=1000.0, title="t",
+                         worst={"random": xs[3]})
+    assert fig.axes[0].get_xlabel() == "roll φ (°)"
+    assert "Random (4 points)" in [t.get_text() for t in fig.legends[0].get_texts()]
+    fig = F.landscape_1d(xs[:9, :1], fs[:9], "roll_deg", {"apgd": (xs[:3, :1], fs[:3])}, eps_safe_m=1000.0, title="t")
+    assert "APGD (3 points)" in labels(fig.axes[0])
+    pnp = [{"source": s, "solver": v, "n": 4, "failures": 0, "median_rel_pct": 1.0, "mae_rel_pct": 2.0,
+            "median_abs_m": 30.0, "mae_abs_m": 60.0} for s in ("ground truth", "detector") for v in ("ippe_lm", "iterative")]
+    fig = F.pnp_comparison(pnp)
+    assert [a.get_title() for a in fig.axes] == ["ground truth keypoints (N = 4)", "detector keypoints (N = 4)"]
+
+
+@pytest.mark.parametrize("method", ["georobust", "unknown-method"])
+def test_style_has_defaults(method):
+    assert {"color", "marker", "label", "linestyle"} <= set(F.style(method))
