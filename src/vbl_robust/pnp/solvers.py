@@ -20,7 +20,8 @@ Solvers (``SOLVERS``; facts in ``notes/pnp.md``)
     and stops 0.26–0.5 m short of the optimum at 6 km (the implicit gradient needs the true stationary point),
     and costs several IPPE solves; (2) keeping the lower IPPE solution *before* refinement ends in a worse
     local minimum for about 3 % of poses with 2 px corner noise (23 of 800 measured over 500–6000 m; none of
-    800 with 0.5 px). ``benchmarks/bench_pnp.py`` measures the recipe side by side.
+    800 with 0.5 px). ``benchmarks/bench_pnp.py`` measures the recipe side by side. When OpenCV's IPPE returns
+    only NaN poses (it does for some exact, noise-free keypoint sets), the SQPNP pose is refined instead.
 ``"ippe"``
     ``SOLVEPNP_IPPE``, lower-reprojection solution, no refinement.
 ``"iterative"``
@@ -188,6 +189,12 @@ def _opencv_candidates(method: str, z: np.ndarray, x: np.ndarray, K: np.ndarray)
         if method == "ippe":
             order = np.argsort(np.asarray(errs, dtype=np.float64).ravel()[:n])
             return [cands[int(i)] for i in order[:1]]
+        if not any(np.all(np.isfinite(r)) and np.all(np.isfinite(t)) for r, t in cands):
+            # OpenCV's IPPE returns NaN poses for some exact (noise-free) keypoint sets, e.g. a straight-in
+            # approach with a yaw offset; SQPNP is then the start point of the same LM refinement.
+            ok, rvec, tvec = cv2.solvePnP(z, x, K, None, flags=cv2.SOLVEPNP_SQPNP)
+            if ok:
+                cands.append((np.asarray(rvec, np.float64).reshape(3), np.asarray(tvec, np.float64).reshape(3)))
         return cands
     flag = {"iterative": cv2.SOLVEPNP_ITERATIVE, "sqpnp": cv2.SOLVEPNP_SQPNP}[method]
     ok, rvec, tvec = cv2.solvePnP(z, x, K, None, flags=flag)
