@@ -168,3 +168,20 @@ def test_plain_numpy_function_in_real_units():
     r = maximize(lambda x: -((x[:, 0] - 3.0) ** 2), ParameterBox({"a": (-10, 10)}), method="direct", max_evals=2000)
     assert abs(r.x[0] - 3.0) < 1e-3 and r.nfev <= 2000
     assert r.x_dict() == {"a": float(r.x[0])}
+
+
+def test_apgd_uses_the_torch_attribute_of_an_objective_object():
+    import torch
+
+    from vbl_robust.search import maximize
+    from vbl_robust.space import ParameterBox
+
+    class Obj:
+        def __call__(self, x):  # numpy path: never used by APGD
+            raise AssertionError("APGD must call .torch")
+
+        def torch(self, x):
+            return -((x - 0.25) ** 2).sum(dim=1) + torch.zeros(1, dtype=x.dtype)
+
+    r = maximize(Obj(), ParameterBox({"a": (-1, 1)}), "apgd", max_evals=60, seed=0)
+    assert abs(float(r.x[0]) - 0.25) < 1e-2

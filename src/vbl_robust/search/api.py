@@ -72,8 +72,9 @@ def maximize(
             ordered as ``box.names``) -> ``(n,)`` values (numpy, list or torch tensor). For ``"apgd"``: a
             torch-differentiable function: it receives a ``torch.float64`` tensor ``(n, d)`` with
             ``requires_grad=True`` and must return a ``(n,)`` tensor connected to it by autograd, each value
-            depending on its own row only (the gradient is taken of the sum). NaN/inf values are failed
-            evaluations, never errors.
+            depending on its own row only (the gradient is taken of the sum). An object with a callable
+            ``torch`` attribute (such as :class:`vbl_robust.Objective`) is called through it for ``"apgd"``
+            and directly for the other methods. NaN/inf values are failed evaluations, never errors.
         box: the search space.
         method: a key of :data:`METHODS`.
         max_evals, max_iters, max_seconds: budgets; at least one is required. ``max_evals`` is never
@@ -95,7 +96,10 @@ def maximize(
         method, box, max_evals=max_evals, max_iters=max_iters, max_seconds=max_seconds,
         stop_above=stop_above, seed=seed, **method_options,
     )
-    evaluate = _with_gradient(f, method) if opt.needs_gradient else _values_only(f)
+    if opt.needs_gradient:
+        evaluate = _with_gradient(getattr(f, "torch", None) if callable(getattr(f, "torch", None)) else f, method)
+    else:
+        evaluate = _values_only(f)
     while len(x := opt.ask()):
         values, grad = evaluate(x)
         opt.tell(x, values, grad=grad)
