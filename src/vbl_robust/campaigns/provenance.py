@@ -132,11 +132,21 @@ class DetectorSpec:
         return f"{self.kind}: {self.path}"
 
     def identity(self) -> dict[str, Any]:
-        """JSON identity: kind, name, model file SHA-256 (None for the oracle), options."""
+        """JSON identity: kind, name, model file SHA-256 (None for the oracle), options; for the shipped model
+        also the SHA-256 of its ``default.json`` (single or two-stage, input size)."""
         f = self.model_file
-        return {"kind": self.kind, "name": self.name, "path": None if f is None else str(f),
-                "sha256": None if f is None else file_sha256(f), "options": dict(self.options),
-                **({"factory": self.path} if self.kind == "factory" else {})}
+        ident = {"kind": self.kind, "name": self.name, "path": None if f is None else str(f),
+                 "sha256": None if f is None else file_sha256(f), "options": dict(self.options)}
+        if self.kind == "factory":
+            ident["factory"] = self.path
+        if self.kind == "default" and f is not None and (f.parent / "default.json").is_file():
+            ident["config_sha256"] = file_sha256(f.parent / "default.json")
+        return ident
+
+    def key(self) -> str:
+        """Digest of what determines the detector's outputs (not where the file lives)."""
+        ident = self.identity()
+        return digest({k: v for k, v in ident.items() if k not in ("name", "path")}, 24)
 
     def build(self) -> Any:
         """Construct the detector (call once per process; models are heavy)."""

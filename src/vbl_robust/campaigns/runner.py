@@ -66,9 +66,7 @@ def sample_record(sample: Any, index: int) -> dict[str, Any]:
 
 def plan(spec: CampaignSpec, samples: Sequence[Any], detector: DetectorSpec) -> list[Job]:
     """All jobs of ``spec`` on ``samples`` for ``detector`` (keys depend on all three)."""
-    det_id = detector.identity()
-    return spec.expand([(s.id, sample_fingerprint(s)) for s in samples],
-                       detector_id=f"{det_id['kind']}:{det_id['sha256']}:{det_id.get('factory')}")
+    return spec.expand([(s.id, sample_fingerprint(s)) for s in samples], detector_id=detector.key())
 
 
 def run_campaign(

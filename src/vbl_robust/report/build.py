@@ -243,9 +243,9 @@ def section_pnp(ctx: Context) -> Section | None:
 def section_landscapes(ctx: Context) -> Section | None:
     grids = ctx.store.jobs(kind="search", role="landscape", with_points=True, with_trace=False)
     if not grids:
-        refs = ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
-        first = min((r["sample_index"] for r in refs), default=None)
-        grids = [r for r in refs if r["sample_index"] == first]
+        refs = [r for r in ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
+                if r["status"] == "done" and len(r["fs"])]
+        grids = [_interesting(refs, ctx.eps)] if refs else []
     grids = [g for g in grids if g["status"] == "done" and len(g["fs"])]
     if not grids:
         return None
@@ -288,6 +288,22 @@ def section_landscapes(ctx: Context) -> Section | None:
                                     ("nfev", "evals", None), ("worst", "worst (m)", None), ("x", "worst θ", esc),
                                     ("verdict", "verdict", None)], left=("method", "box", "budget", "x", "verdict")))
     return s
+
+
+def _interesting(grids: Sequence[dict[str, Any]], eps: float) -> dict[str, Any]:
+    """The 1-D reference grid worth drawing: an image that survives unperturbed (L(0) ≤ ε) but breaches somewhere
+    in the box, with its breach region smallest; else the surviving image with the largest worst value."""
+    def nominal(g: dict[str, Any]) -> float:
+        i = int(np.argmin(np.abs(g["xs"][:, 0])))
+        return float(g["fs"][i]) if np.isfinite(g["fs"][i]) else math.inf
+
+    ok = [g for g in grids if nominal(g) <= eps]
+    if not ok:
+        return grids[0]
+    breach = [g for g in ok if np.nanmax(g["fs"]) > eps]
+    if breach:
+        return min(breach, key=lambda g: (np.mean(np.where(np.isfinite(g["fs"]), g["fs"], math.inf) > eps), g["sample_index"]))
+    return max(ok, key=lambda g: np.nanmax(g["fs"]))
 
 
 def section_best_vs_evals(ctx: Context) -> Section | None:

@@ -52,15 +52,23 @@ def _fig(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (6.4, 4.0),
 
 def survival_vs_level(summary: Sequence[Mapping[str, Any]], *, title: str, xlabel: str,
                       tick_labels: Mapping[float, str] | None = None) -> Figure:
-    """Survival rate (%) against the perturbation budget (box level), one line per method (+ grid reference)."""
+    """Survival rate (%) against the perturbation budget (box level), one line per method (+ grid reference).
+
+    Budgets are placed at equal spacing (categories, as in the paper) and methods are offset slightly
+    sideways so that coinciding curves stay visible.
+    """
     fig, ax = _fig()
-    for m in _methods(summary):
+    levels = sorted({r["box_level"] for r in summary})
+    pos = {v: i for i, v in enumerate(levels)}
+    methods = _methods(summary)
+    for j, m in enumerate(methods):
         rs = sorted((r for r in summary if r["method"] == m), key=lambda r: r["box_level"])
         st = style(m)
-        ax.plot([r["box_level"] for r in rs], [r["survival"] for r in rs], marker=st["marker"], color=st["color"],
-                linestyle=st["linestyle"], label=st["label"], markersize=6, linewidth=1.8)
-    levels = sorted({r["box_level"] for r in summary})
-    ax.set_xticks(levels)
+        dx = 0.0 if m == REFERENCE else 0.07 * (j - (len(methods) - 2) / 2)
+        ax.plot([pos[r["box_level"]] + dx for r in rs], [r["survival"] for r in rs], marker=st["marker"],
+                color=st["color"], linestyle=st["linestyle"], label=st["label"], markersize=6, linewidth=1.6,
+                alpha=0.9, zorder=4 if m == REFERENCE else 3)
+    ax.set_xticks(range(len(levels)))
     if tick_labels:
         ax.set_xticklabels([tick_labels.get(v, f"{v:g}") for v in levels], rotation=20, ha="right", fontsize=8)
     else:
@@ -214,7 +222,7 @@ def landscape_2d(xs: np.ndarray, fs: np.ndarray, names: Sequence[str], overlays:
     vmax = max(float(np.nanmax(g)), vmin * 10, eps_safe_m * 1.5)
     im = ax.pcolormesh(u0, u1, g, shading="nearest", norm=LogNorm(vmin=vmin, vmax=vmax), cmap="viridis")
     cb = fig.colorbar(im, ax=ax)
-    cb.set_label("position error L (m), log scale")
+    cb.set_label("position error L (m), log scale (values < 1 cm shown at 1 cm)")
     if np.nanmax(g) > eps_safe_m > np.nanmin(g):
         ax.contour(u0, u1, g, levels=[eps_safe_m], colors="#ff4040", linewidths=1.4)
     for m in _methods([{"method": m} for m in overlays]):
@@ -242,7 +250,8 @@ def landscape_1d(xs: np.ndarray, fs: np.ndarray, name: str, overlays: Mapping[st
     fig, ax = _fig(size=(8.0, 4.0))
     o = np.argsort(xs[:, 0])
     ax.plot(xs[o, 0], np.clip(fs[o], 1e-2, None), color="black", linewidth=1.0, label="dense grid")
-    for m, (px, pf) in overlays.items():
+    for m in _methods([{"method": m} for m in overlays]):
+        px, pf = overlays[m]
         if len(px):
             st = style(m)
             ax.scatter(px[:, 0], np.clip(pf, 1e-2, None), s=18, marker=st["marker"], facecolors="none",
