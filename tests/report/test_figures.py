@@ -40,12 +40,12 @@ def test_runtime_has_survival_and_median_panels_with_eps():
 
 def test_distance_profile_marks_no_phi_crit_at_the_limit():
     prof = [{"quartile": q, "d_min_m": 1000.0 * q, "d_max_m": 1000.0 * (q + 1), "method": "georobust", "n": 3,
-             "phi_crit": v} for q, v in ((1, 10.0), (2, math.inf))]
+             "phi_crit": v, "survival": [50.0, 5.0, 0.0]} for q, v in ((1, 10.0), (2, math.inf))]
     fig = F.distance_profile(prof, limit_deg=45.0, budgets=[5, 10, 45])
-    texts = [t.get_text() for t in fig.axes[0].texts]
-    assert texts == ["10°", "≥45°"]
+    assert [t.get_text() for t in fig.axes[0].texts] == ["10°"]
     bars = [p for p in fig.axes[0].patches if p.get_width() < 1]
-    assert bars[1].get_height() > 45.0
+    assert bars[0].get_height() == 10.0 and bars[1].get_height() > 45.0 and bars[1].get_hatch() == "//"
+    assert fig.axes[1].get_ylabel() == "survival rate S_rate (%)"
 
 
 def test_convergence_and_landscapes_and_pnp():
@@ -64,7 +64,8 @@ def test_convergence_and_landscapes_and_pnp():
     pnp = [{"source": s, "solver": v, "n": 4, "failures": 0, "median_rel_pct": 1.0, "mae_rel_pct": 2.0,
             "median_abs_m": 30.0, "mae_abs_m": 60.0} for s in ("ground truth", "detector") for v in ("ippe_lm", "iterative")]
     fig = F.pnp_comparison(pnp)
-    assert [a.get_title() for a in fig.axes] == ["ground truth keypoints (N = 4)", "detector keypoints (N = 4)"]
+    assert [a.get_title() for a in fig.axes] == ["ground truth keypoints", "detector keypoints"]
+    assert fig.axes[0].get_xticklabels()[0].get_text() == "ippe_lm\n0/4 failed"
 
 
 @pytest.mark.parametrize("method", ["georobust", "unknown-method"])

@@ -261,8 +261,10 @@ def section_landscapes(ctx: Context) -> Section | None:
         if not on_box and same:
             top = max(r["box_level"] for r in same)
             on_box = [r for r in same if r["box_level"] == top]
+        # per method one run: evaluation budgets before time budgets (a time budget can mean thousands of
+        # points), then the largest
         by_method: dict[str, dict[str, Any]] = {}
-        for r in sorted(on_box, key=lambda r: -(r.get("nfev") or 0)):
+        for r in sorted(on_box, key=lambda r: ((r.get("budget") or {}).get("max_seconds") is not None, -(r.get("nfev") or 0))):
             by_method.setdefault(r["method"], r)
         dist = ctx.samples.get(sid, {}).get("slant_distance_m")
         where = f"image {sid}" + (f" (slant distance {dist:.0f} m)" if dist else "")

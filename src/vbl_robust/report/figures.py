@@ -18,6 +18,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import LogNorm  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+from matplotlib.ticker import FuncFormatter  # noqa: E402
 
 REFERENCE = "grid (reference)"
 STYLE: dict[str, dict[str, Any]] = {
@@ -43,6 +45,15 @@ def style(method: str) -> dict[str, Any]:
 def _methods(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     ms = list(dict.fromkeys(r["method"] for r in rows))
     return sorted(ms, key=lambda m: (m == REFERENCE, list(STYLE).index(m) if m in STYLE else 99, m))
+
+
+_PLAIN = FuncFormatter(lambda v, _: f"{v:g}")
+
+
+def _plain_log_axis(axis: Any) -> None:
+    """Plain numbers (1000, 1500) instead of 1.5×10³ on a log axis."""
+    axis.set_major_formatter(_PLAIN)
+    axis.set_minor_formatter(_PLAIN)
 
 
 def _fig(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (6.4, 4.0), **kw: Any) -> tuple[Figure, Any]:
@@ -114,6 +125,9 @@ def runtime(summary: Sequence[Mapping[str, Any]], *, axis: str, title: str, eps_
     a1.set_ylim(-3, 103)
     a1.set_ylabel("survival rate S_rate (%)")
     a2.set_yscale("log")
+    lo, hi = a2.get_ylim()
+    if hi / lo < 20:  # short range: label the minor ticks too, in plain numbers
+        _plain_log_axis(a2.yaxis)
     a2.set_ylabel("median worst error over images (m)")
     fig.legend(*a2.get_legend_handles_labels(), fontsize=8, loc="outside lower center", ncol=5)
     fig.suptitle(title)
@@ -121,52 +135,50 @@ def runtime(summary: Sequence[Mapping[str, Any]], *, axis: str, title: str, eps_
 
 
 def pnp_comparison(summary: Sequence[Mapping[str, Any]]) -> Figure:
-    """Median and mean (MAE) relative position error per PnP solver, for ground-truth and detector keypoints."""
+    """Median and mean (MAE) relative position error per PnP solver (over its successful solves), for the
+    ground-truth and the detector keypoints; tick labels give each solver's failure count."""
     sources = list(dict.fromkeys(r["source"] for r in summary))
-    fig, axes = _fig(1, len(sources), size=(5.2 * len(sources), 4.0), squeeze=False)
+    fig, axes = _fig(1, len(sources), size=(5.0 * len(sources), 4.2), squeeze=False)
     for ax, src in zip(axes[0], sources, strict=True):
         rs = [r for r in summary if r["source"] == src]
         x = np.arange(len(rs))
-        med = [r["median_rel_pct"] for r in rs]
-        mae = [r["mae_rel_pct"] for r in rs]
-        b1 = ax.bar(x - 0.2, med, 0.4, label="median", color="#1f77b4")
-        b2 = ax.bar(x + 0.2, mae, 0.4, label="mean (MAE)", color="#ff7f0e")
-        for bars, rsv, key in ((b1, rs, "median_abs_m"), (b2, rs, "mae_abs_m")):
-            for b, r in zip(bars, rsv, strict=True):
-                if math.isfinite(b.get_height()):
-                    ax.annotate(f"{r[key]:.3g} m", (b.get_x() + b.get_width() / 2, b.get_height()), ha="center",
-                                va="bottom", fontsize=7, rotation=90, xytext=(0, 2), textcoords="offset points")
+        ax.bar(x - 0.2, [r["median_rel_pct"] for r in rs], 0.4, label="median", color="#1f77b4")
+        ax.bar(x + 0.2, [r["mae_rel_pct"] for r in rs], 0.4, label="mean (MAE)", color="#ff7f0e")
         ax.set_xticks(x)
-        ax.set_xticklabels([f"{r['solver']}\n({r['failures']} fail)" for r in rs], fontsize=8)
+        ax.set_xticklabels([f"{r['solver']}\n{r['failures']}/{r['n']} failed" for r in rs], fontsize=8)
         ax.set_yscale("log")
         ax.set_ylabel("position error (% of slant distance)")
-        ax.set_title(f"{src} keypoints (N = {rs[0]['n'] if rs else 0})")
+        ax.set_title(f"{src} keypoints")
         ax.grid(alpha=0.3, axis="y")
-        ax.legend(fontsize=8, loc="upper left")
-        ax.margins(y=0.25)
-    fig.suptitle("PnP solvers: relative 3-D position error (labels: absolute error)")
+    fig.legend(*axes[0][0].get_legend_handles_labels(), fontsize=8, loc="outside lower center", ncol=2)
+    fig.suptitle("PnP solvers: relative camera-position error over successful solves (absolute errors: table)")
     return fig
 
 
 def distance_profile(profile: Sequence[Mapping[str, Any]], *, limit_deg: float, budgets: Sequence[float],
                      title: str = "Vulnerability profile by approach distance") -> Figure:
-    """φ_crit (roll budget dropping survival below 10 %) per slant-distance quartile, one marker per method; the
-    red band ≥ ``limit_deg`` is the experimental limit ("no φ_crit within the limit")."""
-    fig, ax = _fig(size=(7.0, 4.2))
+    """Left: φ_crit (roll budget dropping survival below 10 %) per slant-distance quartile, one bar per method;
+    hatched bars in the red band ≥ ``limit_deg`` = no φ_crit within the limit. Right: survival rate against the
+    roll budget per quartile for the first method (solid) and the dense-grid reference (dashed) if present."""
+    fig, (ax, a2) = _fig(1, 2, size=(11.5, 4.8), gridspec_kw={"width_ratios": [1.25, 1]})
     quartiles = sorted({r["quartile"] for r in profile})
     methods = _methods(profile)
     width = 0.8 / max(len(methods), 1)
-    top = limit_deg * 1.15
-    ax.axhspan(limit_deg, top, color="#d62728", alpha=0.15, label=f"≥ {limit_deg:g}° (experimental limit)")
+    top = limit_deg * 1.12
+    ax.axhspan(limit_deg, top, color="#d62728", alpha=0.15)
+    handles = [Patch(facecolor="#d62728", alpha=0.15, label=f"≥ {limit_deg:g}° (hatched): no φ_crit within the limit")]
     for i, m in enumerate(methods):
         st = style(m)
         rs = {r["quartile"]: r for r in profile if r["method"] == m}
         xs = [q + (i - (len(methods) - 1) / 2) * width for q in quartiles]
         vals = [rs[q]["phi_crit"] if q in rs else math.nan for q in quartiles]
-        shown = [v if math.isfinite(v) else limit_deg * 1.07 for v in vals]
-        ax.bar(xs, shown, width * 0.9, color=st["color"], alpha=0.85, label=st["label"])
-        for x, v, s in zip(xs, vals, shown, strict=True):
-            ax.annotate("≥45°" if not math.isfinite(v) else f"{v:g}°", (x, s), ha="center", va="bottom", fontsize=7)
+        for x, v in zip(xs, vals, strict=True):
+            beyond = not math.isfinite(v)
+            ax.bar(x, limit_deg * 1.06 if beyond else v, width * 0.9, color=st["color"], alpha=0.85,
+                   hatch="//" if beyond else None, edgecolor="white")
+            if not beyond:
+                ax.annotate(f"{v:g}°", (x, v), ha="center", va="bottom", fontsize=7)
+        handles.append(Patch(facecolor=st["color"], label=st["label"]))
     first = [r for r in profile if r["method"] == methods[0]] if methods else []
     lab = {r["quartile"]: f"Q{r['quartile']}\n{r['d_min_m'] / 1000:.1f}–{r['d_max_m'] / 1000:.1f} km\n(n={r['n']})" for r in first}
     ax.set_xticks(quartiles)
@@ -175,9 +187,27 @@ def distance_profile(profile: Sequence[Mapping[str, Any]], *, limit_deg: float, 
     ax.set_yticks([b for b in budgets if b <= limit_deg])
     ax.set_ylabel("φ_crit: roll budget for S_rate < 10 % (°)")
     ax.set_xlabel("slant-distance quartile (closest first)")
-    ax.set_title(title)
+    ax.set_title("critical roll per quartile", fontsize=10)
     ax.grid(alpha=0.3, axis="y")
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    fig.legend(handles=handles, fontsize=8, loc="outside lower center", ncol=len(handles))
+    colors = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, max(len(quartiles), 1)))
+    shown = [m for m in methods if m != REFERENCE][:1] + [m for m in methods if m == REFERENCE]
+    for q, c in zip(quartiles, colors, strict=True):
+        for m in shown:
+            r = next((r for r in profile if r["method"] == m and r["quartile"] == q), None)
+            if r is not None:
+                a2.plot(budgets, r["survival"], color=c, linestyle="--" if m == REFERENCE else "-", marker="o",
+                        markersize=3, label=f"Q{q}" if m == shown[0] else None)
+    a2.axhline(10, color="grey", linestyle=":", linewidth=1)
+    a2.set_ylim(-3, 103)
+    a2.set_xticks(list(budgets))
+    a2.set_xlabel("roll budget ±b (°)")
+    a2.set_ylabel("survival rate S_rate (%)")
+    names = " (solid), ".join(style(m)["label"] for m in shown) + (" (dashed)" if REFERENCE in shown else " (solid)")
+    a2.set_title(f"survival per quartile: {names}", fontsize=9)
+    a2.grid(alpha=0.3)
+    a2.legend(fontsize=7, loc="lower left")
+    fig.suptitle(title)
     return fig
 
 
@@ -218,8 +248,8 @@ def landscape_2d(xs: np.ndarray, fs: np.ndarray, names: Sequence[str], overlays:
     i1 = np.searchsorted(u1, xs[:, 1])
     grid[i1, i0] = fs
     g = np.clip(np.where(np.isfinite(grid), grid, np.nanmax(grid)), 1e-2, None)
-    vmin = max(float(np.nanmin(g)), 1e-2)
-    vmax = max(float(np.nanmax(g)), vmin * 10, eps_safe_m * 1.5)
+    vmin = min(max(float(np.nanmin(g)), 1e-2), eps_safe_m / 3)  # keep ε_safe inside the colour range
+    vmax = max(float(np.nanmax(g)), eps_safe_m * 1.5)
     im = ax.pcolormesh(u0, u1, g, shading="nearest", norm=LogNorm(vmin=vmin, vmax=vmax), cmap="viridis")
     cb = fig.colorbar(im, ax=ax)
     cb.set_label("position error L (m), log scale (values < 1 cm shown at 1 cm)")
