@@ -263,9 +263,10 @@ def section_landscapes(ctx: Context) -> Section | None:
             on_box = [r for r in same if r["box_level"] == top]
         # per method one run: evaluation budgets before time budgets (a time budget can mean thousands of
         # points), then the largest
-        by_method: dict[str, dict[str, Any]] = {}
+        first: dict[str, dict[str, Any]] = {}
         for r in sorted(on_box, key=lambda r: ((r.get("budget") or {}).get("max_seconds") is not None, -(r.get("nfev") or 0))):
-            by_method.setdefault(r["method"], r)
+            first.setdefault(r["method"], r)
+        by_method = {m: first[m] for m in F._methods(list(first.values()))}
         dist = ctx.samples.get(sid, {}).get("slant_distance_m")
         where = f"image {sid}" + (f" (slant distance {dist:.0f} m)" if dist else "")
         if len(names) == 2:
@@ -283,9 +284,9 @@ def section_landscapes(ctx: Context) -> Section | None:
                                             f"the points each method evaluated — {esc(lab)}; stars: each method's worst "
                                             "point. Red: the ε_safe level set."))
         lines = [{"method": F.style(m)["label"], "box": r["box_label"], "budget": r["budget_label"], "nfev": r["nfev"],
-                  "worst": r["worst_m"], "x": json.dumps(r["worst_x"]), "verdict": r["verdict"]} for m, r in by_method.items()]
+                  "worst": r["worst_m"], "x": _theta(r["worst_x"]), "verdict": r["verdict"]} for m, r in by_method.items()]
         lines.append({"method": "dense grid", "box": g["box_label"], "budget": g["budget_label"], "nfev": g["nfev"],
-                      "worst": g["worst_m"], "x": json.dumps(g["worst_x"]), "verdict": g["verdict"]})
+                      "worst": g["worst_m"], "x": _theta(g["worst_x"]), "verdict": g["verdict"]})
         s.html.append(table(lines, [("method", "method", None), ("box", "box", None), ("budget", "budget", None),
                                     ("nfev", "evals", None), ("worst", "worst (m)", None), ("x", "worst θ", esc),
                                     ("verdict", "verdict", None)], left=("method", "box", "budget", "x", "verdict")))
@@ -346,7 +347,7 @@ def section_per_image(ctx: Context) -> Section | None:
         line = by.setdefault(r["sample_id"], {"sample_id": r["sample_id"], **_sample_cols(ctx, r["sample_id"])})
         line[f"{r['method']}_worst"] = r["worst_m"]
         line[f"{r['method']}_verdict"] = r["verdict"]
-        line[f"{r['method']}_x"] = ", ".join(f"{k}={v:.3g}" for k, v in (r.get("worst_x") or {}).items())
+        line[f"{r['method']}_x"] = _theta(r.get("worst_x"))
     lines = list(by.values())
     for line in lines:
         line["worst"] = max(line.get(f"{m}_worst", -math.inf) for m in methods)
@@ -360,6 +361,11 @@ def section_per_image(ctx: Context) -> Section | None:
     s.html.append(table(lines, cols, row_class=lambda r: "breach" if r["verdict"] == "breach" else "",
                         left=("sample_id", "envelope", "verdict", *[f"{m}_x" for m in methods])))
     return s
+
+
+def _theta(x: Mapping[str, float] | None) -> str:
+    """A worst point in short form: "roll_deg=2.22, contrast=1.05"."""
+    return ", ".join(f"{k}={v:.3g}" for k, v in (x or {}).items())
 
 
 def _sample_cols(ctx: Context, sid: str) -> dict[str, Any]:
