@@ -28,7 +28,6 @@ of the tests use it.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 
 import cv2
@@ -36,14 +35,16 @@ import numpy as np
 
 from vbl_robust.geometry.camera import world_to_cv
 
+from .grid import Grid, make_grid
 from .layout import paint
 from .textures import (
     DETAIL_TEXEL_M,
     N_WORLDS,
     WORLD_SIZE,
     WORLD_TEXEL_M,
-    detail_pyramid,
+    detail_tiles,
     sensor_noise,
+    world_mean,
     world_pyramid,
 )
 
@@ -57,6 +58,12 @@ MAX_TILE_TEXELS = 1_500_000
 MAX_RANGE_M = 30_000.0
 #: Largest tile side (OpenCV warps need < 32767).
 MAX_TILE_SIDE = 8192
+#: Ground boxes of the cells at the horizon are clipped at this multiple of the drawing range (horizontally).
+CLIP_FACTOR = 1.5
+#: Width (cells) of the column chunks in which a band is warped.
+CHUNK_CELLS = 16
+#: Detail-noise amplitude on airport surfaces relative to the ground's (asphalt and concrete are rougher).
+TILE_DETAIL_GAIN = 1.5
 
 
 @dataclass(frozen=True)
@@ -133,76 +140,6 @@ def ground_homography(R: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray
     return np.asarray(K, dtype=np.float64) @ np.column_stack([R_cv[:, 0], R_cv[:, 1], t])
 
 
-@dataclass
-class _Grid:
-    """Per-cell geometry on the coarse grid (arrays of shape (gh, gw))."""
-
-    d: np.ndarray  # (gh, gw, 3) ray directions in the runway frame (forward component 1 in the camera)
-    ground: np.ndarray  # bool, ray hits the ground
-    gx: np.ndarray
-    gy: np.ndarray
-    rng_m: np.ndarray  # range to the ground hit (inf where none)
-    fx: np.ndarray  # ground footprint of a pixel along runway x / y, metres
-    fy: np.ndarray
-    iso: np.ndarray  # sqrt of the ground area of a pixel, metres
-    box: np.ndarray  # (4, gh, gw) ground bounding box (xmin, xmax, ymin, ymax) of each cell (±inf at the horizon)
-
-
-def _hits(R, C, K, u: np.ndarray, v: np.ndarray):
-    """Rays through pixels ``(u[j], v[i])``: directions, ground mask, hit x/y, range, footprints fx, fy, iso."""
-    R = np.asarray(R, dtype=np.float64)
-    du = -R[:, 1] / K[0, 0]
-    dv = -R[:, 2] / K[1, 1]
-    d0 = R[:, 0] - du * K[0, 2] - dv * K[1, 2]
-    d = d0[None, None, :] + u[None, :, None] * du[None, None, :] + v[:, None, None] * dv[None, None, :]
-    dz = d[..., 2]
-    ground = dz < -1e-9
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        t = np.where(ground, -C[2] / dz, np.inf)
-        gx = C[0] + t * d[..., 0]
-        gy = C[1] + t * d[..., 1]
-        rng_m = t * np.linalg.norm(d, axis=-1)
-        k = -C[2] / dz**2
-        a = k * (du[0] * dz - d[..., 0] * du[2])  # d gx / du
-        b = k * (dv[0] * dz - d[..., 0] * dv[2])  # d gx / dv
-        c = k * (du[1] * dz - d[..., 1] * du[2])  # d gy / du
-        e = k * (dv[1] * dz - d[..., 1] * dv[2])  # d gy / dv
-        iso = np.sqrt(np.abs(a * e - b * c))
-    fx = np.where(ground, np.maximum(np.abs(a), np.abs(b)), np.inf)
-    fy = np.where(ground, np.maximum(np.abs(c), np.abs(e)), np.inf)
-    return d, ground, gx, gy, rng_m, fx, fy, iso
-
-
-def _grid(R, C, K, width, height, stride) -> _Grid:
-    gw, gh = -(-width // stride), -(-height // stride)
-    u = stride * np.arange(gw) + (stride - 1) / 2.0
-    v = stride * np.arange(gh) + (stride - 1) / 2.0
-    d, ground, gx, gy, rng_m, fx, fy, iso = _hits(R, C, K, u, v)
-    # cell corners: their ground hits bound each cell's ground region (infinite where a corner is above the
-    # horizon) and their footprints bound the footprints inside the cell from below (near the horizon the
-    # footprint changes by large factors within one cell)
-    uc = stride * np.arange(gw + 1) - 0.5
-    vc = stride * np.arange(gh + 1) - 0.5
-    _, gc, cx, cy, _, cfx, cfy, _ = _hits(R, C, K, uc, vc)
-
-    def four(a):
-        return np.stack([a[:-1, :-1], a[1:, :-1], a[:-1, 1:], a[1:, 1:]])
-
-    open_cell = ~four(gc).all(axis=0)
-    cxs, cys = four(np.where(gc, cx, np.nan)), four(np.where(gc, cy, np.nan))
-    with warnings.catch_warnings():  # all-NaN cells are open cells, replaced by ±inf
-        warnings.simplefilter("ignore", RuntimeWarning)
-        box = np.stack([
-            np.where(open_cell, -np.inf, np.nanmin(cxs, axis=0)),
-            np.where(open_cell, np.inf, np.nanmax(cxs, axis=0)),
-            np.where(open_cell, -np.inf, np.nanmin(cys, axis=0)),
-            np.where(open_cell, np.inf, np.nanmax(cys, axis=0)),
-        ])
-    fx = np.minimum(fx, four(cfx).min(axis=0))
-    fy = np.minimum(fy, four(cfy).min(axis=0))
-    return _Grid(d, ground, gx, gy, rng_m, fx, fy, iso, box)
-
-
 def _world_matrix(look: Look, level: int) -> np.ndarray:
     """(3, 3) map from texel coordinates of world pyramid ``level`` to ground metres (runway frame)."""
     s = WORLD_TEXEL_M * 2**level
@@ -222,8 +159,8 @@ def _layout_bounds(layout: np.ndarray) -> tuple[float, float, float, float]:
             float(layout[:, 5].max()))
 
 
-def _airport_tile(look: Look, layout: np.ndarray, g: _Grid, sel: np.ndarray, bounds) -> tuple | None:
-    """Premultiplied RGBA tile (ny, nx, 4) of the layout for one band, with its texel → ground matrix."""
+def _airport_tile(look: Look, layout: np.ndarray, g: Grid, sel: np.ndarray, bounds) -> tuple | None:
+    """Premultiplied RGBA tile (ny, nx, 4) float32 of the layout for one band, with its texel → ground matrix."""
     bx0, bx1, by0, by1 = bounds
     x_lo, x_hi, y_lo, y_hi = g.box
     inside = sel & (x_hi > bx0) & (x_lo < bx1) & (y_hi > by0) & (y_lo < by1)
@@ -241,27 +178,29 @@ def _airport_tile(look: Look, layout: np.ndarray, g: _Grid, sel: np.ndarray, bou
     nx, ny = int((xmax - xmin) / sx) + 2, int((ymax - ymin) / sy) + 2
     tile = np.zeros((ny, nx, 4), np.float32)
     paint(tile, xmin, ymin, sx, sy, layout)
-    if not look.debug and look.detail_amp > 0:
-        det = _detail_on_grid(look, xmin, ymin, sx, sy, nx, ny)
-        if det is not None:
-            tile[..., :3] *= det[..., None]
     A = np.array([[sx, 0.0, xmin], [0.0, sy, ymin], [0.0, 0.0, 1.0]])
     return tile, A
 
 
-def _detail_on_grid(look: Look, x0: float, y0: float, sx: float, sy: float, nx: int, ny: int):
-    """Multiplicative fine texture ``1 + a·noise`` sampled on a tile grid, or None when the texels are coarse."""
-    s = min(sx, sy)
-    if s >= WORLD_TEXEL_M:
-        return None
-    pyr = detail_pyramid()
-    lvl = int(np.clip(math.floor(math.log2(max(s, DETAIL_TEXEL_M) / DETAIL_TEXEL_M)), 0, len(pyr) - 1))
-    noise = pyr[lvl]
-    n = noise.shape[0]
-    sl = DETAIL_TEXEL_M * 2**lvl
-    ix = np.floor((x0 + look.world_offset[0] + sx * np.arange(nx)) / sl).astype(np.int64) % n
-    iy = np.floor((y0 + look.world_offset[1] + sy * np.arange(ny)) / sl).astype(np.int64) % n
-    return 1.0 + np.float32(1.5 * look.detail_amp) * noise[iy[:, None], ix[None, :]]
+def _placement(tex: np.ndarray, M: np.ndarray, box, period: int = 0) -> tuple[np.ndarray, int]:
+    """Texel → ground matrix and border mode for warping the part of ``tex`` that ground box ``box`` needs.
+
+    ``M`` maps texel coordinates of ``tex`` to ground metres (axis-aligned scale and offset); ``box = (xmin, xmax,
+    ymin, ymax)`` in metres. OpenCV's warps take a slow path for every pixel that samples outside the source
+    unless the border is constant, so: a repeating texture (``period`` > 0 texels; ``tex`` holds whole periods) is
+    shifted by whole periods to put the box inside it when it fits, and a non-repeating one gets a constant border
+    when the box is inside it, else reflection (BORDER_REFLECT_101) beyond its edges.
+    """
+    j0, j1 = math.floor((box[0] - M[0, 2]) / M[0, 0]) - 1, math.ceil((box[1] - M[0, 2]) / M[0, 0]) + 1
+    i0, i1 = math.floor((box[2] - M[1, 2]) / M[1, 1]) - 1, math.ceil((box[3] - M[1, 2]) / M[1, 1]) + 1
+    h, w = tex.shape[:2]
+    if period:
+        sj, si = j0 - j0 % period, i0 - i0 % period
+        M = M @ np.array([[1.0, 0.0, sj], [0.0, 1.0, si], [0.0, 0.0, 1.0]])
+        j0, j1, i0, i1 = j0 - sj, j1 - sj, i0 - si, i1 - si
+    if 0 <= j0 and j1 < w and 0 <= i0 and i1 < h:
+        return M, cv2.BORDER_CONSTANT
+    return M, cv2.BORDER_WRAP if period else cv2.BORDER_REFLECT_101
 
 
 def _chunks(sel: np.ndarray, width_cells: int):
@@ -275,63 +214,88 @@ def _chunks(sel: np.ndarray, width_cells: int):
             yield rows[0], rows[-1] + 1, c0 + cols[0], c0 + cols[-1] + 1
 
 
-def _render_ground(R, C, K, width, height, layout, look, g: _Grid, r_max: float) -> np.ndarray:
-    """Ground layer (height, width, 3) float32 (lit albedo); ground beyond ``r_max`` gets the world mean."""
-    H = ground_homography(R, C, K)
+def _warp(src: np.ndarray, M: np.ndarray, size: tuple[int, int], mode: int = cv2.BORDER_CONSTANT,
+          value=0) -> np.ndarray:
+    """Bilinear ``cv2.warpPerspective`` of ``src`` by ``M`` (source → destination)."""
+    return cv2.warpPerspective(src, M, size, flags=cv2.INTER_LINEAR, borderMode=mode, borderValue=value)
+
+
+def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max: float, out: np.ndarray,
+                   haze: tuple[np.ndarray, np.ndarray] | None) -> None:
+    """Draw the ground cells within ``r_max`` into ``out`` (height, width, 4) uint8 (RGB, A unused), band by band.
+
+    ``haze = (w, hz)``: per-pixel ground transmittance (height, width) and in-scattered light ``sky·(1 − w)``
+    (height, width, 4) float32, so that a pixel is ``albedo·light·w + hz`` (None for debug renders).
+    """
+    height, width = out.shape[:2]
     S = STRIDE
-    gain = np.asarray(look.ground_gain, np.float32)
-    out = np.empty((height, width, 3), np.float32)
-    if look.debug:
-        out[:] = 0.0
-    else:
-        pyr = world_pyramid(look.world)
-        out[:] = pyr[-1].reshape(-1, 3).mean(axis=0) / 255.0 * gain
     valid = g.ground & (g.rng_m < r_max)
     if not valid.any():
-        return out
+        return
     level = np.where(valid, np.floor(np.log2(np.maximum(g.iso, MIN_TEXEL_M) / MIN_TEXEL_M)), -1).astype(np.int32)
     bounds = _layout_bounds(layout)
-    dpyr = detail_pyramid()
+    if not look.debug:
+        pyr = world_pyramid(look.world)
+        dpyr = detail_tiles()
+        gain4 = np.array([*look.ground_gain, 0.0], np.float32)
+        gain4_u8 = tuple(float(c) / 255.0 for c in gain4)
+        border = (*(int(round(255.0 * c)) for c in world_mean(look.world)), 0)
+        w_full, hz_full = haze
     for k in np.unique(level[level >= 0]):
         sel = level == k
         iso_min = float(g.iso[sel].min())
         tile = _airport_tile(look, layout, g, sel, bounds)
+        if look.debug and tile is None:
+            continue
         if not look.debug:
             m = int(np.clip(math.floor(math.log2(max(iso_min, WORLD_TEXEL_M) / WORLD_TEXEL_M)), 0, len(pyr) - 1))
-            Hw = H @ _world_matrix(look, m)
-            dl = None
-            if iso_min < 2 * WORLD_TEXEL_M and look.detail_amp > 0:
-                dl = int(np.clip(math.floor(math.log2(max(iso_min, DETAIL_TEXEL_M) / DETAIL_TEXEL_M)), 0,
-                                 len(dpyr) - 1))
-                Hd = H @ _detail_matrix(look, dl)
-                amp = np.float32(look.detail_amp * min(1.0, 2 * WORLD_TEXEL_M / iso_min - 1.0))
-        for r0, r1, c0, c1 in _chunks(sel, 16):
+            Mw = _world_matrix(look, m)
+            amp_w = look.detail_amp * max(0.0, min(1.0, 2 * WORLD_TEXEL_M / iso_min - 1.0))
+            # (no detail beyond twice the world texel: it would only alias)
+            amp_t = TILE_DETAIL_GAIN * look.detail_amp if tile is not None and amp_w > 0 else amp_w
+            dl = int(np.clip(math.floor(math.log2(max(iso_min, DETAIL_TEXEL_M) / DETAIL_TEXEL_M)), 0, len(dpyr) - 1))
+            Md = _detail_matrix(look, dl)
+        for r0, r1, c0, c1 in _chunks(sel, CHUNK_CELLS):
             v0, v1, u0, u1 = r0 * S, min(r1 * S, height), c0 * S, min(c1 * S, width)
             size = (u1 - u0, v1 - v0)
-            T = np.array([[1.0, 0.0, -u0], [0.0, 1.0, -v0], [0.0, 0.0, 1.0]])
-            if look.debug:
-                col = np.zeros((v1 - v0, u1 - u0, 3), np.float32)
-            else:
-                col = cv2.warpPerspective(pyr[m], T @ Hw, size, flags=cv2.INTER_LINEAR,
-                                          borderMode=cv2.BORDER_REFLECT_101).astype(np.float32)
-                if dl is not None:
-                    det = cv2.warpPerspective(dpyr[dl], T @ Hd, size, flags=cv2.INTER_LINEAR,
-                                              borderMode=cv2.BORDER_WRAP)
-                    det *= amp
-                    det += 1.0
-                    col *= det[..., None]
-                col *= gain * np.float32(1.0 / 255.0)
+            HT = np.array([[1.0, 0.0, -u0], [0.0, 1.0, -v0], [0.0, 0.0, 1.0]]) @ H
+            cells = sel[r0:r1, c0:c1]
             if tile is not None:
-                rgba = cv2.warpPerspective(tile[0], T @ H @ tile[1], size, flags=cv2.INTER_LINEAR,
-                                           borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-                premult = rgba[..., :3] if look.debug else rgba[..., :3] * gain
-                col = col * (1.0 - rgba[..., 3:4]) + premult
-            mask = np.repeat(np.repeat(sel[r0:r1, c0:c1], S, axis=0), S, axis=1)[: v1 - v0, : u1 - u0]
-            np.copyto(out[v0:v1, u0:u1], col, where=mask[..., None])
-    return out
+                rgba = _warp(tile[0], HT @ tile[1], size)
+            if look.debug:
+                col = rgba
+            else:
+                b = g.box[:, r0:r1, c0:c1][:, cells]
+                box = (float(b[0].min()), float(b[1].max()), float(b[2].min()), float(b[3].max()))
+                Mp, mode = _placement(pyr[m], Mw, box)
+                col = cv2.multiply(_warp(pyr[m], HT @ Mp, size, mode, border), gain4_u8, dtype=cv2.CV_32F)
+                w = w_full[v0:v1, u0:u1]
+                if tile is not None:
+                    alpha = rgba[..., 3].copy()
+                    col *= (1.0 - alpha)[..., None]
+                    rgba *= gain4
+                    col += rgba
+                if amp_t > 0 or amp_w > 0:
+                    Mp, mode = _placement(dpyr[dl][0], Md, box, period=dpyr[dl][1])
+                    det = _warp(dpyr[dl][0], HT @ Mp, size, mode)
+                    if tile is not None and amp_t != amp_w:
+                        alpha *= amp_t - amp_w
+                        alpha += amp_w
+                        det *= alpha
+                    else:
+                        det *= amp_w
+                    det += 1.0
+                    det *= w
+                    col *= det[..., None]
+                else:
+                    col *= w[..., None]
+                col += hz_full[v0:v1, u0:u1]
+            col8 = cv2.convertScaleAbs(col, alpha=255.0)  # rounds and saturates to uint8 (values are >= 0)
+            mask = cv2.resize(cells.view(np.uint8), ((c1 - c0) * S, (r1 - r0) * S), interpolation=cv2.INTER_NEAREST)
+            cv2.copyTo(col8, mask[: v1 - v0, : u1 - u0], out[v0:v1, u0:u1])
 
 
-def _sky_and_weight(look: Look, g: _Grid) -> tuple[np.ndarray, np.ndarray]:
+def _sky_and_weight(look: Look, g: Grid) -> tuple[np.ndarray, np.ndarray]:
     """Coarse sky/haze colour (gh, gw, 3) and ground weight ``transmittance`` (gh, gw), float32."""
     dn = g.d / np.linalg.norm(g.d, axis=-1, keepdims=True)
     el = np.clip(dn[..., 2], 0.0, 1.0)
@@ -370,16 +334,20 @@ def render_scene(R: np.ndarray, C: np.ndarray, K: np.ndarray, width: int, height
     if not C[2] > 0:
         raise ValueError(f"render_scene: camera must be above the ground (C_z > 0), got C = {C.tolist()}")
     K = np.asarray(K, dtype=np.float64)
-    g = _grid(R, C, K, width, height, STRIDE)
+    H = ground_homography(R, C, K)
     r_max = min(6.0 * look.visibility_m, MAX_RANGE_M)
-    ground = _render_ground(R, C, K, width, height, layout, look, g, r_max)
+    g = make_grid(R, C, K, width, height, STRIDE, clip_m=CLIP_FACTOR * r_max)
     if look.debug:
-        return cv2.convertScaleAbs(ground, alpha=255.0)
+        img4 = np.zeros((height, width, 4), np.uint8)
+        _render_ground(H, layout, look, g, r_max, img4, None)
+        return cv2.cvtColor(img4, cv2.COLOR_RGBA2RGB)
     sky, w = _sky_and_weight(look, g)
-    sky_f = _upsample(sky, width, height)
-    w_f = _upsample(w, width, height)
-    img = cv2.blendLinear(ground, sky_f, w_f, 1.0 - w_f)
-    img8 = cv2.convertScaleAbs(img, alpha=255.0)  # rounds and saturates to uint8 (values are >= 0)
+    hz = np.dstack([sky * (1.0 - w[..., None]), np.zeros_like(w)])
+    # pixels that no band draws (sky, ground beyond r_max) show the world's mean colour through the haze
+    mean = np.append(world_mean(look.world) * np.asarray(look.ground_gain, np.float32), np.float32(0.0))
+    img4 = np.ascontiguousarray(_upsample(cv2.convertScaleAbs(hz + w[..., None] * mean, alpha=255.0), width, height))
+    _render_ground(H, layout, look, g, r_max, img4, (_upsample(w, width, height), _upsample(hz, width, height)))
+    img8 = cv2.cvtColor(img4, cv2.COLOR_RGBA2RGB)
     if look.blur_sigma > 0.3:
         img8 = cv2.GaussianBlur(img8, (0, 0), look.blur_sigma)
     if look.noise_scale > 0:

@@ -22,6 +22,7 @@ WORLD_SIZE = 2048
 WORLD_TEXEL_M = 8.0
 DETAIL_SIZE = 512
 DETAIL_TEXEL_M = 0.1
+DETAIL_TILED = 1024
 SENSOR_NOISE_STD = 16.0
 
 _PALETTE = np.array([
@@ -105,11 +106,19 @@ def _world(index: int) -> np.ndarray:
 
 @functools.lru_cache(maxsize=N_WORLDS)
 def world_pyramid(index: int) -> tuple[np.ndarray, ...]:
-    """Gaussian pyramid of world raster ``index`` (uint8 RGB albedo); level m has texel ``8·2^m`` m."""
-    levels = [_world(int(index) % N_WORLDS)]
+    """Gaussian pyramid of world raster ``index``: uint8 RGBA (albedo, A = 255); level m has texel ``8·2^m`` m.
+
+    Four channels because OpenCV's bilinear warps have a vectorised path for 1 and 4 channels, not for 3.
+    """
+    levels = [cv2.cvtColor(_world(int(index) % N_WORLDS), cv2.COLOR_RGB2RGBA)]
     while levels[-1].shape[0] > 32:
         levels.append(cv2.pyrDown(levels[-1], borderType=cv2.BORDER_REFLECT_101))
     return tuple(levels)
+
+
+def world_mean(index: int) -> np.ndarray:
+    """(3,) float32 mean albedo (RGB in [0, 1]) of world raster ``index``."""
+    return world_pyramid(index)[-1][..., :3].reshape(-1, 3).mean(axis=0).astype(np.float32) / np.float32(255.0)
 
 
 @functools.lru_cache(maxsize=1)
@@ -121,6 +130,19 @@ def detail_pyramid() -> tuple[np.ndarray, ...]:
         x = levels[-1]
         levels.append(0.25 * (x[0::2, 0::2] + x[1::2, 0::2] + x[0::2, 1::2] + x[1::2, 1::2]))
     return tuple(levels)
+
+
+@functools.lru_cache(maxsize=1)
+def detail_tiles() -> tuple[tuple[np.ndarray, int], ...]:
+    """The detail pyramid's levels repeated to at least :data:`DETAIL_TILED` texels a side, with their periods.
+
+    Warps then read a window of whole periods instead of wrapping around the border.
+    """
+    out = []
+    for x in detail_pyramid():
+        reps = max(2, -(-DETAIL_TILED // x.shape[0]))
+        out.append((np.ascontiguousarray(np.tile(x, (reps, reps))), x.shape[0]))
+    return tuple(out)
 
 
 @functools.lru_cache(maxsize=4)
