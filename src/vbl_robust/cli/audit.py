@@ -101,8 +101,12 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
         try:
             summary = run_campaign(spec, samples, store, detector=detector, executor=executor, address=address,
                                    progress=on_progress, dataset_source=source, config=config)
-        except ValueError as exc:
+        except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
+        except KeyboardInterrupt:
+            bar.stop()
+            fail(f"interrupted; finished jobs are saved in {out / 'results.sqlite'}: rerun the same command to resume",
+                 code=130)
     return summary
 
 
