@@ -259,29 +259,68 @@ def _coverage(origin: float, step: float, n: int, lo: float, hi: float, period: 
     k1 = min(int(math.ceil((hi - origin) / step + 0.5)), n)
     if k1 <= k0:
         return k0, k1, None
+    if period <= 0.0:  # solid: only the end texels are partly covered
+        cov = np.ones(k1 - k0, np.float32)
+        e0, e1 = origin + (k0 - 0.5) * step, origin + (k1 - 1.5) * step  # lower edges of the end texels
+        cov[-1] = max(min(e1 + step, hi) - max(e1, lo), 0.0) / step
+        cov[0] = max(min(e0 + step, hi) - max(e0, lo), 0.0) / step
+        return k0, k1, cov
     edges = origin + (np.arange(k0, k1 + 1) - 0.5) * step
     m = _measure(edges, lo, hi, period, dash)
     return k0, k1, (np.diff(m) / step).astype(np.float32)
 
 
-def paint(tile: np.ndarray, origin_x: float, origin_y: float, sx: float, sy: float, rows: np.ndarray) -> None:
+#: Rectangles with more texels than this get their fully covered interior painted without a coverage array.
+_BIG = 4096
+
+
+def _blend(sub: np.ndarray, colour: np.ndarray, cy: np.ndarray, cx: np.ndarray) -> None:
+    """``sub ← sub + (colour − sub)·(cy ⊗ cx)`` in place (cy already holds the row's opacity).
+
+    Works on the (rows, columns·channels) view of ``sub``: numpy is slow on broadcasts whose inner loop is a
+    single pixel's channels.
+    """
+    ch = colour.size
+    flat = sub.reshape(sub.shape[0], -1)
+    d = np.tile(colour, sub.shape[1]) - flat
+    d *= np.multiply.outer(cy, np.repeat(cx, ch))
+    flat += d
+
+
+def paint(tile: np.ndarray, origin_x: float, origin_y: float, sx: float, sy: float, rows: np.ndarray,
+          gain=(1.0, 1.0, 1.0)) -> None:
     """Paint layout rows into ``tile`` (ny, nx, 3 or 4) float32 in place, with exact area coverage.
 
     Texel ``(i, j)`` is the ground cell centred at ``(origin_x + j·sx, origin_y + i·sy)`` of size ``sx × sy``.
     A 4-channel tile is premultiplied RGBA (painting over a transparent tile gives each texel's coverage in A).
+    Colours are multiplied by ``gain`` (RGB; the light of the frame), opacities are not.
     """
     ny, nx = tile.shape[:2]
     xa, xb = origin_x - sx / 2, origin_x + (nx - 0.5) * sx
     ya, yb = origin_y - sy / 2, origin_y + (ny - 0.5) * sy
     keep = (rows[:, 1] > xa) & (rows[:, 0] < xb) & (rows[:, 5] > ya) & (rows[:, 4] < yb)
-    for x0, x1, px, dx, y0, y1, py, dy, r, g, b, a in rows[keep]:
+    g = np.ones(4, np.float32)
+    g[:3] = gain
+    g = g[: tile.shape[2]]
+    for x0, x1, px, dx, y0, y1, py, dy, r, gr, b, a in rows[keep]:
         j0, j1, cx = _coverage(origin_x, sx, nx, x0, x1, px, dx)
         if cx is None:
             continue
         i0, i1, cy = _coverage(origin_y, sy, ny, y0, y1, py, dy)
         if cy is None:
             continue
-        cov = np.multiply.outer(cy * np.float32(a), cx)[:, :, None]
-        sub = tile[i0:i1, j0:j1]
-        colour = np.array([r, g, b, 1.0][: tile.shape[2]], dtype=np.float32)
-        sub += (colour - sub) * cov
+        colour = np.array([r, gr, b, 1.0][: tile.shape[2]], dtype=np.float32) * g
+        cy *= np.float32(a)
+        if px > 0.0 or py > 0.0 or (i1 - i0) * (j1 - j0) < _BIG or min(i1 - i0, j1 - j0) < 3:
+            _blend(tile[i0:i1, j0:j1], colour, cy, cx)
+            continue
+        # solid and large: the interior (all but the end rows and columns) is covered with opacity a exactly
+        fi0, fi1, fj0, fj1 = i0 + 1, i1 - 1, j0 + 1, j1 - 1
+        inner = tile[fi0:fi1, fj0:fj1].reshape(fi1 - fi0, -1)  # (rows, columns·channels) view, see _blend
+        if a >= 1.0:
+            inner[:] = np.tile(colour, fj1 - fj0)
+        else:
+            inner *= np.float32(1.0 - a)
+            inner += np.tile(colour * np.float32(a), fj1 - fj0)
+        for ra, rb, ca, cb in ((i0, fi0, j0, j1), (fi1, i1, j0, j1), (fi0, fi1, j0, fj0), (fi0, fi1, fj1, j1)):
+            _blend(tile[ra:rb, ca:cb], colour, cy[ra - i0:rb - i0], cx[ca - j0:cb - j0])

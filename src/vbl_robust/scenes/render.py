@@ -160,7 +160,7 @@ def _layout_bounds(layout: np.ndarray) -> tuple[float, float, float, float]:
 
 
 def _airport_tile(look: Look, layout: np.ndarray, g: Grid, sel: np.ndarray, bounds) -> tuple | None:
-    """Premultiplied RGBA tile (ny, nx, 4) float32 of the layout for one band, with its texel → ground matrix."""
+    """Premultiplied RGBA tile (ny, nx, 4) float32 of the lit layout for one band, with its texel → ground matrix."""
     bx0, bx1, by0, by1 = bounds
     x_lo, x_hi, y_lo, y_hi = g.box
     inside = sel & (x_hi > bx0) & (x_lo < bx1) & (y_hi > by0) & (y_lo < by1)
@@ -177,7 +177,7 @@ def _airport_tile(look: Look, layout: np.ndarray, g: Grid, sel: np.ndarray, boun
     sx, sy = sx * scale, sy * scale
     nx, ny = int((xmax - xmin) / sx) + 2, int((ymax - ymin) / sy) + 2
     tile = np.zeros((ny, nx, 4), np.float32)
-    paint(tile, xmin, ymin, sx, sy, layout)
+    paint(tile, xmin, ymin, sx, sy, layout, gain=look.ground_gain)
     A = np.array([[sx, 0.0, xmin], [0.0, sy, ymin], [0.0, 0.0, 1.0]])
     return tile, A
 
@@ -237,8 +237,7 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
     if not look.debug:
         pyr = world_pyramid(look.world)
         dpyr = detail_tiles()
-        gain4 = np.array([*look.ground_gain, 0.0], np.float32)
-        gain4_u8 = tuple(float(c) / 255.0 for c in gain4)
+        gain = [np.float32(c / 255.0) for c in look.ground_gain]
         border = (*(int(round(255.0 * c)) for c in world_mean(look.world)), 0)
         w_full, hz_full = haze
     for k in np.unique(level[level >= 0]):
@@ -251,8 +250,7 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
             m = int(np.clip(math.floor(math.log2(max(iso_min, WORLD_TEXEL_M) / WORLD_TEXEL_M)), 0, len(pyr) - 1))
             Mw = _world_matrix(look, m)
             amp_w = look.detail_amp * max(0.0, min(1.0, 2 * WORLD_TEXEL_M / iso_min - 1.0))
-            # (no detail beyond twice the world texel: it would only alias)
-            amp_t = TILE_DETAIL_GAIN * look.detail_amp if tile is not None and amp_w > 0 else amp_w
+            amp_t = TILE_DETAIL_GAIN * look.detail_amp  # (none beyond twice the world texel: it would only alias)
             dl = int(np.clip(math.floor(math.log2(max(iso_min, DETAIL_TEXEL_M) / DETAIL_TEXEL_M)), 0, len(dpyr) - 1))
             Md = _detail_matrix(look, dl)
         for r0, r1, c0, c1 in _chunks(sel, CHUNK_CELLS):
@@ -268,28 +266,31 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
                 b = g.box[:, r0:r1, c0:c1][:, cells]
                 box = (float(b[0].min()), float(b[1].max()), float(b[2].min()), float(b[3].max()))
                 Mp, mode = _placement(pyr[m], Mw, box)
-                col = cv2.multiply(_warp(pyr[m], HT @ Mp, size, mode, border), gain4_u8, dtype=cv2.CV_32F)
-                w = w_full[v0:v1, u0:u1]
-                if tile is not None:
-                    alpha = rgba[..., 3].copy()
-                    col *= (1.0 - alpha)[..., None]
-                    rgba *= gain4
-                    col += rgba
-                if amp_t > 0 or amp_w > 0:
+                world = _warp(pyr[m], HT @ Mp, size, mode, border)
+                # per-pixel weights (one channel): f = transmittance × detail, a1 = f × (1 − airport coverage)
+                f = w_full[v0:v1, u0:u1]
+                if amp_w > 0:
                     Mp, mode = _placement(dpyr[dl][0], Md, box, period=dpyr[dl][1])
                     det = _warp(dpyr[dl][0], HT @ Mp, size, mode)
-                    if tile is not None and amp_t != amp_w:
-                        alpha *= amp_t - amp_w
-                        alpha += amp_w
-                        det *= alpha
+                    if tile is not None:
+                        amp = rgba[..., 3] * np.float32(amp_t - amp_w)
+                        amp += np.float32(amp_w)
+                        det *= amp
                     else:
-                        det *= amp_w
+                        det *= np.float32(amp_w)
                     det += 1.0
-                    det *= w
-                    col *= det[..., None]
+                    det *= f
+                    f = det
+                if tile is not None:
+                    a1 = 1.0 - rgba[..., 3]
+                    a1 *= f
                 else:
-                    col *= w[..., None]
-                col += hz_full[v0:v1, u0:u1]
+                    a1 = f
+                # (OpenCV multiplies and adds 4-channel images by 1-channel maps much faster than numpy broadcasts)
+                col = cv2.multiply(world, cv2.merge([a1 * gain[0], a1 * gain[1], a1 * gain[2], a1]), dtype=cv2.CV_32F)
+                if tile is not None:
+                    cv2.add(col, cv2.multiply(rgba, cv2.cvtColor(f, cv2.COLOR_GRAY2RGBA), dst=rgba), dst=col)
+                cv2.add(col, hz_full[v0:v1, u0:u1], dst=col)
             col8 = cv2.convertScaleAbs(col, alpha=255.0)  # rounds and saturates to uint8 (values are >= 0)
             mask = cv2.resize(cells.view(np.uint8), ((c1 - c0) * S, (r1 - r0) * S), interpolation=cv2.INTER_NEAREST)
             cv2.copyTo(col8, mask[: v1 - v0, : u1 - u0], out[v0:v1, u0:u1])
