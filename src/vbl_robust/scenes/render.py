@@ -38,6 +38,7 @@ from vbl_robust.geometry.camera import world_to_cv
 from .grid import Grid, make_grid
 from .layout import paint
 from .textures import (
+    DETAIL_Q,
     DETAIL_TEXEL_M,
     N_WORLDS,
     WORLD_SIZE,
@@ -45,6 +46,7 @@ from .textures import (
     detail_tiles,
     sensor_noise,
     world_mean,
+    world_pad,
     world_pyramid,
 )
 
@@ -59,7 +61,7 @@ MAX_RANGE_M = 30_000.0
 #: Largest tile side (OpenCV warps need < 32767).
 MAX_TILE_SIDE = 8192
 #: Ground boxes of the cells at the horizon are clipped at this multiple of the drawing range (horizontally).
-CLIP_FACTOR = 1.5
+CLIP_FACTOR = 1.0
 #: Width (cells) of the column chunks in which a band is warped.
 CHUNK_CELLS = 16
 #: Detail-noise amplitude on airport surfaces relative to the ground's (asphalt and concrete are rougher).
@@ -143,7 +145,7 @@ def ground_homography(R: np.ndarray, C: np.ndarray, K: np.ndarray) -> np.ndarray
 def _world_matrix(look: Look, level: int) -> np.ndarray:
     """(3, 3) map from texel coordinates of world pyramid ``level`` to ground metres (runway frame)."""
     s = WORLD_TEXEL_M * 2**level
-    c = (WORLD_SIZE - 1) / 2.0 * WORLD_TEXEL_M
+    c = (WORLD_SIZE - 1) / 2.0 * WORLD_TEXEL_M + s * world_pad(level)
     ox, oy = look.world_offset
     return np.array([[s, 0.0, -c - ox], [0.0, s, -c - oy], [0.0, 0.0, 1.0]])
 
@@ -239,6 +241,7 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
         dpyr = detail_tiles()
         gain = [np.float32(c / 255.0) for c in look.ground_gain]
         border = (*(int(round(255.0 * c)) for c in world_mean(look.world)), 0)
+        noise_lut = ((np.arange(256, dtype=np.float32) - 128.0) / np.float32(DETAIL_Q)).reshape(1, 256)
         w_full, hz_full = haze
     for k in np.unique(level[level >= 0]):
         sel = level == k
@@ -271,14 +274,15 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
                 f = w_full[v0:v1, u0:u1]
                 if amp_w > 0:
                     Mp, mode = _placement(dpyr[dl][0], Md, box, period=dpyr[dl][1])
-                    det = _warp(dpyr[dl][0], HT @ Mp, size, mode)
-                    if tile is not None:
+                    d8 = _warp(dpyr[dl][0], HT @ Mp, size, mode, 128)
+                    if tile is not None:  # 1 + noise·(amp_w + (amp_t − amp_w)·coverage)
+                        det = cv2.LUT(d8, noise_lut)
                         amp = rgba[..., 3] * np.float32(amp_t - amp_w)
                         amp += np.float32(amp_w)
                         det *= amp
+                        det += 1.0
                     else:
-                        det *= np.float32(amp_w)
-                    det += 1.0
+                        det = cv2.LUT(d8, 1.0 + np.float32(amp_w) * noise_lut)
                     det *= f
                     f = det
                 if tile is not None:

@@ -1,7 +1,8 @@
 """Procedural textures shared by all scenes (built once per process from fixed seeds, then cached).
 
 * **World rasters** (:func:`world_pyramid`): a few 16 km × 16 km albedo maps at 8 m/texel — a patchwork of
-  fields with hedges, forests, lakes, villages and roads — with a Gaussian pyramid for minification.
+  fields with hedges, forests, lakes, villages and roads — with a Gaussian pyramid for minification whose coarse
+  levels are extended by reflection (:func:`world_pad`).
 * **Detail noise** (:func:`detail_pyramid`): a tileable 1/f noise at 0.1 m/texel (period 51.2 m) and its box
   pyramid, multiplied into the ground at texel sizes below the world raster's.
 * **Sensor noise** (:func:`sensor_noise`): a fixed buffer of Gaussian noise; images take random crops of it, which
@@ -13,6 +14,7 @@ Everything is deterministic (fixed seeds), so cached or not, a scene renders to 
 from __future__ import annotations
 
 import functools
+import math
 
 import cv2
 import numpy as np
@@ -20,9 +22,12 @@ import numpy as np
 N_WORLDS = 4
 WORLD_SIZE = 2048
 WORLD_TEXEL_M = 8.0
+WORLD_REACH_M = 40_000.0
+WORLD_PADDED_MAX = 1280
 DETAIL_SIZE = 512
 DETAIL_TEXEL_M = 0.1
-DETAIL_TILED = 1024
+DETAIL_TILED = 1536
+DETAIL_Q = 28.0
 SENSOR_NOISE_STD = 16.0
 
 _PALETTE = np.array([
@@ -113,7 +118,25 @@ def world_pyramid(index: int) -> tuple[np.ndarray, ...]:
     levels = [cv2.cvtColor(_world(int(index) % N_WORLDS), cv2.COLOR_RGB2RGBA)]
     while levels[-1].shape[0] > 32:
         levels.append(cv2.pyrDown(levels[-1], borderType=cv2.BORDER_REFLECT_101))
-    return tuple(levels)
+    out = []
+    for m, x in enumerate(levels):
+        p = world_pad(m)
+        out.append(cv2.copyMakeBorder(x, p, p, p, p, cv2.BORDER_REFLECT_101) if p else x)
+    return tuple(out)
+
+
+def world_pad(level: int) -> int:
+    """Texels added by reflection on each side of world pyramid level ``level`` (0 for the two finest levels).
+
+    Coarse levels are drawn up to the horizon, far beyond the raster; extending them here (up to
+    :data:`WORLD_REACH_M` from the centre, at most :data:`WORLD_PADDED_MAX` texels a side) lets the renderer warp
+    them with a constant border, which OpenCV does much faster than reflecting at run time.
+    """
+    if level < 2:
+        return 0
+    n = WORLD_SIZE >> level
+    want = math.ceil(WORLD_REACH_M / (WORLD_TEXEL_M * 2**level)) - n // 2
+    return int(max(0, min(want, (WORLD_PADDED_MAX - n) // 2)))
 
 
 def world_mean(index: int) -> np.ndarray:
@@ -134,14 +157,16 @@ def detail_pyramid() -> tuple[np.ndarray, ...]:
 
 @functools.lru_cache(maxsize=1)
 def detail_tiles() -> tuple[tuple[np.ndarray, int], ...]:
-    """The detail pyramid's levels repeated to at least :data:`DETAIL_TILED` texels a side, with their periods.
+    """The detail pyramid's levels as uint8 ``128 + DETAIL_Q·noise``, repeated to :data:`DETAIL_TILED` texels a side.
 
-    Warps then read a window of whole periods instead of wrapping around the border.
+    Returns ``(texture, period)`` per level. Warps then read a window of whole periods instead of wrapping around
+    the border (slow in OpenCV), and uint8 keeps the textures small enough for the caches.
     """
     out = []
     for x in detail_pyramid():
-        reps = max(2, -(-DETAIL_TILED // x.shape[0]))
-        out.append((np.ascontiguousarray(np.tile(x, (reps, reps))), x.shape[0]))
+        q = np.clip(np.rint(128.0 + DETAIL_Q * x), 0, 255).astype(np.uint8)
+        reps = -(-DETAIL_TILED // x.shape[0])
+        out.append((np.ascontiguousarray(np.tile(q, (reps, reps))), x.shape[0]))
     return tuple(out)
 
 
