@@ -15,8 +15,6 @@ Markings follow ICAO Annex 14 in spirit (sizes in metres): piano-key threshold s
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from .airports import Airport, designation
@@ -253,21 +251,29 @@ def _measure(t: np.ndarray, lo: float, hi: float, period: float, dash: float) ->
     return np.floor(t / period) * dash + np.minimum(np.mod(t, period), dash)
 
 
-def _coverage(origin: float, step: float, n: int, lo: float, hi: float, period: float, dash: float):
-    """Index range and exact covered fraction of texels ``k`` (centre ``origin + k·step``) by the 1-D pattern."""
-    k0 = max(int(math.floor((lo - origin) / step + 0.5)), 0)
-    k1 = min(int(math.ceil((hi - origin) / step + 0.5)), n)
-    if k1 <= k0:
-        return k0, k1, None
+def _ends(origin: float, step: float, n: int, lo: np.ndarray, hi: np.ndarray):
+    """For intervals ``[lo, hi]`` (arrays): first and past-the-last texel they touch (texel ``k`` is centred at
+    ``origin + k·step``, clipped to ``[0, n)``) and the covered fractions of those two end texels."""
+    k0 = np.maximum(np.floor((lo - origin) / step + 0.5), 0.0)
+    k1 = np.minimum(np.ceil((hi - origin) / step + 0.5), n)
+    e0 = origin + (k0 - 0.5) * step  # lower edges of the end texels
+    e1 = origin + (k1 - 1.5) * step
+    c0 = np.clip((np.minimum(e0 + step, hi) - np.maximum(e0, lo)) / step, 0.0, 1.0)
+    c1 = np.clip((np.minimum(e1 + step, hi) - np.maximum(e1, lo)) / step, 0.0, 1.0)
+    return k0.astype(np.int64).tolist(), k1.astype(np.int64).tolist(), c0.tolist(), c1.tolist()
+
+
+def _coverage(k0: int, k1: int, c0: float, c1: float, origin: float, step: float, lo: float, hi: float,
+              period: float, dash: float) -> np.ndarray:
+    """Exact covered fraction (k1 − k0,) of texels ``k0 … k1 − 1`` by the 1-D pattern (see :func:`_ends`)."""
     if period <= 0.0:  # solid: only the end texels are partly covered
         cov = np.ones(k1 - k0, np.float32)
-        e0, e1 = origin + (k0 - 0.5) * step, origin + (k1 - 1.5) * step  # lower edges of the end texels
-        cov[-1] = max(min(e1 + step, hi) - max(e1, lo), 0.0) / step
-        cov[0] = max(min(e0 + step, hi) - max(e0, lo), 0.0) / step
-        return k0, k1, cov
+        cov[-1] = c1
+        cov[0] = c0
+        return cov
     edges = origin + (np.arange(k0, k1 + 1) - 0.5) * step
     m = _measure(edges, lo, hi, period, dash)
-    return k0, k1, (np.diff(m) / step).astype(np.float32)
+    return (np.diff(m) / step).astype(np.float32)
 
 
 #: Rectangles with more texels than this get their fully covered interior painted without a coverage array.
@@ -296,21 +302,25 @@ def paint(tile: np.ndarray, origin_x: float, origin_y: float, sx: float, sy: flo
     Colours are multiplied by ``gain`` (RGB; the light of the frame), opacities are not.
     """
     ny, nx = tile.shape[:2]
+    ch = tile.shape[2]
     xa, xb = origin_x - sx / 2, origin_x + (nx - 0.5) * sx
     ya, yb = origin_y - sy / 2, origin_y + (ny - 0.5) * sy
-    keep = (rows[:, 1] > xa) & (rows[:, 0] < xb) & (rows[:, 5] > ya) & (rows[:, 4] < yb)
-    g = np.ones(4, np.float32)
-    g[:3] = gain
-    g = g[: tile.shape[2]]
-    for x0, x1, px, dx, y0, y1, py, dy, r, gr, b, a in rows[keep]:
-        j0, j1, cx = _coverage(origin_x, sx, nx, x0, x1, px, dx)
-        if cx is None:
+    rows = rows[(rows[:, 1] > xa) & (rows[:, 0] < xb) & (rows[:, 5] > ya) & (rows[:, 4] < yb)]
+    if not len(rows):
+        return
+    j0s, j1s, cx0s, cx1s = _ends(origin_x, sx, nx, rows[:, 0], rows[:, 1])
+    i0s, i1s, cy0s, cy1s = _ends(origin_y, sy, ny, rows[:, 4], rows[:, 5])
+    colours = np.ones((len(rows), 4), np.float32)
+    colours[:, :3] = rows[:, 8:11] * np.asarray(gain, np.float64)
+    colours = colours[:, :ch]
+    for n, (x0, x1, px, dx, y0, y1, py, dy, *_, a) in enumerate(rows.tolist()):
+        j0, j1, i0, i1 = j0s[n], j1s[n], i0s[n], i1s[n]
+        if j1 <= j0 or i1 <= i0:
             continue
-        i0, i1, cy = _coverage(origin_y, sy, ny, y0, y1, py, dy)
-        if cy is None:
-            continue
-        colour = np.array([r, gr, b, 1.0][: tile.shape[2]], dtype=np.float32) * g
+        cx = _coverage(j0, j1, cx0s[n], cx1s[n], origin_x, sx, x0, x1, px, dx)
+        cy = _coverage(i0, i1, cy0s[n], cy1s[n], origin_y, sy, y0, y1, py, dy)
         cy *= np.float32(a)
+        colour = colours[n]
         if px > 0.0 or py > 0.0 or (i1 - i0) * (j1 - j0) < _BIG or min(i1 - i0, j1 - j0) < 3:
             _blend(tile[i0:i1, j0:j1], colour, cy, cx)
             continue
