@@ -10,7 +10,8 @@ batch 1, 8 and 32, next to the bare detector on the same batch of images (the im
 detector: ``input_size`` for the single pass, full resolution for the two-stage design), in the same run.
 
 Rendered held-out pixels are cached in ``.cache/bench_detector`` (rendering costs seconds per image).
-``VBL_BENCH_MODEL=path.pt`` benchmarks another checkpoint instead of the shipped one.
+``VBL_BENCH_MODEL=path.pt`` benchmarks another checkpoint instead of the shipped one; ``VBL_BENCH_THREADS``
+sets torch's intra-op threads (default 1).
 """
 
 from __future__ import annotations
@@ -59,8 +60,10 @@ def detectors(model: str | None) -> dict:
 
 
 def _fmt(v, pct=False):
-    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+    if v is None or (isinstance(v, float) and np.isnan(v)):
         return "—"
+    if np.isinf(v):
+        return "inf"
     return f"{100 * v:.1f} %" if pct else f"{v:.2f}"
 
 
@@ -123,7 +126,8 @@ def main(quick: bool = False) -> str:
     from vbl_robust.detect.offline import setup_offline
 
     setup_offline()
-    torch.set_num_threads(2)
+    # one intra-op thread: on a shared 2-core machine two threads spin against other jobs and run slower
+    torch.set_num_threads(int(os.environ.get("VBL_BENCH_THREADS", "1")))
     model = os.environ.get("VBL_BENCH_MODEL")
     n = 30 if quick else 510
     samples = held_out(n)

@@ -150,3 +150,16 @@ def test_ship_and_default_detector(tiny_pose_pt, tmp_path, monkeypatch):
     assert len(d.detect(torch.as_tensor(img).permute(2, 0, 1)[None] / 255.0)[0]) == 1
     with pytest.raises(ValueError, match="twostage"):
         ship(tiny_pose_pt, detector="double", imgsz=64, models_dir=tmp_path)
+
+
+@pytest.mark.skipif(not __import__("vbl_robust.detect.ultralytics", fromlist=["x"]).DEFAULT_MODEL.exists(),
+                    reason="no shipped model")
+def test_shipped_model_loads_and_runs():
+    from vbl_robust.detect.base import DifferentiableDetector
+    from vbl_robust.detect.ultralytics import default_detector
+
+    d = default_detector()
+    assert isinstance(d, DifferentiableDetector)
+    x = torch.rand(2, 3, 256, 256)
+    conf, kp = d.detect_top(x)
+    assert conf.shape == (2,) and kp.shape == (2, 4, 2) and torch.isfinite(kp).all()

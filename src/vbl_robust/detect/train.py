@@ -138,6 +138,18 @@ def build_dataset(
     return write_data_yaml(root)
 
 
+def _subset_yaml(data: Path, n_train: int, crops_used: int) -> Path:
+    """A data YAML whose train split lists only views ``0 … crops_used`` of each sample (no re-rendering)."""
+    root = data.parent
+    files = [str(root / "images" / "train" / f"{i:06d}_{j}.png") for i in range(n_train)
+             for j in range(crops_used + 1)]
+    lst = root / f"train_views{crops_used + 1}_{n_train}.txt"
+    lst.write_text("\n".join(files) + "\n")
+    out = root / f"data_views{crops_used + 1}_{n_train}.yaml"
+    out.write_text(data.read_text().replace("train: images/train", f"train: {lst.name}"))
+    return out
+
+
 @dataclass
 class TrainResult:
     """Outcome of one :func:`train` call: the stage directory and its best / last weights."""
@@ -161,7 +173,7 @@ def train(
     out_dir: str | Path, *, samples: Sequence[Sample] | None = None, n_train: int = 1000, n_val: int = 100,
     imgsz: int = 320, epochs: int = 10, batch: int = 16, seed: int = 0, resume: bool = False,
     init_weights: str | Path | None = None, detector: str = "twostage", crops_per_sample: int = 2,
-    workers: int = 2, lr0: float | None = None, **overrides,
+    workers: int = 2, lr0: float | None = None, crops_used: int | None = None, **overrides,
 ) -> TrainResult:
     """Train (or continue training) the runway-corner YOLOv8n-pose.
 
@@ -178,7 +190,9 @@ def train(
         init_weights: initial weights of a new first stage (e.g. the shipped model); None → from
             ``yolov8n-pose.yaml`` (random init, no hub weights).
         detector: ``"twostage"`` (full views + crops) or ``"single"`` (full views only).
-        crops_per_sample: crops per training sample for ``"twostage"``.
+        crops_per_sample: crops per training sample for ``"twostage"`` (rendered).
+        crops_used: train on only the first ``crops_used`` of them (more weight on full views, which teach the
+            detection itself); None → all.
         lr0: initial learning rate (None: ultralytics' choice).
         **overrides: further ultralytics training arguments.
 
@@ -227,6 +241,8 @@ def train(
         va = [samples[i] for i in order[:nv]]
         tr = [samples[i] for i in order[nv:]]
     data = build_dataset(tr, va, data_root, imgsz=imgsz, crops_per_sample=crops, seed=seed)
+    if crops_used is not None and crops_used < crops:
+        data = _subset_yaml(data, len(tr), crops_used)
 
     model = YOLO(str(init)) if init is not None else YOLO("yolov8n-pose.yaml")
     args = dict(TRAIN_DEFAULTS)
