@@ -205,15 +205,30 @@ def _placement(tex: np.ndarray, M: np.ndarray, box, period: int = 0) -> tuple[np
     return M, cv2.BORDER_WRAP if period else cv2.BORDER_REFLECT_101
 
 
-def _chunks(sel: np.ndarray, width_cells: int):
-    """Boxes (r0, r1, c0, c1) in cells covering ``sel``, one per column chunk (tight for tilted stripes)."""
+def _chunks(sel: np.ndarray, box: np.ndarray, width_cells: int) -> list[tuple]:
+    """Column chunks covering ``sel`` (gh, gw): ``(r0, r1, c0, c1, (xmin, xmax, ymin, ymax))`` per chunk.
+
+    ``r0:r1, c0:c1`` is the tight cell box of the chunk's selected cells (tight for tilted stripes) and the last
+    item bounds their ground boxes (``box`` (4, gh, gw), :class:`.grid.Grid`). Computed for all chunks at once.
+    """
     gh, gw = sel.shape
-    for c0 in range(0, gw, width_cells):
-        c1 = min(c0 + width_cells, gw)
-        rows = np.flatnonzero(sel[:, c0:c1].any(axis=1))
-        if rows.size:
-            cols = np.flatnonzero(sel[rows[0]:rows[-1] + 1, c0:c1].any(axis=0))
-            yield rows[0], rows[-1] + 1, c0 + cols[0], c0 + cols[-1] + 1
+    n = -(-gw // width_cells)
+    pad = n * width_cells - gw
+    s3 = np.pad(sel, ((0, 0), (0, pad))).reshape(gh, n, width_cells)
+    rows = s3.any(axis=2)  # (gh, n)
+    cols = s3.any(axis=0)  # (n, width)
+    has = rows.any(axis=0)
+    r0 = rows.argmax(axis=0)
+    r1 = gh - rows[::-1].argmax(axis=0)
+    c0 = cols.argmax(axis=1)
+    c1 = width_cells - cols[:, ::-1].argmax(axis=1)
+    b4 = np.pad(np.where(sel, box, np.array([np.inf, -np.inf, np.inf, -np.inf])[:, None, None]),
+                ((0, 0), (0, 0), (0, pad)), constant_values=np.nan).reshape(4, gh, n, width_cells)
+    lo = np.nanmin(b4[0::2], axis=(1, 3))  # (2, n): xmin, ymin
+    hi = np.nanmax(b4[1::2], axis=(1, 3))
+    base = np.arange(n) * width_cells
+    return [(r0[i], r1[i], base[i] + c0[i], base[i] + c1[i], (lo[0, i], hi[0, i], lo[1, i], hi[1, i]))
+            for i in np.flatnonzero(has).tolist()]
 
 
 def _warp(src: np.ndarray, M: np.ndarray, size: tuple[int, int], mode: int = cv2.BORDER_CONSTANT,
@@ -256,18 +271,16 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
             amp_t = TILE_DETAIL_GAIN * look.detail_amp  # (none beyond twice the world texel: it would only alias)
             dl = int(np.clip(math.floor(math.log2(max(iso_min, DETAIL_TEXEL_M) / DETAIL_TEXEL_M)), 0, len(dpyr) - 1))
             Md = _detail_matrix(look, dl)
-        for r0, r1, c0, c1 in _chunks(sel, CHUNK_CELLS):
+        for r0, r1, c0, c1, box in _chunks(sel, g.box, CHUNK_CELLS):
             v0, v1, u0, u1 = r0 * S, min(r1 * S, height), c0 * S, min(c1 * S, width)
             size = (u1 - u0, v1 - v0)
-            HT = np.array([[1.0, 0.0, -u0], [0.0, 1.0, -v0], [0.0, 0.0, 1.0]]) @ H
+            HT = H - np.outer((u0, v0, 0.0), H[2])  # ground → chunk pixels
             cells = sel[r0:r1, c0:c1]
             if tile is not None:
                 rgba = _warp(tile[0], HT @ tile[1], size)
             if look.debug:
                 col = rgba
             else:
-                b = g.box[:, r0:r1, c0:c1][:, cells]
-                box = (float(b[0].min()), float(b[1].max()), float(b[2].min()), float(b[3].max()))
                 Mp, mode = _placement(pyr[m], Mw, box)
                 world = _warp(pyr[m], HT @ Mp, size, mode, border)
                 # per-pixel weights (one channel): f = transmittance × detail, a1 = f × (1 − airport coverage)
