@@ -36,7 +36,6 @@ import numpy as np
 from vbl_robust.geometry.camera import world_to_cv
 
 from .grid import Grid, make_grid
-from .layout import paint
 from .textures import (
     DETAIL_Q,
     DETAIL_TEXEL_M,
@@ -49,17 +48,12 @@ from .textures import (
     world_pad,
     world_pyramid,
 )
+from .tiles import MIN_TEXEL_M, airport_tiles
 
 #: Coarse grid step (pixels) of the per-pixel geometry.
 STRIDE = 8
-#: Smallest texel size (metres) of a ground tile.
-MIN_TEXEL_M = 0.02
-#: Largest ground tile (texels); beyond it the texel size grows (only far, hazy bands ever reach it).
-MAX_TILE_TEXELS = 1_500_000
 #: Ground farther than this (metres) is drawn in the world's mean colour (it is hazed and sub-pixel anyway).
 MAX_RANGE_M = 30_000.0
-#: Largest tile side (OpenCV warps need < 32767).
-MAX_TILE_SIDE = 8192
 #: Ground boxes of the cells at the horizon are clipped at this multiple of the drawing range (horizontally).
 CLIP_FACTOR = 1.0
 #: Width (cells) of the column chunks in which a band is warped.
@@ -156,34 +150,6 @@ def _detail_matrix(look: Look, level: int) -> np.ndarray:
     return np.array([[s, 0.0, -ox], [0.0, s, -oy], [0.0, 0.0, 1.0]])
 
 
-def _layout_bounds(layout: np.ndarray) -> tuple[float, float, float, float]:
-    return (float(layout[:, 0].min()), float(layout[:, 1].max()), float(layout[:, 4].min()),
-            float(layout[:, 5].max()))
-
-
-def _airport_tile(look: Look, layout: np.ndarray, g: Grid, sel: np.ndarray, bounds) -> tuple | None:
-    """Premultiplied RGBA tile (ny, nx, 4) float32 of the lit layout for one band, with its texel → ground matrix."""
-    bx0, bx1, by0, by1 = bounds
-    x_lo, x_hi, y_lo, y_hi = g.box
-    inside = sel & (x_hi > bx0) & (x_lo < bx1) & (y_hi > by0) & (y_lo < by1)
-    if not inside.any():
-        return None
-    sx = max(float(g.fx[inside].min()), MIN_TEXEL_M)
-    sy = max(float(g.fy[inside].min()), MIN_TEXEL_M)
-    xmin, xmax = max(float(x_lo[inside].min()), bx0) - 2 * sx, min(float(x_hi[inside].max()), bx1) + 2 * sx
-    ymin, ymax = max(float(y_lo[inside].min()), by0) - 2 * sy, min(float(y_hi[inside].max()), by1) + 2 * sy
-    if xmax <= xmin or ymax <= ymin:
-        return None
-    nx, ny = (xmax - xmin) / sx + 1, (ymax - ymin) / sy + 1
-    scale = max(1.0, math.sqrt(nx * ny / MAX_TILE_TEXELS), nx / MAX_TILE_SIDE, ny / MAX_TILE_SIDE)
-    sx, sy = sx * scale, sy * scale
-    nx, ny = int((xmax - xmin) / sx) + 2, int((ymax - ymin) / sy) + 2
-    tile = np.zeros((ny, nx, 4), np.float32)
-    paint(tile, xmin, ymin, sx, sy, layout, gain=look.ground_gain)
-    A = np.array([[sx, 0.0, xmin], [0.0, sy, ymin], [0.0, 0.0, 1.0]])
-    return tile, A
-
-
 def _placement(tex: np.ndarray, M: np.ndarray, box, period: int = 0) -> tuple[np.ndarray, int]:
     """Texel → ground matrix and border mode for warping the part of ``tex`` that ground box ``box`` needs.
 
@@ -211,24 +177,28 @@ def _chunks(sel: np.ndarray, box: np.ndarray, width_cells: int) -> list[tuple]:
     ``r0:r1, c0:c1`` is the tight cell box of the chunk's selected cells (tight for tilted stripes) and the last
     item bounds their ground boxes (``box`` (4, gh, gw), :class:`.grid.Grid`). Computed for all chunks at once.
     """
-    gh, gw = sel.shape
+    gw = sel.shape[1]
+    any_row = np.flatnonzero(sel.any(axis=1))
+    if not any_row.size:
+        return []
+    ra, rb = int(any_row[0]), int(any_row[-1]) + 1
     n = -(-gw // width_cells)
     pad = n * width_cells - gw
-    s3 = np.pad(sel, ((0, 0), (0, pad))).reshape(gh, n, width_cells)
-    rows = s3.any(axis=2)  # (gh, n)
+    s3 = np.pad(sel[ra:rb], ((0, 0), (0, pad))).reshape(rb - ra, n, width_cells)
+    rows = s3.any(axis=2)  # (rows, n)
     cols = s3.any(axis=0)  # (n, width)
-    has = rows.any(axis=0)
-    r0 = rows.argmax(axis=0)
-    r1 = gh - rows[::-1].argmax(axis=0)
-    c0 = cols.argmax(axis=1)
-    c1 = width_cells - cols[:, ::-1].argmax(axis=1)
-    b4 = np.pad(np.where(sel, box, np.array([np.inf, -np.inf, np.inf, -np.inf])[:, None, None]),
-                ((0, 0), (0, 0), (0, pad)), constant_values=np.nan).reshape(4, gh, n, width_cells)
-    lo = np.nanmin(b4[0::2], axis=(1, 3))  # (2, n): xmin, ymin
-    hi = np.nanmax(b4[1::2], axis=(1, 3))
+    r0 = ra + rows.argmax(axis=0)
+    r1 = rb - rows[::-1].argmax(axis=0)
     base = np.arange(n) * width_cells
-    return [(r0[i], r1[i], base[i] + c0[i], base[i] + c1[i], (lo[0, i], hi[0, i], lo[1, i], hi[1, i]))
-            for i in np.flatnonzero(has).tolist()]
+    c0 = base + cols.argmax(axis=1)
+    c1 = base + width_cells - cols[:, ::-1].argmax(axis=1)
+    # ground boxes: lower bounds (xmin, ymin) where selected else +inf, upper bounds likewise with −inf
+    lo = np.where(s3, np.pad(box[0::2, ra:rb], ((0, 0), (0, 0), (0, pad))).reshape(2, rb - ra, n, width_cells),
+                  np.inf).min(axis=(1, 3))
+    hi = np.where(s3, np.pad(box[1::2, ra:rb], ((0, 0), (0, 0), (0, pad))).reshape(2, rb - ra, n, width_cells),
+                  -np.inf).max(axis=(1, 3))
+    return [(int(r0[i]), int(r1[i]), int(c0[i]), int(c1[i]), (lo[0, i], hi[0, i], lo[1, i], hi[1, i]))
+            for i in np.flatnonzero(rows.any(axis=0)).tolist()]
 
 
 def _warp(src: np.ndarray, M: np.ndarray, size: tuple[int, int], mode: int = cv2.BORDER_CONSTANT,
@@ -250,7 +220,8 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
     if not valid.any():
         return
     level = np.where(valid, np.floor(np.log2(np.maximum(g.iso, MIN_TEXEL_M) / MIN_TEXEL_M)), -1).astype(np.int32)
-    bounds = _layout_bounds(layout)
+    bands = {int(k): level == k for k in np.unique(level[level >= 0])}
+    tiles = airport_tiles(layout, g, bands, (1.0, 1.0, 1.0) if look.debug else look.ground_gain)
     if not look.debug:
         pyr = world_pyramid(look.world)
         dpyr = detail_tiles()
@@ -258,10 +229,9 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
         border = (*(int(round(255.0 * c)) for c in world_mean(look.world)), 0)
         noise_lut = ((np.arange(256, dtype=np.float32) - 128.0) / np.float32(DETAIL_Q)).reshape(1, 256)
         w_full, hz_full = haze
-    for k in np.unique(level[level >= 0]):
-        sel = level == k
+    for k, sel in bands.items():
         iso_min = float(g.iso[sel].min())
-        tile = _airport_tile(look, layout, g, sel, bounds)
+        tile = tiles.get(k)
         if look.debug and tile is None:
             continue
         if not look.debug:
