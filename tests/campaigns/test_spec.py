@@ -78,6 +78,7 @@ def test_experiment_defaults_follow_the_paper():
     assert s2.blocks[0].boxes[-1] == roll_contrast_box(30, (0.4, 2.5))
     conv = experiment("convergence").build(0, Options())
     assert conv.blocks[0].budgets[0].max_iters == 30 and conv.blocks[0].methods == ("georobust",)
+    assert conv.blocks[0].budgets[0].max_evals == 3000  # a flat region would make PO_k explode
     rt = experiment("runtime-1d").build(0, Options())
     assert sorted(b.max_seconds for b in rt.blocks[0].budgets) == [0.1, 0.5, 1.0, 2.0, 5.0]
     assert all(not b.stop_at_breach for b in rt.blocks[0].budgets)
