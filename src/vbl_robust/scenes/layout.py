@@ -293,6 +293,10 @@ def _blend(sub: np.ndarray, colour: np.ndarray, cy: np.ndarray, cx: np.ndarray) 
     flat += d
 
 
+#: A run of same-paint rows is painted as one shape when its box has at most this many texels per row.
+_GROUP_TEXELS_PER_ROW = 2048
+
+
 def paint(tile: np.ndarray, origin_x: float, origin_y: float, sx: float, sy: float, rows: np.ndarray,
           gain=(1.0, 1.0, 1.0)) -> None:
     """Paint layout rows into ``tile`` (ny, nx, 3 or 4) float32 in place, with exact area coverage.
@@ -300,6 +304,9 @@ def paint(tile: np.ndarray, origin_x: float, origin_y: float, sx: float, sy: flo
     Texel ``(i, j)`` is the ground cell centred at ``(origin_x + j·sx, origin_y + i·sy)`` of size ``sx × sy``.
     A 4-channel tile is premultiplied RGBA (painting over a transparent tile gives each texel's coverage in A).
     Colours are multiplied by ``gain`` (RGB; the light of the frame), opacities are not.
+
+    Consecutive rows of the same colour and opacity (the markings of a runway, say) are one shape: they are meant
+    to be disjoint, so their coverages add (clipped at 1) before the shape is laid over the tile once.
     """
     ny, nx = tile.shape[:2]
     ch = tile.shape[2]
@@ -313,24 +320,56 @@ def paint(tile: np.ndarray, origin_x: float, origin_y: float, sx: float, sy: flo
     colours = np.ones((len(rows), 4), np.float32)
     colours[:, :3] = rows[:, 8:11] * np.asarray(gain, np.float64)
     colours = colours[:, :ch]
-    for n, (x0, x1, px, dx, y0, y1, py, dy, *_, a) in enumerate(rows.tolist()):
-        j0, j1, i0, i1 = j0s[n], j1s[n], i0s[n], i1s[n]
-        if j1 <= j0 or i1 <= i0:
-            continue
-        cx = _coverage(j0, j1, cx0s[n], cx1s[n], origin_x, sx, x0, x1, px, dx)
-        cy = _coverage(i0, i1, cy0s[n], cy1s[n], origin_y, sy, y0, y1, py, dy)
-        cy *= np.float32(a)
-        colour = colours[n]
-        if px > 0.0 or py > 0.0 or (i1 - i0) * (j1 - j0) < _BIG or min(i1 - i0, j1 - j0) < 3:
-            _blend(tile[i0:i1, j0:j1], colour, cy, cx)
-            continue
-        # solid and large: the interior (all but the end rows and columns) is covered with opacity a exactly
-        fi0, fi1, fj0, fj1 = i0 + 1, i1 - 1, j0 + 1, j1 - 1
-        inner = tile[fi0:fi1, fj0:fj1].reshape(fi1 - fi0, -1)  # (rows, columns·channels) view, see _blend
-        if a >= 1.0:
-            inner[:] = np.tile(colour, fj1 - fj0)
-        else:
-            inner *= np.float32(1.0 - a)
-            inner += np.tile(colour * np.float32(a), fj1 - fj0)
-        for ra, rb, ca, cb in ((i0, fi0, j0, j1), (fi1, i1, j0, j1), (fi0, fi1, j0, fj0), (fi0, fi1, fj1, j1)):
-            _blend(tile[ra:rb, ca:cb], colour, cy[ra - i0:rb - i0], cx[ca - j0:cb - j0])
+    live = [n for n in range(len(rows)) if j1s[n] > j0s[n] and i1s[n] > i0s[n]]
+    paints = rows[:, 8:12].tolist()
+    items = rows.tolist()
+
+    def cov(n):
+        x0, x1, px, dx, y0, y1, py, dy = items[n][:8]
+        return (_coverage(i0s[n], i1s[n], cy0s[n], cy1s[n], origin_y, sy, y0, y1, py, dy),
+                _coverage(j0s[n], j1s[n], cx0s[n], cx1s[n], origin_x, sx, x0, x1, px, dx))
+
+    start = 0
+    while start < len(live):
+        end = start + 1
+        while end < len(live) and paints[live[end]] == paints[live[start]]:
+            end += 1
+        run = live[start:end]
+        start = end
+        a = paints[run[0]][3]
+        colour = colours[run[0]]
+        if len(run) > 1:
+            i0, i1 = min(i0s[n] for n in run), max(i1s[n] for n in run)
+            j0, j1 = min(j0s[n] for n in run), max(j1s[n] for n in run)
+            if (i1 - i0) * (j1 - j0) <= _GROUP_TEXELS_PER_ROW * len(run):
+                acc = np.zeros((i1 - i0, j1 - j0), np.float32)
+                for n in run:
+                    cy, cx = cov(n)
+                    acc[i0s[n] - i0:i1s[n] - i0, j0s[n] - j0:j1s[n] - j0] += np.multiply.outer(cy, cx)
+                np.minimum(acc, 1.0, out=acc)
+                acc *= np.float32(a)
+                flat = tile[i0:i1, j0:j1].reshape(i1 - i0, -1)  # (rows, columns·channels), see _blend
+                d = np.tile(colour, j1 - j0) - flat
+                d *= np.repeat(acc, ch, axis=1)
+                flat += d
+                continue
+        for n in run:
+            _paint_row(tile, colour, a, i0s[n], i1s[n], j0s[n], j1s[n], *cov(n), items[n][2] > 0 or items[n][6] > 0)
+
+
+def _paint_row(tile, colour, a, i0, i1, j0, j1, cy, cx, dashed: bool) -> None:
+    """Lay one row's shape (coverage ``cy ⊗ cx`` on texels ``[i0, i1) × [j0, j1)``, opacity ``a``) over ``tile``."""
+    cy *= np.float32(a)
+    if dashed or (i1 - i0) * (j1 - j0) < _BIG or min(i1 - i0, j1 - j0) < 3:
+        _blend(tile[i0:i1, j0:j1], colour, cy, cx)
+        return
+    # solid and large: the interior (all but the end rows and columns) is covered with opacity a exactly
+    fi0, fi1, fj0, fj1 = i0 + 1, i1 - 1, j0 + 1, j1 - 1
+    inner = tile[fi0:fi1, fj0:fj1].reshape(fi1 - fi0, -1)  # (rows, columns·channels) view, see _blend
+    if a >= 1.0:
+        inner[:] = np.tile(colour, fj1 - fj0)
+    else:
+        inner *= np.float32(1.0 - a)
+        inner += np.tile(colour * np.float32(a), fj1 - fj0)
+    for ra, rb, ca, cb in ((i0, fi0, j0, j1), (fi1, i1, j0, j1), (fi0, fi1, j0, fj0), (fi0, fi1, fj1, j1)):
+        _blend(tile[ra:rb, ca:cb], colour, cy[ra - i0:rb - i0], cx[ca - j0:cb - j0])
