@@ -207,6 +207,22 @@ def _warp(src: np.ndarray, M: np.ndarray, size: tuple[int, int], mode: int = cv2
     return cv2.warpPerspective(src, M, size, flags=cv2.INTER_LINEAR, borderMode=mode, borderValue=value)
 
 
+def _warp_smooth(src: np.ndarray, M: np.ndarray, size: tuple[int, int], mode: int, value, q: int) -> np.ndarray:
+    """:func:`_warp` computed on a grid ``q`` times coarser and bilinearly upsampled (for strongly magnified sources).
+
+    Low-resolution pixel ``x_l`` sits at full-resolution ``q·x_l + (q − 1)/2`` (the convention of ``cv2.resize``),
+    with one extra low-resolution pixel on every side so that the upsampling never extrapolates at the edges.
+    """
+    if q == 1:
+        return _warp(src, M, size, mode, value)
+    wl, hl = -(-size[0] // q) + 2, -(-size[1] // q) + 2
+    to_low = np.array([[1.0 / q, 0.0, 1.0 - (q - 1) / (2.0 * q)], [0.0, 1.0 / q, 1.0 - (q - 1) / (2.0 * q)],
+                       [0.0, 0.0, 1.0]])
+    low = _warp(src, to_low @ M, (wl, hl), mode, value)
+    up = cv2.resize(low, (wl * q, hl * q), interpolation=cv2.INTER_LINEAR)
+    return up[q:q + size[1], q:q + size[0]]
+
+
 def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max: float, out: np.ndarray,
                    haze: tuple[np.ndarray, np.ndarray] | None) -> None:
     """Draw the ground cells within ``r_max`` into ``out`` (height, width, 4) uint8 (RGB, A unused), band by band.
@@ -241,6 +257,9 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
             amp_t = TILE_DETAIL_GAIN * look.detail_amp  # (none beyond twice the world texel: it would only alias)
             dl = int(np.clip(math.floor(math.log2(max(iso_min, DETAIL_TEXEL_M) / DETAIL_TEXEL_M)), 0, len(dpyr) - 1))
             Md = _detail_matrix(look, dl)
+            # the world raster magnified 4× or more is smooth at the pixel scale: warp it at 1/q resolution
+            iso_max = float(g.iso[sel].max())
+            q = 4 if iso_max * 8 <= WORLD_TEXEL_M else 2 if iso_max * 4 <= WORLD_TEXEL_M else 1
         for r0, r1, c0, c1, box in _chunks(sel, g.box, CHUNK_CELLS):
             v0, v1, u0, u1 = r0 * S, min(r1 * S, height), c0 * S, min(c1 * S, width)
             size = (u1 - u0, v1 - v0)
@@ -252,7 +271,7 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
                 col = rgba
             else:
                 Mp, mode = _placement(pyr[m], Mw, box)
-                world = _warp(pyr[m], HT @ Mp, size, mode, border)
+                world = _warp_smooth(pyr[m], HT @ Mp, size, mode, border, q)
                 # per-pixel weights (one channel): f = transmittance × detail, a1 = f × (1 − airport coverage)
                 f = w_full[v0:v1, u0:u1]
                 if amp_w > 0:
