@@ -18,10 +18,8 @@ import numpy as np
 class Grid:
     """Per-cell geometry on the coarse grid (arrays of shape (gh, gw))."""
 
-    d: np.ndarray  # (gh, gw, 3) ray directions in the runway frame (forward component 1 in the camera)
+    d: np.ndarray  # (3, gh, gw) ray directions in the runway frame (forward component 1 in the camera)
     ground: np.ndarray  # bool, ray hits the ground
-    gx: np.ndarray
-    gy: np.ndarray
     rng_m: np.ndarray  # range to the ground hit (inf where none)
     fx: np.ndarray  # ground footprint of a pixel along runway x / y, metres
     fy: np.ndarray
@@ -30,33 +28,42 @@ class Grid:
 
 
 def hits(R, C, K, u: np.ndarray, v: np.ndarray):
-    """Rays through pixels ``(u[j], v[i])``: directions, ground mask, hit x/y, range, footprints fx, fy, iso."""
+    """Rays through pixels ``(u[j], v[i])`` (shapes (len(v), len(u))).
+
+    Returns the direction components ``(dx, dy, dz)`` in the runway frame, the ground mask, the ground hit ``x, y`` (metres), the
+    distance ``t`` along the ray to the hit (range = ``t·|d|``; inf where the ray misses the ground), the footprint
+    of one pixel along runway x and y (``fx, fy``: largest Jacobian entry of the row) and ``iso``, the square root
+    of the pixel's ground area.
+    """
     R = np.asarray(R, dtype=np.float64)
     du = -R[:, 1] / K[0, 0]
     dv = -R[:, 2] / K[1, 1]
     d0 = R[:, 0] - du * K[0, 2] - dv * K[1, 2]
-    d = d0[None, None, :] + u[None, :, None] * du[None, None, :] + v[:, None, None] * dv[None, None, :]
-    dz = d[..., 2]
+    dx, dy, dz = (np.add.outer(v * dv[i], d0[i] + u * du[i]) for i in range(3))
     ground = dz < -1e-9
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t = np.where(ground, -C[2] / dz, np.inf)
-        gx = C[0] + t * d[..., 0]
-        gy = C[1] + t * d[..., 1]
-        rng_m = t * np.linalg.norm(d, axis=-1)
-        k = -C[2] / dz**2
-        a = k * (du[0] * dz - d[..., 0] * du[2])  # d gx / du
-        b = k * (dv[0] * dz - d[..., 0] * dv[2])  # d gx / dv
-        c = k * (du[1] * dz - d[..., 1] * du[2])  # d gy / du
-        e = k * (dv[1] * dz - d[..., 1] * dv[2])  # d gy / dv
+        gx = C[0] + t * dx
+        gy = C[1] + t * dy
+        k = t / dz  # = −C_z / dz² (negated below)
+        a = k * (dx * du[2] - du[0] * dz)  # d gx / du
+        b = k * (dx * dv[2] - dv[0] * dz)  # d gx / dv
+        c = k * (dy * du[2] - du[1] * dz)  # d gy / du
+        e = k * (dy * dv[2] - dv[1] * dz)  # d gy / dv
         iso = np.sqrt(np.abs(a * e - b * c))
-    fx = np.where(ground, np.maximum(np.abs(a), np.abs(b)), np.inf)
-    fy = np.where(ground, np.maximum(np.abs(c), np.abs(e)), np.inf)
-    return d, ground, gx, gy, rng_m, fx, fy, iso
+        fx = np.where(ground, np.maximum(np.abs(a), np.abs(b)), np.inf)
+        fy = np.where(ground, np.maximum(np.abs(c), np.abs(e)), np.inf)
+    d = (dx, dy, dz)
+    return d, ground, gx, gy, t, fx, fy, iso
 
 
-def _four(a: np.ndarray) -> np.ndarray:
-    """The four cell-corner values (4, gh, gw) of a (gh + 1, gw + 1) corner array."""
-    return np.stack([a[:-1, :-1], a[1:, :-1], a[:-1, 1:], a[1:, 1:]])
+def _min4(a: np.ndarray) -> np.ndarray:
+    """Smallest of the four cell-corner values (gh, gw) of a (gh + 1, gw + 1) corner array."""
+    return np.minimum(np.minimum(a[:-1, :-1], a[1:, :-1]), np.minimum(a[:-1, 1:], a[1:, 1:]))
+
+
+def _max4(a: np.ndarray) -> np.ndarray:
+    return np.maximum(np.maximum(a[:-1, :-1], a[1:, :-1]), np.maximum(a[:-1, 1:], a[1:, 1:]))
 
 
 def make_grid(R, C, K, width: int, height: int, stride: int, clip_m: float) -> Grid:
@@ -71,29 +78,29 @@ def make_grid(R, C, K, width: int, height: int, stride: int, clip_m: float) -> G
     gw, gh = -(-width // stride), -(-height // stride)
     u = stride * np.arange(gw) + (stride - 1) / 2.0
     v = stride * np.arange(gh) + (stride - 1) / 2.0
-    d, ground, gx, gy, rng_m, fx, fy, iso = hits(R, C, K, u, v)
+    (dx, dy, dz), ground, _, _, t, fx, fy, iso = hits(R, C, K, u, v)
+    with np.errstate(invalid="ignore"):
+        rng_m = t * np.sqrt(dx * dx + dy * dy + dz * dz)
     # cell corners: their ground hits bound each cell's ground region and their footprints bound the footprints
     # inside the cell from below (near the horizon the footprint changes by large factors within one cell)
     uc = stride * np.arange(gw + 1) - 0.5
     vc = stride * np.arange(gh + 1) - 0.5
     dc, gc, cx, cy, _, cfx, cfy, _ = hits(R, C, K, uc, vc)
+    hn = np.hypot(dc[0], dc[1])
     with np.errstate(invalid="ignore"):
         near = gc & (np.hypot(cx - C[0], cy - C[1]) <= clip_m)
-    hn = np.hypot(dc[..., 0], dc[..., 1])
-    hn = np.where(hn > 0, hn, 1.0)
-    far_x = C[0] + clip_m * dc[..., 0] / hn  # where each corner's horizontal direction leaves the clip disk
-    far_y = C[1] + clip_m * dc[..., 1] / hn
-    closed = _four(near).all(axis=0)  # the cell's ground region is the quad of its corner hits
-    px4, py4 = _four(np.where(near, cx, far_x)), _four(np.where(near, cy, far_y))
-    fx4, fy4 = _four(far_x), _four(far_y)
-    # an open cell also spans the arc between its corner directions
-    pad = np.where(closed, 0.0, 1e-3 * clip_m)
-    box = np.stack([
-        np.minimum(px4.min(axis=0), np.where(closed, np.inf, fx4.min(axis=0))) - pad,
-        np.maximum(px4.max(axis=0), np.where(closed, -np.inf, fx4.max(axis=0))) + pad,
-        np.minimum(py4.min(axis=0), np.where(closed, np.inf, fy4.min(axis=0))) - pad,
-        np.maximum(py4.max(axis=0), np.where(closed, -np.inf, fy4.max(axis=0))) + pad,
-    ])
-    fx = np.minimum(fx, _four(cfx).min(axis=0))
-    fy = np.minimum(fy, _four(cfy).min(axis=0))
-    return Grid(d, ground, gx, gy, rng_m, fx, fy, iso, box)
+    hn = np.where(hn > 0, clip_m / np.where(hn > 0, hn, 1.0), 0.0)
+    far_x = C[0] + hn * dc[0]  # where each corner's horizontal direction leaves the clip disk
+    far_y = C[1] + hn * dc[1]
+    px, py = np.where(near, cx, far_x), np.where(near, cy, far_y)
+    open_ = ~(near[:-1, :-1] & near[1:, :-1] & near[:-1, 1:] & near[1:, 1:])  # not just the quad of corner hits
+    # an open cell also spans the arc between its corner directions (padded by its sagitta)
+    pad = 1e-3 * clip_m
+    box = np.stack([_min4(px), _max4(px), _min4(py), _max4(py)])
+    if open_.any():
+        arc = np.stack([_min4(far_x) - pad, _max4(far_x) + pad, _min4(far_y) - pad, _max4(far_y) + pad])
+        box[0::2] = np.where(open_, np.minimum(box[0::2], arc[0::2]), box[0::2])
+        box[1::2] = np.where(open_, np.maximum(box[1::2], arc[1::2]), box[1::2])
+    fx = np.minimum(fx, _min4(cfx))
+    fy = np.minimum(fy, _min4(cfy))
+    return Grid(np.stack([dx, dy, dz]), ground, rng_m, fx, fy, iso, box)

@@ -304,16 +304,19 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
 
 def _sky_and_weight(look: Look, g: Grid) -> tuple[np.ndarray, np.ndarray]:
     """Coarse sky/haze colour (gh, gw, 3) and ground weight ``transmittance`` (gh, gw), float32."""
-    dn = g.d / np.linalg.norm(g.d, axis=-1, keepdims=True)
-    el = np.clip(dn[..., 2], 0.0, 1.0)
-    zen, hor = np.asarray(look.sky_zenith, np.float32), np.asarray(look.sky_horizon, np.float32)
-    mix = (1.0 - np.exp(-el / 0.12))[..., None]
-    sky = hor + (zen - hor) * mix
-    cosg = dn @ np.asarray(look.sun_dir)
-    glow = 0.9 * np.exp((cosg - 1.0) / 0.0015) + 0.25 * np.exp((cosg - 1.0) / 0.06)
-    sky = sky + glow[..., None] * np.asarray(look.sun_rgb, np.float32)
-    w = np.where(g.ground, np.exp(-np.where(g.ground, g.rng_m, 0.0) / look.visibility_m), 0.0)
-    return sky.astype(np.float32), w.astype(np.float32)
+    dx, dy, dz = g.d
+    inv = 1.0 / np.sqrt(dx * dx + dy * dy + dz * dz)
+    el = np.clip(dz * inv, 0.0, 1.0)
+    mix = 1.0 - np.exp(el * (-1.0 / 0.12))
+    sx, sy, sz = look.sun_dir
+    cosg = (dx * sx + dy * sy + dz * sz) * inv - 1.0
+    glow = 0.9 * np.exp(cosg * (1.0 / 0.0015)) + 0.25 * np.exp(cosg * (1.0 / 0.06))
+    sky = np.empty(dz.shape + (3,), np.float32)
+    for i, (zc, hc, sc) in enumerate(zip(look.sky_zenith, look.sky_horizon, look.sun_rgb, strict=True)):
+        sky[..., i] = hc + (zc - hc) * mix + sc * glow
+    with np.errstate(invalid="ignore"):
+        w = np.where(g.ground, np.exp(-g.rng_m / look.visibility_m), 0.0)
+    return sky, w.astype(np.float32)
 
 
 def _upsample(a: np.ndarray, width: int, height: int) -> np.ndarray:
