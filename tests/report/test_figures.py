@@ -50,8 +50,10 @@ def test_distance_profile_marks_no_phi_crit_at_the_limit():
 
 def test_convergence_and_landscapes_and_pnp():
     conv = [{"iteration": k, "n": 3, **{f"{n}_{s}": v for n in ("po", "ra") for s, v in
-             (("mean", 10.0 / k), ("std", 1.0), ("q25", 9.0 / k), ("q75", 11.0 / k))}} for k in range(1, 6)]
-    assert len(F.convergence(conv).axes) == 2
+             (("mean", 10.0 / k), ("std", 1.0), ("q10", 8.0 / k), ("q25", 9.0 / k), ("median", 10.0 / k),
+              ("q75", 11.0 / k), ("q90", 12.0 / k), ("max", 500.0))}} for k in range(1, 6)]
+    fig = F.convergence(conv)
+    assert len(fig.axes) == 2 and fig.axes[0].get_yscale() == "log"  # outliers: |PO_k| on a log axis
     r, c = np.meshgrid(np.linspace(-10, 10, 9), np.linspace(0.7, 1.4, 5), indexing="ij")
     xs = np.stack([r.ravel(), c.ravel()], axis=1)
     fs = 10.0 + 300.0 * np.abs(xs[:, 0])

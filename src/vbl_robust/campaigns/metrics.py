@@ -176,7 +176,7 @@ def distance_profile(rows: Iterable[Mapping[str, Any]], distances: Mapping[str, 
 
 def convergence(rows: Iterable[Mapping[str, Any]], max_iter: int | None = None) -> list[dict[str, Any]]:
     """Per iteration k (1-based) over the rows' DIRECT-family traces: |PO_k| (as selected, and after the budget
-    filter) and RA(k) in % — mean, standard deviation, 25/50/75th percentiles over images."""
+    filter) and RA(k) in % — mean, standard deviation, 10/25/50/75/90th percentiles and maximum over images."""
     per_k: dict[int, dict[str, list[float]]] = {}
     for r in rows:
         for t in r.get("trace") or []:
@@ -199,7 +199,10 @@ def convergence(rows: Iterable[Mapping[str, Any]], max_iter: int | None = None) 
             v = np.asarray(d[name])
             line[f"{name}_mean"] = float(np.nanmean(v))
             line[f"{name}_std"] = float(np.nanstd(v))
-            line[f"{name}_q25"], line[f"{name}_median"], line[f"{name}_q75"] = (float(x) for x in np.nanpercentile(v, [25, 50, 75]))
+            q = np.nanpercentile(v, [10, 25, 50, 75, 90])
+            for label, x in zip(("q10", "q25", "median", "q75", "q90"), q, strict=True):
+                line[f"{name}_{label}"] = float(x)
+            line[f"{name}_max"] = float(np.nanmax(v))
         line["po_after_mean"] = float(np.nanmean(d["po_after"]))
         line["nfev_mean"] = float(np.mean(d["nfev"]))
         line["best_median"] = float(np.nanmedian(d["best"])) if np.isfinite(d["best"]).any() else math.nan
