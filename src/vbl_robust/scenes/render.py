@@ -298,8 +298,11 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
                     cv2.add(col, cv2.multiply(rgba, cv2.cvtColor(f, cv2.COLOR_GRAY2RGBA), dst=rgba), dst=col)
                 cv2.add(col, hz_full[v0:v1, u0:u1], dst=col)
             col8 = cv2.convertScaleAbs(col, alpha=255.0)  # rounds and saturates to uint8 (values are >= 0)
-            mask = cv2.resize(cells.view(np.uint8), ((c1 - c0) * S, (r1 - r0) * S), interpolation=cv2.INTER_NEAREST)
-            cv2.copyTo(col8, mask[: v1 - v0, : u1 - u0], out[v0:v1, u0:u1])
+            if cells.all():
+                out[v0:v1, u0:u1] = col8
+            else:
+                mask = cv2.resize(cells.view(np.uint8), ((c1 - c0) * S, (r1 - r0) * S), interpolation=cv2.INTER_NEAREST)
+                cv2.copyTo(col8, mask[: v1 - v0, : u1 - u0], out[v0:v1, u0:u1])
 
 
 def _sky_and_weight(look: Look, g: Grid) -> tuple[np.ndarray, np.ndarray]:

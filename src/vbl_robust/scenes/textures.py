@@ -43,20 +43,28 @@ def fft_noise(rng: np.random.Generator, n: int, beta: float, n_out: int | None =
 
     With ``n_out`` the noise is made at ``n`` and upsampled (bicubic) to ``n_out`` (cheap low-frequency noise).
     """
-    white = rng.standard_normal((n, n))
-    f = np.fft.fftfreq(n)
-    rad = np.sqrt(f[:, None] ** 2 + f[None, :] ** 2)
+    white = rng.standard_normal((n, n), dtype=np.float32)
+    f = np.fft.fftfreq(n).astype(np.float32)
+    rad = np.sqrt(f[:, None] ** 2 + np.fft.rfftfreq(n).astype(np.float32)[None, :] ** 2)
     rad[0, 0] = 1.0
-    spec = np.fft.fft2(white) / rad**beta
+    spec = np.fft.rfft2(white)
+    spec *= rad ** np.float32(-beta)
     spec[0, 0] = 0.0
-    out = np.real(np.fft.ifft2(spec))
-    out = ((out - out.mean()) / out.std()).astype(np.float32)
+    out = np.fft.irfft2(spec, s=(n, n)).astype(np.float32)
+    out /= out.std()
     if n_out is not None and n_out != n:
         out = cv2.resize(out, (n_out, n_out), interpolation=cv2.INTER_CUBIC)
     return out
 
 
+def _mask_above(noise: np.ndarray, q: float, n: int) -> np.ndarray:
+    """``noise`` (a low-resolution field) upsampled to (n, n), above its quantile ``q`` (taken before upsampling)."""
+    level = np.quantile(noise, q)
+    return cv2.resize(noise, (n, n), interpolation=cv2.INTER_CUBIC) > level
+
+
 def _world(index: int) -> np.ndarray:
+    """(WORLD_SIZE, WORLD_SIZE, 3) uint8 RGB albedo raster ``index`` (deterministic)."""
     rng = np.random.default_rng(10_000 + index)
     n, s = WORLD_SIZE, WORLD_TEXEL_M
     coords = (np.arange(n, dtype=np.float32) - (n - 1) / 2) * s
@@ -68,37 +76,51 @@ def _world(index: int) -> np.ndarray:
     half = n * s
     row_h = rng.uniform(80.0, 350.0, 400)
     edges = np.cumsum(row_h) - half
-    r = np.searchsorted(edges, b)
-    col_w = rng.uniform(80.0, 500.0, len(edges) + 1).astype(np.float32)[r]
-    col_off = rng.uniform(0.0, 500.0, len(edges) + 1).astype(np.float32)[r]
-    cpos = (a - col_off) / col_w
-    c = np.floor(cpos).astype(np.int64)
-    pid = (r.astype(np.int64) * 73856093) ^ (c * 19349663)
-    pid = np.abs(pid) % 65521
+    # row of each texel, and whether it is within 5 m of the row's edge, from 1/4-metre lookup tables on b (rows
+    # are at least 80 m high; much cheaper than searching every texel)
+    b_min = float(b.min())
+    bq = b_min + (np.arange(int((float(b.max()) - b_min) * 4) + 2) + 0.5) / 4
+    r_table = np.searchsorted(edges, bq)
+    e_lo = np.concatenate([[-np.inf], edges])[r_table]
+    e_hi = np.concatenate([edges, [np.inf]])[r_table]
+    idx = ((b - np.float32(b_min)) * np.float32(4)).astype(np.int32)
+    r = r_table.astype(np.int32)[idx]
+    near_row_edge = (np.minimum(bq - e_lo, e_hi - bq) < 5.0)[idx]
+    col_w = rng.uniform(80.0, 500.0, len(edges) + 1).astype(np.float32)
+    col_off = rng.uniform(0.0, 500.0, len(edges) + 1).astype(np.float32)
+    cw = col_w[r]
+    cpos = a - col_off[r]
+    cpos /= cw
+    c = np.floor(cpos)
+    frac = cpos - c
+    # parcel id: a hash of (row, column) into 2^16 values (uint32 arithmetic wraps around)
+    pid = ((r.astype(np.uint32) * np.uint32(73856093)) ^ (c.astype(np.int32).view(np.uint32) * np.uint32(19349663)))
+    pid &= np.uint32(0xFFFF)
     weights = rng.dirichlet(np.full(len(_PALETTE), 0.8))
-    lut = rng.choice(len(_PALETTE), size=65521, p=weights)
-    bright = rng.uniform(0.85, 1.15, 65521).astype(np.float32)
-    img = _PALETTE[lut[pid]] * bright[pid][..., None]
-    # hedges / tracks along some parcel borders
-    e_lo = np.concatenate([[-np.inf], edges]).astype(np.float32)[r]
-    e_hi = np.concatenate([edges, [np.inf]]).astype(np.float32)[r]
-    row_dist = np.minimum(b - e_lo, e_hi - b)
-    border = (np.minimum(cpos - c, 1 - (cpos - c)) * col_w < 5.0) | (row_dist < 5.0)
-    hedge = border & (bright[pid] > 0.95)
-    img[hedge] = img[hedge] * 0.6 + np.float32([0.12, 0.16, 0.08]) * 0.4
+    lut = rng.choice(len(_PALETTE), size=65536, p=weights)
+    bright = rng.uniform(0.85, 1.15, 65536).astype(np.float32)
+    # hedges / tracks along some parcel borders: one colour table for plain and hedged parcels, one gather
+    colours = _PALETTE[lut] * bright[:, None]
+    colours = np.concatenate([colours, colours * 0.6 + np.float32([0.12, 0.16, 0.08]) * 0.4])
+    border = (np.minimum(frac, 1 - frac) * cw < 5.0) | near_row_edge
+    pid += np.uint32(65536) * (border & (bright[pid] > 0.95))
+    img = colours[pid]
+    flat = img.reshape(-1, 3)
     # forests, lakes, villages from low-frequency noise
-    forest = fft_noise(rng, 512, 1.6, n)
-    fine = fft_noise(rng, 1024, 0.6, n)
-    fmask = forest > np.quantile(forest, 0.86)
-    img[fmask] = np.float32([0.10, 0.17, 0.08]) * (1.0 + 0.25 * fine[fmask])[:, None]
-    lake = fft_noise(rng, 512, 1.8, n)
-    img[lake > np.quantile(lake, 0.985)] = np.float32([0.10, 0.14, 0.17])
-    town = fft_noise(rng, 512, 1.7, n)
-    tmask = town > np.quantile(town, 0.965)
+    forest = fft_noise(rng, 512, 1.6)
+    fine = fft_noise(rng, 1024, 0.6, n).reshape(-1)
+    idx = np.flatnonzero(_mask_above(forest, 0.86, n))
+    flat[idx] = np.float32([0.10, 0.17, 0.08]) * (1.0 + 0.25 * fine[idx])[:, None]
+    lake = fft_noise(rng, 512, 1.8)
+    flat[np.flatnonzero(_mask_above(lake, 0.985, n))] = np.float32([0.10, 0.14, 0.17])
+    town = fft_noise(rng, 512, 1.7)
+    idx = np.flatnonzero(_mask_above(town, 0.965, n))
     roofs = np.float32([[0.45, 0.42, 0.40], [0.55, 0.30, 0.22], [0.60, 0.60, 0.58], [0.30, 0.30, 0.30]])
-    img[tmask] = roofs[rng.integers(0, 4, int(tmask.sum()))]
-    img *= (1.0 + 0.08 * fft_noise(rng, 512, 1.2, n))[..., None]
-    out = np.clip(img * 255.0, 0, 255).astype(np.uint8)
+    flat[idx] = roofs[rng.integers(0, 4, idx.size)]
+    light = fft_noise(rng, 512, 1.2, n)
+    light *= np.float32(0.08 * 255.0)
+    light += np.float32(255.0)
+    out = cv2.convertScaleAbs(cv2.multiply(img, cv2.cvtColor(light, cv2.COLOR_GRAY2RGB)))
     for _ in range(int(rng.integers(4, 9))):  # roads
         p = rng.uniform(0, n, 2)
         ang = rng.uniform(0, np.pi)
@@ -173,6 +195,6 @@ def detail_tiles() -> tuple[tuple[np.ndarray, int], ...]:
 @functools.lru_cache(maxsize=4)
 def sensor_noise(height: int, width: int) -> np.ndarray:
     """(height + 64, width + 64, 3) uint8 Gaussian noise, mean 128, std :data:`SENSOR_NOISE_STD`."""
-    rng = np.random.default_rng(30_000)
-    x = rng.normal(128.0, SENSOR_NOISE_STD, (height + 64, width + 64, 3))
-    return np.clip(np.rint(x), 0, 255).astype(np.uint8)
+    x = np.random.default_rng(30_000).standard_normal((height + 64, (width + 64) * 3), dtype=np.float32)
+    # rounds and saturates (nothing reaches −8σ, where the absolute value would matter)
+    return cv2.convertScaleAbs(x, alpha=SENSOR_NOISE_STD, beta=128.0).reshape(height + 64, width + 64, 3)
