@@ -38,6 +38,8 @@ def _machine() -> str:
         f"- date: {dt.datetime.now(dt.UTC).strftime('%Y-%m-%d %H:%M UTC')}; commit `{commit}`\n"
         f"- machine: {platform.machine()}, {os.cpu_count()} CPU cores, no GPU; Python {platform.python_version()}, "
         f"torch {torch.__version__} (threads: {torch.get_num_threads()})\n"
+        f"- load average at start (1/5/15 min): {' / '.join(f'{v:.1f}' for v in os.getloadavg())} "
+        "(other processes share the 2 cores when this is above ~0.5: timings are then pessimistic)\n"
     )
 
 
