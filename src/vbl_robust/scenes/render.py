@@ -56,8 +56,9 @@ STRIDE = 8
 MAX_RANGE_M = 30_000.0
 #: Ground boxes of the cells at the horizon are clipped at this multiple of the drawing range (horizontally).
 CLIP_FACTOR = 1.0
-#: Width (cells) of the column chunks in which a band is warped.
+#: Blocks (cells) in which a band is warped and composited: small enough for the temporaries to stay in cache.
 CHUNK_CELLS = 16
+CHUNK_ROWS = 16
 #: Detail-noise amplitude on airport surfaces relative to the ground's (asphalt and concrete are rougher).
 TILE_DETAIL_GAIN = 1.5
 
@@ -171,34 +172,38 @@ def _placement(tex: np.ndarray, M: np.ndarray, box, period: int = 0) -> tuple[np
     return M, cv2.BORDER_WRAP if period else cv2.BORDER_REFLECT_101
 
 
-def _chunks(sel: np.ndarray, box: np.ndarray, width_cells: int) -> list[tuple]:
-    """Column chunks covering ``sel`` (gh, gw): ``(r0, r1, c0, c1, (xmin, xmax, ymin, ymax))`` per chunk.
+def _chunks(sel: np.ndarray, box: np.ndarray, width_cells: int, height_cells: int) -> list[tuple]:
+    """Blocks covering ``sel`` (gh, gw): ``(r0, r1, c0, c1, (xmin, xmax, ymin, ymax))`` per non-empty block.
 
-    ``r0:r1, c0:c1`` is the tight cell box of the chunk's selected cells (tight for tilted stripes) and the last
-    item bounds their ground boxes (``box`` (4, gh, gw), :class:`.grid.Grid`). Computed for all chunks at once.
+    The frame is cut into blocks of ``height_cells × width_cells`` cells; ``r0:r1, c0:c1`` is the tight cell box of
+    the block's selected cells (tight for tilted stripes) and the last item bounds their ground boxes (``box``
+    (4, gh, gw), :class:`.grid.Grid`). Computed for all blocks at once.
     """
-    gw = sel.shape[1]
+    gh, gw = sel.shape
     any_row = np.flatnonzero(sel.any(axis=1))
     if not any_row.size:
         return []
-    ra, rb = int(any_row[0]), int(any_row[-1]) + 1
-    n = -(-gw // width_cells)
-    pad = n * width_cells - gw
-    s3 = np.pad(sel[ra:rb], ((0, 0), (0, pad))).reshape(rb - ra, n, width_cells)
-    rows = s3.any(axis=2)  # (rows, n)
-    cols = s3.any(axis=0)  # (n, width)
-    r0 = ra + rows.argmax(axis=0)
-    r1 = rb - rows[::-1].argmax(axis=0)
-    base = np.arange(n) * width_cells
-    c0 = base + cols.argmax(axis=1)
-    c1 = base + width_cells - cols[:, ::-1].argmax(axis=1)
+    ra = int(any_row[0])
+    nr = -(-(int(any_row[-1]) + 1 - ra) // height_cells)
+    nc = -(-gw // width_cells)
+    rb = ra + nr * height_cells
+    pad = ((0, max(0, rb - gh)), (0, nc * width_cells - gw))
+    s4 = np.pad(sel[ra:rb], pad).reshape(nr, height_cells, nc, width_cells)
+    rows = s4.any(axis=3)  # (nr, height, nc)
+    cols = s4.any(axis=1)  # (nr, nc, width)
+    base_r = ra + np.arange(nr)[:, None] * height_cells
+    r0 = base_r + rows.argmax(axis=1)
+    r1 = base_r + height_cells - rows[:, ::-1].argmax(axis=1)
+    base_c = np.arange(nc)[None, :] * width_cells
+    c0 = base_c + cols.argmax(axis=2)
+    c1 = base_c + width_cells - cols[:, :, ::-1].argmax(axis=2)
     # ground boxes: lower bounds (xmin, ymin) where selected else +inf, upper bounds likewise with −inf
-    lo = np.where(s3, np.pad(box[0::2, ra:rb], ((0, 0), (0, 0), (0, pad))).reshape(2, rb - ra, n, width_cells),
-                  np.inf).min(axis=(1, 3))
-    hi = np.where(s3, np.pad(box[1::2, ra:rb], ((0, 0), (0, 0), (0, pad))).reshape(2, rb - ra, n, width_cells),
-                  -np.inf).max(axis=(1, 3))
-    return [(int(r0[i]), int(r1[i]), int(c0[i]), int(c1[i]), (lo[0, i], hi[0, i], lo[1, i], hi[1, i]))
-            for i in np.flatnonzero(rows.any(axis=0)).tolist()]
+    b6 = np.pad(box[:, ra:rb], ((0, 0), *pad)).reshape(4, nr, height_cells, nc, width_cells)
+    lo = np.where(s4, b6[0::2], np.inf).min(axis=(2, 4))  # (2, nr, nc)
+    hi = np.where(s4, b6[1::2], -np.inf).max(axis=(2, 4))
+    return [(int(r0[i, j]), int(r1[i, j]), int(c0[i, j]), int(c1[i, j]),
+             (float(lo[0, i, j]), float(hi[0, i, j]), float(lo[1, i, j]), float(hi[1, i, j])))
+            for i, j in zip(*np.nonzero(rows.any(axis=1)), strict=True)]
 
 
 def _warp(src: np.ndarray, M: np.ndarray, size: tuple[int, int], mode: int = cv2.BORDER_CONSTANT,
@@ -260,7 +265,7 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
             # the world raster magnified 4× or more is smooth at the pixel scale: warp it at 1/q resolution
             iso_max = float(g.iso[sel].max())
             q = 4 if iso_max * 8 <= WORLD_TEXEL_M else 2 if iso_max * 4 <= WORLD_TEXEL_M else 1
-        for r0, r1, c0, c1, box in _chunks(sel, g.box, CHUNK_CELLS):
+        for r0, r1, c0, c1, box in _chunks(sel, g.box, CHUNK_CELLS, CHUNK_ROWS):
             v0, v1, u0, u1 = r0 * S, min(r1 * S, height), c0 * S, min(c1 * S, width)
             size = (u1 - u0, v1 - v0)
             HT = H - np.outer((u0, v0, 0.0), H[2])  # ground → chunk pixels
