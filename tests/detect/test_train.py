@@ -102,3 +102,22 @@ def test_evaluate_scores_known_errors():
     exact = evaluate_detector(_ShiftedTruth(samples, [0.0, 0.0]), samples)
     assert np.all(exact.pos_err_m["ippe_lm"] < 1e-3)
     assert score(exact) >= score(r)
+
+
+def test_new_stage_starts_from_previous_weights(tmp_path):
+    """With a zero learning rate, a new stage's conv weights equal the previous stage's (not a fresh init)."""
+    import torch
+
+    frozen = dict(optimizer="SGD", lr0=0.0, lrf=1.0, momentum=0.0, weight_decay=0.0, warmup_epochs=0.0,
+                  warmup_bias_lr=0.0)
+    kw = dict(samples=_samples(6), n_val=2, imgsz=64, epochs=1, batch=4, workers=0, seed=0)
+    r0 = train(tmp_path / "run", **kw)
+    r1 = train(tmp_path / "run", resume=True, **kw, **frozen)
+
+    def conv_weights(p):
+        m = torch.load(p, weights_only=False)["ema"] or torch.load(p, weights_only=False)["model"]
+        return [w.float() for n, w in m.state_dict().items() if n.endswith("conv.weight")]
+
+    a, b = conv_weights(r0.best), conv_weights(r1.best)
+    assert len(a) == len(b) > 10
+    assert all(torch.equal(x, y) for x, y in zip(a, b, strict=True))

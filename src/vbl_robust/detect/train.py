@@ -138,6 +138,11 @@ def build_dataset(
     return write_data_yaml(root)
 
 
+def _pretrained_arg(init: str | Path | None) -> str | bool:
+    """Ultralytics' ``pretrained``: ``False`` discards the model's weights, so a new stage passes its init file."""
+    return str(Path(init).resolve()) if init is not None else False
+
+
 def _subset_yaml(data: Path, n_train: int, crops_used: int) -> Path:
     """A data YAML whose train split lists only views ``0 … crops_used`` of each sample (no re-rendering)."""
     root = data.parent
@@ -247,7 +252,7 @@ def train(
     model = YOLO(str(init)) if init is not None else YOLO("yolov8n-pose.yaml")
     args = dict(TRAIN_DEFAULTS)
     args.update(data=str(data), imgsz=imgsz, epochs=epochs, batch=batch, workers=workers, seed=seed,
-                project=str(out_dir), name=stage.name, exist_ok=True, pretrained=False)
+                project=str(out_dir), name=stage.name, exist_ok=True, pretrained=_pretrained_arg(init))
     if lr0 is not None:
         args["lr0"] = lr0
     args.update(overrides)
