@@ -2,23 +2,30 @@
 
 How a frame is made
 -------------------
-1. **Per-pixel geometry on a coarse grid** (every :data:`STRIDE` px): the ray of each cell centre, where it hits
-   the ground plane ``z = 0`` (only rays pointing down: nothing behind the camera or above the horizon is ever
-   mapped to the ground, so the plane cannot "wrap"), its range, and the ground footprint of one pixel along the
-   runway axes (the Jacobian of the inverse homography).
-2. **Footprint bands**: cells are grouped by ``log2`` of their footprint (like mip levels). For each band a ground
-   tile is built whose texel size equals the smallest footprint of the band (per axis), so the tile is never
-   minified by more than about 2×: the world raster is resampled from its pyramid, fine detail noise is
-   multiplied in, and the airport layout is painted with exact area coverage (:func:`.layout.paint`).
-3. Each tile is warped into the image with ``cv2.warpPerspective`` through ``H · A`` where ``H = K [r1 r2 t]``
-   is the ground → image homography of the labelled pose and ``A`` maps texels to ground metres. OpenCV's
-   convention (pixel centres at integer coordinates, in the tile and in the image) is used on both sides, so the
-   painted runway edge crosses 50 % exactly where :func:`vbl_robust.geometry.camera.project` puts it (up to the
-   ≤ 0.1 texel bias of bilinear reconstruction of a box-filtered edge and OpenCV's 1/32 px warp precision).
-4. **Sky and aerial perspective**: a sky gradient with sun glow; the ground is blended toward the horizon haze
-   colour with transmittance ``exp(−range / visibility)``; both are computed on the coarse grid and upsampled
-   (they are smooth; at the horizon the ground is fully hazed, so sky and ground meet without a seam).
-5. Sensor: optional Gaussian blur, then noise from a cached buffer, then a per-channel tone curve (LUT).
+1. **Per-pixel geometry on a coarse grid** (every :data:`STRIDE` px, :mod:`.grid`): the ray of each cell centre,
+   where it hits the ground plane ``z = 0`` (only rays pointing down: nothing behind the camera or above the
+   horizon is ever mapped to the ground, so the plane cannot "wrap"), its range, the ground footprint of one pixel
+   along the runway axes (the Jacobian of the inverse homography) and a ground box per cell.
+2. **Footprint bands**: cells are grouped by ``log2`` of their footprint (like mip levels). Each band takes the
+   world raster from the pyramid level that is never minified by more than about 2× (:mod:`.textures`), the
+   detail noise likewise, and an airport tile painted with exact area coverage at the band's smallest footprint
+   per axis (:mod:`.tiles`, :func:`.layout.paint`).
+3. A band is drawn in blocks of :data:`CHUNK_ROWS` × :data:`CHUNK_CELLS` cells (small enough for the temporaries
+   to stay in cache): each layer is warped into the block with ``cv2.warpPerspective`` through ``H · A`` where
+   ``H = K [r1 r2 t]`` is the ground → image homography of the labelled pose and ``A`` maps texels to ground
+   metres, then composited (albedo × light × transmittance + in-scattered haze) and copied where the block's
+   cells belong to the band. OpenCV's convention (pixel centres at integer coordinates, in the tile and in the
+   image) is used on both sides, so the painted runway edge crosses 50 % exactly where
+   :func:`vbl_robust.geometry.camera.project` puts it (up to the ≤ 0.1 texel bias of bilinear reconstruction of a
+   box-filtered edge and OpenCV's 1/32 px warp precision).
+4. Speed: every warp keeps OpenCV's fast path (1 or 4 channels, constant border; textures that would need a
+   reflected or periodic border are pre-extended instead), a world raster magnified 4× or more is warped at 1/2
+   or 1/4 resolution and bilinearly upsampled (it is smooth at the pixel scale), and per-pixel products are
+   OpenCV calls on 4-channel images rather than numpy broadcasts.
+5. **Sky and aerial perspective**: a sky gradient with sun glow; the ground is blended toward the sky colour
+   with transmittance ``exp(−range / visibility)``; both are computed on the coarse grid and upsampled (they are
+   smooth; at the horizon the ground is fully hazed, so sky and ground meet without a seam).
+6. Sensor: optional Gaussian blur, then noise from a cached buffer, then a per-channel tone curve (LUT).
 
 ``Look`` holds all appearance choices of a frame (drawn by :func:`sample_look` from a seed). ``debug=True``
 renders a black world with the runway surface flat white and no haze, blur, noise or markings: the pixel checks
