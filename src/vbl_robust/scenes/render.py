@@ -236,11 +236,11 @@ def _warp_smooth(src: np.ndarray, M: np.ndarray, size: tuple[int, int], mode: in
 
 
 def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max: float, out: np.ndarray,
-                   haze: tuple[np.ndarray, np.ndarray] | None) -> None:
+                   haze: np.ndarray | None) -> None:
     """Draw the ground cells within ``r_max`` into ``out`` (height, width, 4) uint8 (RGB, A unused), band by band.
 
-    ``haze = (w, hz)``: per-pixel ground transmittance (height, width) and in-scattered light ``sky·(1 − w)``
-    (height, width, 4) float32, so that a pixel is ``albedo·light·w + hz`` (None for debug renders).
+    ``haze`` (height, width, 4) float32: in-scattered light ``hz = sky·(1 − w)`` (RGB) and the ground's
+    transmittance ``w`` (A), so that a pixel is ``albedo·light·w + hz`` (None for debug renders).
     """
     height, width = out.shape[:2]
     S = STRIDE
@@ -256,7 +256,6 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
         gain = [np.float32(c / 255.0) for c in look.ground_gain]
         border = (*(int(round(255.0 * c)) for c in world_mean(look.world)), 0)
         noise_lut = ((np.arange(256, dtype=np.float32) - 128.0) / np.float32(DETAIL_Q)).reshape(1, 256)
-        w_full, hz_full = haze
     for k, sel in bands.items():
         iso_min = float(g.iso[sel].min())
         tile = tiles.get(k)
@@ -285,7 +284,8 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
                 Mp, mode = _placement(pyr[m], Mw, box)
                 world = _warp_smooth(pyr[m], HT @ Mp, size, mode, border, q)
                 # per-pixel weights (one channel): f = transmittance × detail, a1 = f × (1 − airport coverage)
-                f = w_full[v0:v1, u0:u1]
+                hz = haze[v0:v1, u0:u1]
+                f = hz[..., 3].copy()
                 if amp_w > 0:
                     Mp, mode = _placement(dpyr[dl][0], Md, box, period=dpyr[dl][1])
                     d8 = _warp(dpyr[dl][0], HT @ Mp, size, mode, 128)
@@ -308,7 +308,7 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
                 col = cv2.multiply(world, cv2.merge([a1 * gain[0], a1 * gain[1], a1 * gain[2], a1]), dtype=cv2.CV_32F)
                 if tile is not None:
                     cv2.add(col, cv2.multiply(rgba, cv2.cvtColor(f, cv2.COLOR_GRAY2RGBA), dst=rgba), dst=col)
-                cv2.add(col, hz_full[v0:v1, u0:u1], dst=col)
+                cv2.add(col, hz, dst=col)  # (adds w to the unused A)
             col8 = cv2.convertScaleAbs(col, alpha=255.0)  # rounds and saturates to uint8 (values are >= 0)
             if cells.all():
                 out[v0:v1, u0:u1] = col8
@@ -334,11 +334,16 @@ def _sky_and_weight(look: Look, g: Grid) -> tuple[np.ndarray, np.ndarray]:
     return sky, w.astype(np.float32)
 
 
-def _upsample(a: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Bilinear upsampling of a coarse-grid map whose samples sit at cell centres (STRIDE·k + (STRIDE−1)/2)."""
+def _upsample(a: np.ndarray, width: int, height: int, r0: int = 0, r1: int | None = None) -> np.ndarray:
+    """Bilinear upsampling of a coarse-grid map whose samples sit at cell centres (STRIDE·k + (STRIDE−1)/2).
+
+    Only the pixel rows of cell rows ``r0:r1`` (same values as upsampling everything and cropping).
+    """
     gh, gw = a.shape[:2]
-    up = cv2.resize(a, (gw * STRIDE, gh * STRIDE), interpolation=cv2.INTER_LINEAR)
-    return up[:height, :width]
+    r1 = gh if r1 is None else r1
+    pad = cv2.copyMakeBorder(a[max(r0 - 1, 0):r1 + 1], int(r0 == 0), int(r1 == gh), 0, 0, cv2.BORDER_REPLICATE)
+    up = cv2.resize(pad, (gw * STRIDE, pad.shape[0] * STRIDE), interpolation=cv2.INTER_LINEAR)
+    return up[STRIDE:STRIDE + min((r1 - r0) * STRIDE, height - r0 * STRIDE), :width]
 
 
 def render_scene(R: np.ndarray, C: np.ndarray, K: np.ndarray, width: int, height: int, layout: np.ndarray,
@@ -367,11 +372,17 @@ def render_scene(R: np.ndarray, C: np.ndarray, K: np.ndarray, width: int, height
         _render_ground(H, layout, look, g, r_max, img4, None)
         return cv2.cvtColor(img4, cv2.COLOR_RGBA2RGB)
     sky, w = _sky_and_weight(look, g)
-    hz = np.dstack([sky * (1.0 - w[..., None]), np.zeros_like(w)])
-    # pixels that no band draws (sky, ground beyond r_max) show the world's mean colour through the haze
-    mean = np.append(world_mean(look.world) * np.asarray(look.ground_gain, np.float32), np.float32(0.0))
-    img4 = np.ascontiguousarray(_upsample(cv2.convertScaleAbs(hz + w[..., None] * mean, alpha=255.0), width, height))
-    _render_ground(H, layout, look, g, r_max, img4, (_upsample(w, width, height), _upsample(hz, width, height)))
+    hz = sky * (1.0 - w[..., None])
+    # pixels that no band draws (sky, ground beyond r_max) show the world's mean colour through the haze; only
+    # their rows are upsampled (every other pixel is drawn over)
+    img4 = np.empty((height, width, 4), np.uint8)
+    rows = np.flatnonzero(~(g.ground & (g.rng_m < r_max)).all(axis=1))
+    if rows.size:
+        mean = world_mean(look.world) * np.asarray(look.ground_gain, np.float32)
+        bg = cv2.convertScaleAbs(np.dstack([hz + w[..., None] * mean, w]), alpha=255.0)
+        r0, r1 = int(rows[0]), int(rows[-1]) + 1
+        img4[r0 * STRIDE:r1 * STRIDE] = _upsample(bg, width, height, r0, r1)
+    _render_ground(H, layout, look, g, r_max, img4, _upsample(np.dstack([hz, w]), width, height))
     img8 = cv2.cvtColor(img4, cv2.COLOR_RGBA2RGB)
     if look.blur_sigma > 0.3:
         img8 = cv2.GaussianBlur(img8, (0, 0), look.blur_sigma)
