@@ -103,7 +103,7 @@ def test_variants_have_their_settings():
     assert (Direct(UNIT1, max_evals=5).size, Direct(UNIT1, max_evals=5).ties) == ("diagonal", "all")
     assert (DirectL(UNIT1, max_evals=5).size, DirectL(UNIT1, max_evals=5).ties) == ("side", "one")
     g = GeoRobust(UNIT1, max_evals=5)
-    assert (g.size, g.ties, g.alpha, g.f_scale) == ("side", "all", 2, "auto")
+    assert (g.size, g.ties, g.alpha, g.f_scale) == ("side", "alpha", 2, "auto")
     with pytest.raises(ValueError, match="alpha must be an integer >= 1"):
         GeoRobust(UNIT1, alpha=0)
     with pytest.raises(ValueError, match="size must be one of"):
@@ -189,3 +189,17 @@ def test_classic_functions_reach_target_within_factor_of_peers():
             assert c.nfev <= 3 * best_peer, f"{m} needs {c.nfev} evaluations on {name}, best peer {best_peer}"
         assert [ours["direct"].nfev, ours["direct-l"].nfev] == [GOLDEN["direct"][k], GOLDEN["direct-l"][k]]
     print("\n" + "\n".join(lines))
+
+
+def test_georobust_po_set_stays_bounded_on_a_plateau():
+    """A flat region (e.g. the 5000 m failure penalty everywhere) must not make |PO_k| explode."""
+    from vbl_robust.search import maximize
+    from vbl_robust.space import ParameterBox
+
+    box = ParameterBox({"a": (0, 1), "b": (0, 1)})
+    r = maximize(lambda x: np.full(len(x), 5000.0), box, "georobust", max_iters=12, seed=0)
+    counts = [row.po_count_before for row in r.trace if row.po_count_before is not None]
+    assert counts, "no PO counts recorded"
+    n_classes_bound = 2 * 2 * 25  # α per size class; classes are bounded by depth levels
+    assert max(counts) <= n_classes_bound
+    assert r.nfev < 12 * 4 * n_classes_bound

@@ -39,7 +39,7 @@ def potentially_optimal(
         f: ``(m,)`` finite values to *minimise*.
         alpha: candidates of a class are the rectangles with ``f <=`` its α-th smallest value (1 = classic).
         ties: ``"all"`` keeps every candidate (Jones: all ties divided); ``"one"`` keeps the first rectangle
-            (lowest index) of each distinct value (Gablonsky's DIRECT-L).
+            (lowest index) of each distinct value (Gablonsky's DIRECT-L); ``"alpha"`` keeps at most α per class.
         eps, f_scale: the ε test (c).
     """
     keys = np.asarray(keys)
@@ -63,6 +63,8 @@ def potentially_optimal(
             vals = f[members]
             keep = np.r_[True, vals[1:] != vals[:-1]]  # members are sorted by (value, index)
             members = members[keep]
+        elif ties == "alpha":
+            members = members[:alpha]  # sorted by (value, index): the α best, older first among equals
         cand.extend(members.tolist())
         cand_class.extend([c] * len(members))
     cand = np.asarray(cand, dtype=np.int64)
