@@ -1,0 +1,60 @@
+"""``vbl-robust train``: train (or keep training) the runway-corner YOLOv8n-pose, offline, resumable."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from .common import fail
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def train(
+        out: Path = typer.Option(Path("train_runs/default"), "--out", help="Working directory (dataset + stages)."),
+        resume: bool = typer.Option(False, "--resume", help="Continue the latest stage, or start a new stage from its best weights."),
+        lard: Path = typer.Option(None, "--lard", help="Train on a LARD V2 directory (CSV + runway DB JSON) instead of synthetic scenes."),
+        n_train: int = typer.Option(1000, "--n-train", min=2, help="Synthetic training approaches."),
+        n_val: int = typer.Option(100, "--n-val", min=1, help="Validation approaches."),
+        imgsz: int = typer.Option(320, "--imgsz", help="Network input size (multiple of 32)."),
+        epochs: int = typer.Option(10, "--epochs", min=1, help="Epochs of this stage."),
+        batch: int = typer.Option(16, "--batch", min=1),
+        seed: int = typer.Option(0, "--seed"),
+        detector: str = typer.Option("twostage", "--detector", help="'twostage' (full view + runway crop) or 'single'."),
+        init: str = typer.Option(None, "--init", help="Initial weights of a first stage: a .pt path or 'default' (the shipped model)."),
+        trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading an --init .pt pickle from outside the package."),
+        ship_model: bool = typer.Option(False, "--ship", help="Copy the stage's best weights into the package as the default model."),
+    ) -> None:
+        """Train the default detector from our synthetic scenes (or your LARD V2 data); every call adds a stage."""
+        from vbl_robust.detect import train as tr
+        from vbl_robust.detect.ultralytics import DEFAULT_MODEL
+
+        init_path = None
+        if init == "default":
+            init_path = DEFAULT_MODEL
+        elif init is not None:
+            init_path = Path(init)
+            if not init_path.is_file():
+                fail(f"--init {init_path}: file not found")
+            if not trust_model:
+                fail(f"--init {init_path}: a .pt file is a pickle that runs code when loaded; pass --trust-model if you trust it")
+        samples = None
+        if lard is not None:
+            from vbl_robust.campaigns.samples import find_lard_files
+            from vbl_robust.data import read_lard
+
+            try:
+                csv_path, db_path = find_lard_files(lard)
+                samples = read_lard(csv_path, db_path, corners_in_image=True)
+            except (ValueError, FileNotFoundError) as exc:
+                fail(str(exc))
+        try:
+            res = tr.train(out, samples=samples, n_train=n_train, n_val=n_val, imgsz=imgsz, epochs=epochs,
+                           batch=batch, seed=seed, resume=resume, init_weights=init_path, detector=detector)
+        except (ValueError, FileNotFoundError) as exc:
+            fail(str(exc))
+        typer.echo(f"stage {res.stage_dir.name}: best weights {res.best}")
+        if ship_model:
+            path = tr.ship(res.best, detector=detector, imgsz=imgsz)
+            typer.echo(f"shipped {path} (update MODEL_CARD.md with the benchmark: python benchmarks/bench_detector.py)")
