@@ -258,9 +258,13 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
         noise_lut = ((np.arange(256, dtype=np.float32) - 128.0) / np.float32(DETAIL_Q)).reshape(1, 256)
     for k, sel in bands.items():
         iso_min = float(g.iso[sel].min())
-        tile = tiles.get(k)
-        if look.debug and tile is None:
+        band_tile = tiles.get(k)
+        if look.debug and band_tile is None:
             continue
+        if band_tile is not None:  # the tile's ground extent (texel edges)
+            (ny, nx), A = band_tile[0].shape[:2], band_tile[1]
+            tx0, ty0 = A[0, 2] - A[0, 0] / 2, A[1, 2] - A[1, 1] / 2
+            tile_box = (tx0, tx0 + nx * A[0, 0], ty0, ty0 + ny * A[1, 1])
         if not look.debug:
             m = int(np.clip(math.floor(math.log2(max(iso_min, WORLD_TEXEL_M) / WORLD_TEXEL_M)), 0, len(pyr) - 1))
             Mw = _world_matrix(look, m)
@@ -276,6 +280,12 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
             size = (u1 - u0, v1 - v0)
             HT = H - np.outer((u0, v0, 0.0), H[2])  # ground → chunk pixels
             cells = sel[r0:r1, c0:c1]
+            tile = band_tile
+            if tile is not None and (box[1] < tile_box[0] or box[0] > tile_box[1] or box[3] < tile_box[2]
+                                     or box[2] > tile_box[3]):
+                tile = None  # this block does not see the airport
+                if look.debug:
+                    continue
             if tile is not None:
                 rgba = _warp(tile[0], HT @ tile[1], size)
             if look.debug:
