@@ -298,7 +298,7 @@ _GROUP_TEXELS_PER_ROW = 2048
 
 
 def paint(tile: np.ndarray, origin_x: float, origin_y: float, sx: float, sy: float, rows: np.ndarray,
-          gain=(1.0, 1.0, 1.0)) -> None:
+          gain=(1.0, 1.0, 1.0), blank: bool = False) -> None:
     """Paint layout rows into ``tile`` (ny, nx, 3 or 4) float32 in place, with exact area coverage.
 
     Texel ``(i, j)`` is the ground cell centred at ``(origin_x + j·sx, origin_y + i·sy)`` of size ``sx × sy``.
@@ -307,6 +307,7 @@ def paint(tile: np.ndarray, origin_x: float, origin_y: float, sx: float, sy: flo
 
     Consecutive rows of the same colour and opacity (the markings of a runway, say) are one shape: they are meant
     to be disjoint, so their coverages add (clipped at 1) before the shape is laid over the tile once.
+    ``blank=True`` promises that ``tile`` is all zeros (the first shape is then written rather than blended).
     """
     ny, nx = tile.shape[:2]
     ch = tile.shape[2]
@@ -352,12 +353,15 @@ def paint(tile: np.ndarray, origin_x: float, origin_y: float, sx: float, sy: flo
                 d = np.tile(colour, j1 - j0) - flat
                 d *= np.repeat(acc, ch, axis=1)
                 flat += d
+                blank = False
                 continue
         for n in run:
-            _paint_row(tile, colour, a, i0s[n], i1s[n], j0s[n], j1s[n], *cov(n), items[n][2] > 0 or items[n][6] > 0)
+            _paint_row(tile, colour, a, i0s[n], i1s[n], j0s[n], j1s[n], *cov(n), items[n][2] > 0 or items[n][6] > 0,
+                       blank)
+            blank = False
 
 
-def _paint_row(tile, colour, a, i0, i1, j0, j1, cy, cx, dashed: bool) -> None:
+def _paint_row(tile, colour, a, i0, i1, j0, j1, cy, cx, dashed: bool, blank: bool = False) -> None:
     """Lay one row's shape (coverage ``cy ⊗ cx`` on texels ``[i0, i1) × [j0, j1)``, opacity ``a``) over ``tile``."""
     cy *= np.float32(a)
     if dashed or (i1 - i0) * (j1 - j0) < _BIG or min(i1 - i0, j1 - j0) < 3:
@@ -366,8 +370,8 @@ def _paint_row(tile, colour, a, i0, i1, j0, j1, cy, cx, dashed: bool) -> None:
     # solid and large: the interior (all but the end rows and columns) is covered with opacity a exactly
     fi0, fi1, fj0, fj1 = i0 + 1, i1 - 1, j0 + 1, j1 - 1
     inner = tile[fi0:fi1, fj0:fj1].reshape(fi1 - fi0, -1)  # (rows, columns·channels) view, see _blend
-    if a >= 1.0:
-        inner[:] = np.tile(colour, fj1 - fj0)
+    if a >= 1.0 or blank:  # (over a blank tile, blending is writing)
+        inner[:] = np.tile(colour * np.float32(min(a, 1.0)), fj1 - fj0)
     else:
         inner *= np.float32(1.0 - a)
         inner += np.tile(colour * np.float32(a), fj1 - fj0)

@@ -59,7 +59,7 @@ def paint_tile(layout: np.ndarray, region: Region, sx: float, sy: float, gain) -
     sx, sy = sx * scale, sy * scale
     nx, ny = int((xmax - xmin) / sx) + 2, int((ymax - ymin) / sy) + 2
     tile = np.zeros((ny, nx, 4), np.float32)
-    paint(tile, xmin, ymin, sx, sy, layout, gain=gain)
+    paint(tile, xmin, ymin, sx, sy, layout, gain=gain, blank=True)
     return tile, np.array([[sx, 0.0, xmin], [0.0, sy, ymin], [0.0, 0.0, 1.0]])
 
 
