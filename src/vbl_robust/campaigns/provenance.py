@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+import json
 import logging
 import subprocess
 from collections.abc import Sequence
@@ -76,6 +77,21 @@ def default_model_path() -> Path | None:
     return Path(path)
 
 
+def default_model_status() -> str:
+    """``""`` when the shipped model is installed and validated, else why not (one line)."""
+    path = default_model_path()
+    if path is None:
+        return "the shipped detector model is not installed"
+    try:
+        info = json.loads((path.parent / "default.json").read_text())
+    except (OSError, ValueError):
+        info = {}
+    if info.get("meets_goals") is not True:
+        return (f"the shipped detector model ({path.name}) does not meet its accuracy goals yet "
+                f"(see {path.parent / 'MODEL_CARD.md'})")
+    return ""
+
+
 @dataclass(frozen=True)
 class DetectorSpec:
     """How to build a detector.
@@ -99,12 +115,20 @@ class DetectorSpec:
             raise FileNotFoundError(f"{self.path}: model file not found")
 
     @classmethod
-    def auto(cls) -> DetectorSpec:
-        """The shipped model when its weights are installed, else the oracle detector (with a warning)."""
-        if default_model_path() is not None:
+    def auto(cls, *, oracle_noise_px: float = 0.0) -> DetectorSpec:
+        """The shipped model when it is installed and validated, else the oracle detector (with a warning).
+
+        A shipped model is *validated* when its ``default.json`` says ``"meets_goals": true`` — set only after
+        ``benchmarks/bench_detector.py`` showed it meets the accuracy goals of its model card. An undertrained
+        model would turn every audit into a report on a broken detector, so it is used only when asked for
+        (``DetectorSpec("default")``, ``--model default``).
+        """
+        why = default_model_status()
+        if why == "":
             return cls("default")
-        logger.warning("the shipped detector model is not installed; using the oracle detector (perfect keypoints)")
-        return cls("oracle")
+        logger.warning("%s; using the oracle detector (ground-truth keypoints%s)", why,
+                       f", {oracle_noise_px:g} px fixed noise" if oracle_noise_px else "")
+        return cls("oracle", options={"noise_px": oracle_noise_px} if oracle_noise_px else {})
 
     @classmethod
     def from_path(cls, path: str | Path, *, trust: bool = False) -> DetectorSpec:

@@ -1,0 +1,33 @@
+"""The shipped model is used by default only once it is validated (``meets_goals`` in its default.json)."""
+
+import json
+
+from vbl_robust.campaigns import provenance
+from vbl_robust.campaigns.provenance import DetectorSpec, default_model_status
+
+
+def _fake_model(tmp_path, monkeypatch, info):
+    weights = tmp_path / "runway_yolov8n_pose.pt"
+    weights.write_bytes(b"x")
+    if info is not None:
+        (tmp_path / "default.json").write_text(json.dumps(info))
+    monkeypatch.setattr(provenance, "default_model_path", lambda: weights)
+
+
+def test_unvalidated_shipped_model_falls_back_to_the_oracle(tmp_path, monkeypatch):
+    _fake_model(tmp_path, monkeypatch, {"detector": "twostage", "imgsz": 320})
+    assert "does not meet its accuracy goals" in default_model_status()
+    spec = DetectorSpec.auto(oracle_noise_px=1.0)
+    assert spec.kind == "oracle" and spec.options == {"noise_px": 1.0}
+
+
+def test_validated_shipped_model_is_the_default(tmp_path, monkeypatch):
+    _fake_model(tmp_path, monkeypatch, {"detector": "twostage", "imgsz": 320, "meets_goals": True})
+    assert default_model_status() == ""
+    assert DetectorSpec.auto().kind == "default"
+
+
+def test_missing_model_is_named(monkeypatch):
+    monkeypatch.setattr(provenance, "default_model_path", lambda: None)
+    assert "not installed" in default_model_status()
+    assert DetectorSpec.auto().kind == "oracle"
