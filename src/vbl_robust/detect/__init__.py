@@ -24,4 +24,26 @@ __all__ = [
     "OracleDetector",
     "Selection",
     "select",
+    "UltralyticsDetector",
+    "OnnxDetector",
+    "TwoStageDetector",
+    "default_detector",
 ]
+
+# The model adapters import ultralytics/onnxruntime: resolved on first use only.
+_LAZY = {
+    "UltralyticsDetector": ".ultralytics",
+    "default_detector": ".ultralytics",
+    "OnnxDetector": ".onnx",
+    "TwoStageDetector": ".twostage",
+}
+
+
+def __getattr__(name: str):
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+    globals()[name] = value
+    return value
