@@ -5,6 +5,7 @@ from .lard_read import read_lard
 from .lard_write import write_lard
 from .paths import resolve_within
 from .sample import Sample, load_rgb
+from .yolo import pose_label, write_data_yaml, write_pose_images
 
 __all__ = [
     "LARD_COLUMNS",
@@ -13,7 +14,10 @@ __all__ = [
     "load_rgb",
     "load_runway_db",
     "normalize_runway",
+    "pose_label",
     "read_lard",
     "resolve_within",
+    "write_data_yaml",
     "write_lard",
+    "write_pose_images",
 ]
