@@ -378,20 +378,21 @@ class Objective:
         return loss + anchor
 
     def _pnp_error_torch(self, kp: torch.Tensor, rows: torch.Tensor):
-        """Position errors of the rows whose PnP succeeds, recomputed on those rows only so that failed rows
-        cannot leak NaN into the gradient. Returns ``(rows, err)`` or None."""
+        """Position errors of the rows whose PnP succeeds: ``(rows, err)`` or None.
+
+        The PnP layer already gives failed rows a zero gradient; their NaN positions are swapped for a finite
+        stand-in before the norm, whose backward would otherwise turn ``0 · NaN`` into NaN.
+        """
         from vbl_robust.pnp import pnp_position_torch
 
+        if rows.numel() == 0:
+            return None
         y = torch.as_tensor(self.sample.position, dtype=torch.float64, device=kp.device)
-        for _ in range(3):
-            if rows.numel() == 0:
-                return None
-            pos, ok = pnp_position_torch(kp[rows], self.sample.corners_3d, self.sample.K, method=self.pnp,
-                                         grad=self.pnp_grad)
-            err = torch.linalg.vector_norm(pos - y, dim=1)
-            good = ok & torch.isfinite(err.detach())
-            if bool(good.all()):
-                return rows, err
-            rows = rows[good]
-        logger.warning("sample %s: PnP kept failing on re-solved rows; they are penalised", self.sample.id)
-        return None
+        pos, ok = pnp_position_torch(kp[rows], self.sample.corners_3d, self.sample.K, method=self.pnp,
+                                     grad=self.pnp_grad)
+        good = ok & torch.isfinite(pos.detach()).all(dim=1)
+        if not bool(good.any()):
+            return None
+        pos = torch.where(good[:, None], pos, y + 1.0)
+        err = torch.linalg.vector_norm(pos - y, dim=1)
+        return rows[good], err[good]
