@@ -24,3 +24,20 @@ def test_train_names_bad_lard_directory(tmp_path):
     res = runner.invoke(app, ["train", "--lard", str(tmp_path / "nope"), "--out", str(tmp_path / "run")])
     assert res.exit_code == 2
     assert "nope" in res.output
+
+
+def test_train_passes_the_training_levers(tmp_path, monkeypatch):
+    from vbl_robust.detect import train as tr
+
+    seen = {}
+
+    def fake_train(out, **kw):
+        seen.update(kw)
+        return tr.TrainResult(out / "stage00", out / "best.pt", out / "last.pt", False)
+
+    monkeypatch.setattr(tr, "train", fake_train)
+    res = runner.invoke(app, ["train", "--out", str(tmp_path), "--crops", "3", "--crops-used", "1", "--min-box", "16",
+                              "--lr0", "0.001", "--optimizer", "AdamW", "--workers", "0", "--imgsz", "480"])
+    assert res.exit_code == 0, res.output
+    assert seen["crops_per_sample"] == 3 and seen["crops_used"] == 1 and seen["min_box"] == 16
+    assert seen["lr0"] == 0.001 and seen["optimizer"] == "AdamW" and seen["workers"] == 0 and seen["imgsz"] == 480

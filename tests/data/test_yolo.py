@@ -60,3 +60,20 @@ def test_write_dataset(tmp_path):
     assert "download" not in y
     with pytest.raises(ValueError, match="uint8"):
         write_pose_images([("c", img.astype(float), c)], tmp_path, "train")
+
+
+def test_min_box_widens_tiny_boxes_keeps_keypoints():
+    # a far runway: 3 × 8 px at detector resolution
+    c = np.array([[51.0, 20.0], [49.0, 20.0], [48.0, 27.0], [52.0, 27.0]])
+    plain, wide = pose_label(c, 100, 50), pose_label(c, 100, 50, min_box=24)
+    assert plain.split()[5:] == wide.split()[5:]  # keypoints untouched
+    box0, _, _ = parse_pose_label(plain, 100, 50)
+    box, _, _ = parse_pose_label(wide, 100, 50)
+    assert (box[:2] + box[2:]) / 2 == pytest.approx((box0[:2] + box0[2:]) / 2, abs=1e-5)  # same centre
+    assert box[2:] - box[:2] == pytest.approx([24.0, 24.0], abs=1e-5)
+    # a large box is unchanged; a widened box is clipped to the image
+    big = np.array([[90.0, 5.0], [10.0, 5.0], [5.0, 45.0], [95.0, 45.0]])
+    assert pose_label(big, 100, 50, min_box=24) == pose_label(big, 100, 50)
+    edge = np.array([[2.0, 20.0], [0.0, 20.0], [0.0, 27.0], [3.0, 27.0]])
+    box, _, _ = parse_pose_label(pose_label(edge, 100, 50, min_box=24), 100, 50)
+    assert box[0] == pytest.approx(0.0) and box[2] == pytest.approx(2.0 + 12.0, abs=1e-5)

@@ -36,6 +36,13 @@ def test_views_and_labels_follow_the_image(tmp_path):
     _, corners, vis = parse_pose_label(labels[0].read_text(), 64, 64)
     assert vis.all() and np.isfinite(corners).all()
     assert data.name == "data.yaml"
+    # min_box: every labelled box at least that wide, recorded in the build spec (another value → other dir)
+    build_dataset(_samples(3), _samples(2), tmp_path / "ds24", imgsz=64, crops_per_sample=0, seed=1, min_box=24)
+    for f in (tmp_path / "ds24/labels/train").glob("*.txt"):
+        box, _, _ = parse_pose_label(f.read_text(), 64, 64)
+        assert min(box[2] - box[0], box[3] - box[1]) >= 24 - 1e-4 or box[0] == 0 or box[2] == 64
+    with pytest.raises(ValueError, match="min_box"):
+        build_dataset(_samples(3), _samples(2), tmp_path / "ds24", imgsz=64, crops_per_sample=0, seed=1)
 
 
 def test_train_offline_and_resume(tmp_path, monkeypatch):

@@ -25,6 +25,12 @@ def register(app: typer.Typer) -> None:
         init: str = typer.Option(None, "--init", help="Initial weights of a first stage: a .pt path or 'default' (the shipped model)."),
         trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading an --init .pt pickle from outside the package."),
         ship_model: bool = typer.Option(False, "--ship", help="Copy the stage's best weights into the package as the default model."),
+        crops: int = typer.Option(2, "--crops", min=0, help="Jittered runway crops rendered per training sample (two-stage)."),
+        crops_used: int = typer.Option(None, "--crops-used", min=0, help="Train on only the first N crops of each sample (more weight on full views)."),
+        min_box: float = typer.Option(None, "--min-box", min=0, help="Minimum labelled box side in view pixels (default 7.5 % of --imgsz)."),
+        lr0: float = typer.Option(None, "--lr0", help="Initial learning rate (default: ultralytics')."),
+        optimizer: str = typer.Option("auto", "--optimizer", help="Ultralytics optimizer: auto, SGD, AdamW, ..."),
+        workers: int = typer.Option(2, "--workers", min=0, help="Data-loader worker processes."),
     ) -> None:
         """Train the default detector from our synthetic scenes (or your LARD V2 data); every call adds a stage."""
         from vbl_robust.detect import train as tr
@@ -51,7 +57,9 @@ def register(app: typer.Typer) -> None:
                 fail(str(exc))
         try:
             res = tr.train(out, samples=samples, n_train=n_train, n_val=n_val, imgsz=imgsz, epochs=epochs,
-                           batch=batch, seed=seed, resume=resume, init_weights=init_path, detector=detector)
+                           batch=batch, seed=seed, resume=resume, init_weights=init_path, detector=detector,
+                           crops_per_sample=crops, crops_used=crops_used, min_box=min_box, lr0=lr0,
+                           optimizer=optimizer, workers=workers)
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         typer.echo(f"stage {res.stage_dir.name}: best weights {res.best}")

@@ -40,17 +40,32 @@ def from_edge(xy: np.ndarray) -> np.ndarray:
     return np.asarray(xy, dtype=np.float64) - 0.5
 
 
-def pose_label(corners_2d: np.ndarray, width: int, height: int, cls: int = 0) -> str | None:
+def widen_box(lo: np.ndarray, hi: np.ndarray, min_side: float) -> tuple[np.ndarray, np.ndarray]:
+    """Grow the box ``[lo, hi]`` about its centre so that each side is at least ``min_side`` (unchanged if larger)."""
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    half = np.maximum(hi - lo, float(min_side)) / 2
+    mid = (lo + hi) / 2
+    return mid - half, mid + half
+
+
+def pose_label(corners_2d: np.ndarray, width: int, height: int, cls: int = 0, *, min_box: float = 0.0) -> str | None:
     """One YOLO-pose label line for runway corners.
 
     Args:
         corners_2d: (4, 2) corner pixels TR, TL, BL, BR in OpenCV convention (may lie outside the image).
         width, height: image size in pixels.
         cls: class index.
+        min_box: minimum side of the labelled box in pixels. The box of a far runway is a few pixels wide at
+            detector resolution; ultralytics' task-aligned assigner only takes anchors whose centres lie inside
+            the box (stride 8 at best), so such a box gets zero or one positive anchor and the runway is learnt
+            as background. Widening the *box* (about its centre, before clipping) gives it several anchors; the
+            keypoints stay exact. (Side effect: ultralytics scales its keypoint loss by the box area, so corners of
+            tiny runways are learnt with a looser tolerance; the second pass of the two-stage detector sees them
+            large.)
 
     Returns:
         The label line, or ``None`` when no corner is inside the image and the runway box does not intersect it
-        (nothing to label). The box is the corners' bounding box clipped to the image.
+        (nothing to label). The box is the corners' bounding box, widened to ``min_box``, clipped to the image.
     """
     c = np.asarray(corners_2d, dtype=np.float64).reshape(4, 2)
     if not np.all(np.isfinite(c)):
@@ -61,6 +76,10 @@ def pose_label(corners_2d: np.ndarray, width: int, height: int, cls: int = 0) ->
     x2, y2 = np.clip(e.max(0), 0, [width, height])
     if x2 - x1 < 1.0 or y2 - y1 < 1.0:
         return None
+    if min_box > 0:
+        lo, hi = widen_box(e.min(0), e.max(0), min_box)
+        x1, y1 = np.clip(lo, 0, [width, height])
+        x2, y2 = np.clip(hi, 0, [width, height])
     vals = [(x1 + x2) / 2 / width, (y1 + y2) / 2 / height, (x2 - x1) / width, (y2 - y1) / height]
     parts = [str(int(cls))] + [f"{v:.7f}" for v in vals]
     for (x, y), vis in zip(e, inside, strict=True):
@@ -105,7 +124,8 @@ def write_data_yaml(root: str | Path, *, train: str = "images/train", val: str =
 
 
 def write_pose_images(
-    items: Iterable[tuple[str, np.ndarray, np.ndarray]], root: str | Path, split: str, *, ext: str = "png"
+    items: Iterable[tuple[str, np.ndarray, np.ndarray]], root: str | Path, split: str, *, ext: str = "png",
+    min_box: float = 0.0,
 ) -> int:
     """Write images and labels of one split under ``root/images/<split>`` and ``root/labels/<split>``.
 
@@ -115,6 +135,7 @@ def write_pose_images(
         root: dataset root.
         split: ``"train"`` or ``"val"`` (any sub-directory name).
         ext: image file extension (``png`` is lossless).
+        min_box: minimum side of the labelled boxes in pixels (see :func:`pose_label`).
 
     Returns:
         The number of images written.
@@ -133,7 +154,7 @@ def write_pose_images(
         h, w = img.shape[:2]
         if not cv2.imwrite(str(img_dir / f"{name}.{ext}"), np.ascontiguousarray(img[:, :, ::-1])):
             raise ValueError(f"write_pose_images: could not write {img_dir / f'{name}.{ext}'}")
-        line = pose_label(corners, w, h)
+        line = pose_label(corners, w, h, min_box=min_box)
         (lbl_dir / f"{name}.txt").write_text("" if line is None else line + "\n")
         n += 1
     return n

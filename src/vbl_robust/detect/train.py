@@ -44,6 +44,9 @@ TRAIN_DEFAULTS = dict(
 )
 
 
+#: default minimum side of a labelled box, as a fraction of the training size (24 px at 320: three stride-8 anchors)
+MIN_BOX_FRACTION = 0.075
+
 #: synthetic validation samples come from ``generate(n_val, seed + VAL_SEED_OFFSET)``
 VAL_SEED_OFFSET = 1_000_003
 
@@ -95,7 +98,7 @@ def sample_views(
 
 def build_dataset(
     train_samples: Sequence[Sample], val_samples: Sequence[Sample], root: str | Path, *, imgsz: int = 320,
-    crops_per_sample: int = 2, seed: int = 0, jitter: CropJitter | None = None,
+    crops_per_sample: int = 2, seed: int = 0, jitter: CropJitter | None = None, min_box: float = 0.0,
 ) -> Path:
     """Render and write a YOLO-pose dataset; returns the path of its ``data.yaml``.
 
@@ -103,10 +106,12 @@ def build_dataset(
     ``(seed, split, i)``), so the build is incremental: a sample whose views all exist is not rendered again
     (a growing prefix-stable sample list, such as ``scenes.generate(n, seed)``, only renders the new samples).
     Validation gets one full view and (if ``crops_per_sample > 0``) one jittered crop per sample. Extra files
-    beyond the requested sizes are removed, so the directory always matches the arguments.
+    beyond the requested sizes are removed, so the directory always matches the arguments. ``min_box``: minimum
+    side of the labelled boxes in view pixels (:func:`~vbl_robust.data.yolo.pose_label`).
     """
     root = Path(root).resolve()
-    spec = dict(imgsz=imgsz, crops=crops_per_sample, seed=seed, jitter=(jitter or CropJitter()).__dict__)
+    spec = dict(imgsz=imgsz, crops=crops_per_sample, seed=seed, jitter=(jitter or CropJitter()).__dict__,
+                min_box=float(min_box))
     marker = root / "build.json"
     if marker.exists() and json.loads(marker.read_text()) != spec:
         raise ValueError(f"build_dataset: {root} was built with {marker.read_text()}, now {spec}; "
@@ -127,7 +132,7 @@ def build_dataset(
                     yield f"{i:06d}_{j}", img, c
                 s.drop_pixels()
 
-        n = write_pose_images(items(), root, split)
+        n = write_pose_images(items(), root, split, min_box=min_box)
         keep = {f"{i:06d}_{j}" for i in range(len(samples)) for j in range(nviews)}
         for d in (img_dir, lbl_dir):
             for f in d.glob("*"):
@@ -178,7 +183,8 @@ def train(
     out_dir: str | Path, *, samples: Sequence[Sample] | None = None, n_train: int = 1000, n_val: int = 100,
     imgsz: int = 320, epochs: int = 10, batch: int = 16, seed: int = 0, resume: bool = False,
     init_weights: str | Path | None = None, detector: str = "twostage", crops_per_sample: int = 2,
-    workers: int = 2, lr0: float | None = None, crops_used: int | None = None, **overrides,
+    workers: int = 2, lr0: float | None = None, crops_used: int | None = None, min_box: float | None = None,
+    **overrides,
 ) -> TrainResult:
     """Train (or continue training) the runway-corner YOLOv8n-pose.
 
@@ -199,6 +205,9 @@ def train(
         crops_used: train on only the first ``crops_used`` of them (more weight on full views, which teach the
             detection itself); None → all.
         lr0: initial learning rate (None: ultralytics' choice).
+        min_box: minimum side of the labelled boxes in view pixels; None → ``MIN_BOX_FRACTION · imgsz`` (24 px
+            at 320): far runways are 3–7 px wide in a 320 px full view, too small for the anchor assigner to give
+            them positives (:func:`~vbl_robust.data.yolo.pose_label`).
         **overrides: further ultralytics training arguments.
 
     Returns:
@@ -231,7 +240,9 @@ def train(
         stage = out_dir / "stage00"
 
     crops = crops_per_sample if detector == "twostage" else 0
-    data_root = out_dir / f"dataset_{imgsz}px_{crops}crops"
+    if min_box is None:
+        min_box = round(MIN_BOX_FRACTION * imgsz)
+    data_root = out_dir / (f"dataset_{imgsz}px_{crops}crops" + (f"_box{min_box:g}" if min_box else ""))
     if samples is None:
         from ..scenes import generate
 
@@ -245,7 +256,7 @@ def train(
         nv = max(1, min(n_val, len(samples) // 5))
         va = [samples[i] for i in order[:nv]]
         tr = [samples[i] for i in order[nv:]]
-    data = build_dataset(tr, va, data_root, imgsz=imgsz, crops_per_sample=crops, seed=seed)
+    data = build_dataset(tr, va, data_root, imgsz=imgsz, crops_per_sample=crops, seed=seed, min_box=min_box)
     if crops_used is not None and crops_used < crops:
         data = _subset_yaml(data, len(tr), crops_used)
 
