@@ -41,3 +41,4 @@ def test_train_passes_the_training_levers(tmp_path, monkeypatch):
     assert res.exit_code == 0, res.output
     assert seen["crops_per_sample"] == 3 and seen["crops_used"] == 1 and seen["min_box"] == 16
     assert seen["lr0"] == 0.001 and seen["optimizer"] == "AdamW" and seen["workers"] == 0 and seen["imgsz"] == 480
+    assert seen["threads"] is None

@@ -53,7 +53,16 @@ def test_train_offline_and_resume(tmp_path, monkeypatch):
 
     monkeypatch.setattr(socket, "getaddrinfo", no_network)
     monkeypatch.setattr(socket.socket, "connect", no_network)
-    r = train(tmp_path / "run", samples=_samples(8), n_val=2, imgsz=64, epochs=1, batch=4, workers=0, seed=0)
+    import torch
+
+    before = torch.get_num_threads()
+    try:
+        # ultralytics alone would use cpu_count − 1 threads (1 on a 2-core machine); `threads` wins
+        r = train(tmp_path / "run", samples=_samples(8), n_val=2, imgsz=64, epochs=1, batch=4, workers=0, seed=0,
+                  threads=3)
+        assert torch.get_num_threads() == 3
+    finally:
+        torch.set_num_threads(before)
     assert r.best.exists() and r.stage_dir.name == "stage00"
     with pytest.raises(ValueError, match="resume"):
         train(tmp_path / "run", samples=_samples(8), imgsz=64, epochs=1)

@@ -31,6 +31,7 @@ def register(app: typer.Typer) -> None:
         lr0: float = typer.Option(None, "--lr0", help="Initial learning rate (default: ultralytics')."),
         optimizer: str = typer.Option("auto", "--optimizer", help="Ultralytics optimizer: auto, SGD, AdamW, ..."),
         workers: int = typer.Option(2, "--workers", min=0, help="Data-loader worker processes."),
+        threads: int = typer.Option(None, "--threads", min=1, help="Torch threads for CPU training (default: all cores)."),
     ) -> None:
         """Train the default detector from our synthetic scenes (or your LARD V2 data); every call adds a stage."""
         from vbl_robust.detect import train as tr
@@ -59,7 +60,7 @@ def register(app: typer.Typer) -> None:
             res = tr.train(out, samples=samples, n_train=n_train, n_val=n_val, imgsz=imgsz, epochs=epochs,
                            batch=batch, seed=seed, resume=resume, init_weights=init_path, detector=detector,
                            crops_per_sample=crops, crops_used=crops_used, min_box=min_box, lr0=lr0,
-                           optimizer=optimizer, workers=workers)
+                           optimizer=optimizer, workers=workers, threads=threads)
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         typer.echo(f"stage {res.stage_dir.name}: best weights {res.best}")

@@ -143,6 +143,16 @@ def build_dataset(
     return write_data_yaml(root)
 
 
+def _use_threads(threads: int | None) -> None:
+    """Make ultralytics' CPU trainer use ``threads`` torch threads (it resets them to ``cpu_count − 1``)."""
+    import os
+
+    from ultralytics.utils import torch_utils
+
+    n = int(threads) if threads else (os.cpu_count() or 1)
+    torch_utils.NUM_THREADS = max(1, n)
+
+
 def _pretrained_arg(init: str | Path | None) -> str | bool:
     """Ultralytics' ``pretrained``: ``False`` discards the model's weights, so a new stage passes its init file."""
     return str(Path(init).resolve()) if init is not None else False
@@ -184,7 +194,7 @@ def train(
     imgsz: int = 320, epochs: int = 10, batch: int = 16, seed: int = 0, resume: bool = False,
     init_weights: str | Path | None = None, detector: str = "twostage", crops_per_sample: int = 2,
     workers: int = 2, lr0: float | None = None, crops_used: int | None = None, min_box: float | None = None,
-    **overrides,
+    threads: int | None = None, **overrides,
 ) -> TrainResult:
     """Train (or continue training) the runway-corner YOLOv8n-pose.
 
@@ -208,6 +218,8 @@ def train(
         min_box: minimum side of the labelled boxes in view pixels; None → ``MIN_BOX_FRACTION · imgsz`` (24 px
             at 320): far runways are 3–7 px wide in a 320 px full view, too small for the anchor assigner to give
             them positives (:func:`~vbl_robust.data.yolo.pose_label`).
+        threads: torch intra-op threads for CPU training; None → all cores (ultralytics' own choice is
+            ``cpu_count − 1``, i.e. one thread on a 2-core machine).
         **overrides: further ultralytics training arguments.
 
     Returns:
@@ -229,6 +241,7 @@ def train(
         last = stages[-1] / "weights" / "last.pt"
         if last.exists() and not _finished(last):
             logger.info("resuming %s", last)
+            _use_threads(threads)
             YOLO(str(last)).train(resume=True)
             w = stages[-1] / "weights"
             return TrainResult(stages[-1], w / "best.pt", w / "last.pt", True)
@@ -260,6 +273,7 @@ def train(
     if crops_used is not None and crops_used < crops:
         data = _subset_yaml(data, len(tr), crops_used)
 
+    _use_threads(threads)
     model = YOLO(str(init)) if init is not None else YOLO("yolov8n-pose.yaml")
     args = dict(TRAIN_DEFAULTS)
     args.update(data=str(data), imgsz=imgsz, epochs=epochs, batch=batch, workers=workers, seed=seed,
