@@ -115,6 +115,11 @@ def test_evaluate_scores_known_errors():
     assert [row["envelope"] for row in rows] == ["far", "medium", "close", "all"]
     assert rows[-1]["bias_u_px"] == pytest.approx(0.5) and rows[-1]["bias_v_px"] == pytest.approx(-1.0)
     assert np.all(r.pos_err_m["ippe_lm"] > 0) and np.all(np.isfinite(r.pos_err_m["ippe_lm"]))
+    assert r.correct.all() and rows[-1]["correct_rate"] == 1.0  # 1.1 px ≪ a quarter of each runway's box
+    # a 40-px miss is a detection but not a correct one for the small (far, medium) runways
+    off = evaluate_detector(_ShiftedTruth(samples, [20.0, 0.0]), samples, pnp_methods=())
+    assert off.detected.all()
+    assert off.correct.tolist() == list(off.box_diag * 0.25 >= 40.0) and not off.correct.all()
     exact = evaluate_detector(_ShiftedTruth(samples, [0.0, 0.0]), samples)
     assert np.all(exact.pos_err_m["ippe_lm"] < 1e-3)
     assert score(exact) >= score(r)

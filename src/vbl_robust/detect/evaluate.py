@@ -4,6 +4,11 @@ Per sample: top candidate (σ_select at ``conf_threshold``), corner errors in **
 error × 1024 / image width), PnP position error for each solver, slant distance. :func:`summarize` aggregates
 per envelope (``sample.meta["envelope"]``) and overall; a failure (no detection, PnP failure) counts as an
 infinite position error, so medians and survival rates are over *all* samples.
+
+*Detection* is the paper's criterion (a candidate with confidence ≥ τ_conf), whether or not it is on the
+runway; *correct* detection adds a localisation criterion in the spirit of PCK: the mean corner error is at most
+``PCK_FRACTION`` × the diagonal of the true corner box (so a far runway of 10 px must be hit within 2.5 px, a
+close one within tens of pixels).
 """
 
 from __future__ import annotations
@@ -21,6 +26,9 @@ from .views import to_tensor
 #: nominal survival: position error ≤ this many metres with no perturbation
 SURVIVAL_M = 1000.0
 
+#: a detection is *correct* when its mean corner error ≤ this fraction of the true corner box's diagonal
+PCK_FRACTION = 0.25
+
 
 @dataclass
 class EvalResult:
@@ -28,7 +36,8 @@ class EvalResult:
 
     envelope (N,) str; detected (N,) bool; conf (N,); corner_err (N, 4) 1024-px units (NaN if not detected);
     corner_delta (N, 4, 2) signed errors (predicted − true), 1024-px units; slant_m (N,);
-    pos_err_m: solver → (N,) metres (inf on failure).
+    pos_err_m: solver → (N,) metres (inf on failure); box_diag (N,) diagonal of the true corner box,
+    1024-px units.
     """
 
     envelope: np.ndarray
@@ -38,6 +47,16 @@ class EvalResult:
     corner_delta: np.ndarray
     slant_m: np.ndarray
     pos_err_m: dict[str, np.ndarray]
+    box_diag: np.ndarray | None = None
+
+    @property
+    def correct(self) -> np.ndarray:
+        """(N,) bool: detected and mean corner error ≤ ``PCK_FRACTION`` × true box diagonal."""
+        if self.box_diag is None:
+            return self.detected.copy()
+        with np.errstate(invalid="ignore"):
+            return self.detected & (np.nanmean(np.where(self.detected[:, None], self.corner_err, 0.0), axis=1)
+                                    <= PCK_FRACTION * self.box_diag)
 
 
 def evaluate_detector(
@@ -83,6 +102,7 @@ def evaluate_detector(
         envelope=np.array([str(s.meta.get("envelope", "all")) for s in samples]),
         detected=ok, conf=conf, corner_err=np.linalg.norm(delta, axis=-1), corner_delta=delta,
         slant_m=np.array([s.slant_distance_m for s in samples]), pos_err_m=pos,
+        box_diag=np.array([np.linalg.norm(np.ptp(s.corners_2d, axis=0)) * 1024.0 / s.width for s in samples]),
     )
 
 
@@ -95,6 +115,7 @@ def summarize(r: EvalResult, groups: Sequence[str] = ("far", "medium", "close"))
         ce = r.corner_err[m][r.detected[m]].ravel()
         dl = r.corner_delta[m][r.detected[m]].reshape(-1, 2)
         row = dict(envelope=g, n=int(m.sum()), detection_rate=float(r.detected[m].mean()) if m.any() else np.nan,
+                   correct_rate=float(r.correct[m].mean()) if m.any() else np.nan,
                    corner_median_px=float(np.median(ce)) if ce.size else np.nan,
                    corner_p95_px=float(np.percentile(ce, 95)) if ce.size else np.nan,
                    bias_u_px=float(dl[:, 0].mean()) if dl.size else np.nan,
