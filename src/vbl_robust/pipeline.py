@@ -18,7 +18,10 @@ image — rotation about the principal point commutes with isotropic scaling, so
 computed on fewer pixels; the centre is mapped with :class:`~vbl_robust.perturb.PixelScale` and keypoints are
 mapped back to the sample's pixels before PnP (``resolution="full"`` disables it).
 
-A detector declaring ``uses_pixels = False`` (the oracle) receives the unperturbed image broadcast over the
+A detector whose ``applies_perturbation(perturbation)`` is true (the two-stage detector) receives the
+unperturbed image with a context marked ``perturbed=False`` and samples its views of ``T(x; θ)`` itself (no
+full-resolution warp per evaluation; ``fuse=False`` disables it). A detector declaring ``uses_pixels = False``
+(the oracle) receives the unperturbed image broadcast over the
 batch instead of perturbed copies: it reads the perturbation from the context, and the audit runs fast.
 
 Two paths: ``objective(theta)`` (NumPy, no gradient, OpenCV warps) and ``objective.torch(theta)``
@@ -152,6 +155,9 @@ class Objective:
         resolution: ``"auto"`` (perturb at the detector's ``input_size`` when smaller than the image),
             ``"full"``, or an int long side in pixels.
         pnp_grad: gradient of the differentiable PnP layer (``"exact"`` or ``"bpnp"``).
+        fuse: let a detector that can (``detector.applies_perturbation(perturbation)``, e.g. the two-stage
+            detector) apply the perturbation while sampling its own views from the unperturbed image, instead of
+            receiving perturbed full-resolution copies (False: always perturb the image first).
 
     Raises:
         ValueError: a user mistake (unknown parameter name, unknown PnP solver, bad threshold/penalty/batch size,
@@ -176,6 +182,7 @@ class Objective:
         batch_size: int = 32,
         resolution: str | int = "auto",
         pnp_grad: str = "exact",
+        fuse: bool = True,
     ):
         if not isinstance(box, ParameterBox):
             raise ValueError(f"Objective: box must be a vbl_robust.ParameterBox, got {type(box).__name__}")
@@ -203,6 +210,7 @@ class Objective:
         self.batch_size = int(batch_size)
         self.resolution = resolution
         self.pnp_grad = pnp_grad
+        self.fuse = bool(fuse)
         self._uses_pixels = bool(getattr(detector, "uses_pixels", True))
         self.nfev = 0
         self._loaded = False
@@ -265,8 +273,15 @@ class Objective:
     def _center(self) -> np.ndarray:
         return self._scale.to_scaled(self.sample.K[:2, 2])
 
-    def _context(self, theta) -> DetectContext:
-        return DetectContext(self.sample, theta, self.perturbation, self._scale)
+    def _context(self, theta, fused: bool = False) -> DetectContext:
+        return DetectContext(self.sample, theta, self.perturbation, self._scale, perturbed=not fused)
+
+    def _fused(self) -> bool:
+        """Does the detector apply the perturbation itself (it then gets the unperturbed image)?"""
+        if not self.fuse:
+            return False
+        applies = getattr(self.detector, "applies_perturbation", None)
+        return bool(callable(applies) and applies(self.perturbation))
 
     # -- black-box path ------------------------------------------------------------------------------------------
     def __call__(self, theta) -> np.ndarray:
@@ -295,12 +310,13 @@ class Objective:
 
     def _evaluate_chunk(self, t: np.ndarray) -> EvalRecord:
         n = t.shape[0]
-        if self._uses_pixels:
+        fused = self._fused()
+        if self._uses_pixels and not fused:
             imgs = self.perturbation.images_numpy(self._base, t, center=self._center())
             x = torch.from_numpy(imgs).permute(0, 3, 1, 2)  # a (B, 3, H, W) view; detectors copy if they need to
         else:
             x = self._base_t[None].expand(n, -1, -1, -1)
-        kw = {"context": self._context(t)} if _takes_context(self.detector.detect) else {}
+        kw = {"context": self._context(t, fused)} if fused or _takes_context(self.detector.detect) else {}
         with torch.no_grad():
             dets = self.detector.detect(x, **kw)
         if len(dets) != n:
@@ -362,11 +378,12 @@ class Objective:
         center = self._center()
         for i in range(0, t.shape[0], self.batch_size):
             th = t[i : i + self.batch_size]
-            if self._uses_pixels:
+            fused = self._fused()
+            if self._uses_pixels and not fused:
                 imgs = self.perturbation.images_torch(self._base_t, th, center=center)
             else:
                 imgs = self._base_t[None].expand(th.shape[0], -1, -1, -1)
-            conf, kp = top(imgs, **({"context": self._context(th)} if _takes_context(top) else {}))
+            conf, kp = top(imgs, **({"context": self._context(th, fused)} if fused or _takes_context(top) else {}))
             confs.append(conf.reshape(-1))
             kps.append(kp.reshape(-1, 4, 2))
         conf, kp = torch.cat(confs), self._scale.to_original(torch.cat(kps).to(torch.float64))

@@ -111,12 +111,16 @@ class DetectContext:
             differentiable path), columns named by ``perturbation.names``.
         perturbation: the :class:`~vbl_robust.perturb.Perturbation` applied.
         scale: mapping from the sample's pixels to the pixels of the images given to the detector.
+        perturbed: True when the images already show ``T(x; θ)``; False when the caller handed the *unperturbed*
+            image (every row) to a detector whose ``applies_perturbation(perturbation)`` is true — that detector
+            then applies θ itself while sampling its views (e.g. :class:`~vbl_robust.detect.TwoStageDetector`).
     """
 
     sample: Sample
     theta: np.ndarray | torch.Tensor
     perturbation: Perturbation
     scale: PixelScale = PixelScale()
+    perturbed: bool = True
 
     @property
     def center(self) -> np.ndarray:

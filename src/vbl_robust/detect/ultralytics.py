@@ -88,7 +88,10 @@ class PoseDetector:
         """All anchors: boxes (B, A, 4), conf (B, A), keypoints (B, A, 4, 2), in image pixels (OpenCV)."""
         x = to_tensor(images)
         win = self.windows(x)
-        views = resample(x, win, self.imgsz)
+        return self.candidates_in_views(resample(x, win, self.imgsz), win)
+
+    def candidates_in_views(self, views: torch.Tensor, win: torch.Tensor):
+        """Like :meth:`candidates` for views already sampled (windows ``win`` (B, 3)), in image pixels."""
         boxes, conf, k = split_raw(self.raw_chunked(views), self.nc)
         b, a = conf.shape
         kp = view_to_image(k.reshape(b, a * 4, 2), win, self.imgsz).reshape(b, a, 4, 2)
@@ -97,7 +100,11 @@ class PoseDetector:
 
     def top(self, images) -> Top:
         """Differentiable max-confidence candidate per image (gradients flow to float input images)."""
-        boxes, conf, kp = self.candidates(images)
+        return self.top_of(*self.candidates(images))
+
+    @staticmethod
+    def top_of(boxes: torch.Tensor, conf: torch.Tensor, kp: torch.Tensor) -> Top:
+        """The max-confidence anchor of candidates (``gather``, differentiable)."""
         i = conf.argmax(dim=1)
         c = conf.gather(1, i[:, None])[:, 0]
         k = kp.gather(1, i[:, None, None, None].expand(-1, 1, 4, 2))[:, 0]

@@ -123,3 +123,114 @@ def to_tensor(images: np.ndarray | torch.Tensor) -> torch.Tensor:
     if a.ndim != 4 or a.shape[-1] != 3:
         raise ValueError(f"to_tensor: expected (H, W, 3) or (B, H, W, 3) RGB, got {tuple(a.shape)}")
     return a.permute(0, 3, 1, 2).float().div_(255.0)
+
+
+# -- views of a perturbed image, sampled from the unperturbed one ------------------------------------------------
+def _reflect101(u: torch.Tensor, n: int) -> torch.Tensor:
+    """Reflect OpenCV pixel coordinates into ``[0, n − 1]`` without repeating the border (``BORDER_REFLECT_101``).
+
+    Bilinear interpolation at a reflected coordinate equals OpenCV's bilinear interpolation with that border.
+    """
+    if n < 2:
+        return torch.zeros_like(u)
+    period = 2.0 * (n - 1)
+    return (n - 1) - (torch.remainder(u, period) - (n - 1)).abs()
+
+
+def _rolled_samples(src: torch.Tensor, xs: torch.Tensor, ys: torch.Tensor, p: int, height: int, width: int,
+                    angle_deg: torch.Tensor, center: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Sample the *rolled* image at edge coordinates ``xs (B, nx)`` × ``ys (B, ny)``, reading the unrolled source.
+
+    Args:
+        src: (1 or B, C, Hp, Wp) source, already average-pooled by ``p`` from the ``height × width`` image.
+        angle_deg, center: the roll (see :mod:`vbl_robust.perturb.geometric`); center (2,) OpenCV pixels.
+
+    Returns:
+        ``(values (B, C, ny, nx), mask (B, 1, ny, nx))``: mask is the fraction of each sample inside the image
+        frame (bilinear weights of in-frame pixels, as :func:`resample` computes it).
+    """
+    b = xs.shape[0]
+    hp, wp = src.shape[-2:]
+    qu = (xs - 0.5)[:, None, :].expand(b, ys.shape[1], xs.shape[1])  # OpenCV coordinates of the rolled image
+    qv = (ys - 0.5)[:, :, None].expand(b, ys.shape[1], xs.shape[1])
+    # in-frame fraction, in the pooled domain (what resample's ones channel gives)
+    mu, mv = (qu + 0.5) / p - 0.5, (qv + 0.5) / p - 0.5
+    mask = ((1.0 + mu).clamp(0, 1) * (wp - mu).clamp(0, 1) * (1.0 + mv).clamp(0, 1) * (hp - mv).clamp(0, 1))
+    # inverse roll: the rolled pixel q shows the source pixel c + Rᵀ (q − c)
+    a = torch.deg2rad(angle_deg.to(xs.dtype))[:, None, None]
+    co, si = torch.cos(a), torch.sin(a)
+    du, dv = qu - center[0], qv - center[1]
+    su = _reflect101(center[0] + co * du - si * dv, width)
+    sv = _reflect101(center[1] + si * du + co * dv, height)
+    gx = 2.0 * ((su + 0.5) / p) / wp - 1.0
+    gy = 2.0 * ((sv + 0.5) / p) / hp - 1.0
+    grid = torch.stack([gx, gy], dim=-1).to(src.dtype)  # (B, ny, nx, 2)
+    if src.shape[0] == 1 and b > 1:  # one source for the whole batch: stack the grids instead of copying it
+        ny, nx = grid.shape[1:3]
+        out = F.grid_sample(src, grid.reshape(1, b * ny, nx, 2), mode="bilinear", padding_mode="border",
+                            align_corners=False)
+        out = out.reshape(src.shape[1], b, ny, nx).transpose(0, 1)
+    else:
+        out = F.grid_sample(src.expand(b, -1, -1, -1), grid, mode="bilinear", padding_mode="border",
+                            align_corners=False)
+    return out, mask[:, None].to(src.dtype)
+
+
+def rolled_gray_mean(pooled: torch.Tensor, p: int, height: int, width: int, angle_deg: torch.Tensor,
+                     center: torch.Tensor, n: int = 128) -> torch.Tensor:
+    """(B,) grayscale mean of the rolled image (ITU-R 601 luma, what the contrast perturbation uses), estimated
+    on an ``n × n`` grid of the frame sampled from the (pooled) unrolled source."""
+    from vbl_robust.perturb.photometric import LUMA_WEIGHTS
+
+    b = angle_deg.shape[0]
+    t = (torch.arange(n, dtype=pooled.dtype, device=pooled.device) + 0.5) / n
+    xs, ys = (t * width).expand(b, n), (t * height).expand(b, n)
+    v, _ = _rolled_samples(pooled, xs, ys, p, height, width, angle_deg, center)
+    w = torch.tensor(LUMA_WEIGHTS, dtype=v.dtype, device=v.device)
+    return torch.einsum("bchw,c->b", v, w) / (n * n)
+
+
+def perturbed_resample(
+    image: torch.Tensor, windows: torch.Tensor, size: int, *, angle_deg: torch.Tensor, center,
+    contrast: torch.Tensor, gray_mean: torch.Tensor, pooled: dict[int, torch.Tensor] | None = None,
+) -> torch.Tensor:
+    """Views of the *perturbed* image ``T(x; θ)`` (roll about ``center``, then contrast), sampled directly from
+    the unperturbed ``x`` — the same views as ``resample(perturb(x), windows, size)`` without making the
+    perturbed full-resolution image (one interpolation instead of two, so the values differ by interpolation
+    smoothing only; tested).
+
+    Args:
+        image: (1, 3, H, W) unperturbed image in [0, 1] (or (B, 3, H, W), one per row).
+        windows: (B, 3) view windows (edge coordinates of the image).
+        size: output side.
+        angle_deg, contrast: (B,) roll (degrees) and contrast factor per view.
+        center: (2,) roll centre, OpenCV pixels (the principal point).
+        gray_mean: (B,) grayscale mean of each rolled image (:func:`rolled_gray_mean`), for the contrast.
+        pooled: cache ``{p: avg_pool(image, p)}`` shared between calls on the same image (filled as needed).
+
+    Returns:
+        (B, 3, size, size); outside the image frame: grey 114/255 as in :func:`resample`. Differentiable w.r.t.
+        the image, the windows, the angles and the contrast factors.
+    """
+    b = windows.shape[0]
+    h, w = image.shape[-2:]
+    dtype = image.dtype
+    windows = torch.as_tensor(windows, dtype=dtype, device=image.device)
+    center = torch.as_tensor(np.asarray(center, dtype=np.float64), dtype=dtype, device=image.device)
+    pooled = {} if pooled is None else pooled
+    factors = [_pool_factor(float(s), size) for s in windows[:, 2].detach().cpu().tolist()]
+    out = torch.empty(b, image.shape[1], size, size, dtype=dtype, device=image.device)
+    t = (torch.arange(size, dtype=dtype, device=image.device) + 0.5) / size
+    for p in sorted(set(factors)):
+        idx = torch.tensor([i for i, f in enumerate(factors) if f == p], device=image.device)
+        if p not in pooled:
+            pooled[p] = F.avg_pool2d(image, p, stride=p) if p > 1 else image
+        src = pooled[p] if pooled[p].shape[0] == 1 else pooled[p][idx]
+        win = windows[idx]
+        xs = win[:, 0:1] + t[None, :] * win[:, 2:3]
+        ys = win[:, 1:2] + t[None, :] * win[:, 2:3]
+        v, mask = _rolled_samples(src, xs, ys, p, h, w, angle_deg[idx], center)
+        f = contrast[idx].to(dtype)[:, None, None, None]
+        v = (f * v + (1.0 - f) * gray_mean[idx].to(dtype)[:, None, None, None]).clamp(0.0, 1.0)
+        out[idx] = v * mask + PAD_VALUE * (1.0 - mask)
+    return out
