@@ -11,7 +11,13 @@ from detect_helpers import runway_image
 from vbl_robust.detect.base import DetectContext
 from vbl_robust.detect.twostage import TwoStageDetector
 from vbl_robust.detect.ultralytics import UltralyticsDetector
-from vbl_robust.detect.views import letterbox_window, perturbed_resample, resample, rolled_gray_mean, to_tensor
+from vbl_robust.detect.views import (
+    letterbox_window,
+    perturbed_resample,
+    resample,
+    rolled_gray_mean,
+    to_tensor,
+)
 from vbl_robust.perturb import Perturbation
 from vbl_robust.perturb.photometric import _gray_mean
 from vbl_robust.space import ParameterBox
