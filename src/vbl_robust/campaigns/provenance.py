@@ -99,6 +99,8 @@ class DetectorSpec:
     Kinds: ``"oracle"`` (projects the ground truth: a perfect detector), ``"default"`` (the shipped model),
     ``"ultralytics"`` (a user's ``.pt``; ``trust=True`` required for files outside the package), ``"onnx"``,
     ``"factory"`` (``path`` = ``"module:callable"`` returning a detector; for tests and plug-ins).
+    ``options["design"]`` (model kinds): ``"single"`` or ``"twostage"`` (:func:`~vbl_robust.detect.ultralytics.
+    with_design`); the shipped model defaults to its ``default.json``, a user's model to a single pass.
     """
 
     kind: str
@@ -182,14 +184,16 @@ class DetectorSpec:
             from ..detect.ultralytics import default_detector
 
             return default_detector(**self.options)
-        if self.kind == "ultralytics":
-            from ..detect.ultralytics import UltralyticsDetector
+        if self.kind in ("ultralytics", "onnx"):
+            from ..detect.ultralytics import UltralyticsDetector, with_design
 
-            return UltralyticsDetector(self.path, trust=self.trust, **self.options)
-        if self.kind == "onnx":
-            from ..detect.onnx import OnnxDetector
+            opts = dict(self.options)
+            design = opts.pop("design", "single")
+            if self.kind == "onnx":
+                from ..detect.onnx import OnnxDetector
 
-            return OnnxDetector(self.path, **self.options)
+                return with_design(OnnxDetector(self.path, **opts), design)
+            return with_design(UltralyticsDetector(self.path, trust=self.trust, **opts), design)
         module, _, attr = self.path.partition(":")
         return getattr(importlib.import_module(module), attr)(**self.options)
 

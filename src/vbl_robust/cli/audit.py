@@ -24,26 +24,39 @@ METHODS_DEFAULT = "georobust,random,apgd"
 DEMO_ORACLE_NOISE_PX = 1.0
 
 
-def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_noise: float) -> Any:
-    """The detector the user asked for: --oracle, --model PATH, else the shipped model (oracle if not installed)."""
+def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_noise: float,
+                  design: str = "auto") -> Any:
+    """The detector the user asked for: --oracle, --model PATH, else the shipped model (oracle if not installed).
+
+    ``design`` (``--detector``): ``auto`` (the shipped model's own design; a user's model as a single pass),
+    ``single`` or ``twostage``.
+    """
     from vbl_robust.campaigns import DetectorSpec
+
+    if design not in ("auto", "single", "twostage"):
+        fail(f"--detector {design}: choose auto, single or twostage")
+    if oracle and design != "auto":
+        fail("--detector applies to a model, not to --oracle")
+    opts = {} if design == "auto" else {"design": design}
 
     if oracle and model is not None:
         fail("--oracle and --model are exclusive")
     if oracle:
         return DetectorSpec("oracle", options={"noise_px": oracle_noise} if oracle_noise else {})
     if model is not None and str(model) == "default":
-        return DetectorSpec("default")
+        return DetectorSpec("default", options=opts)
     if model is not None:
         try:
             spec = DetectorSpec.from_path(model, trust=trust_model)
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
-        return spec
+        return DetectorSpec(spec.kind, spec.path, spec.trust, options=opts) if opts else spec
     from vbl_robust.campaigns.provenance import default_model_status
 
     why = default_model_status()
     spec = DetectorSpec.auto(oracle_noise_px=oracle_noise)
+    if spec.kind == "default" and opts:
+        spec = DetectorSpec("default", options=opts)
     if spec.kind == "oracle":
         noise = f", {oracle_noise:g} px fixed corner noise" if oracle_noise else ""
         typer.secho(f"note: {why}; using the oracle detector (ground-truth corners{noise}). "
@@ -189,6 +202,8 @@ def register(app: typer.Typer) -> None:
                                           "for the shipped model (default: the shipped model once it is validated, "
                                           "else the oracle)."),
         trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading a .pt pickle from outside the package."),
+        design: str = typer.Option("auto", "--detector", help="Detector design: auto (the shipped model's own; a "
+                                   "user's model as one pass), single (one pass: the paper's pipeline) or twostage."),
         oracle: bool = typer.Option(False, "--oracle", help="Use the oracle detector (exact projected corners)."),
         oracle_noise: float = typer.Option(0.0, "--oracle-noise", help="Oracle: fixed per-image corner noise (px)."),
         roll: str = typer.Option("15", "--roll", help="Roll range in degrees: '15' (= ±15) or 'lo,hi'; 'none' to omit."),
@@ -234,7 +249,7 @@ def register(app: typer.Typer) -> None:
         counts = (21, 11)[: box.dim] if landscape and box.dim <= 2 else None
         spec = audit_spec(BoxSpec(box, label, level), methods=method_list, budget=budget, seed=seed,
                           lipschitz=parse_lipschitz(lipschitz), pnp=pnp, landscape=counts)
-        det = detector_spec(model, trust_model, oracle, oracle_noise)
+        det = detector_spec(model, trust_model, oracle, oracle_noise, design)
         samples, source = load(n, seed, lard, width, height)
         config = {"command": "audit", "n": n, "seed": seed, "lard": str(lard) if lard else None, "roll": roll,
                   "contrast": contrast, "methods": list(method_list), "max_evals": max_evals, "max_seconds": max_seconds,

@@ -215,10 +215,12 @@ class UltralyticsDetector(PoseDetector):
         return (out[0] if isinstance(out, (tuple, list)) else out).to(views.device)
 
 
-def default_detector(*, imgsz: int | None = None, chunk: int = 16) -> PoseDetector:
-    """The detector shipped with the package (see ``vbl_robust/models/MODEL_CARD.md``)."""
-    from .twostage import TwoStageDetector
+def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str | None = None) -> PoseDetector:
+    """The detector shipped with the package (see ``vbl_robust/models/MODEL_CARD.md``).
 
+    ``design``: ``"twostage"`` or ``"single"`` (one pass at ``imgsz``: the paper's pipeline); None → the shipped
+    default (``default.json``).
+    """
     meta = MODELS_DIR / "default.json"
     kind = "single"
     if meta.exists():
@@ -229,10 +231,22 @@ def default_detector(*, imgsz: int | None = None, chunk: int = 16) -> PoseDetect
         imgsz = imgsz or info.get("imgsz")
     if not DEFAULT_MODEL.exists():
         raise FileNotFoundError(f"{DEFAULT_MODEL}: the shipped model is missing (reinstall vbl-robust)")
-    if kind == "twostage":
-        return TwoStageDetector(UltralyticsDetector(None, imgsz=imgsz, chunk=chunk))
-    return UltralyticsDetector(None, imgsz=imgsz, chunk=chunk)
+    return with_design(UltralyticsDetector(None, imgsz=imgsz, chunk=chunk), design or kind)
 
 
-__all__ = ["PoseDetector", "Top", "UltralyticsDetector", "default_detector", "load_pose_model",
-           "split_raw"]
+DESIGNS = ("single", "twostage")
+
+
+def with_design(detector: PoseDetector, design: str) -> PoseDetector:
+    """``detector`` as a single pass, or wrapped as the first and second pass of a two-stage detector."""
+    if design not in DESIGNS:
+        raise ValueError(f"detector design must be one of {DESIGNS}, got {design!r}")
+    if design == "twostage":
+        from .twostage import TwoStageDetector
+
+        return TwoStageDetector(detector)
+    return detector
+
+
+__all__ = ["DESIGNS", "PoseDetector", "Top", "UltralyticsDetector", "default_detector", "load_pose_model",
+           "split_raw", "with_design"]
