@@ -15,6 +15,8 @@ stage from its ``last.pt``; when the latest stage is finished, it starts a new s
 stage's ``best.pt`` — hours of training accumulate over several calls. Augmentation keeps corners exact: no
 vertical flip, horizontal flip with ``flip_idx``, translation only (no mosaic, scale, rotation or shear: the crop
 jitter provides position and scale diversity, and ultralytics' affine warps are not half-pixel exact).
+Labelled boxes are widened to ``min_box`` view pixels (keypoints unchanged) so that far runways, a few pixels
+wide in the full view, get positive anchors; CPU training uses every core (``threads``).
 """
 
 from __future__ import annotations

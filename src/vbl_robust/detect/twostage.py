@@ -24,10 +24,10 @@ import torch.nn.functional as F
 from .base import DetectContext, Detections
 from .ultralytics import PoseDetector, Top, split_raw
 from .views import (
-    _pool_factor,
     box_window,
     letterbox_window,
     perturbed_resample,
+    pool_factor,
     resample,
     rolled_gray_mean,
     to_tensor,
@@ -115,7 +115,7 @@ class TwoStageDetector(PoseDetector):
         center = torch.as_tensor(context.center, dtype=x.dtype)
         h, w = x.shape[-2:]
         win1 = torch.tensor(letterbox_window(h, w), dtype=x.dtype).expand(b, 3)
-        p1 = _pool_factor(float(win1[0, 2]), self.first.imgsz)
+        p1 = pool_factor(float(win1[0, 2]), self.first.imgsz)
         pooled = {p1: F.avg_pool2d(src, p1, stride=p1) if p1 > 1 else src}
         gray = rolled_gray_mean(pooled[p1][:1] if pooled[p1].shape[0] == 1 else pooled[p1], p1, h, w, angle,
                                 center)

@@ -53,7 +53,8 @@ def box_window(
     return torch.cat([c - side[:, None] / 2, side[:, None]], dim=1)
 
 
-def _pool_factor(side: float, size: int) -> int:
+def pool_factor(side: float, size: int) -> int:
+    """Average-pooling factor applied before resampling a window of ``side`` image pixels to ``size``."""
     k = side / size
     return int(k) if k >= 2.0 else 1
 
@@ -75,7 +76,7 @@ def resample(images: torch.Tensor, windows: torch.Tensor, size: int) -> torch.Te
     windows = torch.as_tensor(windows, dtype=images.dtype, device=images.device)
     if windows.ndim == 1:
         windows = windows.expand(b, 3)
-    factors = [_pool_factor(float(s), size) for s in windows[:, 2].detach().cpu().tolist()]
+    factors = [pool_factor(float(s), size) for s in windows[:, 2].detach().cpu().tolist()]
     out = torch.empty(b, images.shape[1], size, size, dtype=images.dtype, device=images.device)
     t = (torch.arange(size, dtype=images.dtype, device=images.device) + 0.5) / size  # view-pixel centres in [0, 1]
     for p in sorted(set(factors)):
@@ -218,7 +219,7 @@ def perturbed_resample(
     windows = torch.as_tensor(windows, dtype=dtype, device=image.device)
     center = torch.as_tensor(np.asarray(center, dtype=np.float64), dtype=dtype, device=image.device)
     pooled = {} if pooled is None else pooled
-    factors = [_pool_factor(float(s), size) for s in windows[:, 2].detach().cpu().tolist()]
+    factors = [pool_factor(float(s), size) for s in windows[:, 2].detach().cpu().tolist()]
     out = torch.empty(b, image.shape[1], size, size, dtype=dtype, device=image.device)
     t = (torch.arange(size, dtype=dtype, device=image.device) + 0.5) / size
     for p in sorted(set(factors)):
