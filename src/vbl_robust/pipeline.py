@@ -211,6 +211,9 @@ class Objective:
         self.resolution = resolution
         self.pnp_grad = pnp_grad
         self.fuse = bool(fuse)
+        applies = getattr(detector, "applies_perturbation", None)
+        #: the detector applies the perturbation itself (it then gets the unperturbed image)
+        self.fused = self.fuse and callable(applies) and bool(applies(self.perturbation))
         self._uses_pixels = bool(getattr(detector, "uses_pixels", True))
         self.nfev = 0
         self._loaded = False
@@ -273,15 +276,8 @@ class Objective:
     def _center(self) -> np.ndarray:
         return self._scale.to_scaled(self.sample.K[:2, 2])
 
-    def _context(self, theta, fused: bool = False) -> DetectContext:
-        return DetectContext(self.sample, theta, self.perturbation, self._scale, perturbed=not fused)
-
-    def _fused(self) -> bool:
-        """Does the detector apply the perturbation itself (it then gets the unperturbed image)?"""
-        if not self.fuse:
-            return False
-        applies = getattr(self.detector, "applies_perturbation", None)
-        return bool(callable(applies) and applies(self.perturbation))
+    def _context(self, theta) -> DetectContext:
+        return DetectContext(self.sample, theta, self.perturbation, self._scale, perturbed=not self.fused)
 
     # -- black-box path ------------------------------------------------------------------------------------------
     def __call__(self, theta) -> np.ndarray:
@@ -310,13 +306,12 @@ class Objective:
 
     def _evaluate_chunk(self, t: np.ndarray) -> EvalRecord:
         n = t.shape[0]
-        fused = self._fused()
-        if self._uses_pixels and not fused:
+        if self._uses_pixels and not self.fused:
             imgs = self.perturbation.images_numpy(self._base, t, center=self._center())
             x = torch.from_numpy(imgs).permute(0, 3, 1, 2)  # a (B, 3, H, W) view; detectors copy if they need to
         else:
             x = self._base_t[None].expand(n, -1, -1, -1)
-        kw = {"context": self._context(t, fused)} if fused or _takes_context(self.detector.detect) else {}
+        kw = {"context": self._context(t)} if self.fused or _takes_context(self.detector.detect) else {}
         with torch.no_grad():
             dets = self.detector.detect(x, **kw)
         if len(dets) != n:
@@ -378,12 +373,11 @@ class Objective:
         center = self._center()
         for i in range(0, t.shape[0], self.batch_size):
             th = t[i : i + self.batch_size]
-            fused = self._fused()
-            if self._uses_pixels and not fused:
+            if self._uses_pixels and not self.fused:
                 imgs = self.perturbation.images_torch(self._base_t, th, center=center)
             else:
                 imgs = self._base_t[None].expand(th.shape[0], -1, -1, -1)
-            conf, kp = top(imgs, **({"context": self._context(th, fused)} if fused or _takes_context(top) else {}))
+            conf, kp = top(imgs, **({"context": self._context(th)} if self.fused or _takes_context(top) else {}))
             confs.append(conf.reshape(-1))
             kps.append(kp.reshape(-1, 4, 2))
         conf, kp = torch.cat(confs), self._scale.to_original(torch.cat(kps).to(torch.float64))

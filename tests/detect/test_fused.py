@@ -19,7 +19,7 @@ from vbl_robust.detect.views import (
     to_tensor,
 )
 from vbl_robust.perturb import Perturbation
-from vbl_robust.perturb.photometric import _gray_mean
+from vbl_robust.perturb.photometric import gray_mean
 from vbl_robust.space import ParameterBox
 
 BOX = ParameterBox({"roll_deg": (-30, 30), "contrast": (0.4, 2.5)})
@@ -53,11 +53,11 @@ def test_views_match_perturb_then_resample(scene):
     gray = rolled_gray_mean(pooled[3], 3, h, w, ang, torch.tensor(center, dtype=torch.float32))
     # the contrast's grey mean: estimated from the pooled source within 1e-3 of the rolled image's (contrast 1 rows)
     unit = th[:, 1] == 1.0
-    true = _gray_mean(torch.from_numpy(Perturbation(BOX).images_numpy(img.astype(np.float32) / 255.0,
+    true = gray_mean(torch.from_numpy(Perturbation(BOX).images_numpy(img.astype(np.float32) / 255.0,
                                                                       np.column_stack([th[:, 0], np.ones(12)]),
                                                                       center=center)).permute(0, 3, 1, 2))
     assert torch.allclose(gray, true.float(), atol=1e-3)
-    assert torch.allclose(gray[unit], _gray_mean(rolled[unit]).float(), atol=1e-3)
+    assert torch.allclose(gray[unit], gray_mean(rolled[unit]).float(), atol=1e-3)
     out = perturbed_resample(x, wins, 320, angle_deg=ang, center=center, contrast=con, gray_mean=gray, pooled=pooled)
     d = (out - ref).abs()
     assert float(d[0].max()) < 1e-4 and float(d[4].max()) < 1e-4  # identity: the same views
@@ -117,7 +117,7 @@ def test_objective_fused_agrees_with_perturb_first(two):
     s = _sample()
     box = ParameterBox({"roll_deg": (-15, 15), "contrast": (0.6, 1.6)})
     fused, plain = (Objective(s, two, box, conf_threshold=0.0, fuse=f) for f in (True, False))
-    assert fused._fused() and not plain._fused()
+    assert fused.fused and not plain.fused
     ident = np.array([[0.0, 1.0]])
     assert np.allclose(fused.evaluate(ident).keypoints, plain.evaluate(ident).keypoints, atol=1e-4)
     theta = box.from_unit(np.random.default_rng(0).random((8, 2)))

@@ -130,7 +130,12 @@ class DetectorSpec:
             return cls("default")
         logger.warning("%s; using the oracle detector (ground-truth keypoints%s)", why,
                        f", {oracle_noise_px:g} px fixed noise" if oracle_noise_px else "")
-        return cls("oracle", options={"noise_px": oracle_noise_px} if oracle_noise_px else {})
+        return cls.oracle(oracle_noise_px)
+
+    @classmethod
+    def oracle(cls, noise_px: float = 0.0) -> DetectorSpec:
+        """The oracle detector, with ``noise_px`` of fixed per-image corner noise (0: exact corners)."""
+        return cls("oracle", options={"noise_px": noise_px} if noise_px else {})
 
     @classmethod
     def from_path(cls, path: str | Path, *, trust: bool = False) -> DetectorSpec:

@@ -31,10 +31,13 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
     ``design`` (``--detector``): ``auto`` (the shipped model's own design; a user's model as a single pass),
     ``single`` or ``twostage``.
     """
-    from vbl_robust.campaigns import DetectorSpec
+    import dataclasses
 
-    if design not in ("auto", "single", "twostage"):
-        fail(f"--detector {design}: choose auto, single or twostage")
+    from vbl_robust.campaigns import DetectorSpec
+    from vbl_robust.detect.ultralytics import DESIGNS
+
+    if design != "auto" and design not in DESIGNS:
+        fail(f"--detector {design}: choose auto, {' or '.join(DESIGNS)}")
     if oracle and design != "auto":
         fail("--detector applies to a model, not to --oracle")
     opts = {} if design == "auto" else {"design": design}
@@ -42,7 +45,7 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
     if oracle and model is not None:
         fail("--oracle and --model are exclusive")
     if oracle:
-        return DetectorSpec("oracle", options={"noise_px": oracle_noise} if oracle_noise else {})
+        return DetectorSpec.oracle(oracle_noise)
     if model is not None and str(model) == "default":
         return DetectorSpec("default", options=opts)
     if model is not None:
@@ -50,19 +53,17 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
             spec = DetectorSpec.from_path(model, trust=trust_model)
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
-        return DetectorSpec(spec.kind, spec.path, spec.trust, options=opts) if opts else spec
+        return dataclasses.replace(spec, options=opts) if opts else spec
     from vbl_robust.campaigns.provenance import default_model_status
 
-    why = default_model_status()
-    spec = DetectorSpec.auto(oracle_noise_px=oracle_noise)
-    if spec.kind == "default" and opts:
-        spec = DetectorSpec("default", options=opts)
-    if spec.kind == "oracle":
-        noise = f", {oracle_noise:g} px fixed corner noise" if oracle_noise else ""
-        typer.secho(f"note: {why}; using the oracle detector (ground-truth corners{noise}). "
-                    "Pass --model PATH for your model, or --model default to audit the shipped one anyway.",
-                    fg=typer.colors.YELLOW, err=True)
-    return spec
+    why = default_model_status()  # the rule of DetectorSpec.auto, with the reason shown to the user
+    if not why:
+        return DetectorSpec("default", options=opts)
+    noise = f", {oracle_noise:g} px fixed corner noise" if oracle_noise else ""
+    typer.secho(f"note: {why}; using the oracle detector (ground-truth corners{noise}). "
+                "Pass --model PATH for your model, or --model default to audit the shipped one anyway.",
+                fg=typer.colors.YELLOW, err=True)
+    return DetectorSpec.oracle(oracle_noise)
 
 
 def box_label(bounds: dict[str, tuple[float, float]]) -> str:

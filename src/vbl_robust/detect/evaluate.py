@@ -47,16 +47,12 @@ class EvalResult:
     corner_delta: np.ndarray
     slant_m: np.ndarray
     pos_err_m: dict[str, np.ndarray]
-    box_diag: np.ndarray | None = None
+    box_diag: np.ndarray
 
     @property
     def correct(self) -> np.ndarray:
         """(N,) bool: detected and mean corner error ≤ ``PCK_FRACTION`` × true box diagonal."""
-        if self.box_diag is None:
-            return self.detected.copy()
-        with np.errstate(invalid="ignore"):
-            return self.detected & (np.nanmean(np.where(self.detected[:, None], self.corner_err, 0.0), axis=1)
-                                    <= PCK_FRACTION * self.box_diag)
+        return self.detected & (self.corner_err.mean(axis=1) <= PCK_FRACTION * self.box_diag)  # NaN → False
 
 
 def evaluate_detector(

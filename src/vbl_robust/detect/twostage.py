@@ -19,7 +19,6 @@ two; the views agree to interpolation smoothing — tested on images and on keyp
 from __future__ import annotations
 
 import torch
-import torch.nn.functional as F
 
 from .base import DetectContext, Detections
 from .ultralytics import PoseDetector, Top, split_raw
@@ -28,6 +27,7 @@ from .views import (
     letterbox_window,
     perturbed_resample,
     pool_factor,
+    pooled_source,
     resample,
     rolled_gray_mean,
     to_tensor,
@@ -116,9 +116,8 @@ class TwoStageDetector(PoseDetector):
         h, w = x.shape[-2:]
         win1 = torch.tensor(letterbox_window(h, w), dtype=x.dtype).expand(b, 3)
         p1 = pool_factor(float(win1[0, 2]), self.first.imgsz)
-        pooled = {p1: F.avg_pool2d(src, p1, stride=p1) if p1 > 1 else src}
-        gray = rolled_gray_mean(pooled[p1][:1] if pooled[p1].shape[0] == 1 else pooled[p1], p1, h, w, angle,
-                                center)
+        pooled: dict[int, torch.Tensor] = {}
+        gray = rolled_gray_mean(pooled_source(src, p1, pooled), p1, h, w, angle, center)
 
         def views(win, size):
             return perturbed_resample(src, win, size, angle_deg=angle, center=center, contrast=factor,

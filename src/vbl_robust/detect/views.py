@@ -76,11 +76,9 @@ def resample(images: torch.Tensor, windows: torch.Tensor, size: int) -> torch.Te
     windows = torch.as_tensor(windows, dtype=images.dtype, device=images.device)
     if windows.ndim == 1:
         windows = windows.expand(b, 3)
-    factors = [pool_factor(float(s), size) for s in windows[:, 2].detach().cpu().tolist()]
     out = torch.empty(b, images.shape[1], size, size, dtype=images.dtype, device=images.device)
     t = (torch.arange(size, dtype=images.dtype, device=images.device) + 0.5) / size  # view-pixel centres in [0, 1]
-    for p in sorted(set(factors)):
-        idx = torch.tensor([i for i, f in enumerate(factors) if f == p], device=images.device)
+    for p, idx in _pool_groups(windows, size):
         src = images[idx]
         if p > 1:
             src = F.avg_pool2d(src, p, stride=p)
@@ -98,6 +96,20 @@ def resample(images: torch.Tensor, windows: torch.Tensor, size: int) -> torch.Te
         mask = sampled[:, -1:]
         out[idx] = sampled[:, :-1] + PAD_VALUE * (1.0 - mask)
     return out
+
+
+def _pool_groups(windows: torch.Tensor, size: int):
+    """``(p, rows)`` for each pooling factor ``p`` among the windows (B, 3), rows as an index tensor."""
+    factors = [pool_factor(float(s), size) for s in windows[:, 2].detach().cpu().tolist()]
+    for p in sorted(set(factors)):
+        yield p, torch.tensor([i for i, f in enumerate(factors) if f == p], device=windows.device)
+
+
+def pooled_source(image: torch.Tensor, p: int, cache: dict[int, torch.Tensor]) -> torch.Tensor:
+    """``avg_pool(image, p)`` (``image`` itself for p = 1), computed once per factor in ``cache``."""
+    if p not in cache:
+        cache[p] = F.avg_pool2d(image, p, stride=p) if p > 1 else image
+    return cache[p]
 
 
 def view_to_image(points: torch.Tensor, windows: torch.Tensor, size: int) -> torch.Tensor:
@@ -181,14 +193,12 @@ def rolled_gray_mean(pooled: torch.Tensor, p: int, height: int, width: int, angl
                      center: torch.Tensor, n: int = 128) -> torch.Tensor:
     """(B,) grayscale mean of the rolled image (ITU-R 601 luma, what the contrast perturbation uses), estimated
     on an ``n × n`` grid of the frame sampled from the (pooled) unrolled source."""
-    from vbl_robust.perturb.photometric import LUMA_WEIGHTS
+    from vbl_robust.perturb.photometric import gray_mean
 
     b = angle_deg.shape[0]
     t = (torch.arange(n, dtype=pooled.dtype, device=pooled.device) + 0.5) / n
     xs, ys = (t * width).expand(b, n), (t * height).expand(b, n)
-    v, _ = _rolled_samples(pooled, xs, ys, p, height, width, angle_deg, center)
-    w = torch.tensor(LUMA_WEIGHTS, dtype=v.dtype, device=v.device)
-    return torch.einsum("bchw,c->b", v, w) / (n * n)
+    return gray_mean(_rolled_samples(pooled, xs, ys, p, height, width, angle_deg, center)[0])
 
 
 def perturbed_resample(
@@ -219,14 +229,11 @@ def perturbed_resample(
     windows = torch.as_tensor(windows, dtype=dtype, device=image.device)
     center = torch.as_tensor(np.asarray(center, dtype=np.float64), dtype=dtype, device=image.device)
     pooled = {} if pooled is None else pooled
-    factors = [pool_factor(float(s), size) for s in windows[:, 2].detach().cpu().tolist()]
     out = torch.empty(b, image.shape[1], size, size, dtype=dtype, device=image.device)
     t = (torch.arange(size, dtype=dtype, device=image.device) + 0.5) / size
-    for p in sorted(set(factors)):
-        idx = torch.tensor([i for i, f in enumerate(factors) if f == p], device=image.device)
-        if p not in pooled:
-            pooled[p] = F.avg_pool2d(image, p, stride=p) if p > 1 else image
-        src = pooled[p] if pooled[p].shape[0] == 1 else pooled[p][idx]
+    for p, idx in _pool_groups(windows, size):
+        src = pooled_source(image, p, pooled)
+        src = src if src.shape[0] == 1 else src[idx]
         win = windows[idx]
         xs = win[:, 0:1] + t[None, :] * win[:, 2:3]
         ys = win[:, 1:2] + t[None, :] * win[:, 2:3]

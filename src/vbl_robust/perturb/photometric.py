@@ -45,12 +45,13 @@ def contrast(images: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
     f = torch.as_tensor(factor, device=images.device).to(images.dtype).reshape(-1)
     if images.shape[0] not in (1, f.shape[0]):
         raise ValueError(f"contrast: {images.shape[0]} images for {f.shape[0]} factors (give 1 image or one per factor)")
-    mean = _gray_mean(images)  # (B or 1,)
+    mean = gray_mean(images)  # (B or 1,)
     f4 = f[:, None, None, None]
     return (f4 * images + (1.0 - f4) * mean[:, None, None, None]).clamp(0.0, 1.0)
 
 
-def _gray_mean(images: torch.Tensor) -> torch.Tensor:
+def gray_mean(images: torch.Tensor) -> torch.Tensor:
+    """(B,) grayscale mean of each image (ITU-R 601 luma for RGB): the grey level contrast scales about."""
     if images.shape[1] == 3:
         w = torch.tensor(LUMA_WEIGHTS, dtype=images.dtype, device=images.device)
         return torch.einsum("bchw,c->b", images, w) / (images.shape[-1] * images.shape[-2])
