@@ -2,6 +2,8 @@
 
 Each benchmark module exposes ``main(quick: bool = False) -> str`` returning a markdown section. A benchmark that
 fails is reported as failed in the file (with its error), and the others still run.
+Each section starts with a ``<!-- bench:NAME -->`` marker and ends with its own provenance (date, commit, load):
+``--only NAMES`` replaces those sections and keeps every other section of the existing file.
 
 Usage::
 
@@ -15,6 +17,7 @@ import datetime as dt
 import importlib.util
 import os
 import platform
+import re
 import subprocess
 import sys
 import time
@@ -27,15 +30,40 @@ HERE = Path(__file__).resolve().parent
 ORDER = ["scenes", "pnp", "search", "perturb", "detector", "pipeline", "campaigns"]
 
 
+MARKER = re.compile(r"^<!-- bench:(\w+) -->$", re.M)
+
+
+def _commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                              cwd=HERE).stdout.strip() or "?"
+    except OSError:
+        return "?"
+
+
+def _now() -> str:
+    return dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
+
+
+def _kept_sections(path: Path, replaced: set[str]) -> dict[str, str]:
+    """Sections of an existing file (by marker) that this run does not replace."""
+    if not path.exists():
+        return {}
+    text = path.read_text()
+    marks = list(MARKER.finditer(text))
+    out = {}
+    for i, m in enumerate(marks):
+        end = marks[i + 1].start() if i + 1 < len(marks) else len(text)
+        if m.group(1) not in replaced:
+            out[m.group(1)] = text[m.start():end].rstrip() + "\n"
+    return out
+
+
 def _machine() -> str:
     import torch
 
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=HERE).stdout.strip()
-    except OSError:
-        commit = "?"
     return (
-        f"- date: {dt.datetime.now(dt.UTC).strftime('%Y-%m-%d %H:%M UTC')}; commit `{commit}`\n"
+        f"- last run: {_now()}; commit `{_commit()}` (each section names its own run)\n"
         f"- machine: {platform.machine()}, {os.cpu_count()} CPU cores, no GPU; Python {platform.python_version()}, "
         f"torch {torch.__version__} (threads: {torch.get_num_threads()})\n"
         f"- load average at start (1/5/15 min): {' / '.join(f'{v:.1f}' for v in os.getloadavg())} "
@@ -76,7 +104,13 @@ def main() -> int:
         + ":\n\n"
         + _machine()
     )
-    sections = []
+    out = Path(args.out)
+    sections = _kept_sections(out, set(todo)) if only else {}
+
+    def write() -> None:
+        order = sorted(sections, key=lambda n: (rank.get(n, len(ORDER)), n))
+        out.write_text(header + "\n" + "\n".join(sections[n] for n in order))
+
     for name in todo:
         t0 = time.perf_counter()
         print(f"[bench] {name} …", file=sys.stderr, flush=True)
@@ -85,9 +119,12 @@ def main() -> int:
         except Exception:  # a broken benchmark must not hide the others
             text = f"## {name}\n\nFAILED:\n\n```\n{traceback.format_exc()}\n```\n"
         took = time.perf_counter() - t0
-        sections.append(text.rstrip() + f"\n\n_(section produced in {took:.0f} s)_\n")
+        load = " / ".join(f"{v:.1f}" for v in os.getloadavg())
+        sections[name] = (f"<!-- bench:{name} -->\n" + text.rstrip()
+                          + f"\n\n_(section produced in {took:.0f} s; {_now()}, commit `{_commit()}`, load average"
+                          f" {load})_\n")
         print(f"[bench] {name} done in {took:.0f} s", file=sys.stderr, flush=True)
-        Path(args.out).write_text(header + "\n" + "\n".join(sections))  # after each section: partial runs count
+        write()  # after each section: partial runs count
 
     print(f"wrote {args.out}", file=sys.stderr)
     return 0
