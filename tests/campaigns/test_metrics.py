@@ -82,3 +82,22 @@ def test_pnp_summary():
     rows = [{"status": "done", "payload": payload(v)} for v in (10.0, 30.0, None)]
     (s,) = mx.pnp_summary(rows)
     assert s["n"] == 3 and s["failures"] == 1 and s["median_abs_m"] == 20.0 and s["mae_rel_pct"] == 2.0
+
+
+def test_reference_rows_from_a_grid_stopped_at_its_first_breach():
+    # centre-out grid over ±30° (61 nodes), stopped after reaching ±13° where L first breaches
+    nodes = np.linspace(-30, 30, 61)
+    seen = nodes[np.argsort(np.abs(nodes), kind="stable")][:27]  # 0, ±1 … ±13
+    fs = np.where(np.abs(seen) > 12, 3000.0, 10.0 + np.abs(seen))
+    ref = [{"status": "done", "sample_id": "s", "box": {"box": {"bounds": {"roll_deg": [-30, 30]}}},
+            "budget": {"max_evals": 61}, "nfev": 27, "options": {"counts": [61]}, "xs": seen[:, None], "fs": fs}]
+    boxes = [{"box": {"bounds": {"roll_deg": [-b, b]}}, "label": f"±{b}", "level": b} for b in (5, 12, 20, 30)]
+    out = mx.reference_rows(ref, boxes, 1000.0, 5000.0)
+    assert [(r["box_level"], r["worst_m"], r["verdict"]) for r in out] == [
+        (5, 15.0, "no breach found"), (12, 22.0, "no breach found"), (20, 3000.0, "breach"), (30, 3000.0, "breach")]
+    # without a breach in the evaluated part, a box not fully evaluated gives no row (it would understate L)
+    ref[0]["fs"] = 10.0 + np.abs(seen)
+    out = mx.reference_rows(ref, boxes, 1000.0, 5000.0)
+    assert [r["box_level"] for r in out] == [5, 12]
+    assert mx.lattice_covered(seen[:, None], [(-30, 30)], [61], [-13], [13])
+    assert not mx.lattice_covered(seen[:, None], [(-30, 30)], [61], [-14], [14])

@@ -61,3 +61,29 @@ def test_grid_sound_bound_when_complete():
     assert r.verdict(2.56) is Verdict.CERTIFIED and r.verdict(2.5) is Verdict.UNDECIDED and r.verdict(2.3) is Verdict.BREACH
     partial = maximize(_f, BOX, "grid", counts=[31, 8], max_evals=100, lipschitz=[0.2, 1.0])
     assert partial.upper_bound is None and partial.verdict(2.5) is Verdict.UNDECIDED
+
+
+def test_grid_center_out_visits_every_node_once_by_growing_distance():
+    roll = ParameterBox({"roll_deg": (-3.0, 3.0)})
+    r = maximize(lambda x: -np.abs(x[:, 0]), roll, "grid", counts=13, order="center-out", batch_size=4,
+                 max_evals=100)
+    assert r.status is Status.CONVERGED and r.nfev == 13
+    assert np.allclose(np.sort(r.xs[:, 0]), np.linspace(-3, 3, 13))
+    assert np.all(np.diff(np.abs(r.xs[:, 0])) >= -1e-12) and r.xs[0, 0] == 0.0
+    # 2-D: normalised Chebyshev rings, each node once
+    r2 = maximize(_f, BOX, "grid", counts=[5, 3], order="center-out", batch_size=64, max_evals=100)
+    u = BOX.to_unit(r2.xs)
+    ring = np.max(np.abs(u - 0.5), axis=1)
+    assert r2.nfev == 15 and len({tuple(p) for p in np.round(u, 9)}) == 15 and np.all(np.diff(ring) >= -1e-12)
+    with pytest.raises(ValueError, match="order must be one of"):
+        GridSearch(BOX, counts=3, order="spiral")
+
+
+def test_center_out_grid_stopped_at_a_breach_answers_every_nested_budget():
+    # L breaches only beyond 7.3°: the grid stops in the batch holding ±7.5° and has seen all of ±7.25°
+    roll = ParameterBox({"roll_deg": (-30.0, 30.0)})
+    r = maximize(lambda x: np.where(np.abs(x[:, 0]) > 7.3, 3000.0, 10.0 + np.abs(x[:, 0])), roll, "grid",
+                 counts=241, order="center-out", batch_size=8, stop_above=1000.0, max_evals=241)
+    assert r.status is Status.TARGET_REACHED and r.nfev < 241 // 3
+    inside = np.abs(r.xs[:, 0]) <= 7.25 + 1e-9
+    assert inside.sum() == 59 and r.fs[inside].max() == pytest.approx(17.25)

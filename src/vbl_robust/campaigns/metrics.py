@@ -78,13 +78,29 @@ def worst_within(xs: np.ndarray, fs: np.ndarray, lower: Sequence[float], upper: 
     return float(np.max(f))
 
 
+def lattice_covered(xs: np.ndarray, grid_bounds: Sequence[Sequence[float]], counts: Sequence[int],
+                    lower: Sequence[float], upper: Sequence[float]) -> bool:
+    """True if every node of the lattice (``counts`` nodes per dimension over ``grid_bounds``, the centre for a
+    count of 1) inside ``[lower, upper]`` is among the evaluated points ``xs`` — i.e. the worst value of a partly
+    evaluated grid (stopped at a breach) restricted to that box is exact."""
+    expected = 1
+    for (glo, ghi), n, lo, hi in zip(grid_bounds, counts, lower, upper, strict=True):
+        nodes = np.full(1, (glo + ghi) / 2) if int(n) == 1 else np.linspace(glo, ghi, int(n))
+        expected *= int(np.sum((nodes >= lo - 1e-9) & (nodes <= hi + 1e-9)))
+    x = np.asarray(xs, dtype=np.float64).reshape(-1, len(counts))
+    inside = np.all((x >= np.asarray(lower) - 1e-9) & (x <= np.asarray(upper) + 1e-9), axis=1)
+    return int(inside.sum()) >= expected
+
+
 def reference_rows(ref_rows: Iterable[Mapping[str, Any]], boxes: Sequence[Mapping[str, Any]], eps_safe_m: float,
                    penalty_m: float) -> list[dict[str, Any]]:
     """Pseudo-rows ``method="grid (reference)"`` giving, per image and per box of ``boxes`` (``BoxSpec`` dicts),
     the dense grid's worst value restricted to that box — the true worst case up to the grid spacing.
 
     ``ref_rows`` need ``xs``/``fs`` (``store.jobs(role="reference", with_points=True)``); a box not inside a
-    grid's box is skipped for that image.
+    grid's box is skipped for that image. A grid stopped at a breach (centre-out) gives a row for a box only if
+    the box holds an evaluated breach (its worst value is then a lower bound) or all its lattice nodes were
+    evaluated (:func:`lattice_covered`).
     """
     out = []
     for r in ref_rows:
@@ -102,11 +118,21 @@ def reference_rows(ref_rows: Iterable[Mapping[str, Any]], boxes: Sequence[Mappin
             w = worst_within(r["xs"], r["fs"], lo, hi, penalty_m)
             if math.isnan(w):
                 continue
+            if w <= eps_safe_m and not grid_complete(r):
+                counts = (r.get("options") or {}).get("counts")
+                if counts is None or not lattice_covered(r["xs"], [gbox[k] for k in gbox], counts, lo, hi):
+                    continue
             out.append({"method": "grid (reference)", "sample_id": r["sample_id"], "box_label": b["label"],
                         "box_level": b["level"], "budget_label": f"grid {r['budget']['max_evals']} pts", "budget": r["budget"],
                         "worst_m": w, "verdict": "breach" if w > eps_safe_m else "no breach found",
                         "status": "done", "nfev": r["nfev"], "search_s": r.get("search_s")})
     return out
+
+
+def grid_complete(r: Mapping[str, Any]) -> bool:
+    """True if a grid job row evaluated its whole lattice (its evaluation budget is the lattice size)."""
+    size = (r.get("budget") or {}).get("max_evals")
+    return size is not None and (r.get("nfev") or 0) >= size
 
 
 def smallest_breach_levels(rows: Iterable[Mapping[str, Any]]) -> dict[tuple[str, str], float]:

@@ -245,7 +245,9 @@ def section_landscapes(ctx: Context) -> Section | None:
     if not grids:
         refs = [r for r in ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
                 if r["status"] == "done" and len(r["fs"])]
-        grids = [_interesting(refs, ctx.eps)] if refs else []
+        # a reference grid stopped at its first breach covers only part of its box: draw a complete one if any
+        whole = [r for r in refs if mx.grid_complete(r)]
+        grids = [_interesting(whole or refs, ctx.eps)] if refs else []
     grids = [g for g in grids if g["status"] == "done" and len(g["fs"])]
     if not grids:
         return None

@@ -74,14 +74,24 @@ class SobolSearch(_Batched):
             return self._sampler.random(n)
 
 
+#: Orders in which a grid can be evaluated.
+GRID_ORDERS = ("c", "center-out")
+
+
 class GridSearch(Optimizer):
-    """Dense lattice including the box's corners, evaluated in C order (last parameter fastest) in batches.
+    """Dense lattice including the box's corners, evaluated in batches.
 
     Args:
         counts: points per dimension (an int for all, or one per parameter, each >= 1; 1 = the centre).
         step: alternatively the spacing in real units (a number or one per parameter); counts become
             ``floor(width / step) + 1``.
         batch_size: points per iteration.
+        order: ``"c"`` — C order (last parameter fastest); ``"center-out"`` — by growing normalised Chebyshev
+            distance from the box centre (ties in C order). With ``stop_above``, a centre-out grid that stops at
+            its first breach at normalised radius r* has evaluated every node of each centred sub-box of radius
+            < r*: those sub-boxes' worst values are exact and every larger one holds the breach. That answers
+            "is there a breach within ±b?" for all nested budgets b at once, at the cost of the breach radius
+            instead of the whole grid.
 
     Without counts or step: the largest equal count whose lattice fits ``max_evals``, else 33 per dimension.
     The grid stops with CONVERGED when complete; with ``lipschitz`` its cells (half a spacing around each node)
@@ -97,10 +107,14 @@ class GridSearch(Optimizer):
         counts: int | Sequence[int] | None = None,
         step: float | Sequence[float] | None = None,
         batch_size: int = 256,
+        order: str = "c",
         **budget: Any,
     ):
         super().__init__(box, **budget)
         self.batch_size = _check_batch(batch_size)
+        if order not in GRID_ORDERS:
+            raise ValueError(f"grid: order must be one of {', '.join(GRID_ORDERS)}, got {order!r}")
+        self.order = order
         d = self.dim
         if counts is not None and step is not None:
             raise ValueError(f"grid: give counts or step, not both (counts={counts!r}, step={step!r})")
@@ -124,6 +138,12 @@ class GridSearch(Optimizer):
         self.size = int(np.prod(self.counts))
         self._axes = [np.full(1, 0.5) if n == 1 else np.linspace(0.0, 1.0, n) for n in self.counts]
         self._next = 0
+        self._perm: np.ndarray | None = None
+        if order == "center-out" and self.size > 1:
+            idx = np.indices(self.counts).reshape(d, -1)
+            radius = np.max([np.abs(ax[i] - 0.5) for ax, i in zip(self._axes, idx, strict=True)], axis=0)
+            # rounding makes nodes at the same distance tie exactly (linspace is not symmetric to the last bit)
+            self._perm = np.argsort(np.round(radius, 12), kind="stable")
 
     def _ask(self, remaining: int | None) -> np.ndarray:
         n = min(self.batch_size, self.size - self._next)
@@ -133,6 +153,8 @@ class GridSearch(Optimizer):
             self._finish(Status.CONVERGED, f"grid of {self.size} points complete")
             return np.zeros((0, self.dim))
         flat = np.arange(self._next, self._next + n)
+        if self._perm is not None:
+            flat = self._perm[flat]
         idx = np.unravel_index(flat, self.counts)
         self._next += n
         return np.stack([ax[i] for ax, i in zip(self._axes, idx, strict=True)], axis=1)
