@@ -245,9 +245,7 @@ def section_landscapes(ctx: Context) -> Section | None:
     if not grids:
         refs = [r for r in ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
                 if r["status"] == "done" and len(r["fs"])]
-        # a reference grid stopped at its first breach covers only part of its box: draw a complete one if any
-        whole = [r for r in refs if mx.grid_complete(r)]
-        grids = [_interesting(whole or refs, ctx.eps)] if refs else []
+        grids = [_interesting(refs, ctx.eps)] if refs else []
     grids = [g for g in grids if g["status"] == "done" and len(g["fs"])]
     if not grids:
         return None
@@ -282,7 +280,10 @@ def section_landscapes(ctx: Context) -> Section | None:
                                  eps_safe_m=ctx.eps, title=f"L over {g['box_label']}, {where}")
             name = "landscape_1d"
         lab = ", ".join(f"{F.style(m)['label']} on {r['box_label']} ({r['budget_label']})" for m, r in by_method.items())
-        s.html.append(ctx.figure(fig, name, f"Dense grid of {len(g['fs'])} points ({esc(g['box_label'])}); markers: "
+        part = "" if mx.grid_complete(g) else (f", evaluated from the centre outwards and stopped at its first "
+                                               f"breach after {len(g['fs'])} of {g['budget']['max_evals']} points")
+        s.html.append(ctx.figure(fig, name, f"Dense grid of {len(g['fs'])} points ({esc(g['box_label'])}{part}); "
+                                            "markers: "
                                             f"the points each method evaluated — {esc(lab)}; stars: each method's worst "
                                             "point. Red: the ε_safe level set."))
         lines = [{"method": F.style(m)["label"], "box": r["box_label"], "budget": r["budget_label"], "nfev": r["nfev"],
