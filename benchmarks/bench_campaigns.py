@@ -3,7 +3,7 @@ takes here on the shipped detector (extrapolated from a partial run on a few ima
 
 Usage::
 
-    python benchmarks/bench_campaigns.py [--quick] [--oracle]
+    python benchmarks/bench_campaigns.py [--quick] [--oracle] [--images N]
 
 The overhead is measured with the oracle detector (ground-truth corners, no network), which isolates the
 runner's own cost; the durations use the shipped model (``--model default``, the two-stage design) — what a user
@@ -105,14 +105,15 @@ def experiments(detector, n_images: int, quick: bool) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(quick: bool = False, oracle_only: bool = False) -> str:
+def main(quick: bool = False, oracle_only: bool = False, images: int | None = None) -> str:
     import torch
 
     torch.set_num_threads(1)
     oracle, det = _detectors(oracle_only)
-    cmd = "python benchmarks/bench_campaigns.py" + (" --quick" if quick else "") + (" --oracle" if oracle_only else "")
+    cmd = ("python benchmarks/bench_campaigns.py" + (" --quick" if quick else "") + (" --oracle" if oracle_only else "")
+           + (f" --images {images}" if images else ""))
     t_over, _ = overhead(oracle, 1 if quick else 3, 20 if quick else 60)
-    n = 1 if quick else 2
+    n = images or (1 if quick else 2)
     t_exp = experiments(det, n, quick)
     who = "the shipped model (two-stage, `--model default`)" if det.kind == "default" else "the oracle detector"
     return (
@@ -132,4 +133,6 @@ def main(quick: bool = False, oracle_only: bool = False) -> str:
 
 
 if __name__ == "__main__":
-    print(main("--quick" in sys.argv, "--oracle" in sys.argv))
+    args = sys.argv[1:]
+    n = int(args[args.index("--images") + 1]) if "--images" in args else None
+    print(main("--quick" in args, "--oracle" in args, n))
