@@ -62,6 +62,11 @@ def summarize(rows: Iterable[Mapping[str, Any]], eps_safe_m: float,
     return out
 
 
+def _inside(x: np.ndarray, lower: Sequence[float], upper: Sequence[float]) -> np.ndarray:
+    """Rows of ``x`` (N, d) inside the box ``[lower, upper]`` (1e-9 tolerance: grid nodes sit on box edges)."""
+    return np.all((x >= np.asarray(lower) - 1e-9) & (x <= np.asarray(upper) + 1e-9), axis=1)
+
+
 def worst_within(xs: np.ndarray, fs: np.ndarray, lower: Sequence[float], upper: Sequence[float],
                  penalty_m: float) -> float:
     """Largest value among the evaluated points inside the box ``[lower, upper]`` (failed values count as the
@@ -69,9 +74,7 @@ def worst_within(xs: np.ndarray, fs: np.ndarray, lower: Sequence[float], upper: 
     x = np.asarray(xs, dtype=np.float64)
     if x.size == 0:
         return math.nan
-    lo = np.asarray(lower) - 1e-9
-    hi = np.asarray(upper) + 1e-9
-    inside = np.all((x >= lo) & (x <= hi), axis=1)
+    inside = _inside(x, lower, upper)
     if not inside.any():
         return math.nan
     f = np.where(np.isfinite(fs), fs, penalty_m)[inside]
@@ -87,9 +90,7 @@ def lattice_covered(xs: np.ndarray, grid_bounds: Sequence[Sequence[float]], coun
     for (glo, ghi), n, lo, hi in zip(grid_bounds, counts, lower, upper, strict=True):
         nodes = np.full(1, (glo + ghi) / 2) if int(n) == 1 else np.linspace(glo, ghi, int(n))
         expected *= int(np.sum((nodes >= lo - 1e-9) & (nodes <= hi + 1e-9)))
-    x = np.asarray(xs, dtype=np.float64).reshape(-1, len(counts))
-    inside = np.all((x >= np.asarray(lower) - 1e-9) & (x <= np.asarray(upper) + 1e-9), axis=1)
-    return int(inside.sum()) >= expected
+    return int(_inside(np.asarray(xs, dtype=np.float64).reshape(-1, len(counts)), lower, upper).sum()) >= expected
 
 
 def reference_rows(ref_rows: Iterable[Mapping[str, Any]], boxes: Sequence[Mapping[str, Any]], eps_safe_m: float,
