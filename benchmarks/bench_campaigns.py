@@ -127,7 +127,8 @@ def main(quick: bool = False, oracle_only: bool = False, images: int | None = No
         f"Each experiment was run on the first {n} images of the default sample stream ({5 * n} for pnp-validation) "
         "and extrapolated: start-up (model loading, store; the wall time not inside any job) once, the 2-D "
         "landscape grid (one image only) once, the per-image job time × the default number of images. Searches "
-        "that breach stop early in the spatial experiments, so their durations depend on how robust the model is on the images drawn; the time-budget experiments cost at least "
+        "that breach stop early in the spatial experiments, so their durations depend on how robust the model is "
+        "on the images drawn; the time-budget experiments cost at least "
         "Σ budgets × methods per image.\n\n" + t_exp
     )
 
