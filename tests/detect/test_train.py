@@ -75,6 +75,29 @@ def test_bad_arguments(tmp_path):
         train(tmp_path, samples=_samples(3), detector="three")
     with pytest.raises(ValueError, match="imgsz"):
         train(tmp_path, samples=_samples(3), imgsz=100)
+    with pytest.raises(ValueError, match="n_airports"):
+        train(tmp_path, n_train=4, n_val=2, n_airports=0)
+
+
+def test_synthetic_data_uses_the_airport_pool(tmp_path, monkeypatch):
+    """``n_airports`` reaches the generator for both splits (validation from another seed) and names the dataset."""
+    import vbl_robust.detect.train as tr
+    import vbl_robust.scenes as scenes
+
+    calls = []
+
+    def fake_generate(n, seed=0, **kw):
+        calls.append((n, seed, kw.get("n_airports")))
+        return _samples(n)
+
+    def stop(tr_samples, va_samples, root, **kw):
+        raise RuntimeError(f"built {root.name}")
+
+    monkeypatch.setattr(scenes, "generate", fake_generate)
+    monkeypatch.setattr(tr, "build_dataset", stop)
+    with pytest.raises(RuntimeError, match="built dataset_32px_1crops_box2_ap57$"):
+        train(tmp_path, n_train=4, n_val=2, imgsz=32, crops_per_sample=1, min_box=2, n_airports=57)
+    assert calls == [(4, 0, 57), (2, tr.VAL_SEED_OFFSET, 57)]
 
 
 class _ShiftedTruth:
