@@ -25,6 +25,16 @@ def _detectors(oracle_only: bool):
     return oracle, (oracle if oracle_only else DetectorSpec("default"))
 
 
+def _shipped_version() -> str:
+    """``"v6, "`` from the shipped model's ``default.json`` (empty if it has no version)."""
+    import json
+
+    from vbl_robust.detect.ultralytics import DEFAULT_MODEL
+
+    info = json.loads((DEFAULT_MODEL.parent / "default.json").read_text())
+    return f"v{info['version']}, " if "version" in info else ""
+
+
 def overhead(detector, n_images: int, max_evals: int) -> tuple[str, list[dict]]:
     """Same jobs twice: bare ``maximize`` on a prebuilt objective, and through ``run_campaign`` into a store."""
     import numpy as np
@@ -115,7 +125,8 @@ def main(quick: bool = False, oracle_only: bool = False, images: int | None = No
     t_over, _ = overhead(oracle, 1 if quick else 3, 20 if quick else 60)
     n = images or (1 if quick else 2)
     t_exp = experiments(det, n, quick)
-    who = "the shipped model (two-stage, `--model default`)" if det.kind == "default" else "the oracle detector"
+    who = f"the shipped model ({_shipped_version()}two-stage, `--model default`)" if det.kind == "default" else \
+        "the oracle detector"
     return (
         "## Campaigns: runner overhead and experiment durations\n\n"
         f"Command: `{cmd}`. Synthetic 1024 × 1024 approaches; 1 torch thread.\n\n"

@@ -17,7 +17,7 @@ def register(app: typer.Typer) -> None:
         lard: Path = typer.Option(None, "--lard", help="Train on a LARD V2 directory (CSV + runway DB JSON) instead of synthetic scenes."),
         n_train: int = typer.Option(1000, "--n-train", min=2, help="Synthetic training approaches."),
         n_val: int = typer.Option(100, "--n-val", min=1, help="Validation approaches."),
-        airports: int = typer.Option(10, "--airports", min=1, help="Synthetic airport pool (runway sizes) of the generated data."),
+        airports: int = typer.Option(None, "--airports", min=1, help="Synthetic airports (runway sizes) of the generated data (default: the generator's pool)."),
         imgsz: int = typer.Option(320, "--imgsz", help="Network input size (multiple of 32)."),
         epochs: int = typer.Option(10, "--epochs", min=1, help="Epochs of this stage."),
         batch: int = typer.Option(16, "--batch", min=1),
@@ -37,6 +37,7 @@ def register(app: typer.Typer) -> None:
         """Train the default detector from our synthetic scenes (or your LARD V2 data); every call adds a stage."""
         from vbl_robust.detect import train as tr
         from vbl_robust.detect.ultralytics import DEFAULT_MODEL
+        from vbl_robust.scenes.airports import DEFAULT_POOL
 
         init_path = None
         if init == "default":
@@ -62,7 +63,7 @@ def register(app: typer.Typer) -> None:
                            batch=batch, seed=seed, resume=resume, init_weights=init_path, detector=detector,
                            crops_per_sample=crops, crops_used=crops_used, min_box=min_box, lr0=lr0,
                            optimizer=optimizer, workers=workers, threads=threads,
-                           n_airports=airports)
+                           n_airports=airports or DEFAULT_POOL)
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         typer.echo(f"stage {res.stage_dir.name}: best weights {res.best}")

@@ -32,6 +32,7 @@ import torch
 
 from ..data.sample import Sample
 from ..data.yolo import write_data_yaml, write_pose_images
+from ..scenes.airports import DEFAULT_POOL
 from .offline import import_ultralytics
 from .views import box_window, image_to_view, letterbox_window, resample, to_tensor
 
@@ -196,7 +197,7 @@ def train(
     imgsz: int = 320, epochs: int = 10, batch: int = 16, seed: int = 0, resume: bool = False,
     init_weights: str | Path | None = None, detector: str = "twostage", crops_per_sample: int = 2,
     workers: int = 2, lr0: float | None = None, crops_used: int | None = None, min_box: float | None = None,
-    threads: int | None = None, n_airports: int = 10, **overrides,
+    threads: int | None = None, n_airports: int = DEFAULT_POOL, **overrides,
 ) -> TrainResult:
     """Train (or continue training) the runway-corner YOLOv8n-pose.
 
@@ -224,7 +225,7 @@ def train(
             ``cpu_count − 1``, i.e. one thread on a 2-core machine).
         n_airports: synthetic airport pool of the generated data (``scenes.generate(n_airports=...)``; each
             airport has its own runway length and width). Few airports let the network learn their runways'
-            shape instead of reading it: with 10, held-out runways came out 8–13 % too narrow (MODEL_CARD).
+            shape instead of reading it: with 10, held-out runways came out 4–13 % too narrow (MODEL_CARD).
             The validation airports are a different pool (another seed). Ignored with ``samples``.
         **overrides: further ultralytics training arguments.
 
@@ -261,10 +262,8 @@ def train(
     crops = crops_per_sample if detector == "twostage" else 0
     if min_box is None:
         min_box = round(MIN_BOX_FRACTION * imgsz)
-    if n_airports < 1:
-        raise ValueError(f"train: n_airports must be >= 1, got {n_airports}")
     data_root = out_dir / (f"dataset_{imgsz}px_{crops}crops" + (f"_box{min_box:g}" if min_box else "")
-                           + (f"_ap{n_airports}" if samples is None and n_airports != 10 else ""))
+                           + (f"_ap{n_airports}" if samples is None and n_airports != DEFAULT_POOL else ""))
     if samples is None:
         from ..scenes import generate
 

@@ -18,6 +18,9 @@ REFERENCE_LAT_LON_ALT = (44.0, 2.0, 150.0)
 #: ``spawn_key`` prefix of the airport seed streams (sample streams use ``(i,)`` with ``i`` < this value).
 AIRPORT_STREAM = 2**31 - 1
 
+#: airports in a synthetic pool unless asked otherwise (``generate(n_airports=...)``)
+DEFAULT_POOL = 10
+
 RUNWAY_LENGTH_RANGE_M = (1500.0, 4000.0)
 RUNWAY_WIDTH_RANGE_M = (30.0, 60.0)
 

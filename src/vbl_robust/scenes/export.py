@@ -9,7 +9,7 @@ from vbl_robust.data.lard_write import write_lard
 from vbl_robust.data.sample import Sample
 from vbl_robust.geometry.geodesy import runway_db_entry
 
-from .airports import REFERENCE_LAT_LON_ALT, make_airports
+from .airports import DEFAULT_POOL, REFERENCE_LAT_LON_ALT, make_airports
 from .generate import generate
 
 
@@ -21,7 +21,7 @@ def _streamed(samples: list[Sample]) -> Iterator[Sample]:
 
 
 def write_dataset(out_dir: str | Path, n: int, seed: int = 0, *, image_format: str = "png",
-                  n_airports: int = 10, **generate_kwargs) -> Path:
+                  n_airports: int = DEFAULT_POOL, **generate_kwargs) -> Path:
     """Generate ``n`` scenes (:func:`.generate`, same seed → same files) and write a LARD V2 dataset.
 
     The synthetic airports' runway DB (lat/lon/alt and ECEF of corners A–D) is built with

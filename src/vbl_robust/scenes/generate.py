@@ -10,7 +10,7 @@ import numpy as np
 from vbl_robust.data.sample import Sample
 from vbl_robust.geometry.camera import intrinsics, project
 
-from .airports import Airport, make_airports
+from .airports import DEFAULT_POOL, Airport, make_airports
 from .envelopes import Approach, Envelope, resolve_envelopes, sample_approach, sample_stream
 from .layout import airport_layout, debug_layout
 from .render import debug_look, render_scene, sample_look
@@ -47,7 +47,7 @@ def generate(
     fov_deg: float = 60.0,
     envelopes: Sequence[str | Envelope] | str = ("far", "medium", "close"),
     weights: Sequence[float] | None = None,
-    n_airports: int = 10,
+    n_airports: int = DEFAULT_POOL,
     require_visible: bool = True,
     margin_px: float = 8.0,
     eager: bool = False,
