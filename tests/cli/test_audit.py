@@ -66,3 +66,15 @@ def test_reproduce_and_report_commands(tmp_path):
     assert res.exit_code == 2 and "unknown experiment 'spatial-9d'" in res.output
     res = runner.invoke(app, ["report", str(tmp_path / "nothing")])
     assert res.exit_code == 2 and "no results store" in res.output
+
+
+def test_demo_audits_the_shipped_model_by_default(tmp_path):
+    # issue 4's "done when": the demo runs on the shipped, validated model (no training, no download)
+    out = tmp_path / "demo"
+    res = runner.invoke(app, ["demo", "--out", str(out), "--n", "1", "--max-evals", "3", "--no-landscape", "--quiet"])
+    assert res.exit_code == 0, res.output
+    con = sqlite3.connect(out / "results.sqlite")
+    methods = sorted(m for (m,) in con.execute("SELECT method FROM jobs WHERE status = 'done'"))
+    assert methods == ["apgd", "georobust", "random"]
+    report = (out / "report.html").read_text()
+    assert "shipped model (runway_yolov8n_pose.pt) v" in report and "oracle detector returns" not in report

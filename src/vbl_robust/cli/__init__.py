@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib
 import logging
+import warnings
 
 import typer
 
@@ -25,6 +26,9 @@ _COMMAND_MODULES = ("scenes", "audit", "reproduce", "report", "train")
 @app.callback()
 def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log progress details (INFO).")) -> None:
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    # torch 2.14 warns about its own use of torch.jit.script when torch.func first loads its decompositions
+    # (the gradient methods); nothing the user can act on.
+    warnings.filterwarnings("ignore", message=r"`torch\.jit\.script` is deprecated", category=FutureWarning)
 
 
 for _name in _COMMAND_MODULES:

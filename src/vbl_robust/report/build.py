@@ -98,6 +98,8 @@ def section_overview(ctx: Context, title: str) -> Section:
         + (f" of {total}" if total else "") + ".</p>")
     if ctx.spec.notes:
         s.html.append(f'<p class="note">{esc(ctx.spec.notes)}</p>')
+    for goal in det.get("open_goals") or []:
+        s.html.append(f'<p class="warn">Open accuracy goal of this detector (its model card): {esc(goal)}.</p>')
     if det.get("kind") == "oracle":
         s.html.append('<p class="warn">The oracle detector returns the exact projected runway corners: these results '
                       "describe a perfect detector (roll about the optical axis does not move the camera), not a "
