@@ -42,3 +42,30 @@ def test_gradcheck_image_and_window():
     x = torch.rand(1, 3, 12, 12, dtype=torch.float64, requires_grad=True)
     w = torch.tensor([[1.3, 2.1, 7.7]], dtype=torch.float64, requires_grad=True)
     assert torch.autograd.gradcheck(lambda a, b: resample(a, b, 5), (x, w))
+
+
+@pytest.mark.parametrize("window", [(0, 0, 16), (-3, 5, 16), (10, -6, 16), (-12, 0, 16), (2, 1, 16)])
+def test_integer_window_copy_equals_bilinear_sampling(window):
+    """A window of the output size at integer offsets is served as a pixel copy: same values, padding and
+    image gradient as the bilinear path (forced by a window that needs a gradient)."""
+    torch.manual_seed(0)
+    img = torch.rand(2, 3, 20, 24, dtype=torch.float64, requires_grad=True)
+    fast = resample(img, torch.tensor(window, dtype=torch.float64), 16)
+    slow = resample(img, torch.tensor(window, dtype=torch.float64, requires_grad=True), 16)
+    assert torch.allclose(fast, slow, atol=1e-12)
+    w = torch.rand_like(fast)
+    g_fast, = torch.autograd.grad((fast * w).sum(), img)
+    g_slow, = torch.autograd.grad((slow * w).sum(), img)
+    assert torch.allclose(g_fast, g_slow, atol=1e-12)
+
+
+def test_non_integer_or_mixed_windows_still_sample():
+    img = torch.rand(2, 3, 16, 16, dtype=torch.float64)
+    half = resample(img, torch.tensor((0.5, 0.0, 16.0), dtype=torch.float64), 16)
+    # half a pixel to the right: the mean of two neighbouring columns
+    assert torch.allclose(half[:, :, :, :-1], (img[:, :, :, :-1] + img[:, :, :, 1:]) / 2, atol=1e-12)
+    same = resample(img, torch.tensor((0.0, 0.0, 16.0), dtype=torch.float64), 16)
+    slow = resample(img, torch.tensor((0.0, 0.0, 16.0), dtype=torch.float64, requires_grad=True), 16)
+    assert torch.equal(same, img) and torch.allclose(slow, img, atol=1e-12)
+    mixed = resample(img, torch.tensor([(0.0, 0.0, 16.0), (1.0, 0.0, 16.0)], dtype=torch.float64), 16)
+    assert torch.allclose(mixed[0], img[0]) and torch.allclose(mixed[1, :, :, :-1], img[1, :, :, 1:])

@@ -76,6 +76,9 @@ def resample(images: torch.Tensor, windows: torch.Tensor, size: int) -> torch.Te
     windows = torch.as_tensor(windows, dtype=images.dtype, device=images.device)
     if windows.ndim == 1:
         windows = windows.expand(b, 3)
+    shifted = _integer_shift(images, windows, size)
+    if shifted is not None:
+        return shifted
     out = torch.empty(b, images.shape[1], size, size, dtype=images.dtype, device=images.device)
     t = (torch.arange(size, dtype=images.dtype, device=images.device) + 0.5) / size  # view-pixel centres in [0, 1]
     for p, idx in _pool_groups(windows, size):
@@ -95,6 +98,35 @@ def resample(images: torch.Tensor, windows: torch.Tensor, size: int) -> torch.Te
                                 align_corners=False)
         mask = sampled[:, -1:]
         out[idx] = sampled[:, :-1] + PAD_VALUE * (1.0 - mask)
+    return out
+
+
+def _integer_shift(images: torch.Tensor, windows: torch.Tensor, size: int) -> torch.Tensor | None:
+    """The views as a pixel copy when one window of side ``size`` at integer offsets serves every image, else None.
+
+    Then each view pixel centre lands on an image pixel centre and bilinear sampling is a copy: this is the
+    letterbox of an image already at the detector's input size (the single-pass objective perturbs at that
+    size), where ``grid_sample`` would cost as much as a tenth of the detector's forward pass. Not taken when the
+    windows need a gradient (the copy has none with respect to the window).
+    """
+    if windows.requires_grad or windows.shape[0] == 0:
+        return None
+    w0 = windows[0]
+    if not bool((windows == w0).all()) or float(w0[2]) != size:
+        return None
+    x0, y0 = float(w0[0]), float(w0[1])
+    if x0 != int(x0) or y0 != int(y0):
+        return None
+    x0, y0 = int(x0), int(y0)
+    h, w = images.shape[-2:]
+    if x0 == 0 and y0 == 0 and h == w == size:
+        return images  # the view is the image (read only downstream)
+    out = images.new_full((images.shape[0], images.shape[1], size, size), PAD_VALUE)
+    # view rows/cols [a, b) ← image rows/cols [a + offset, b + offset), clipped to the image
+    r0, r1 = max(0, -y0), min(size, h - y0)
+    c0, c1 = max(0, -x0), min(size, w - x0)
+    if r1 > r0 and c1 > c0:
+        out[:, :, r0:r1, c0:c1] = images[:, :, r0 + y0:r1 + y0, c0 + x0:c1 + x0]
     return out
 
 
