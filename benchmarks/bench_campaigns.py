@@ -27,11 +27,9 @@ def _detectors(oracle_only: bool):
 
 def _shipped_version() -> str:
     """``"v6, "`` from the shipped model's ``default.json`` (empty if it has no version)."""
-    import json
+    from vbl_robust.campaigns.provenance import default_model_info
 
-    from vbl_robust.detect.ultralytics import DEFAULT_MODEL
-
-    info = json.loads((DEFAULT_MODEL.parent / "default.json").read_text())
+    info = default_model_info()
     return f"v{info['version']}, " if "version" in info else ""
 
 

@@ -1,5 +1,5 @@
 """The shipped model is used by default only once it is validated (``validated`` in its default.json);
-its open goals travel with every run.."""
+its open goals travel with every run."""
 
 import json
 

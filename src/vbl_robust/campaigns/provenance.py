@@ -106,9 +106,10 @@ def default_model_status() -> str:
     return ""
 
 
-def default_model_caveats() -> list[str]:
-    """The shipped model's open accuracy goals (``"open_goals"`` of ``default.json``), one line each."""
-    goals = default_model_info().get("open_goals") or []
+def default_model_caveats(info: dict[str, Any] | None = None) -> list[str]:
+    """The shipped model's open accuracy goals (``"open_goals"`` of ``default.json``, or of ``info`` when given),
+    one line each."""
+    goals = (default_model_info() if info is None else info).get("open_goals") or []
     return [str(g) for g in goals] if isinstance(goals, list) else [str(goals)]
 
 
@@ -195,8 +196,8 @@ class DetectorSpec:
             info = default_model_info()
             if "version" in info:
                 ident["name"] += f" v{info['version']}"
-            if default_model_caveats():
-                ident["open_goals"] = default_model_caveats()
+            if goals := default_model_caveats(info):
+                ident["open_goals"] = goals
         return ident
 
     def key(self) -> str:
