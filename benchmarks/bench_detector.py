@@ -149,7 +149,8 @@ def main(quick: bool = False) -> str:
         "(LARD V2 far / medium / close envelopes, 1024 × 1024, 60° FOV), no perturbation. *Detection*: a "
         "candidate with confidence ≥ 0.25 (the paper's criterion); *correct*: detected and mean corner error ≤ "
         "0.25 × the true corner box's diagonal. Corner errors in 1024-px units (over detected samples); a failure "
-        "counts as an infinite position error. 2-core CPU: timings include contention from concurrent jobs.",
+        f"counts as an infinite position error. Torch threads: {torch.get_num_threads()} (`VBL_BENCH_THREADS`); "
+        "2-core CPU: timings include contention from concurrent jobs.",
         "",
         acc,
         "",

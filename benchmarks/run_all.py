@@ -65,7 +65,7 @@ def _machine() -> str:
     return (
         f"- last run: {_now()}; commit `{_commit()}` (each section names its own run)\n"
         f"- machine: {platform.machine()}, {os.cpu_count()} CPU cores, no GPU; Python {platform.python_version()}, "
-        f"torch {torch.__version__} (threads: {torch.get_num_threads()})\n"
+        f"torch {torch.__version__} (default threads: {torch.get_num_threads()}; a section that sets its own says so)\n"
         f"- load average at start (1/5/15 min): {' / '.join(f'{v:.1f}' for v in os.getloadavg())} "
         "(other processes share the 2 cores when this is above ~0.5: timings are then pessimistic)\n"
     )
