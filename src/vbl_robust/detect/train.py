@@ -173,6 +173,14 @@ def _subset_yaml(data: Path, n_train: int, crops_used: int) -> Path:
     return out
 
 
+def _options_tag(options: dict) -> str:
+    """Short stable tag of generator options for a dataset directory name."""
+    import hashlib
+
+    text = json.dumps({k: list(v) if isinstance(v, tuple) else v for k, v in sorted(options.items())})
+    return "_g" + hashlib.sha256(text.encode()).hexdigest()[:8]
+
+
 @dataclass
 class TrainResult:
     """Outcome of one :func:`train` call: the stage directory and its best / last weights."""
@@ -197,7 +205,8 @@ def train(
     imgsz: int = 320, epochs: int = 10, batch: int = 16, seed: int = 0, resume: bool = False,
     init_weights: str | Path | None = None, detector: str = "twostage", crops_per_sample: int = 2,
     workers: int = 2, lr0: float | None = None, crops_used: int | None = None, min_box: float | None = None,
-    threads: int | None = None, n_airports: int = DEFAULT_POOL, **overrides,
+    threads: int | None = None, n_airports: int = DEFAULT_POOL, generate_options: dict | None = None,
+    **overrides,
 ) -> TrainResult:
     """Train (or continue training) the runway-corner YOLOv8n-pose.
 
@@ -227,6 +236,9 @@ def train(
             airport has its own runway length and width). Few airports let the network learn their runways'
             shape instead of reading it: with 10, held-out runways came out 4–13 % too narrow (MODEL_CARD).
             The validation airports are a different pool (another seed). Ignored with ``samples``.
+        generate_options: further keyword arguments of ``scenes.generate`` for the synthetic data, e.g.
+            ``{"weights": (2, 1, 1), "runway_length_range_m": (1500, 4500)}`` (far approaches twice as often,
+            longer runways); they name the dataset directory, so a different mix never reuses a rendered one.
         **overrides: further ultralytics training arguments.
 
     Returns:
@@ -263,12 +275,14 @@ def train(
     if min_box is None:
         min_box = round(MIN_BOX_FRACTION * imgsz)
     data_root = out_dir / (f"dataset_{imgsz}px_{crops}crops" + (f"_box{min_box:g}" if min_box else "")
-                           + (f"_ap{n_airports}" if samples is None and n_airports != DEFAULT_POOL else ""))
+                           + (f"_ap{n_airports}" if samples is None and n_airports != DEFAULT_POOL else "")
+                           + (_options_tag(generate_options) if samples is None and generate_options else ""))
     if samples is None:
         from ..scenes import generate
 
-        tr = generate(n_train, seed=seed, n_airports=n_airports)
-        va = generate(n_val, seed=seed + VAL_SEED_OFFSET, n_airports=n_airports)
+        gen = dict(generate_options or {})
+        tr = generate(n_train, seed=seed, n_airports=n_airports, **gen)
+        va = generate(n_val, seed=seed + VAL_SEED_OFFSET, n_airports=n_airports, **gen)
     else:
         samples = list(samples)
         if len(samples) < 2:

@@ -24,6 +24,9 @@ DEFAULT_POOL = 10
 RUNWAY_LENGTH_RANGE_M = (1500.0, 4000.0)
 RUNWAY_WIDTH_RANGE_M = (30.0, 60.0)
 
+#: largest synthetic pool (airport codes ``X1000`` … ``X9999`` beyond ``XS99`` / ``X100``–``X999``)
+MAX_POOL = 9999
+
 
 @dataclass(frozen=True)
 class Airport:
@@ -58,12 +61,18 @@ def designation(azimuth_deg: float, letter: str = "") -> str:
     return f"{36 if n == 0 else n:02d}{letter}"
 
 
-def make_airport(j: int, seed: int) -> Airport:
-    """Airport ``j`` of the pool of dataset ``seed`` (deterministic)."""
+def make_airport(j: int, seed: int, *, length_range_m: tuple[float, float] = RUNWAY_LENGTH_RANGE_M,
+                 width_range_m: tuple[float, float] = RUNWAY_WIDTH_RANGE_M) -> Airport:
+    """Airport ``j`` of the pool of dataset ``seed`` (deterministic).
+
+    ``length_range_m`` / ``width_range_m``: uniform ranges of the runway size (metres). With the defaults an
+    airport is the same as in every earlier release; a wider range rescales the same draws.
+    Positions: a 10 × 100 grid 0.3° apart per block of 1000 airports, blocks 3° apart in longitude.
+    """
     rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(AIRPORT_STREAM, int(j))))
     azimuth = float(rng.uniform(0.0, 360.0))
-    length = float(rng.uniform(*RUNWAY_LENGTH_RANGE_M))
-    width = float(rng.uniform(*RUNWAY_WIDTH_RANGE_M))
+    length = float(rng.uniform(*length_range_m))
+    width = float(rng.uniform(*width_range_m))
     parallel_side = int(rng.choice([0, 0, 1, -1]))
     letter = {0: "", 1: "R", -1: "L"}[parallel_side]  # distractor on the left -> we land on the right runway
     lat0, lon0, alt0 = REFERENCE_LAT_LON_ALT
@@ -73,18 +82,23 @@ def make_airport(j: int, seed: int) -> Airport:
         azimuth_deg=azimuth,
         length_m=length,
         width_m=width,
-        ltp_lat=lat0 + 0.3 * (j // 10) + float(rng.uniform(-0.05, 0.05)),
-        ltp_lon=lon0 + 0.3 * (j % 10) + float(rng.uniform(-0.05, 0.05)),
+        ltp_lat=lat0 + 0.3 * ((j // 10) % 100) + float(rng.uniform(-0.05, 0.05)),
+        ltp_lon=lon0 + 3.0 * (j // 1000) + 0.3 * (j % 10) + float(rng.uniform(-0.05, 0.05)),
         ltp_alt=alt0 + float(rng.uniform(0.0, 300.0)),
         seed=int(rng.integers(0, 2**62)),
         parallel_side=parallel_side,
     )
 
 
-def make_airports(n: int, seed: int = 0) -> list[Airport]:
+def make_airports(n: int, seed: int = 0, *, length_range_m: tuple[float, float] = RUNWAY_LENGTH_RANGE_M,
+                  width_range_m: tuple[float, float] = RUNWAY_WIDTH_RANGE_M) -> list[Airport]:
     """The pool of ``n`` synthetic airports of dataset ``seed``; airport ``j`` does not depend on ``n``."""
     if int(n) != n or n < 1:
         raise ValueError(f"n_airports: need a positive integer, got {n!r}")
-    if int(n) > 999:
-        raise ValueError(f"n_airports: at most 999 synthetic airports, got {n}")
-    return [make_airport(j, seed) for j in range(int(n))]
+    if int(n) > MAX_POOL:
+        raise ValueError(f"n_airports: at most {MAX_POOL} synthetic airports, got {n}")
+    for name, (lo, hi) in (("length_range_m", length_range_m), ("width_range_m", width_range_m)):
+        if not (np.isfinite(lo) and np.isfinite(hi) and 0 < lo <= hi):
+            raise ValueError(f"{name}: need 0 < lo <= hi metres, got {(lo, hi)!r}")
+    return [make_airport(j, seed, length_range_m=length_range_m, width_range_m=width_range_m)
+            for j in range(int(n))]

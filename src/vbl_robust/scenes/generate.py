@@ -48,6 +48,7 @@ def generate(
     envelopes: Sequence[str | Envelope] | str = ("far", "medium", "close"),
     weights: Sequence[float] | None = None,
     n_airports: int = DEFAULT_POOL,
+    runway_length_range_m: tuple[float, float] | None = None,
     require_visible: bool = True,
     margin_px: float = 8.0,
     eager: bool = False,
@@ -66,6 +67,7 @@ def generate(
             the image centre as in LARD).
         envelopes, weights: envelopes to draw from and their relative weights (default: equal).
         n_airports: size of the synthetic airport pool.
+        runway_length_range_m: runway lengths of the pool (default :data:`.airports.RUNWAY_LENGTH_RANGE_M`).
         eager: render all pixels now (else on first access of ``sample.image``; ``drop_pixels()`` frees them).
         debug: render a black world with a flat white runway (for pixel checks).
 
@@ -83,7 +85,8 @@ def generate(
     width, height = int(width), int(height)
     K = intrinsics(width, height, fov_deg)
     envs, p = resolve_envelopes(envelopes, weights)
-    airports = make_airports(n_airports, seed)
+    airports = make_airports(n_airports, seed, **(
+        {} if runway_length_range_m is None else {"length_range_m": tuple(runway_length_range_m)}))
     out = []
     for i in range(int(n)):
         rng = np.random.default_rng(sample_stream(seed, i))
