@@ -99,11 +99,10 @@ def throughput_section(dets: dict, sample, reps: int) -> str:
     box = ParameterBox({"roll_deg": (-10, 10), "contrast": (0.7, 1.3)})
     rng = np.random.default_rng(0)
     lines = ["| detector | batch | end-to-end evals/s | bare detector images/s | e2e / bare |", "|---|---|---|---|---|"]
-    runs = [(name, det, {}) for name, det in dets.items()]
-    runs += [(f"{name}, perturb full image first", det, {"fuse": False}) for name, det in dets.items()
-             if callable(getattr(det, "applies_perturbation", None))]
-    for name, det, kw in runs:
-        obj = Objective(sample, det, box, batch_size=32, **kw)
+    from vbl_robust.detect import DetectContext
+
+    for name, det in dets.items():
+        obj = Objective(sample, det, box, batch_size=32)
         size = getattr(det, "input_size", None)
         img = sample.image
         if size is not None and max(img.shape[:2]) > size:
@@ -112,7 +111,7 @@ def throughput_section(dets: dict, sample, reps: int) -> str:
         x1 = torch.as_tensor(np.asarray(img)).permute(2, 0, 1)[None].float() / 255
         for b in (1, 8, 32):
             theta = box.from_unit(rng.random((b, 2)))
-            xb = x1.expand(b, -1, -1, -1).contiguous()
+            xb = DetectContext.of_images(x1.expand(b, -1, -1, -1).contiguous())
             det.detect(xb)
             obj(theta)  # warm-up
             # interleaved, so that load from other processes weighs on both the same way

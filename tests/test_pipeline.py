@@ -88,11 +88,11 @@ class StubDetector:
         self.keypoints, self.conf, self.empty = np.asarray(keypoints, float), conf, empty
         self.calls = []
 
-    def detect(self, images, *, context=None):
-        self.calls.append(tuple(images.shape))
+    def detect(self, context):
+        self.calls.append(tuple(context.frames().shape))
         if self.empty:
-            return [Detections.empty() for _ in range(images.shape[0])]
-        return [Detections(np.zeros((1, 4)), [self.conf], self.keypoints[None]) for _ in range(images.shape[0])]
+            return [Detections.empty() for _ in range(len(context))]
+        return [Detections(np.zeros((1, 4)), [self.conf], self.keypoints[None]) for _ in range(len(context))]
 
 
 def test_every_failure_is_penalised_with_its_reason(samples):
@@ -158,13 +158,13 @@ def test_user_errors_are_value_errors_at_construction(samples):
     obj = Objective(s, OracleDetector(), BOX)
     with pytest.raises(ValueError, match=r"theta must have shape \(N, 2\)"):
         obj(np.zeros((3, 3)))
-    with pytest.raises(ValueError, match="no detect_top"):
+    with pytest.raises(ValueError, match="not differentiable"):
         Objective(s, StubDetector(s.corners_2d), BOX).torch(torch.zeros(1, 2))
 
 
 # -- batching, resolution, records --------------------------------------------------------------------------------
-def test_detectors_without_context_and_with_tensor_containers(samples):
-    """A user's detector may omit the context keyword and return tensors in its own container type."""
+def test_user_detectors_with_tensor_containers(samples):
+    """A user's detector declares its capabilities and may return tensors in its own container type."""
     s = samples[1]
 
     class Candidates:  # duck-typed: conf and keypoints as tensors
@@ -175,11 +175,13 @@ def test_detectors_without_context_and_with_tensor_containers(samples):
             return 2
 
     class Plain:
-        def detect(self, images):
-            return [Candidates(torch.from_numpy(s.corners_2d)) for _ in range(images.shape[0])]
+        differentiable = True
 
-        def detect_top(self, images):
-            n = images.shape[0]
+        def detect(self, context):
+            return [Candidates(torch.from_numpy(s.corners_2d)) for _ in range(len(context))]
+
+        def detect_top(self, context):
+            n = len(context)
             return torch.full((n,), 0.8), torch.from_numpy(s.corners_2d).expand(n, 4, 2)
 
     obj = Objective(s, Plain(), BOX)
@@ -210,9 +212,9 @@ class RecordingOracle(OracleDetector):
         self.input_size = input_size
         self.images = []
 
-    def detect(self, images, *, context=None):
-        self.images.append(images)
-        return super().detect(images, context=context)
+    def detect(self, context):
+        self.images.append(context.frames())
+        return super().detect(context)
 
 
 def test_perturbing_at_the_detector_resolution(samples):
@@ -272,13 +274,15 @@ class ContrastBiasedOracle(OracleDetector):
     GAIN_PX = 8.0
     uses_pixels = True
 
-    def detect(self, images, *, context=None):
-        dets = super().detect(images, context=context)
+    def detect(self, context):
+        dets = super().detect(context)
+        images = context.frames()
         std = images.reshape(images.shape[0], -1).std(dim=1).numpy()
         return [Detections(d.boxes, d.conf, d.keypoints + self.GAIN_PX * sd) for d, sd in zip(dets, std, strict=True)]
 
-    def detect_top(self, images, *, context=None):
-        conf, kp = super().detect_top(images, context=context)
+    def detect_top(self, context):
+        conf, kp = super().detect_top(context)
+        images = context.frames()
         std = images.reshape(images.shape[0], -1).std(dim=1)
         return conf, kp + self.GAIN_PX * std.to(kp.dtype)[:, None, None]
 
@@ -316,8 +320,8 @@ def test_pnp_failures_in_the_differentiable_path_do_not_leak_nan(samples):
     collinear = torch.tensor([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0], [3.0, 3.0]], dtype=torch.float64)
 
     class HalfBroken(OracleDetector):
-        def detect_top(self, images, *, context=None):
-            conf, kp = super().detect_top(images, context=context)
+        def detect_top(self, context):
+            conf, kp = super().detect_top(context)
             kp = torch.cat([kp[:1], collinear[None] + 0.0 * kp[1:2], kp[2:]])
             return conf, kp
 

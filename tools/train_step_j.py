@@ -15,8 +15,8 @@ import logging
 
 import torch
 
+from vbl_robust.detect.shipped import DEFAULT_MODEL
 from vbl_robust.detect.train import train
-from vbl_robust.detect.ultralytics import DEFAULT_MODEL
 
 #: generator options of the step-J data (train and the ultralytics validation split)
 STEP_J_DATA = {"weights": (2.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)}

@@ -25,7 +25,7 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "OracleDetector": ("vbl_robust.detect.oracle", "OracleDetector"),
     "UltralyticsDetector": ("vbl_robust.detect.ultralytics", "UltralyticsDetector"),
     "OnnxDetector": ("vbl_robust.detect.onnx", "OnnxDetector"),
-    "default_detector": ("vbl_robust.detect.ultralytics", "default_detector"),
+    "default_detector": ("vbl_robust.detect.shipped", "default_detector"),
     "scenes": ("vbl_robust.scenes", None),
     "data": ("vbl_robust.data", None),
     "search": ("vbl_robust.search", None),

@@ -3,30 +3,22 @@
 For a sample (image ``x``, intrinsics ``K``, runway corners, true camera position ``y``) and a batch of
 parameter vectors θ ``(N, d)`` in real units (columns named by the box)::
 
-    x'  = T(x; θ)                     roll about the principal point, then contrast (vbl_robust.perturb)
-    k   = σ_select(detector(x'))       max-confidence candidate if conf ≥ τ_conf (vbl_robust.detect)
-    ŷ   = PnP(k, corners_3d, K)        camera position in the runway frame (vbl_robust.pnp)
-    L   = ‖ŷ − y‖₂  (metres), or penalty_m (5000 m) on ANY failure
+    views = ViewSampler(x, θ)         the perturbed images T(x; θ), as the views a detector asks for (perturb/)
+    k     = σ_select(detector(views))  max-confidence candidate if conf ≥ τ_conf (detect/)
+    ŷ     = PnP(k, corners_3d, K)      camera position in the runway frame (pnp/)
+    L     = ‖ŷ − y‖₂  (metres), or PENALTY_M (5000 m) on ANY failure
 
-Failures (recorded per row in :class:`EvalRecord`): ``image_unavailable`` (the sample's pixels cannot be
-loaded — every row, never an exception), ``no_detection``, ``low_confidence``, ``non_finite_keypoints``,
-``pnp_failed``, ``non_finite_position``. A successful row is never capped: a wild but "successful" PnP can
-exceed the penalty.
+Every chunk of θ goes through one loop, :meth:`Objective._chunk`, in one of two modes: black box
+(``objective(theta)`` / :meth:`Objective.evaluate`: NumPy, no gradient, OpenCV PnP) or differentiable
+(:meth:`Objective.torch`: the detector's ``detect_top`` and the implicit PnP gradient; penalised rows are
+constant with zero gradient, never NaN). Both record per row why an evaluation failed
+(:data:`vbl_robust.constants.FAILURE_REASONS`): ``image_unavailable`` (the pixels cannot be loaded — every row,
+never an exception), ``no_detection``, ``low_confidence``, ``non_finite_keypoints``, ``pnp_failed``,
+``non_finite_position``. A successful row is never capped: a wild but "successful" PnP can exceed the penalty.
 
-Resolution: images are perturbed at the detector's ``input_size`` (long side) when it is smaller than the
-image — rotation about the principal point commutes with isotropic scaling, so this is the same perturbation,
-computed on fewer pixels; the centre is mapped with :class:`~vbl_robust.perturb.PixelScale` and keypoints are
-mapped back to the sample's pixels before PnP (``resolution="full"`` disables it).
-
-A detector whose ``applies_perturbation(perturbation)`` is true (the two-stage detector) receives the
-unperturbed image with a context marked ``perturbed=False`` and samples its views of ``T(x; θ)`` itself (no
-full-resolution warp per evaluation; ``fuse=False`` disables it). A detector declaring ``uses_pixels = False``
-(the oracle) receives the unperturbed image broadcast over the
-batch instead of perturbed copies: it reads the perturbation from the context, and the audit runs fast.
-
-Two paths: ``objective(theta)`` (NumPy, no gradient, OpenCV warps) and ``objective.torch(theta)``
-(differentiable w.r.t. θ through kornia, the detector's ``detect_top`` and the implicit PnP gradient;
-penalised rows are constant with zero gradient, never NaN).
+Resolution: the image is resized once to the detector's ``input_size`` (long side) when that is smaller —
+rotation about the principal point commutes with isotropic scaling, so this is the same perturbation on fewer
+pixels; keypoints are mapped back to the sample's pixels before PnP (``resolution="full"`` disables it).
 """
 
 from __future__ import annotations
@@ -37,27 +29,23 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from vbl_robust.constants import CONF_THRESHOLD, PENALTY_M
+from vbl_robust.constants import FAILURE_REASONS as _REASONS
 from vbl_robust.data.sample import Sample
-from vbl_robust.detect.base import DEFAULT_CONF_THRESHOLD, DetectContext, Detector, select
-from vbl_robust.perturb import Perturbation, PixelScale, resize_image
-from vbl_robust.pnp import SOLVERS, solve
+from vbl_robust.detect.base import DetectContext, Detector, select
+from vbl_robust.perturb import Perturbation, PixelScale, ViewSampler, resize_image
+from vbl_robust.pnp import SOLVERS, pnp_position_torch, solve
 from vbl_robust.space import ParameterBox
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["DEFAULT_PENALTY_M", "FAILURE_REASONS", "EvalRecord", "Objective"]
 
-#: Error assigned to any failure, metres (the paper's L_E2E for a detection breakdown).
-DEFAULT_PENALTY_M = 5000.0
+#: Error assigned to any failure, metres (alias of :data:`vbl_robust.constants.PENALTY_M`).
+DEFAULT_PENALTY_M = PENALTY_M
 
-FAILURE_REASONS = (
-    "image_unavailable",
-    "no_detection",
-    "low_confidence",
-    "non_finite_keypoints",
-    "pnp_failed",
-    "non_finite_position",
-)
+#: The failure codes of :attr:`EvalRecord.reason` (see :data:`vbl_robust.constants.FAILURE_REASONS`).
+FAILURE_REASONS = tuple(_REASONS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,34 +118,20 @@ class EvalRecord:
         )
 
 
-def _takes_context(fn) -> bool:
-    """True when ``fn`` accepts a ``context`` keyword (or ``**kwargs``); detectors may omit it."""
-    import inspect
-
-    try:
-        params = inspect.signature(fn).parameters.values()
-    except (TypeError, ValueError):
-        return True
-    return any(p.name == "context" or p.kind is inspect.Parameter.VAR_KEYWORD for p in params)
-
-
 class Objective:
     """``L(θ)`` for one sample: ``objective(theta (N, d)) -> (N,)`` metres; ``objective.torch`` differentiable.
 
     Args:
         sample: the :class:`~vbl_robust.data.sample.Sample` (its pixels are loaded on the first evaluation).
-        detector: any :class:`~vbl_robust.detect.Detector` (``detect_top`` is needed for :meth:`torch`).
+        detector: any :class:`~vbl_robust.detect.Detector` (``differentiable = True`` for :meth:`torch`).
         box: the :class:`~vbl_robust.space.ParameterBox` whose names select the perturbations.
         pnp: PnP solver name (``"ippe_lm"`` default, ``"iterative"``, ``"sqpnp"``, ``"ippe"``).
         conf_threshold: τ_conf of σ_select.
         penalty_m: error assigned to any failure, metres.
         batch_size: θ rows per detector call (bounds memory).
-        resolution: ``"auto"`` (perturb at the detector's ``input_size`` when smaller than the image),
-            ``"full"``, or an int long side in pixels.
+        resolution: ``"auto"`` (resize to the detector's ``input_size`` when smaller than the image), ``"full"``,
+            or an int long side in pixels.
         pnp_grad: gradient of the differentiable PnP layer (``"exact"`` or ``"bpnp"``).
-        fuse: let a detector that can (``detector.applies_perturbation(perturbation)``, e.g. the two-stage
-            detector) apply the perturbation while sampling its own views from the unperturbed image, instead of
-            receiving perturbed full-resolution copies (False: always perturb the image first).
 
     Raises:
         ValueError: a user mistake (unknown parameter name, unknown PnP solver, bad threshold/penalty/batch size,
@@ -177,19 +151,18 @@ class Objective:
         box: ParameterBox,
         pnp: str = "ippe_lm",
         *,
-        conf_threshold: float = DEFAULT_CONF_THRESHOLD,
-        penalty_m: float = DEFAULT_PENALTY_M,
+        conf_threshold: float = CONF_THRESHOLD,
+        penalty_m: float = PENALTY_M,
         batch_size: int = 32,
         resolution: str | int = "auto",
         pnp_grad: str = "exact",
-        fuse: bool = True,
     ):
         if not isinstance(box, ParameterBox):
             raise ValueError(f"Objective: box must be a vbl_robust.ParameterBox, got {type(box).__name__}")
         if not isinstance(sample, Sample):
             raise ValueError(f"Objective: sample must be a vbl_robust.Sample, got {type(sample).__name__}")
         if not callable(getattr(detector, "detect", None)):
-            raise ValueError(f"Objective: detector {detector!r} has no detect(images, *, context) method")
+            raise ValueError(f"Objective: detector {detector!r} has no detect(context) method")
         if pnp not in SOLVERS:
             raise ValueError(f"Objective: unknown PnP solver pnp={pnp!r}; choose from {SOLVERS}")
         if not (0.0 <= float(conf_threshold) <= 1.0):
@@ -210,11 +183,6 @@ class Objective:
         self.batch_size = int(batch_size)
         self.resolution = resolution
         self.pnp_grad = pnp_grad
-        self.fuse = bool(fuse)
-        applies = getattr(detector, "applies_perturbation", None)
-        #: the detector applies the perturbation itself (it then gets the unperturbed image)
-        self.fused = self.fuse and callable(applies) and bool(applies(self.perturbation))
-        self._uses_pixels = bool(getattr(detector, "uses_pixels", True))
         self.nfev = 0
         self._loaded = False
         self._image_error = ""
@@ -243,7 +211,7 @@ class Objective:
         return int(self.resolution)
 
     def _load(self) -> None:
-        """Load and resample the pixels once; a failure is recorded (``image_unavailable``), never raised."""
+        """Load and resize the pixels once; a failure is recorded (``image_unavailable``), never raised."""
         if self._loaded:
             return
         self._loaded = True
@@ -273,28 +241,110 @@ class Objective:
         self._load()
         return self._image_error
 
-    def _center(self) -> np.ndarray:
-        return self._scale.to_scaled(self.sample.K[:2, 2])
+    def context(self, theta) -> DetectContext:
+        """The :class:`~vbl_robust.detect.DetectContext` of θ rows ``(B, d)`` (NumPy or a tensor)."""
+        self._load()
+        sampler = ViewSampler(self.perturbation, self._base_t, theta, self._scale.to_scaled(self.sample.K[:2, 2]),
+                              frame=self._base)
+        return DetectContext(self.sample, sampler, self._scale)
 
-    def _context(self, theta) -> DetectContext:
-        return DetectContext(self.sample, theta, self.perturbation, self._scale, perturbed=not self.fused)
-
-    # -- black-box path ------------------------------------------------------------------------------------------
+    # -- the two entry points ------------------------------------------------------------------------------------
     def __call__(self, theta) -> np.ndarray:
         """``theta (N, d)`` real units → ``L (N,)`` float64 metres."""
         return self.evaluate(theta).loss
 
     def evaluate(self, theta) -> EvalRecord:
         """Like ``__call__`` with every detail per row (positions, confidences, keypoints, failure reasons)."""
-        t = self.perturbation.check_theta(np.asarray(theta, dtype=np.float64))
+        try:
+            t = np.asarray(theta, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"theta must be numbers, shape (N, {self.dim}) for parameters {self.names}; "
+                             f"got {theta!r}"[:300]) from None
+        return self._run(self.perturbation.check_theta(t))[0]
+
+    def torch(self, theta, *, reasons: bool = False):
+        """``theta (N, d)`` tensor → ``L (N,)`` float64 tensor, differentiable w.r.t. θ (``reasons=True``: also the
+        ``N`` failure codes).
+
+        Gradients flow through the view sampler, the detector's ``detect_top`` and the implicit PnP gradient.
+        Penalised rows are the constant ``penalty_m`` with zero gradient (never NaN).
+        """
+        if not getattr(self.detector, "differentiable", False) or not callable(getattr(self.detector, "detect_top", None)):
+            raise ValueError(f"Objective.torch: detector {self.detector!r} is not differentiable (no detect_top); "
+                             "it supports only the black-box path")
+        t = theta if isinstance(theta, torch.Tensor) else torch.as_tensor(np.asarray(theta, dtype=np.float64))
+        rec, loss = self._run(self.perturbation.check_theta(t))
+        loss = loss + 0.0 * t.sum(dim=1).to(torch.float64)  # keeps the result attached to θ even if all failed
+        return (loss, rec.reason) if reasons else loss
+
+    # -- one loop for both modes ---------------------------------------------------------------------------------
+    def _run(self, t) -> tuple[EvalRecord, torch.Tensor | None]:
+        grad = isinstance(t, torch.Tensor)
         self._load()
         self.nfev += t.shape[0]
-        if self._image_error:
-            return self._all_failed(t, "image_unavailable", self._image_error)
-        records = [self._evaluate_chunk(t[i : i + self.batch_size]) for i in range(0, t.shape[0], self.batch_size)]
-        if not records:
-            return self._all_failed(t, "", "")
-        return records[0] if len(records) == 1 else EvalRecord.concat(records)
+        theta_np = t.detach().cpu().numpy().astype(np.float64) if grad else t
+        if self._image_error or t.shape[0] == 0:
+            rec = self._all_failed(theta_np, "image_unavailable" if self._image_error else "", self._image_error)
+            return rec, torch.full((t.shape[0],), self.penalty_m, dtype=torch.float64) if grad else None
+        parts = [self._chunk(t[i : i + self.batch_size], grad) for i in range(0, t.shape[0], self.batch_size)]
+        rec = parts[0][0] if len(parts) == 1 else EvalRecord.concat([p[0] for p in parts])
+        return rec, (torch.cat([p[1] for p in parts]) if grad else None)
+
+    def _chunk(self, th, grad: bool) -> tuple[EvalRecord, torch.Tensor | None]:
+        """One detector call and one PnP call for θ rows ``th``; the loss tensor too when ``grad``."""
+        n = th.shape[0]
+        ctx = self.context(th)
+        if grad:
+            conf_t, kp_t = self.detector.detect_top(ctx)
+            kp_t = self._scale.to_original(kp_t.reshape(n, 4, 2).to(torch.float64))
+            conf = conf_t.detach().reshape(-1).cpu().numpy().astype(np.float64)
+            kp = kp_t.detach().cpu().numpy()
+            reason = ["" if c >= self.conf_threshold else "low_confidence" for c in conf]
+        else:
+            with torch.no_grad():
+                dets = self.detector.detect(ctx)
+            if len(dets) != n:
+                raise ValueError(f"Objective: detector {self.detector!r} returned {len(dets)} results for {n} images")
+            sel = select(dets, self.conf_threshold)
+            conf, kp, reason = sel.conf, self._scale.to_original(sel.keypoints), list(sel.reason)
+        finite_kp = np.isfinite(kp).all(axis=(1, 2))
+        for i in np.nonzero((np.array(reason) == "") & ~finite_kp)[0]:
+            reason[i] = "non_finite_keypoints"
+        rows = np.nonzero(np.array([r == "" for r in reason]))[0]
+        position, reproj = np.full((n, 3), np.nan), np.full(n, np.nan)
+        error, detail = np.full(n, np.nan), [""] * n
+        y = self.sample.position
+        if rows.size and grad:
+            pos_t, ok_t = pnp_position_torch(kp_t[rows], self.sample.corners_3d, self.sample.K, method=self.pnp,
+                                             grad=self.pnp_grad)
+            position[rows] = pos_t.detach().cpu().numpy()
+            success = ok_t.cpu().numpy()
+        elif rows.size:
+            res = solve(kp[rows], self.sample.corners_3d, self.sample.K, method=self.pnp)
+            position[rows], reproj[rows], success = res.position, res.reproj_error_px, res.success
+            for j, i in enumerate(rows):
+                detail[i] = "" if success[j] else res.reason[j]
+        err = np.linalg.norm(position[rows] - y, axis=1)
+        for j, i in enumerate(rows):
+            if not success[j]:
+                reason[i] = "pnp_failed"
+            elif not np.isfinite(err[j]):
+                reason[i] = "non_finite_position"
+            else:
+                error[i] = err[j]
+        failed = np.array([r != "" for r in reason])
+        error[failed] = np.nan
+        theta_np = th.detach().cpu().numpy().astype(np.float64) if grad else th
+        rec = EvalRecord(str(self.sample.id), self.names, theta_np, np.where(failed, self.penalty_m, error), error,
+                         position, conf, kp, reproj, tuple(reason), tuple(detail), self.penalty_m)
+        if not grad:
+            return rec, None
+        loss = torch.full((n,), self.penalty_m, dtype=torch.float64)
+        good = np.nonzero(~failed[rows])[0] if rows.size else np.zeros(0, dtype=int)
+        if good.size:
+            yt = torch.as_tensor(y, dtype=torch.float64)
+            loss = loss.index_put((torch.as_tensor(rows[good]),), torch.linalg.vector_norm(pos_t[good] - yt, dim=1))
+        return rec, loss
 
     def _all_failed(self, t: np.ndarray, reason: str, detail: str) -> EvalRecord:
         n = t.shape[0]
@@ -303,107 +353,3 @@ class Objective:
             str(self.sample.id), self.names, t, np.full(n, self.penalty_m), nan, np.full((n, 3), np.nan), nan.copy(),
             np.full((n, 4, 2), np.nan), nan.copy(), (reason,) * n, (detail,) * n, self.penalty_m,
         )
-
-    def _evaluate_chunk(self, t: np.ndarray) -> EvalRecord:
-        n = t.shape[0]
-        if self._uses_pixels and not self.fused:
-            imgs = self.perturbation.images_numpy(self._base, t, center=self._center())
-            x = torch.from_numpy(imgs).permute(0, 3, 1, 2)  # a (B, 3, H, W) view; detectors copy if they need to
-        else:
-            x = self._base_t[None].expand(n, -1, -1, -1)
-        kw = {"context": self._context(t)} if self.fused or _takes_context(self.detector.detect) else {}
-        with torch.no_grad():
-            dets = self.detector.detect(x, **kw)
-        if len(dets) != n:
-            raise ValueError(f"Objective: detector {self.detector!r} returned {len(dets)} results for {n} images")
-        sel = select(dets, self.conf_threshold)
-        kp = self._scale.to_original(sel.keypoints)
-        reason = list(sel.reason)
-        detail = [""] * n
-        finite_kp = np.isfinite(kp).all(axis=(1, 2))
-        for i in np.nonzero(sel.ok & ~finite_kp)[0]:
-            reason[i] = "non_finite_keypoints"
-        rows = np.nonzero(sel.ok & finite_kp)[0]
-        position = np.full((n, 3), np.nan)
-        reproj = np.full(n, np.nan)
-        error = np.full(n, np.nan)
-        if rows.size:
-            res = solve(kp[rows], self.sample.corners_3d, self.sample.K, method=self.pnp)
-            position[rows] = res.position
-            reproj[rows] = res.reproj_error_px
-            err = np.linalg.norm(res.position - self.sample.position, axis=1)
-            for j, i in enumerate(rows):
-                if not res.success[j]:
-                    reason[i], detail[i] = "pnp_failed", res.reason[j]
-                elif not np.isfinite(err[j]):
-                    reason[i] = "non_finite_position"
-                else:
-                    error[i] = err[j]
-        failed = np.array([r != "" for r in reason])
-        loss = np.where(failed, self.penalty_m, error)
-        error[failed] = np.nan
-        return EvalRecord(
-            str(self.sample.id), self.names, t, loss, error, position, sel.conf, kp, reproj, tuple(reason),
-            tuple(detail), self.penalty_m,
-        )
-
-    # -- differentiable path ---------------------------------------------------------------------------------------
-    def torch(self, theta) -> torch.Tensor:
-        """``theta (N, d)`` tensor → ``L (N,)`` float64 tensor, differentiable w.r.t. θ.
-
-        Gradients flow through the perturbation, the detector's ``detect_top`` and the implicit PnP gradient.
-        Penalised rows are the constant ``penalty_m`` with zero gradient (never NaN).
-        """
-        top = getattr(self.detector, "detect_top", None)
-        if not callable(top):
-            raise ValueError(
-                f"Objective.torch: detector {self.detector!r} has no detect_top(images, *, context) method "
-                "(it supports only the black-box path)"
-            )
-        t = theta if isinstance(theta, torch.Tensor) else torch.as_tensor(np.asarray(theta, dtype=np.float64))
-        t = self.perturbation.check_theta(t)
-        self._load()
-        self.nfev += t.shape[0]
-        # an exact-zero term keeps the result attached to θ even when every row is penalised
-        anchor = 0.0 * t.sum(dim=1).to(torch.float64)
-        loss = torch.full((t.shape[0],), self.penalty_m, dtype=torch.float64, device=t.device)
-        if self._image_error or t.shape[0] == 0:
-            return loss + anchor
-        confs, kps = [], []
-        center = self._center()
-        for i in range(0, t.shape[0], self.batch_size):
-            th = t[i : i + self.batch_size]
-            if self._uses_pixels and not self.fused:
-                imgs = self.perturbation.images_torch(self._base_t, th, center=center)
-            else:
-                imgs = self._base_t[None].expand(th.shape[0], -1, -1, -1)
-            conf, kp = top(imgs, **({"context": self._context(th)} if self.fused or _takes_context(top) else {}))
-            confs.append(conf.reshape(-1))
-            kps.append(kp.reshape(-1, 4, 2))
-        conf, kp = torch.cat(confs), self._scale.to_original(torch.cat(kps).to(torch.float64))
-        rows = torch.nonzero((conf.detach() >= self.conf_threshold) & torch.isfinite(kp.detach()).all(dim=(1, 2)))[:, 0]
-        err = self._pnp_error_torch(kp, rows)
-        if err is not None:
-            rows, err = err
-            loss = loss.index_put((rows,), err)
-        return loss + anchor
-
-    def _pnp_error_torch(self, kp: torch.Tensor, rows: torch.Tensor):
-        """Position errors of the rows whose PnP succeeds: ``(rows, err)`` or None.
-
-        The PnP layer already gives failed rows a zero gradient; their NaN positions are swapped for a finite
-        stand-in before the norm, whose backward would otherwise turn ``0 · NaN`` into NaN.
-        """
-        from vbl_robust.pnp import pnp_position_torch
-
-        if rows.numel() == 0:
-            return None
-        y = torch.as_tensor(self.sample.position, dtype=torch.float64, device=kp.device)
-        pos, ok = pnp_position_torch(kp[rows], self.sample.corners_3d, self.sample.K, method=self.pnp,
-                                     grad=self.pnp_grad)
-        good = ok & torch.isfinite(pos.detach()).all(dim=1)
-        if not bool(good.any()):
-            return None
-        pos = torch.where(good[:, None], pos, y + 1.0)
-        err = torch.linalg.vector_norm(pos - y, dim=1)
-        return rows[good], err[good]

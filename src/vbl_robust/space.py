@@ -26,6 +26,31 @@ KNOWN_UNITS: dict[str, str] = {
     "scale": "factor",
 }
 
+#: Smallest width of a parameter relative to the magnitude of its bounds: keeps the unit-cube resolution
+#: ``ulp(max(|lower|, |upper|)) / width`` at or below 2**-20 (about 1e-6), so ``to_unit(from_unit(u))`` is ``u``
+#: to that precision or better.
+MIN_RELATIVE_WIDTH = 2.0**-32
+#: Smallest absolute width (well above the subnormal range, where ``u * width`` would lose all precision).
+MIN_WIDTH = 1e-290
+
+
+def _pair(name: str, pair) -> tuple[float, float]:
+    """``(lower, upper)`` as floats; ``ValueError`` naming the parameter for anything but two real numbers."""
+    bad = ValueError(f"ParameterBox: bounds of {name!r} must be two numbers (lower, upper), got {pair!r}")
+    if isinstance(pair, str | bytes | Mapping) or not hasattr(pair, "__iter__"):
+        raise bad
+    try:
+        values = list(pair)
+    except TypeError:
+        raise bad from None
+    if len(values) != 2 or any(isinstance(v, bool | np.bool_ | str | bytes) for v in values):
+        raise bad
+    try:
+        a, b = (float(v) for v in values)
+    except (TypeError, ValueError, OverflowError):
+        raise bad from None
+    return a, b
+
 
 @dataclass(frozen=True, init=False)
 class ParameterBox:
@@ -48,20 +73,32 @@ class ParameterBox:
             raise ValueError(f"ParameterBox: bounds must be a non-empty mapping name -> (lower, upper), got {bounds!r}")
         names, lo, hi = [], [], []
         for name, pair in bounds.items():
-            if not isinstance(name, str) or not name:
+            if not isinstance(name, str) or not name.strip():
                 raise ValueError(f"ParameterBox: parameter name must be a non-empty string, got {name!r}")
-            try:
-                a, b = (float(v) for v in pair)
-            except (TypeError, ValueError):
-                raise ValueError(f"ParameterBox: bounds of {name!r} must be two numbers (lower, upper), got {pair!r}") from None
+            a, b = _pair(name, pair)
             if not (math.isfinite(a) and math.isfinite(b)):
                 raise ValueError(f"ParameterBox: bounds of {name!r} must be finite, got ({a}, {b})")
             if not a < b:
                 raise ValueError(f"ParameterBox: lower < upper required for {name!r}, got ({a}, {b})")
+            # the unit-cube maps divide by the width: it must be finite and resolvable at the bounds' magnitude
+            width = b - a
+            if not math.isfinite(width) or width < max(MIN_RELATIVE_WIDTH * max(abs(a), abs(b)), MIN_WIDTH):
+                raise ValueError(
+                    f"ParameterBox: bounds of {name!r} = ({a!r}, {b!r}) have a width {width!r} that float64 cannot "
+                    f"map to the unit cube (need a finite width >= {MIN_RELATIVE_WIDTH:.3g} x max(|lower|, |upper|) "
+                    f"and >= {MIN_WIDTH:g})"
+                )
             names.append(name)
             lo.append(a)
             hi.append(b)
+        if units is not None and not isinstance(units, Mapping):
+            raise ValueError(f"ParameterBox: units must be a mapping name -> unit string, got {units!r}")
         units = dict(units or {})
+        for name, unit in units.items():
+            if name not in bounds:
+                raise ValueError(f"ParameterBox: unit given for {name!r}, which is not a parameter of {tuple(names)}")
+            if not isinstance(unit, str):
+                raise ValueError(f"ParameterBox: unit of {name!r} must be a string, got {unit!r}")
         object.__setattr__(self, "names", tuple(names))
         object.__setattr__(self, "lower", np.asarray(lo, dtype=np.float64))
         object.__setattr__(self, "upper", np.asarray(hi, dtype=np.float64))
@@ -118,11 +155,19 @@ class ParameterBox:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> ParameterBox:
-        return cls({k: tuple(v) for k, v in d["bounds"].items()}, units=d.get("units"))
+        """Inverse of :meth:`to_dict`; ``ValueError`` (never ``KeyError``/``TypeError``) for a malformed dict."""
+        if not isinstance(d, Mapping) or not isinstance(d.get("bounds"), Mapping):
+            raise ValueError(f"ParameterBox.from_dict: expected {{'bounds': {{name: [lower, upper]}}, 'units': "
+                             f"{{name: unit}}}}, got {d!r}")
+        return cls(dict(d["bounds"]), units=d.get("units"))
 
     # -- mappings ---------------------------------------------------------------------------------------
     def _as_2d(self, x, what: str) -> np.ndarray:
-        a = np.asarray(x, dtype=np.float64)
+        try:
+            a = np.asarray(x, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"ParameterBox: {what} must be numbers of shape (N, {self.dim}) for {self.names}, "
+                             f"got {x!r}") from None
         if a.ndim == 1:
             a = a[None, :]
         if a.ndim != 2 or a.shape[1] != self.dim:
@@ -130,9 +175,14 @@ class ParameterBox:
         return a
 
     def from_unit(self, u) -> np.ndarray:
-        """Map points of the unit cube ``(N, d)`` to real units ``(N, d)``."""
+        """Map points of the unit cube ``(N, d)`` to real units ``(N, d)`` (points of ``[0, 1]^d`` land in the box)."""
         a = self._as_2d(u, "unit-cube points")
-        return self.lower + a * self.width
+        x = self.lower + a * self.width
+        # lower + 1 * width can round past upper (or short of it): the cube's points land in the box, its
+        # corners exactly on the bounds; the map stays monotone
+        x = np.where(a <= 1.0, np.minimum(x, self.upper), x)
+        x = np.where(a == 1.0, self.upper, x)
+        return np.where(a >= 0.0, np.maximum(x, self.lower), x)
 
     def to_unit(self, x) -> np.ndarray:
         """Map real-unit points ``(N, d)`` to the unit cube ``(N, d)``."""
@@ -143,7 +193,8 @@ class ParameterBox:
         """Boolean ``(N,)``: which real-unit points lie in the box (inclusive, with tolerance)."""
         a = self._as_2d(x, "points")
         tol = atol * np.maximum(1.0, np.abs(self.width))
-        return np.all((a >= self.lower - tol) & (a <= self.upper + tol), axis=1)
+        with np.errstate(over="ignore"):  # bounds near the float64 limit: an infinite margin is still right
+            return np.all((a >= self.lower - tol) & (a <= self.upper + tol), axis=1)
 
     def clip(self, x) -> np.ndarray:
         return np.clip(self._as_2d(x, "points"), self.lower, self.upper)

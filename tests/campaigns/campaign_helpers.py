@@ -14,8 +14,15 @@ from vbl_robust.detect.oracle import OracleDetector
 class BrokenDetector(OracleDetector):
     """Raises inside the pipeline: the sample's jobs must be recorded as failed, the campaign must go on."""
 
-    def detect(self, images, *, context=None):
+    def detect(self, context):
         raise RuntimeError("detector exploded")
+
+
+class RefusedDetector(OracleDetector):
+    """Refused while it is built (like an untrusted model file): the run fails before its first job."""
+
+    def __init__(self, **kw):
+        raise ValueError("refused model: pass --trust-model")
 
 
 class SlowOracle(OracleDetector):
@@ -25,9 +32,9 @@ class SlowOracle(OracleDetector):
         super().__init__(**kw)
         self.delay = delay
 
-    def detect(self, images, *, context=None):
+    def detect(self, context):
         time.sleep(self.delay)
-        return super().detect(images, context=context)
+        return super().detect(context)
 
 
 def kill_campaign_spec():

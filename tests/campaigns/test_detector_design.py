@@ -6,8 +6,9 @@ from typer.testing import CliRunner
 from vbl_robust.campaigns.provenance import DetectorSpec
 from vbl_robust.cli import app
 from vbl_robust.cli.audit import detector_spec
+from vbl_robust.detect.shipped import DEFAULT_MODEL, with_design
 from vbl_robust.detect.twostage import TwoStageDetector
-from vbl_robust.detect.ultralytics import DEFAULT_MODEL, UltralyticsDetector, with_design
+from vbl_robust.detect.ultralytics import UltralyticsDetector
 
 
 @pytest.mark.skipif(not DEFAULT_MODEL.exists(), reason="no shipped model")
@@ -20,7 +21,7 @@ def test_shipped_model_in_either_design():
 
 
 def test_with_design_wraps_or_refuses():
-    det = UltralyticsDetector(DEFAULT_MODEL) if DEFAULT_MODEL.exists() else None
+    det = UltralyticsDetector(DEFAULT_MODEL, trust=True) if DEFAULT_MODEL.exists() else None
     if det is not None:
         assert with_design(det, "single") is det
         assert isinstance(with_design(det, "twostage"), TwoStageDetector)

@@ -97,7 +97,7 @@ def test_derived_disagreement_is_flagged_and_logged(dataset, caplog):
     assert set(back[2].meta["lard_check"]) == {"slant_distance"}
     assert back[2].meta["lard_check"]["slant_distance"][0] == 9.5
     assert all(not s.meta["lard_check"] for i, s in enumerate(back) if i != 2)
-    assert "1 row(s) have derived columns disagreeing" in caplog.text and "row 3" in caplog.text
+    assert "1 row(s) have derived columns or corner labels disagreeing" in caplog.text and "row 3" in caplog.text
 
 
 def test_filters(dataset):
@@ -190,7 +190,7 @@ def test_bad_runway_db(dataset, tmp_path):
     db = json.loads(db_path.read_text())
     db["VBLA"]["09"]["C"]["coordinate"]["latitude"] = "x"
     bad.write_text(json.dumps(db))
-    with pytest.raises(ValueError, match=r"bad\.json: airport 'VBLA' runway '09': .*corner 'C'"):
+    with pytest.raises(ValueError, match=r"bad\.json: airport 'VBLA' runway '09' corner 'C': field 'coordinate\.latitude' = 'x' is not a number"):
         read_lard(csv_path, bad)
     with pytest.raises(FileNotFoundError, match="nope.json: runway DB file not found"):
         read_lard(csv_path, tmp_path / "nope.json")

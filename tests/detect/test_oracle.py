@@ -20,17 +20,13 @@ def _sample(sid="s0", width=640, height=480, yaw_deg=2.0) -> Sample:
 
 
 def _ctx(sample, theta, scale=PixelScale()):
-    return DetectContext(sample, theta, Perturbation(BOX), scale)
-
-
-def _images(n):
-    return torch.zeros(n, 3, 4, 4)  # the oracle never looks at pixels
+    return DetectContext.for_sample(sample, Perturbation(BOX), theta, scale)  # no pixels: the oracle reads none
 
 
 def test_corners_move_with_the_roll_and_not_with_contrast():
     s = _sample()
     theta = np.array([[0.0, 1.0], [20.0, 1.0], [20.0, 2.5], [-30.0, 0.4]])
-    dets = OracleDetector().detect(_images(4), context=_ctx(s, theta))
+    dets = OracleDetector().detect(_ctx(s, theta))
     sel = select(dets)
     assert sel.ok.all() and np.all(sel.conf == 1.0)
     expected = roll_points(s.corners_2d, theta[:, 0], s.K[:2, 2])
@@ -44,7 +40,7 @@ def test_keypoints_are_in_the_detector_input_pixels():
     s = _sample()
     scale, _ = PixelScale.for_long_side(s.width, s.height, 320)
     theta = np.array([[12.0, 1.0]])
-    sel = select(OracleDetector().detect(_images(1), context=_ctx(s, theta, scale)))
+    sel = select(OracleDetector().detect(_ctx(s, theta, scale)))
     full = roll_points(s.corners_2d, theta[:, 0], s.K[:2, 2])
     np.testing.assert_allclose(scale.to_original(sel.keypoints), full, atol=1e-9)
 
@@ -55,20 +51,20 @@ def test_fail_outside():
     moved = roll_points(s.corners_2d, theta[:, 0], s.K[:2, 2])
     inside = np.all((moved[..., 0] >= 0) & (moved[..., 0] <= 639) & (moved[..., 1] >= 0) & (moved[..., 1] <= 479), 1)
     assert inside.tolist() == [True, False]
-    sel = select(OracleDetector(fail_outside=True).detect(_images(2), context=_ctx(s, theta)))
+    sel = select(OracleDetector(fail_outside=True).detect(_ctx(s, theta)))
     assert sel.reason == ("", "no_detection")
-    assert select(OracleDetector().detect(_images(2), context=_ctx(s, theta))).ok.all()
-    conf, _ = OracleDetector(fail_outside=True).detect_top(_images(2), context=_ctx(s, torch.from_numpy(theta)))
+    assert select(OracleDetector().detect(_ctx(s, theta))).ok.all()
+    conf, _ = OracleDetector(fail_outside=True).detect_top(_ctx(s, torch.from_numpy(theta)))
     assert conf.tolist() == [1.0, 0.0]
 
 
 def test_noise_is_seeded_fixed_per_sample_and_scaled():
     s = _sample()
     theta = np.array([[0.0, 1.0], [5.0, 1.0]])
-    a = select(OracleDetector(noise_px=2.0, seed=3).detect(_images(2), context=_ctx(s, theta))).keypoints
-    b = select(OracleDetector(noise_px=2.0, seed=3).detect(_images(2), context=_ctx(s, theta))).keypoints
-    c = select(OracleDetector(noise_px=2.0, seed=4).detect(_images(2), context=_ctx(s, theta))).keypoints
-    d = select(OracleDetector(noise_px=2.0, seed=3).detect(_images(2), context=_ctx(_sample("other"), theta))).keypoints
+    a = select(OracleDetector(noise_px=2.0, seed=3).detect(_ctx(s, theta))).keypoints
+    b = select(OracleDetector(noise_px=2.0, seed=3).detect(_ctx(s, theta))).keypoints
+    c = select(OracleDetector(noise_px=2.0, seed=4).detect(_ctx(s, theta))).keypoints
+    d = select(OracleDetector(noise_px=2.0, seed=3).detect(_ctx(_sample("other"), theta))).keypoints
     clean = roll_points(s.corners_2d, theta[:, 0], s.K[:2, 2])
     np.testing.assert_array_equal(a, b)
     assert not np.allclose(a, c) and not np.allclose(a, d)
@@ -77,27 +73,27 @@ def test_noise_is_seeded_fixed_per_sample_and_scaled():
     assert 0.3 < np.std(offsets) < 6.0
     # at half resolution the same offsets in sample pixels
     scale, _ = PixelScale.for_long_side(s.width, s.height, 320)
-    half = select(OracleDetector(noise_px=2.0, seed=3).detect(_images(2), context=_ctx(s, theta, scale))).keypoints
+    half = select(OracleDetector(noise_px=2.0, seed=3).detect(_ctx(s, theta, scale))).keypoints
     np.testing.assert_allclose(scale.to_original(half), a, atol=1e-9)
     # resample_noise: a new draw per call, reproducible from the seed
     o1, o2 = OracleDetector(noise_px=1.0, seed=0, resample_noise=True), OracleDetector(noise_px=1.0, resample_noise=True)
-    k1, k2 = (select(o.detect(_images(2), context=_ctx(s, theta))).keypoints for o in (o1, o2))
+    k1, k2 = (select(o.detect(_ctx(s, theta))).keypoints for o in (o1, o2))
     np.testing.assert_array_equal(k1, k2)
-    assert not np.allclose(k1, select(o1.detect(_images(2), context=_ctx(s, theta))).keypoints)
+    assert not np.allclose(k1, select(o1.detect(_ctx(s, theta))).keypoints)
 
 
 def test_differentiable_path_matches_and_has_gradients():
     s = _sample()
     theta = torch.tensor([[7.0, 1.3], [-22.0, 0.6]], dtype=torch.float64, requires_grad=True)
     oracle = OracleDetector(noise_px=0.5)
-    conf, kp = oracle.detect_top(_images(2), context=_ctx(s, theta))
-    sel = select(oracle.detect(_images(2), context=_ctx(s, theta.detach().numpy())))
+    conf, kp = oracle.detect_top(_ctx(s, theta))
+    sel = select(oracle.detect(_ctx(s, theta.detach().numpy())))
     np.testing.assert_allclose(kp.detach().numpy(), sel.keypoints, atol=1e-9)
     assert conf.tolist() == [1.0, 1.0]
     kp[:, 0, 0].sum().backward()
     assert theta.grad[:, 0].abs().min() > 0 and theta.grad[:, 1].abs().max() == 0  # roll moves, contrast not
     assert torch.autograd.gradcheck(
-        lambda t: oracle.detect_top(_images(2), context=_ctx(s, t))[1], (theta.detach().clone().requires_grad_(),)
+        lambda t: oracle.detect_top(_ctx(s, t))[1], (theta.detach().clone().requires_grad_(),)
     )
 
 
@@ -119,6 +115,4 @@ def test_errors():
     with pytest.raises(ValueError, match="corners"):
         OracleDetector(corners="gt")
     with pytest.raises(ValueError, match="needs the context"):
-        OracleDetector().detect(_images(1))
-    with pytest.raises(ValueError, match="2 images but 1"):
-        OracleDetector().detect(_images(2), context=_ctx(_sample(), np.zeros((1, 2))))
+        OracleDetector().detect(DetectContext.of_images(torch.zeros(1, 3, 4, 4)))

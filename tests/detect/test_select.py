@@ -47,13 +47,17 @@ def test_detections_accept_tensors_and_check_shapes():
 def test_protocols_are_structural():
     class BlackBox:
         input_size = None
+        uses_pixels = True
+        differentiable = False
 
-        def detect(self, images, *, context=None):
-            return [Detections.empty() for _ in range(images.shape[0])]
+        def detect(self, context):
+            return [Detections.empty() for _ in range(len(context))]
 
     class WhiteBox(BlackBox):
-        def detect_top(self, images, *, context=None):
-            return torch.zeros(images.shape[0]), torch.zeros(images.shape[0], 4, 2)
+        differentiable = True
+
+        def detect_top(self, context):
+            return torch.zeros(len(context)), torch.zeros(len(context), 4, 2)
 
     assert isinstance(BlackBox(), Detector) and not isinstance(BlackBox(), DifferentiableDetector)
     assert isinstance(WhiteBox(), DifferentiableDetector)

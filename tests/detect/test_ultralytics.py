@@ -138,13 +138,13 @@ def test_two_stage_paths_agree_and_differentiate(det):
 
 
 def test_ship_and_default_detector(tiny_pose_pt, tmp_path, monkeypatch):
-    import vbl_robust.detect.ultralytics as ul
+    import vbl_robust.detect.shipped as shipped
     from vbl_robust.detect.train import ship
 
     out = ship(tiny_pose_pt, detector="twostage", imgsz=64, models_dir=tmp_path, info={"note": "test"})
-    monkeypatch.setattr(ul, "MODELS_DIR", tmp_path.resolve())
-    monkeypatch.setattr(ul, "DEFAULT_MODEL", out)
-    d = ul.default_detector()  # packaged: no trust flag needed
+    monkeypatch.setattr(shipped, "MODELS_DIR", tmp_path.resolve())
+    monkeypatch.setattr(shipped, "DEFAULT_MODEL", out)
+    d = shipped.default_detector()  # the shipped model: no trust flag needed
     assert isinstance(d, TwoStageDetector) and d.imgsz == 64 and d.input_size is None
     img, _ = runway_image(64)
     assert len(d.detect(torch.as_tensor(img).permute(2, 0, 1)[None] / 255.0)[0]) == 1
@@ -152,11 +152,11 @@ def test_ship_and_default_detector(tiny_pose_pt, tmp_path, monkeypatch):
         ship(tiny_pose_pt, detector="double", imgsz=64, models_dir=tmp_path)
 
 
-@pytest.mark.skipif(not __import__("vbl_robust.detect.ultralytics", fromlist=["x"]).DEFAULT_MODEL.exists(),
+@pytest.mark.skipif(not __import__("vbl_robust.detect.shipped", fromlist=["x"]).DEFAULT_MODEL.exists(),
                     reason="no shipped model")
 def test_shipped_model_loads_and_runs():
     from vbl_robust.detect.base import DifferentiableDetector
-    from vbl_robust.detect.ultralytics import default_detector
+    from vbl_robust.detect.shipped import default_detector
 
     d = default_detector()
     assert isinstance(d, DifferentiableDetector)

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.detect.views import image_to_view, letterbox_window, resample, view_to_image
+from vbl_robust.detect.windows import letterbox_window
+from vbl_robust.perturb.views import image_to_view, resample, view_to_image
 
 
 def _centroid(v):

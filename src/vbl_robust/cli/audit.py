@@ -33,8 +33,7 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
     """
     import dataclasses
 
-    from vbl_robust.campaigns import DetectorSpec
-    from vbl_robust.detect.ultralytics import DESIGNS
+    from vbl_robust.detect.shipped import DESIGNS, DetectorSpec
 
     if design != "auto" and design not in DESIGNS:
         fail(f"--detector {design}: choose auto, {' or '.join(DESIGNS)}")
@@ -55,22 +54,20 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         return dataclasses.replace(spec, options=opts) if opts else spec
-    from vbl_robust.campaigns.provenance import default_model_status
-
-    why = default_model_status()  # the rule of DetectorSpec.auto, with the reason shown to the user
+    spec, why = DetectorSpec.choose(oracle_noise_px=oracle_noise, options=opts)
     if not why:
         _note_open_goals()
-        return DetectorSpec("default", options=opts)
+        return spec
     noise = f", {oracle_noise:g} px fixed corner noise" if oracle_noise else ""
     typer.secho(f"note: {why}; using the oracle detector (ground-truth corners{noise}). "
                 "Pass --model PATH for your model, or --model default to audit the shipped one anyway.",
                 fg=typer.colors.YELLOW, err=True)
-    return DetectorSpec.oracle(oracle_noise)
+    return spec
 
 
 def _note_open_goals() -> None:
     """Tell the user which accuracy goals the shipped model has not reached (also in the report)."""
-    from vbl_robust.campaigns.provenance import default_model_caveats
+    from vbl_robust.detect.shipped import default_model_caveats
 
     for goal in default_model_caveats():
         typer.secho(f"note: the shipped detector model has an open accuracy goal: {goal} (see its MODEL_CARD.md)",

@@ -36,7 +36,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Train the default detector from our synthetic scenes (or your LARD V2 data); every call adds a stage."""
         from vbl_robust.detect import train as tr
-        from vbl_robust.detect.ultralytics import DEFAULT_MODEL
+        from vbl_robust.detect.shipped import DEFAULT_MODEL
         from vbl_robust.scenes.airports import DEFAULT_POOL
 
         init_path = None

@@ -67,25 +67,42 @@ def normalize_runway(key) -> str:
     return f"{int(m.group(1))}{m.group(2)}"
 
 
+#: Plausible camera and runway altitudes, metres (the lowest airport is about −400 m, none is above 4.5 km).
+ALTITUDE_RANGE_M = (-1000.0, 100_000.0)
+
+
 def load_runway_db(path: str | Path) -> dict[str, dict[str, tuple[str, dict]]]:
     """Read a LARD runway DB: ``{AIRPORT: {normalised runway: (key as stored, corner entry)}}``.
 
+    Every corner is checked: ``coordinate`` with finite numeric ``latitude`` in (−90, 90), ``longitude`` in
+    [−180, 180], ``altitude`` in :data:`ALTITUDE_RANGE_M`; ``position`` (ECEF, not used by the reader), when
+    present, with finite numeric ``x, y, z``.
+
     Raises:
         FileNotFoundError: the file does not exist.
-        ValueError: not JSON, or not shaped ``airport → runway → {A, B, C, D}`` (the message names the file and
-            the offending airport/runway).
+        ValueError: not UTF-8 JSON, or not shaped ``airport → runway → {A, B, C, D}``, or a corner value missing,
+            not a number or out of range, or two airports/runways with the same normalised name (one line naming
+            the file, the airport, the runway, the corner, the field and the value).
     """
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"{p}: runway DB file not found")
     try:
         raw = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{p}: malformed runway DB JSON ({exc})") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{p}: runway DB is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError, the int-digits limit, absurd nesting
+        raise ValueError(f"{p}: malformed runway DB JSON ({_one_line(exc)})") from None
     if not isinstance(raw, dict):
         raise ValueError(f"{p}: runway DB must be a JSON object airport → runway → corners, got {type(raw).__name__}")
     db: dict[str, dict[str, tuple[str, dict]]] = {}
+    stored_airport: dict[str, str] = {}
     for airport, runways in raw.items():
+        name = str(airport).strip().upper()
+        if not name:
+            raise ValueError(f"{p}: airport {airport!r}: empty airport name")
+        if name in db:
+            raise ValueError(f"{p}: airports {stored_airport[name]!r} and {airport!r} are the same airport {name!r}")
         if not isinstance(runways, dict):
             raise ValueError(f"{p}: airport {airport!r}: expected an object of runways, got {type(runways).__name__}")
         table: dict[str, tuple[str, dict]] = {}
@@ -93,12 +110,66 @@ def load_runway_db(path: str | Path) -> dict[str, dict[str, tuple[str, dict]]]:
             if not isinstance(entry, dict) or any(c not in entry for c in "ABCD"):
                 raise ValueError(f"{p}: airport {airport!r} runway {key!r}: expected corners A, B, C, D")
             norm = normalize_runway(key)
+            if not norm:
+                raise ValueError(f"{p}: airport {airport!r} runway {key!r}: empty runway designator")
             if norm in table:
                 raise ValueError(f"{p}: airport {airport!r}: runways {table[norm][0]!r} and {key!r} are the same "
                                  f"designator {norm!r}")
+            for corner in "ABCD":
+                _check_corner(entry[corner], f"{p}: airport {airport!r} runway {key!r} corner {corner!r}")
             table[norm] = (str(key), entry)
-        db[str(airport).strip().upper()] = table
+        db[name] = table
+        stored_airport[name] = str(airport)
     return db
+
+
+_COORDINATE_RANGES = {
+    "latitude": (-90.0, 90.0, False),  # (low, high, inclusive)
+    "longitude": (-180.0, 180.0, True),
+    "altitude": (*ALTITUDE_RANGE_M, True),
+}
+
+
+def _check_corner(corner, where: str) -> None:
+    if not isinstance(corner, dict) or not isinstance(corner.get("coordinate"), dict):
+        raise ValueError(f"{where}: expected {{'coordinate': {{latitude, longitude, altitude}}, 'position': "
+                         f"{{x, y, z}}}}, got {_short(corner)}")
+    for field, (lo, hi, inclusive) in _COORDINATE_RANGES.items():
+        value = _db_number(corner["coordinate"], field, f"{where}: field 'coordinate.{field}'")
+        inside = lo <= value <= hi if inclusive else lo < value < hi
+        if not inside:
+            interval = f"[{lo:g}, {hi:g}]" if inclusive else f"({lo:g}, {hi:g})"
+            raise ValueError(f"{where}: field 'coordinate.{field}' = {corner['coordinate'][field]!r} is not in "
+                             f"{interval}")
+    if "position" in corner:
+        if not isinstance(corner["position"], dict):
+            raise ValueError(f"{where}: field 'position' = {_short(corner['position'])} is not an object {{x, y, z}}")
+        for axis in "xyz":
+            _db_number(corner["position"], axis, f"{where}: field 'position.{axis}'")
+
+
+def _db_number(obj: dict, field: str, where: str) -> float:
+    if field not in obj:
+        raise ValueError(f"{where} is missing")
+    value = obj[field]
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"{where} = {_short(value)} is not a number")
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number):
+        raise ValueError(f"{where} = {_short(value)} is not a finite number")
+    return number
+
+
+def _short(value, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}… ({type(value).__name__})"
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
 
 
 def approach_metrics(position: np.ndarray, corners_3d: np.ndarray) -> dict[str, float]:

@@ -9,11 +9,22 @@ Target runway
     ``<ICAO>-<runway>…``, e.g. ``CYEG-20_000.jpg``); if neither names one of the rows' runways, the row with the
     smallest absolute lateral path angle (the runway the aircraft is lined up with) is kept.
 
-Derived columns
-    ``slant_distance, along_track_distance, height_above_runway, lateral_path_angle, vertical_path_angle`` are
-    recomputed from the geometry (:func:`.lard.approach_metrics`). Values present in the CSV are cross-checked
-    within :func:`.lard.metrics_tolerance`; a disagreement does not drop the row: it is listed in
-    ``sample.meta["lard_check"]`` (``{field: (stored, computed)}``) and one warning per file is logged.
+Checks: what is an error, what is recorded
+    A user mistake is a one-line ``ValueError`` naming the file, the 1-based data row, the image, the field and
+    the value: a row with more or fewer fields than the header, a duplicated header column, a missing, empty,
+    non-numeric or non-finite number, a value outside :data:`FIELD_RANGES` (these angles and altitudes are not
+    attitudes but swapped or mis-converted columns), an exact corner column empty while the others of the row
+    are filled, an unknown airport or runway, degenerate runway corners, an image path leaving the root, the same
+    image and runway on two rows. Nothing is skipped silently.
+
+    An *inconsistency* between fields does not drop the row: it is listed in ``sample.meta["lard_check"]``
+    (``{field: (stored, computed)}``) and one warning per file is logged. Checked: the derived columns
+    ``slant_distance, along_track_distance, height_above_runway, lateral_path_angle, vertical_path_angle``,
+    recomputed from the geometry (:func:`.lard.approach_metrics`), within :func:`.lard.metrics_tolerance`; the
+    corner labels against the projection of the DB corners with the row's camera (``x_TR … y_BR`` within
+    :data:`LABEL_TOL_PX`, the exact columns within :data:`EXACT_TOL_PX`, both plus :data:`RELATIVE_TOL_PX` of the
+    distance from the principal point; corners behind the camera are not compared); and, when the exact columns
+    are used, the truncated labels against them (within 1 px).
 """
 
 from __future__ import annotations
@@ -27,9 +38,10 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from ..geometry.camera import intrinsics
+from ..geometry.camera import intrinsics, project
 from ..geometry.geodesy import RunwayFrame
 from .lard import (
+    ALTITUDE_RANGE_M,
     CORNER_COLUMNS,
     DERIVED_COLUMNS,
     EXACT_CORNER_COLUMNS,
@@ -46,6 +58,29 @@ from .sample import Sample, load_rgb
 logger = logging.getLogger(__name__)
 
 DEFAULT_FOV_DEG = 60.0
+#: Accepted values of the CSV's coordinates, angles (degrees) and altitude (metres): ``(low, high, inclusive)``.
+FIELD_RANGES = {
+    "lat_cam": (-90.0, 90.0, False),
+    "lon_cam": (-180.0, 180.0, True),
+    "alt_cam": (*ALTITUDE_RANGE_M, True),
+    "yaw": (-360.0, 360.0, True),
+    "pitch": (0.0, 180.0, True),  # stored as 90 + aeronautical pitch
+    "roll": (-180.0, 180.0, True),
+    "fov_deg": (0.0, 180.0, False),
+}
+#: Largest image side accepted, pixels (``width``, ``height``).
+MAX_IMAGE_SIZE_PX = 100_000
+#: ``runway_in_cone`` values of LARD V2 (checked when ``in_odd_only`` uses the column).
+RUNWAY_IN_CONE = ("IN_ODD", "IN_EXTENDED_ODD", "OUT_OF_ODD", "UNKNOWN")
+#: Corner-label reprojection tolerances, pixels: truncated labels lie within 1 px of the projection, plus the
+#: 1–3 px by which the LARD labeller's geodesy differs from this package's; exact labels (written by this
+#: package) reproject to rounding error; far off-image corners amplify small pose errors (relative term).
+LABEL_TOL_PX = 4.0
+EXACT_TOL_PX = 0.05
+RELATIVE_TOL_PX = 1e-3
+#: Smallest runway width (near and far ends) and length accepted from the DB, metres.
+MIN_RUNWAY_WIDTH_M = 0.1
+MIN_RUNWAY_LENGTH_M = 1.0
 _TARGET_RE = re.compile(r"([A-Z]{4})[-_ ]?(?:RWY)?[-_ ]?(\d{1,2}[LCR]?)(?![0-9])")
 
 
@@ -84,9 +119,11 @@ def read_lard(
 
     Raises:
         FileNotFoundError: CSV or DB missing (an image file is only needed when ``sample.image`` is accessed).
-        ValueError: one line naming the file, the 1-based data row and image, the field and the value, for a
-            missing column, a non-numeric/NaN value, an unknown airport or runway, malformed DB JSON or corners, or
-            an image path leaving the root.
+        ValueError: one line naming the file, the 1-based data row and image, the field and the value, for
+            every user mistake listed in the module docstring (malformed rows, bad or out-of-range values, unknown
+            airport or runway, malformed DB JSON or corners, an image path leaving the root, duplicated rows), or
+            naming the argument for a bad ``width``/``height``/``fov_deg``. Inconsistent rows are not errors:
+            see ``meta["lard_check"]``.
     """
     csv_file = Path(csv_path)
     if not csv_file.is_file():
@@ -94,28 +131,52 @@ def read_lard(
     db_file = Path(runway_db_path)
     db = load_runway_db(db_file)
     base = Path(root) if root is not None else csv_file.parent
-    if width is not None and (int(width) != width or width <= 0):
-        raise ValueError(f"read_lard: width must be a positive integer, got {width}")
-    if height is not None and (int(height) != height or height <= 0):
-        raise ValueError(f"read_lard: height must be a positive integer, got {height}")
+    for name, value in (("width", width), ("height", height)):
+        if value is not None and not (_positive_integer(value) and value <= MAX_IMAGE_SIZE_PX):
+            raise ValueError(f"read_lard: {name} must be a positive integer <= {MAX_IMAGE_SIZE_PX}, got {value!r}")
+    if fov_deg is not None and not (_real(fov_deg) and 0.0 < fov_deg < 180.0):
+        raise ValueError(f"read_lard: fov_deg must be a number in (0, 180), got {fov_deg!r}")
 
-    with open(csv_file, newline="", encoding="utf-8-sig") as f:
-        reader = csv.DictReader(f, delimiter=";")
-        header = [h.strip() for h in (reader.fieldnames or [])]
-        reader.fieldnames = header
-        missing = [c for c in REQUIRED_COLUMNS if c not in header]
-        if missing:
-            raise ValueError(f"{csv_file}: missing column(s) {', '.join(missing)}")
-        if in_odd_only and "runway_in_cone" not in header:
-            raise ValueError(f"{csv_file}: in_odd_only needs the column 'runway_in_cone', which is missing")
-        use_exact = all(c in header for c in EXACT_CORNER_COLUMNS)
-        frames: dict[tuple[str, str], tuple[RunwayFrame, np.ndarray]] = {}
-        records = []
-        for i, row in enumerate(reader, start=1):
-            row = {k: (v if v is not None else "") for k, v in row.items() if k is not None}
-            records.append(_parse_row(row, i, csv_file, db_file, db, frames, base, use_exact,
-                                      fov_deg, width, height))
+    records = []
+    line = 0
+    try:
+        with open(csv_file, newline="", encoding="utf-8-sig") as f:
+            reader = csv.reader(f, delimiter=";")
+            header = [h.strip() for h in next(reader, [])]
+            line = reader.line_num
+            _check_header(header, csv_file, in_odd_only)
+            use_exact = all(c in header for c in EXACT_CORNER_COLUMNS)
+            frames: dict[tuple[str, str], tuple[RunwayFrame, np.ndarray]] = {}
+            seen: dict[tuple[str, str, str], int] = {}
+            i = 0
+            for values in reader:
+                line = reader.line_num
+                if not values:  # a blank line
+                    continue
+                i += 1
+                if len(values) != len(header):
+                    image = values[header.index("image")] if len(values) > header.index("image") else ""
+                    raise ValueError(f"{csv_file}: row {i} (image {image.strip()!r}): {len(values)} field(s), the "
+                                     f"header has {len(header)} (a missing or extra ';'?)")
+                row = {k: v for k, v in zip(header, values, strict=True) if k}
+                s = _parse_row(row, i, csv_file, db_file, db, frames, base, use_exact, fov_deg, width, height)
+                key = (s.id, s.meta["airport"], s.meta["runway_db_key"])
+                if key in seen:
+                    raise ValueError(f"{csv_file}: row {i} (image {s.id!r}): same image and runway "
+                                     f"{s.meta['airport']} {s.meta['runway_db_key']} as row {seen[key]}")
+                seen[key] = i
+                records.append(s)
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{csv_file}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except csv.Error as exc:
+        raise ValueError(f"{csv_file}: line {line + 1}: malformed CSV ({exc})") from None
 
+    if in_odd_only:
+        for s in records:
+            value = s.meta.get("runway_in_cone", "")
+            if value.strip() not in RUNWAY_IN_CONE:
+                raise ValueError(f"{csv_file}: row {s.meta['row']} (image {s.id!r}): field 'runway_in_cone' = "
+                                 f"{value!r} is not one of {', '.join(RUNWAY_IN_CONE)}")
     if target_runway_only:
         records = _select_targets(records)
     else:
@@ -133,19 +194,46 @@ def read_lard(
     flagged = [s for s in records if s.meta["lard_check"]]
     if flagged:
         s = flagged[0]
-        logger.warning("%s: %d row(s) have derived columns disagreeing with the geometry, e.g. row %d: %s",
-                       csv_file, len(flagged), s.meta["row"], s.meta["lard_check"])
+        logger.warning("%s: %d row(s) have derived columns or corner labels disagreeing with the geometry, e.g. "
+                       "row %d: %s", csv_file, len(flagged), s.meta["row"], s.meta["lard_check"])
     return records
+
+
+def _check_header(header: list[str], csv_file: Path, in_odd_only: bool) -> None:
+    names = [h for h in header if h]  # an empty name (a trailing ';') is ignored
+    dup = sorted({h for h in names if names.count(h) > 1})
+    if dup:
+        raise ValueError(f"{csv_file}: column(s) {', '.join(dup)} appear more than once in the header")
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if missing:
+        raise ValueError(f"{csv_file}: missing column(s) {', '.join(missing)}")
+    if in_odd_only and "runway_in_cone" not in header:
+        raise ValueError(f"{csv_file}: in_odd_only needs the column 'runway_in_cone', which is missing")
+
+
+def _real(value) -> bool:
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool | np.bool_) \
+        and math.isfinite(value)
+
+
+def _positive_integer(value) -> bool:
+    return _real(value) and value > 0 and int(value) == value
 
 
 def _number(row: dict, field: str, where: str) -> float:
     text = row.get(field, "")
     try:
-        value = float(str(text).strip())
+        value = float(text.strip())
     except ValueError:
         raise ValueError(f"{where}: field {field!r} = {text!r} is not a number") from None
     if not math.isfinite(value):
         raise ValueError(f"{where}: field {field!r} = {text!r} is not a finite number")
+    limits = FIELD_RANGES.get(field)
+    if limits is not None:
+        lo, hi, inclusive = limits
+        if not (lo <= value <= hi if inclusive else lo < value < hi):
+            interval = f"[{lo:g}, {hi:g}]" if inclusive else f"({lo:g}, {hi:g})"
+            raise ValueError(f"{where}: field {field!r} = {text!r} is not in {interval}")
     return value
 
 
@@ -153,9 +241,39 @@ def _size(row: dict, field: str, where: str, override: int | None) -> int:
     if override is not None:
         return int(override)
     value = _number(row, field, where)
-    if value <= 0 or value != int(value):
-        raise ValueError(f"{where}: field {field!r} = {row[field]!r} is not a positive integer")
+    if value <= 0 or value != int(value) or value > MAX_IMAGE_SIZE_PX:
+        raise ValueError(f"{where}: field {field!r} = {row[field]!r} is not a positive integer "
+                         f"<= {MAX_IMAGE_SIZE_PX}")
     return int(value)
+
+
+def _runway_frame(entry, airport: str, db_key: str, db_file: Path) -> tuple[RunwayFrame, np.ndarray]:
+    where = f"{db_file}: airport {airport!r} runway {db_key!r}"
+    try:
+        frame = RunwayFrame.from_corners(entry)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+    k = frame.corners_3d
+    widths = (float(np.linalg.norm(k[0] - k[1])), float(np.linalg.norm(k[2] - k[3])))
+    length = float(np.linalg.norm(0.5 * (k[0] + k[1]) - 0.5 * (k[2] + k[3])))
+    if not np.isfinite(k).all() or min(widths) < MIN_RUNWAY_WIDTH_M or length < MIN_RUNWAY_LENGTH_M:
+        raise ValueError(f"{where}: degenerate runway corners (widths A-B {widths[0]:.3g} m, C-D {widths[1]:.3g} m, "
+                         f"length {length:.3g} m)")
+    return frame, k
+
+
+def _corner_check(uv, names, projected, K, tol_px) -> dict[str, tuple[float, float]]:
+    """``{column: (stored, projected)}`` for label coordinates farther than the tolerance from the projection."""
+    out = {}
+    centre = K[:2, 2]
+    for k in range(4):
+        if not np.isfinite(projected[k]).all():  # behind the camera: LARD's label is not a projection
+            continue
+        tol = tol_px + RELATIVE_TOL_PX * float(np.linalg.norm(projected[k] - centre))
+        for j in range(2):
+            if not abs(uv[k, j] - projected[k, j]) <= tol:  # (also flags a non-finite tolerance)
+                out[names[2 * k + j]] = (float(uv[k, j]), float(projected[k, j]))
+    return out
 
 
 def _parse_row(row, i, csv_file, db_file, db, frames, base, use_exact, fov_deg, width, height) -> Sample:
@@ -167,11 +285,15 @@ def _parse_row(row, i, csv_file, db_file, db, frames, base, use_exact, fov_deg, 
         _number(row, "fov_deg", where) if row.get("fov_deg", "").strip() else DEFAULT_FOV_DEG)
     lat, lon, alt = (_number(row, c, where) for c in ("lat_cam", "lon_cam", "alt_cam"))
     yaw, pitch, roll = (_number(row, c, where) for c in ("yaw", "pitch", "roll"))
-    if not -90.0 < lat < 90.0:
-        raise ValueError(f"{where}: field 'lat_cam' = {row['lat_cam']!r} is not a latitude in (-90, 90)")
-    corner_cols = EXACT_CORNER_COLUMNS if use_exact and all(row.get(c, "").strip() for c in
-                                                            EXACT_CORNER_COLUMNS) else CORNER_COLUMNS
+    exact_filled = [bool(row.get(c, "").strip()) for c in EXACT_CORNER_COLUMNS] if use_exact else [False]
+    if any(exact_filled) and not all(exact_filled):
+        empty = EXACT_CORNER_COLUMNS[exact_filled.index(False)]
+        raise ValueError(f"{where}: field {empty!r} = {row.get(empty, '')!r} is empty while other exact corner "
+                         f"columns of the row are filled")
+    corner_cols = EXACT_CORNER_COLUMNS if all(exact_filled) else CORNER_COLUMNS
     uv = np.array([_number(row, c, where) for c in corner_cols]).reshape(4, 2)
+    labels = uv if corner_cols is CORNER_COLUMNS else np.array(
+        [_number(row, c, where) for c in CORNER_COLUMNS]).reshape(4, 2)
 
     airport = row.get("airport", "").strip().upper()
     if airport not in db:
@@ -182,16 +304,17 @@ def _parse_row(row, i, csv_file, db_file, db, frames, base, use_exact, fov_deg, 
                          f"runway DB {db_file} (has {', '.join(k for k, _ in db[airport].values())})")
     db_key, entry = found
     if (airport, db_key) not in frames:
-        try:
-            f = RunwayFrame.from_corners(entry)
-        except ValueError as exc:
-            raise ValueError(f"{db_file}: airport {airport!r} runway {db_key!r}: {exc}") from None
-        frames[(airport, db_key)] = (f, f.corners_3d)
+        frames[(airport, db_key)] = _runway_frame(entry, airport, db_key, db_file)
     frame, corners_3d = frames[(airport, db_key)]
 
     path = resolve_within(base, image_text, context=f"{where}: field 'image'")
+    K = intrinsics(w, h, fov)
     position = frame.to_runway(lat, lon, alt)
+    R = frame.camera_rotation(yaw, pitch, roll)
     derived = approach_metrics(position, corners_3d)
+    if not (np.isfinite(position).all() and np.isfinite(K).all() and all(map(math.isfinite, derived.values()))):
+        raise ValueError(f"{where}: fields 'lat_cam', 'lon_cam', 'alt_cam' = {row['lat_cam']!r}, {row['lon_cam']!r}, "
+                         f"{row['alt_cam']!r} give a non-finite camera geometry")
     slant_m = derived["slant_distance"] * METRES_PER_NM
     check = {}
     for field in DERIVED_COLUMNS:
@@ -199,23 +322,32 @@ def _parse_row(row, i, csv_file, db_file, db, frames, base, use_exact, fov_deg, 
             stored = _number(row, field, where)
             if abs(stored - derived[field]) > metrics_tolerance(field, slant_m):
                 check[field] = (stored, derived[field])
+    with np.errstate(all="ignore"):
+        projected = project(corners_3d, R, position, K)
+    exact = corner_cols is EXACT_CORNER_COLUMNS
+    check.update(_corner_check(uv, corner_cols, projected, K, EXACT_TOL_PX if exact else LABEL_TOL_PX))
+    if exact:
+        for k, name in enumerate(CORNER_COLUMNS):
+            stored, value = float(labels.reshape(-1)[k]), float(uv.reshape(-1)[k])
+            if not abs(stored - value) < 1.0 + 1e-6:  # the label is the exact value truncated
+                check[name] = (stored, value)
 
     meta = dict(row)
     meta.update(
         airport=airport, runway=row.get("runway", "").strip(), runway_db_key=db_key,
         runway_azimuth_deg=frame.azimuth_deg, runway_heading_deg=frame.heading_deg,
         yaw=yaw, pitch=pitch, roll=roll, fov_deg=fov, derived=derived, lard_check=check,
-        corners_exact=corner_cols is EXACT_CORNER_COLUMNS, row=i, csv=str(csv_file),
+        corners_exact=exact, row=i, csv=str(csv_file),
     )
     return Sample(
         id=PurePosixPath(image_text.replace("\\", "/")).as_posix(),
-        K=intrinsics(w, h, fov),
+        K=K,
         corners_3d=corners_3d,
         corners_2d=uv,
         position=position,
         width=w,
         height=h,
-        R=frame.camera_rotation(yaw, pitch, roll),
+        R=R,
         image_path=path,
         meta=meta,
         _loader=_image_loader(path, where),

@@ -17,7 +17,11 @@ def load_rgb(path: str | Path) -> np.ndarray:
     import cv2
 
     p = Path(path)
-    if not p.is_file():
+    try:
+        found = p.is_file()
+    except OSError as exc:  # e.g. a name too long for the file system
+        raise ValueError(f"{p}: unreadable image path ({exc.strerror or exc})") from None
+    if not found:
         raise FileNotFoundError(f"{p}: image file not found")
     bgr = cv2.imread(str(p), cv2.IMREAD_COLOR)
     if bgr is None:

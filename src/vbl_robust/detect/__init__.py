@@ -1,7 +1,11 @@
-"""Runway-corner detectors: the protocol every detector implements, σ_select, and the oracle detector.
+"""Runway-corner detectors: the protocol every detector implements, σ_select, and the detectors.
 
-The protocol (black-box ``detect`` and differentiable ``detect_top``, coordinates, ``context``) is documented
-in :mod:`.base`; adapters for ultralytics ``.pt`` and ONNX models implement it.
+- :mod:`.base` — the protocol (``detect(context)``, ``detect_top(context)``, declared capabilities), the
+  :class:`DetectContext` a detector asks for its views, :class:`Detections`, :func:`select`;
+- :mod:`.windows` — detector-side geometry (letterbox, crop windows from corners);
+- :mod:`.pose` — the pose-model base (single pass); :mod:`.ultralytics` (``.pt``) and :mod:`.onnx` models;
+- :mod:`.twostage` — two pose models composed: whole image, then a crop; :mod:`.oracle` — ground truth;
+- :mod:`.shipped` — the shipped model (path, design, validation, caveats) and :class:`DetectorSpec`.
 """
 
 from .base import (
@@ -27,13 +31,15 @@ __all__ = [
     "UltralyticsDetector",
     "OnnxDetector",
     "TwoStageDetector",
+    "DetectorSpec",
     "default_detector",
 ]
 
 # The model adapters import ultralytics/onnxruntime: resolved on first use only.
 _LAZY = {
     "UltralyticsDetector": ".ultralytics",
-    "default_detector": ".ultralytics",
+    "default_detector": ".shipped",
+    "DetectorSpec": ".shipped",
     "OnnxDetector": ".onnx",
     "TwoStageDetector": ".twostage",
 }

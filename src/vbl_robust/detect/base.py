@@ -2,36 +2,38 @@
 
 What a detector is (for adapter writers)
 ----------------------------------------
-Any object with
+A class with three declared capabilities and one required method::
 
-* ``input_size: int | None`` (optional, default ``None``) — the long side, in pixels, of the view the detector resamples its input to (e.g.
-  640 for a YOLOv8-Pose letterboxed to 640 × 640), or ``None`` if it uses images at any size as given. The
-  :class:`~vbl_robust.pipeline.Objective` uses it to perturb images at that resolution instead of the full one
-  (rotation about the principal point commutes with isotropic scaling), so the detector then receives images
-  whose long side is ``input_size``. Adapters must accept any size anyway.
-* ``detect(images, *, context=None) -> list[Detections]`` — the **black-box path**: ``images`` is a
-  ``(B, 3, H, W)`` float tensor, RGB in ``[0, 1]``; called under ``torch.no_grad()``. Returns one
-  :class:`Detections` per image, all candidates the detector reports (after its own NMS), in the pixel
-  coordinates **of the images passed in** (OpenCV convention: ``u`` right, ``v`` down, pixel centres at
-  integers) — an adapter undoes its own letterbox/resize. Keypoints in the order TR, TL, BL, BR.
-* optionally ``detect_top(images, *, context=None) -> (conf (B,), keypoints (B, 4, 2))`` — the
-  **differentiable path** (:class:`DifferentiableDetector`): the single candidate of maximum confidence per
-  image, as tensors with gradients flowing back to ``images`` (raw predictions before NMS, argmax + ``gather``).
-  Same coordinates as ``detect``. A confidence below the threshold (e.g. 0 when there is no candidate at all)
-  makes the row a failure. Its top candidate should equal ``select(detect(images))`` (same network outputs).
+    class MyDetector:
+        input_size: int | None = 640      # long side of the source it wants (None: full resolution)
+        uses_pixels: bool = True          # False: reads only the context (the oracle)
+        differentiable: bool = False      # True: also has detect_top (white-box searches)
 
-* optionally ``uses_pixels: bool`` (default True) — ``False`` declares that the detector reads only the
-  ``context``, never the pixels (the oracle); the Objective then skips perturbing the images and passes the
-  unperturbed image broadcast over the batch.
+        def detect(self, context: DetectContext) -> list[Detections]: ...
+        def detect_top(self, context: DetectContext) -> tuple[Tensor, Tensor]: ...   # if differentiable
 
-``context`` (a :class:`DetectContext`) tells the detector which sample and which θ produced the images. Real
-detectors ignore it (a ``detect``/``detect_top`` without a ``context`` parameter is called without it); the :class:`~vbl_robust.detect.oracle.OracleDetector` uses it to return the ground-truth
-corners moved by the same perturbation. The pipeline always passes it; direct callers may pass ``None``.
+* ``input_size`` — the :class:`~vbl_robust.pipeline.Objective` resizes the sample's image so that its long side is
+  ``input_size`` before the perturbation is applied (rotation about the principal point commutes with isotropic
+  scaling), so a detector that letterboxes to 640 × 640 never receives pixels it would throw away.
+* ``detect(context)`` — the **black-box path**, called under ``torch.no_grad()``. The detector asks the context
+  for what it needs: ``context.views(windows, size)`` (square views of the perturbed images, see
+  :mod:`vbl_robust.perturb.views`), ``context.frames()`` (the whole perturbed images), or, for the oracle,
+  ``context.move_points(points)``. It returns one :class:`Detections` per row of ``context.theta``: all
+  candidates after its own NMS, in the pixel coordinates of the context's source (OpenCV convention: ``u``
+  right, ``v`` down, pixel centres at integers), keypoints in the order TR, TL, BL, BR.
+* ``detect_top(context)`` — the **differentiable path**: ``(conf (B,), keypoints (B, 4, 2))`` of the candidate
+  of maximum confidence per row (raw predictions before NMS, argmax + ``gather``), with gradients flowing back
+  to θ. A confidence below the threshold (0 when there is no candidate) makes the row a failure. Its top
+  candidate equals ``select(detect(context))`` (same network outputs).
+
+Capabilities are class attributes, read as they are declared (never guessed from signatures).
+:func:`DetectContext.of_images` wraps plain images (no perturbation) for direct calls.
 
 Selection (the paper's σ_select)
 --------------------------------
 :func:`select` keeps, per image, the candidate of maximum confidence if that confidence is ``≥ τ_conf``
-(default 0.25), else the image is a failure (``no_detection`` or ``low_confidence``).
+(:data:`vbl_robust.constants.CONF_THRESHOLD` = 0.25), else the image is a failure (``no_detection`` or
+``low_confidence``).
 """
 
 from __future__ import annotations
@@ -43,7 +45,9 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 import numpy as np
 import torch
 
-from vbl_robust.perturb import Perturbation, PixelScale
+from vbl_robust.constants import CONF_THRESHOLD
+from vbl_robust.perturb import Perturbation, PixelScale, ViewSampler
+from vbl_robust.perturb.views import to_tensor
 
 if TYPE_CHECKING:
     from vbl_robust.data.sample import Sample
@@ -52,14 +56,16 @@ __all__ = [
     "DEFAULT_CONF_THRESHOLD",
     "DetectContext",
     "Detections",
+    "ImageViews",
+    "as_context",
     "Detector",
     "DifferentiableDetector",
     "Selection",
     "select",
 ]
 
-#: The paper's operational confidence threshold τ_conf.
-DEFAULT_CONF_THRESHOLD = 0.25
+#: τ_conf (alias of :data:`vbl_robust.constants.CONF_THRESHOLD`, kept for existing imports).
+DEFAULT_CONF_THRESHOLD = CONF_THRESHOLD
 
 
 def _np(a, dtype=np.float64) -> np.ndarray:
@@ -103,47 +109,118 @@ class Detections:
 
 @dataclass(frozen=True, eq=False)
 class DetectContext:
-    """What produced a batch of images: the sample, the θ rows and the perturbation, and the resolution.
+    """What a detector is asked about: a batch of perturbed images of one sample, given as a view sampler.
 
     Attributes:
-        sample: the :class:`~vbl_robust.data.sample.Sample` the images were made from.
-        theta: ``(B, d)`` parameters in real units, one row per image (NumPy, or a tensor on the
-            differentiable path), columns named by ``perturbation.names``.
-        perturbation: the :class:`~vbl_robust.perturb.Perturbation` applied.
-        scale: mapping from the sample's pixels to the pixels of the images given to the detector.
-        perturbed: True when the images already show ``T(x; θ)``; False when the caller handed the *unperturbed*
-            image (every row) to a detector whose ``applies_perturbation(perturbation)`` is true — that detector
-            then applies θ itself while sampling its views (e.g. :class:`~vbl_robust.detect.TwoStageDetector`).
+        sample: the :class:`~vbl_robust.data.sample.Sample` (None for plain images, :meth:`of_images`).
+        sampler: the :class:`~vbl_robust.perturb.ViewSampler` of ``T(x; θ)`` (or :class:`ImageViews`).
+        scale: mapping from the sample's pixels to the source pixels of the sampler.
     """
 
-    sample: Sample
-    theta: np.ndarray | torch.Tensor
-    perturbation: Perturbation
+    sample: Sample | None
+    sampler: ViewSampler | ImageViews
     scale: PixelScale = PixelScale()
-    perturbed: bool = True
+
+    @classmethod
+    def of_images(cls, images) -> DetectContext:
+        """A context for plain images ``(B, 3, H, W)`` float in [0, 1] / ``(H, W, 3)`` or ``(B, H, W, 3)`` uint8
+        (no sample, no perturbation): for calling a pixel detector directly."""
+        return cls(None, ImageViews(to_tensor(images)))
+
+    @classmethod
+    def for_sample(cls, sample: Sample, perturbation: Perturbation, theta, scale: PixelScale = PixelScale(),
+                   image=None) -> DetectContext:
+        """The context of θ rows for ``sample``: its views sampled from ``image`` (the sample's pixels at ``scale``;
+        None → a blank image, for detectors that read no pixels, such as the oracle)."""
+        w, h = round(sample.width * scale.sx), round(sample.height * scale.sy)
+        src = torch.zeros(1, 3, 1, 1).expand(1, 3, h, w) if image is None else image
+        center = scale.to_scaled(np.asarray(sample.K, np.float64)[:2, 2])
+        return cls(sample, ViewSampler(perturbation, src, theta, center), scale)
 
     @property
-    def center(self) -> np.ndarray:
-        """Rotation centre (the principal point of ``sample.K``) in the detector-input pixels, ``(2,)``."""
-        return self.scale.to_scaled(self.sample.K[:2, 2])
+    def theta(self):
+        """``(B, d)`` parameters in real units (NumPy, or a tensor on the differentiable path)."""
+        return self.sampler.theta
+
+    @property
+    def perturbation(self) -> Perturbation | None:
+        return self.sampler.perturbation
+
+    def __len__(self) -> int:
+        return len(self.sampler)
+
+    @property
+    def height(self) -> int:
+        """Height of the source in pixels (the coordinates detections are given in)."""
+        return self.sampler.height
+
+    @property
+    def width(self) -> int:
+        return self.sampler.width
+
+    def views(self, windows, size: int) -> torch.Tensor:
+        """``(B, 3, size, size)`` views of the perturbed images (see :meth:`ViewSampler.views`)."""
+        return self.sampler.views(windows, size)
+
+    def frames(self) -> torch.Tensor:
+        """``(B, 3, H, W)`` the whole perturbed images at the source resolution."""
+        return self.sampler.frames()
 
     def move_points(self, points):
-        """Sample pixels ``(P, 2)`` → where the perturbation moves them, in detector-input pixels ``(B, P, 2)``.
+        """Sample pixels ``(P, 2)`` → where the perturbation moves them, in source pixels ``(B, P, 2)`` (a tensor θ
+        gives a tensor differentiable w.r.t. θ)."""
+        return self.sampler.points(self.scale.to_scaled(np.asarray(points, np.float64)))
 
-        A tensor θ gives a tensor differentiable w.r.t. θ.
-        """
-        return self.perturbation.points(self.scale.to_scaled(np.asarray(points, np.float64)), self.theta,
-                                        center=self.center)
+
+class ImageViews:
+    """The :class:`~vbl_robust.perturb.ViewSampler` interface over plain images ``(B, 3, H, W)`` (no perturbation)."""
+
+    perturbation = None
+    theta = None
+
+    def __init__(self, images: torch.Tensor) -> None:
+        self.images = images
+
+    def __len__(self) -> int:
+        return int(self.images.shape[0])
+
+    @property
+    def height(self) -> int:
+        return int(self.images.shape[-2])
+
+    @property
+    def width(self) -> int:
+        return int(self.images.shape[-1])
+
+    def frames(self) -> torch.Tensor:
+        return self.images
+
+    def views(self, windows, size: int) -> torch.Tensor:
+        from vbl_robust.perturb.views import resample
+
+        return resample(self.images, windows, size)
+
+    def points(self, points):
+        raise ValueError("plain images carry no sample or perturbation: this detector needs a vr.Objective context")
+
+
+def as_context(context_or_images) -> DetectContext:
+    """A :class:`DetectContext` as it is, or plain images wrapped by :meth:`DetectContext.of_images`."""
+    if isinstance(context_or_images, DetectContext):
+        return context_or_images
+    return DetectContext.of_images(context_or_images)
 
 
 @runtime_checkable
 class Detector(Protocol):
-    """Black-box runway-corner detector (see the module docstring for the full contract)."""
+    """Runway-corner detector (see the module docstring for the full contract)."""
 
     input_size: int | None
+    uses_pixels: bool
+    differentiable: bool
 
-    def detect(self, images: torch.Tensor, *, context: DetectContext | None = None) -> list[Detections]:
-        """``(B, 3, H, W)`` float RGB in [0, 1] → one :class:`Detections` per image (input-image pixels)."""
+    def detect(self, context: DetectContext) -> list[Detections]:
+        """One :class:`Detections` per row of the context (source pixels)."""
         ...
 
 
@@ -151,10 +228,8 @@ class Detector(Protocol):
 class DifferentiableDetector(Detector, Protocol):
     """A :class:`Detector` that also has the differentiable max-confidence path."""
 
-    def detect_top(
-        self, images: torch.Tensor, *, context: DetectContext | None = None
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(B, 3, H, W)`` → ``(conf (B,), keypoints (B, 4, 2))`` of the top candidate, differentiable."""
+    def detect_top(self, context: DetectContext) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(conf (B,), keypoints (B, 4, 2))`` of the top candidate, differentiable w.r.t. θ."""
         ...
 
 

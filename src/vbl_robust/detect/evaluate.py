@@ -20,8 +20,8 @@ import numpy as np
 import torch
 
 from ..data.sample import Sample
-from .base import DEFAULT_CONF_THRESHOLD, select
-from .views import to_tensor
+from ..perturb.views import to_tensor
+from .base import DEFAULT_CONF_THRESHOLD, DetectContext, select
 
 #: nominal survival: position error ≤ this many metres with no perturbation
 SURVIVAL_M = 1000.0
@@ -74,7 +74,7 @@ def evaluate_detector(
             j += 1
         x = torch.cat([to_tensor(s.image) for s in samples[i:j]], 0)
         with torch.no_grad():
-            sel = select(detector.detect(x), conf_threshold)
+            sel = select(detector.detect(DetectContext.of_images(x)), conf_threshold)
         for k, s in enumerate(samples[i:j]):
             conf[i + k] = sel.conf[k]
             ok[i + k] = sel.ok[k]

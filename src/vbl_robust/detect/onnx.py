@@ -2,7 +2,7 @@
 
 The ONNX graph is an ultralytics pose export (``dynamic=True``): input ``images`` (B, 3, S, S) float RGB in
 [0, 1], output (B, 4 + nc + K·3, A), the same layout as the ``.pt`` raw predictions, so all pre- and
-post-processing is shared with :class:`~vbl_robust.detect.ultralytics.PoseDetector`. ONNX Runtime does not give
+post-processing is shared with :class:`~vbl_robust.detect.pose.PoseDetector`. ONNX Runtime does not give
 gradients: :meth:`OnnxDetector.top` works as a (non-differentiable) black box.
 """
 
@@ -17,7 +17,8 @@ import numpy as np
 import torch
 
 from .offline import import_ultralytics
-from .ultralytics import PoseDetector, load_pose_model
+from .pose import PoseDetector
+from .ultralytics import load_pose_model
 
 logger = logging.getLogger(__name__)
 

@@ -1,6 +1,7 @@
 """The oracle detector: the ground-truth corners moved by the perturbation — "a perfect detector".
 
-It ignores the pixels and reads the :class:`~vbl_robust.detect.base.DetectContext` instead, so the whole
+It never asks for pixels: it reads the sample from the :class:`~vbl_robust.detect.base.DetectContext` and moves its
+corners with the context's view sampler (the same point map the perturbation applies to the image), so the whole
 pipeline (perturb → detect → select → PnP → error) can be tested and audited without a network. With camera
 roll about the principal point the moved corners are exactly the corners the rolled camera would see, so with
 an exact PnP solver the position error stays ~0 over any roll: a departure from that is a solver failure.
@@ -42,13 +43,14 @@ class OracleDetector:
             the true pose, needs ``sample.R``; exact even when labels are truncated integers, as in LARD), or
             ``"auto"`` (projected when ``sample.R`` is known, labels otherwise).
 
-    Both paths need the ``context`` the :class:`~vbl_robust.pipeline.Objective` passes. The differentiable
-    path returns keypoints as a differentiable function of θ (the images are not used).
+    Both paths need the ``context`` the :class:`~vbl_robust.pipeline.Objective` passes (a sample and θ). The
+    differentiable path returns keypoints as a differentiable function of θ.
     """
 
     input_size: int | None = None
-    #: The oracle never reads pixels: the Objective may skip perturbing the images (see vbl_robust.pipeline).
+    #: The oracle never reads pixels (the Objective then never loads or resizes them for it).
     uses_pixels: bool = False
+    differentiable: bool = True
 
     def __init__(
         self,
@@ -104,20 +106,16 @@ class OracleDetector:
 
     @staticmethod
     def _need_context(context) -> DetectContext:
-        if context is None:
+        if not isinstance(context, DetectContext) or context.sample is None or context.theta is None:
             raise ValueError("OracleDetector needs the context (sample and θ); use it through vr.Objective")
         return context
 
     # -- the protocol -----------------------------------------------------------------------------------------
-    def detect(self, images: torch.Tensor, *, context: DetectContext | None = None) -> list[Detections]:
-        """Black-box path: one candidate per image (or none when ``fail_outside`` and a corner left the image)."""
+    def detect(self, context: DetectContext) -> list[Detections]:
+        """Black-box path: one candidate per row (or none when ``fail_outside`` and a corner left the image)."""
         ctx = self._need_context(context)
-        theta = ctx.theta.detach().cpu().numpy() if isinstance(ctx.theta, torch.Tensor) else ctx.theta
-        ctx = DetectContext(ctx.sample, np.asarray(theta, np.float64), ctx.perturbation, ctx.scale)
         kp = np.asarray(ctx.move_points(self.true_corners(ctx.sample)))
         n = kp.shape[0]
-        if n != images.shape[0]:
-            raise ValueError(f"OracleDetector: {images.shape[0]} images but {n} θ rows in the context")
         kp = kp + self._noise(ctx, n)
         out_of_image = self._outside(ctx, kp) if self.fail_outside else np.zeros(n, dtype=bool)
         dets = []
@@ -129,18 +127,13 @@ class OracleDetector:
             dets.append(Detections(box[None], np.ones(1), kp[k][None]))
         return dets
 
-    def detect_top(
-        self, images: torch.Tensor, *, context: DetectContext | None = None
-    ) -> tuple[torch.Tensor, torch.Tensor]:
+    def detect_top(self, context: DetectContext) -> tuple[torch.Tensor, torch.Tensor]:
         """Differentiable path: ``conf (B,)`` (1, or 0 for a corner outside with ``fail_outside``) and keypoints
         ``(B, 4, 2)`` differentiable w.r.t. a tensor θ in the context."""
         ctx = self._need_context(context)
-        theta = ctx.theta if isinstance(ctx.theta, torch.Tensor) else torch.as_tensor(np.asarray(ctx.theta))
-        ctx = DetectContext(ctx.sample, theta, ctx.perturbation, ctx.scale)
         kp = ctx.move_points(self.true_corners(ctx.sample))
+        kp = torch.as_tensor(kp) if not isinstance(kp, torch.Tensor) else kp
         n = kp.shape[0]
-        if n != images.shape[0]:
-            raise ValueError(f"OracleDetector: {images.shape[0]} images but {n} θ rows in the context")
         kp = kp + torch.as_tensor(self._noise(ctx, n), dtype=kp.dtype, device=kp.device)
         conf = torch.ones(n, dtype=kp.dtype, device=kp.device)
         if self.fail_outside:

@@ -1,6 +1,6 @@
 """Train the runway-corner keypoint model (YOLOv8n-pose) with ultralytics, offline, resumable and cumulative.
 
-Data: each :class:`~vbl_robust.data.Sample` gives square *views* (see :mod:`vbl_robust.detect.views`), rendered
+Data: each :class:`~vbl_robust.data.Sample` gives square *views* (see :mod:`vbl_robust.perturb.views`), rendered
 at the training size with the same resampling the detectors use at inference:
 
 - the letterboxed full image (what a single-pass detector, or the first pass of the two-stage one, sees);
@@ -32,9 +32,10 @@ import torch
 
 from ..data.sample import Sample
 from ..data.yolo import write_data_yaml, write_pose_images
+from ..perturb.views import image_to_view, resample, to_tensor
 from ..scenes.airports import DEFAULT_POOL
 from .offline import import_ultralytics
-from .views import box_window, image_to_view, letterbox_window, resample, to_tensor
+from .windows import box_window, letterbox_window
 
 logger = logging.getLogger(__name__)
 
@@ -56,7 +57,7 @@ VAL_SEED_OFFSET = 1_000_003
 
 @dataclass
 class CropJitter:
-    """How training crops are drawn around the true corner box (see :func:`~vbl_robust.detect.views.box_window`).
+    """How training crops are drawn around the true corner box (see :func:`~vbl_robust.detect.windows.box_window`).
 
     margin/min_side: nominal window; shift: centre shift, uniform in ± shift·side per axis; scale: side factor,
     log-uniform in [1/scale, scale].
@@ -321,7 +322,7 @@ def ship(weights: str | Path, *, detector: str, imgsz: int, models_dir: str | Pa
     import_ultralytics()
     from ultralytics.utils.torch_utils import strip_optimizer
 
-    from .ultralytics import DEFAULT_MODEL
+    from .shipped import DEFAULT_MODEL
 
     d = Path(models_dir) if models_dir is not None else DEFAULT_MODEL.parent
     d.mkdir(parents=True, exist_ok=True)

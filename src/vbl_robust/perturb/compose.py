@@ -18,8 +18,8 @@ import torch
 
 from vbl_robust.space import ParameterBox
 
-from .geometric import roll, roll_numpy, roll_points
-from .photometric import contrast, contrast_numpy
+from .geometric import roll, roll_numpy, roll_points, roll_source_coords
+from .photometric import contrast, contrast_about, contrast_numpy, gray_mean
 
 __all__ = ["PERTURBATIONS", "Perturbation", "PerturbationSpec"]
 
@@ -102,6 +102,12 @@ class Perturbation:
         finite = bool(torch.isfinite(t).all()) if isinstance(t, torch.Tensor) else bool(np.isfinite(t).all())
         if not finite:
             raise ValueError(f"theta must be finite, got non-finite values for parameters {self.names}")
+        for name, i in self._index.items():  # outside the box is allowed; outside the family's domain is not
+            low = PERTURBATIONS[name].minimum
+            col = t[:, i]
+            if low > -np.inf and bool((col < low).any()):
+                bad = float(col.min())
+                raise ValueError(f"theta: {name} must be >= {low:g}, got {bad:g}")
         return t
 
     def column(self, theta, name: str):
@@ -166,6 +172,30 @@ class Perturbation:
             x = x.expand(n, -1, -1, -1)
         return x
 
+    # -- what the view sampler needs (vbl_robust.perturb.views.ViewSampler) ---------------------------------
+    @property
+    def has_photometric(self) -> bool:
+        """True when some parameter changes pixel values (after the geometry)."""
+        return any(PERTURBATIONS[n].kind == "photometric" for n in self.names)
+
+    def source_coords(self, qu: torch.Tensor, qv: torch.Tensor, theta, center: torch.Tensor):
+        """Inverse geometric map: perturbed-image OpenCV coordinates ``(B, …)`` → source coordinates (unreflected),
+        for θ rows ``(B, d)``; the identity when no parameter is geometric."""
+        if "roll_deg" not in self._index:
+            return qu, qv
+        return roll_source_coords(qu, qv, _column_tensor(self.column(theta, "roll_deg")), center)
+
+    def photometric_stats(self, values: torch.Tensor) -> torch.Tensor:
+        """``(B,)`` statistics the photometric families need, from samples ``(B, 3, n, n)`` of the geometrically
+        perturbed frames (the grey mean of the contrast)."""
+        return gray_mean(values)
+
+    def photometric_torch(self, values: torch.Tensor, theta, stats: torch.Tensor) -> torch.Tensor:
+        """The photometric families on pixel values ``(B, 3, …)`` of the geometrically perturbed frames."""
+        if "contrast" in self._index:
+            values = contrast_about(values, _column_tensor(self.column(theta, "contrast")), stats)
+        return values
+
     # -- points --------------------------------------------------------------------------------------------
     def points(self, points, theta, *, center):
         """Move pixel points ``(P, 2)`` or ``(N, P, 2)`` as the image content moves: ``(N, P, 2)``.
@@ -182,6 +212,10 @@ class Perturbation:
             return p[None].expand(n, -1, -1).clone() if p.ndim == 2 else p.clone()
         p = np.asarray(points, dtype=np.float64)
         return np.broadcast_to(p, (n, *p.shape[-2:])).copy()
+
+
+def _column_tensor(col) -> torch.Tensor:
+    return col if isinstance(col, torch.Tensor) else torch.as_tensor(np.asarray(col, dtype=np.float64))
 
 
 def _as_chw_tensor(image) -> torch.Tensor:

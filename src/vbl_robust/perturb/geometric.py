@@ -32,7 +32,7 @@ import torch
 from kornia.geometry.transform import warp_affine
 from torch import nn
 
-__all__ = ["Roll", "default_center", "roll", "roll_matrix", "roll_numpy", "roll_points"]
+__all__ = ["Roll", "default_center", "roll", "roll_matrix", "roll_numpy", "roll_points", "roll_source_coords"]
 
 
 def default_center(width: int, height: int) -> tuple[float, float]:
@@ -138,6 +138,24 @@ def roll_points(points, angle_deg, center):
     du, dv = p[..., 0] - c[..., 0], p[..., 1] - c[..., 1]
     co, si = xp_cos(a)[:, None], xp_sin(a)[:, None]
     return stack([c[..., 0] + co * du + si * dv, c[..., 1] - si * du + co * dv], -1)
+
+
+def roll_source_coords(qu: torch.Tensor, qv: torch.Tensor, angle_deg: torch.Tensor, center: torch.Tensor,
+                       ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Inverse map of :func:`roll`: the source pixel shown at rolled pixel ``(qu, qv)``, i.e. ``c + Rᵀ (q − c)``.
+
+    Args:
+        qu, qv: ``(B, …)`` OpenCV coordinates in the rolled image (computed in their dtype).
+        angle_deg: ``(B,)`` degrees (same sign as :func:`roll`); center: ``(2,)`` pixels.
+
+    Returns:
+        ``(su, sv)`` like ``qu``: source coordinates, not yet reflected into the image (see
+        :func:`~vbl_robust.perturb.views.reflect101`). Differentiable w.r.t. the angle.
+    """
+    a = torch.deg2rad(torch.as_tensor(angle_deg).to(qu.dtype)).reshape(-1, *([1] * (qu.ndim - 1)))
+    co, si = torch.cos(a), torch.sin(a)
+    du, dv = qu - center[0], qv - center[1]
+    return center[0] + co * du - si * dv, center[1] + si * du + co * dv
 
 
 def roll_numpy(image: np.ndarray, angle_deg: float, center=None, out: np.ndarray | None = None) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["LUMA_WEIGHTS", "Contrast", "contrast", "contrast_numpy"]
+__all__ = ["LUMA_WEIGHTS", "Contrast", "contrast", "contrast_about", "contrast_numpy", "gray_mean"]
 
 #: ITU-R 601-2 luma weights used by torchvision's ``rgb_to_grayscale``.
 LUMA_WEIGHTS = (0.2989, 0.587, 0.114)
@@ -48,6 +48,14 @@ def contrast(images: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
     mean = gray_mean(images)  # (B or 1,)
     f4 = f[:, None, None, None]
     return (f4 * images + (1.0 - f4) * mean[:, None, None, None]).clamp(0.0, 1.0)
+
+
+def contrast_about(values: torch.Tensor, factor: torch.Tensor, mean: torch.Tensor) -> torch.Tensor:
+    """:func:`contrast` of pixel values ``(B, C, …)`` of images whose grey means ``(B,)`` are known (the view
+    sampler gives views, not whole images, so the mean comes from the whole frame)."""
+    f = torch.as_tensor(factor).to(values.dtype).reshape(-1, *([1] * (values.ndim - 1)))
+    m = torch.as_tensor(mean).to(values.dtype).reshape(-1, *([1] * (values.ndim - 1)))
+    return (f * values + (1.0 - f) * m).clamp(0.0, 1.0)
 
 
 def gray_mean(images: torch.Tensor) -> torch.Tensor:

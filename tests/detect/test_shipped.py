@@ -3,8 +3,8 @@ its open goals travel with every run."""
 
 import json
 
-from vbl_robust.campaigns import provenance
-from vbl_robust.campaigns.provenance import DetectorSpec, default_model_caveats, default_model_status
+from vbl_robust.detect import shipped
+from vbl_robust.detect.shipped import DetectorSpec, default_model_caveats, default_model_status
 
 
 def _fake_model(tmp_path, monkeypatch, info):
@@ -12,7 +12,8 @@ def _fake_model(tmp_path, monkeypatch, info):
     weights.write_bytes(b"x")
     if info is not None:
         (tmp_path / "default.json").write_text(json.dumps(info))
-    monkeypatch.setattr(provenance, "default_model_path", lambda: weights)
+    monkeypatch.setattr(shipped, "MODELS_DIR", tmp_path)
+    monkeypatch.setattr(shipped, "DEFAULT_MODEL", weights)
 
 
 def test_unvalidated_shipped_model_falls_back_to_the_oracle(tmp_path, monkeypatch):
@@ -20,6 +21,8 @@ def test_unvalidated_shipped_model_falls_back_to_the_oracle(tmp_path, monkeypatc
     assert "does not meet its validation gates" in default_model_status()
     spec = DetectorSpec.auto(oracle_noise_px=1.0)
     assert spec.kind == "oracle" and spec.options == {"noise_px": 1.0}
+    spec, why = DetectorSpec.choose(oracle_noise_px=1.0)  # what the CLI prints
+    assert spec.kind == "oracle" and "does not meet its validation gates" in why
 
 
 def test_validated_shipped_model_is_the_default(tmp_path, monkeypatch):
@@ -44,7 +47,7 @@ def test_a_validation_flag_that_is_not_true_keeps_the_oracle(tmp_path, monkeypat
     assert DetectorSpec.auto().kind == "oracle"
 
 
-def test_missing_model_is_named(monkeypatch):
-    monkeypatch.setattr(provenance, "default_model_path", lambda: None)
+def test_missing_model_is_named(tmp_path, monkeypatch):
+    monkeypatch.setattr(shipped, "DEFAULT_MODEL", tmp_path / "absent.pt")
     assert "not installed" in default_model_status()
     assert DetectorSpec.auto().kind == "oracle"

@@ -1,0 +1,50 @@
+"""The numbers and vocabularies every part of vbl-robust shares, defined once.
+
+- ``EPS_SAFE_M``: the safety threshold ε_safe (metres): a box is safe iff ``max_Θ L ≤ EPS_SAFE_M``.
+- ``CONF_THRESHOLD``: the operational confidence threshold τ_conf of the selection σ_select.
+- ``PENALTY_M``: the error ``L`` assigned to any failed evaluation (metres; the paper's detection-breakdown value).
+- ``FAILURE_REASONS``: why one evaluation failed (it is then penalised with ``PENALTY_M``).
+- :class:`Verdict`: the answer for one image and box, used by search, campaigns and report alike.
+
+This module imports nothing of the package, so every part (``search/`` included) may import it.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+__all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FAILURE_REASONS", "PENALTY_M", "Verdict"]
+
+#: ε_safe: the largest acceptable camera-position error, metres (the paper's threshold).
+EPS_SAFE_M = 1000.0
+
+#: τ_conf: a candidate is selected only if its confidence is at least this (the paper's operating point).
+CONF_THRESHOLD = 0.25
+
+#: L of a failed evaluation (no detection, PnP failure, …), metres (the paper's L_E2E of a breakdown).
+PENALTY_M = 5000.0
+
+#: Why an evaluation failed, with what each code means. ``""`` is a success.
+FAILURE_REASONS: dict[str, str] = {
+    "image_unavailable": "the sample's pixels could not be loaded",
+    "no_detection": "the detector returned no candidate",
+    "low_confidence": "the best candidate's confidence is below τ_conf",
+    "non_finite_keypoints": "the selected keypoints are not finite",
+    "pnp_failed": "the PnP solver found no pose",
+    "non_finite_position": "the PnP position is not finite",
+}
+
+
+class Verdict(StrEnum):
+    """The answer for one image and one box Θ.
+
+    - ``CERTIFIED``: a *sound* upper bound of ``max_Θ L`` is ≤ ε_safe (needs a Lipschitz constant).
+    - ``BREACH``: an evaluated θ has ``L > ε_safe`` (a concrete counter-example).
+    - ``NO_BREACH_FOUND``: neither; the search did not find a breach within its budget.
+    - ``FAILED``: the job itself could not run (the sample cannot be processed at all).
+    """
+
+    CERTIFIED = "certified"
+    BREACH = "breach"
+    NO_BREACH_FOUND = "no breach found"
+    FAILED = "failed"

@@ -1,0 +1,129 @@
+"""The pose-model detector base: a YOLO-pose network on square views, and its two paths.
+
+A :class:`PoseDetector` wraps a network that maps views ``(B, 3, S, S)`` in [0, 1] to raw predictions
+``y (B, 4 + nc + K·3, A)`` (ultralytics' layout, before NMS; subclasses implement :meth:`PoseDetector.raw`:
+``.pt`` in :mod:`.ultralytics`, ONNX in :mod:`.onnx`). As a detector it is the paper's single pass: it asks the
+context for the letterboxed view of each perturbed image and reads the candidates back in source pixels
+(OpenCV convention), keypoints TR, TL, BL, BR.
+
+- :meth:`PoseDetector.detect` — black box: ``no_grad``, NMS (``conf_min``, ``iou``, ``max_det``);
+  :class:`~vbl_robust.detect.base.Detections` per image, highest confidence first.
+- :meth:`PoseDetector.detect_top` / :meth:`PoseDetector.top` — differentiable: the anchor of maximum
+  confidence (``argmax`` + ``gather``). NMS always keeps the global maximum, so it equals the black box's top.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from vbl_robust.perturb.views import view_to_image
+
+from .base import DetectContext, Detections, as_context
+from .windows import letterbox_window
+
+__all__ = ["PoseDetector", "Top", "split_raw"]
+
+
+@dataclass
+class Top:
+    """Max-confidence candidate per image (differentiable): conf (B,), keypoints (B, 4, 2), boxes (B, 4)."""
+
+    conf: torch.Tensor
+    keypoints: torch.Tensor
+    boxes: torch.Tensor
+
+
+def split_raw(y: torch.Tensor, nc: int, nk: int = 4, kdim: int = 3) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Raw predictions (B, 4 + nc + nk·kdim, A) → (boxes xyxy (B, A, 4), conf (B, A), keypoints (B, A, nk, 2)).
+
+    Coordinates stay in view-pixel edge coordinates (ultralytics' convention).
+    """
+    y = y.transpose(1, 2)
+    xy, wh = y[..., :2], y[..., 2:4]
+    boxes = torch.cat([xy - wh / 2, xy + wh / 2], -1)
+    conf = y[..., 4:4 + nc].amax(-1) if nc > 1 else y[..., 4]
+    k = y[..., 4 + nc:].reshape(*y.shape[:2], nk, kdim)[..., :2]
+    return boxes, conf, k
+
+
+class PoseDetector:
+    """A pose network as a single-pass runway-corner detector; subclasses implement :meth:`raw`.
+
+    Attributes: ``imgsz`` (view side), ``nc`` (classes), ``chunk`` (views per forward pass), NMS settings
+    ``conf_min``, ``iou``, ``max_det`` of the black-box path; ``input_size = imgsz`` (the objective hands over a
+    source already at that size).
+    """
+
+    imgsz: int
+    nc: int = 1
+    input_size: int | None
+    chunk: int = 16
+    uses_pixels: bool = True
+    differentiable: bool = True
+    conf_min: float = 0.01
+    iou: float = 0.7
+    max_det: int = 10
+
+    def raw(self, views: torch.Tensor) -> torch.Tensor:
+        """Network on views (B, 3, imgsz, imgsz) in [0, 1] → raw predictions (B, 4 + nc + 12, A)."""
+        raise NotImplementedError
+
+    def raw_chunked(self, views: torch.Tensor) -> torch.Tensor:
+        """:meth:`raw` in chunks of ``chunk`` views (bounds memory)."""
+        if views.shape[0] <= self.chunk:
+            return self.raw(views)
+        return torch.cat([self.raw(v) for v in views.split(self.chunk)], 0)
+
+    def candidates_in_views(self, views: torch.Tensor, win: torch.Tensor):
+        """All anchors of views sampled at windows ``win`` (B, 3): boxes (B, A, 4), conf (B, A), keypoints
+        (B, A, 4, 2), in source pixels (OpenCV)."""
+        boxes, conf, k = split_raw(self.raw_chunked(views), self.nc)
+        b, a = conf.shape
+        kp = view_to_image(k.reshape(b, a * 4, 2), win, self.imgsz).reshape(b, a, 4, 2)
+        bx = view_to_image(boxes.reshape(b, a * 2, 2), win, self.imgsz).reshape(b, a, 4)
+        return bx, conf, kp
+
+    def letterbox(self, context: DetectContext) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(views, windows)`` of the letterboxed perturbed images at ``imgsz``."""
+        win = torch.tensor(letterbox_window(context.height, context.width), dtype=torch.float32)
+        win = win.expand(len(context), 3)
+        return context.views(win, self.imgsz), win
+
+    def candidates(self, context) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """All anchors on the letterboxed images of a context (or of plain images)."""
+        return self.candidates_in_views(*self.letterbox(as_context(context)))
+
+    def top(self, context) -> Top:
+        """Differentiable max-confidence candidate per image of a context (or of plain images)."""
+        return self.top_of(*self.candidates(context))
+
+    @staticmethod
+    def top_of(boxes: torch.Tensor, conf: torch.Tensor, kp: torch.Tensor) -> Top:
+        """The max-confidence anchor of candidates (``gather``, differentiable)."""
+        i = conf.argmax(dim=1)
+        c = conf.gather(1, i[:, None])[:, 0]
+        k = kp.gather(1, i[:, None, None, None].expand(-1, 1, 4, 2))[:, 0]
+        bx = boxes.gather(1, i[:, None, None].expand(-1, 1, 4))[:, 0]
+        return Top(c, k, bx)
+
+    def detect_top(self, context) -> tuple[torch.Tensor, torch.Tensor]:
+        """Protocol form of :meth:`top`: ``(conf (B,), keypoints (B, 4, 2))``, differentiable."""
+        t = self.top(context)
+        return t.conf, t.keypoints
+
+    @torch.no_grad()
+    def detect(self, context) -> list[Detections]:
+        """Black-box path: candidates after NMS per image, highest confidence first."""
+        import torchvision
+
+        boxes, conf, kp = self.candidates(context)
+        out = []
+        for b in range(conf.shape[0]):
+            keep = torch.nonzero(conf[b] >= self.conf_min)[:, 0]
+            if keep.numel() == 0:  # the global maximum is always a candidate (selection applies the threshold)
+                keep = conf[b].argmax()[None]
+            sel = keep[torchvision.ops.nms(boxes[b, keep], conf[b, keep], self.iou)][:self.max_det]
+            out.append(Detections(boxes[b, sel], conf[b, sel], kp[b, sel]))
+        return out

@@ -1,0 +1,221 @@
+"""The shipped default detector and how every detector of a run is named and built (:class:`DetectorSpec`).
+
+The shipped model is ``vbl_robust/models/runway_yolov8n_pose.pt`` with ``default.json`` beside it: its design
+(``"twostage"`` or ``"single"``), input size, version, and whether it passed its validation gates
+(``"validated": true`` — detection ≥ 97 % and nominal survival ≥ 90 % on the held-out protocol of
+``benchmarks/bench_detector.py``; below them a robustness figure mostly measures the detector's nominal failures)
+and its ``"open_goals"``, printed by every run and shown in the report. See ``models/MODEL_CARD.md``.
+
+A :class:`DetectorSpec` names a detector by *how to build it* (kind + path), not by an object, so the same
+spec rebuilds the detector once per process — in the local runner and in every Ray worker — and its identity
+(kind, file SHA-256) goes into each job's key: results of two different models never mix in one store.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from vbl_robust.digest import digest, file_sha256
+
+from .pose import PoseDetector
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["DEFAULT_MODEL", "DESIGNS", "DETECTOR_KINDS", "MODELS_DIR", "DetectorSpec", "default_detector",
+           "default_model_caveats", "default_model_info", "default_model_path", "default_model_status",
+           "with_design"]
+
+MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
+DEFAULT_MODEL = MODELS_DIR / "runway_yolov8n_pose.pt"
+#: Designs of a pose-model detector: one pass on the letterboxed image, or a pass on it and one on a crop.
+DESIGNS = ("single", "twostage")
+DETECTOR_KINDS = ("oracle", "default", "ultralytics", "onnx", "factory")
+
+
+# -- the shipped model ------------------------------------------------------------------------------------------
+def default_model_path() -> Path | None:
+    """The shipped model's weights file if it is installed, else None."""
+    return DEFAULT_MODEL if DEFAULT_MODEL.is_file() else None
+
+
+def default_model_info() -> dict[str, Any]:
+    """The shipped model's ``default.json`` (design, input size, version, validation), ``{}`` if unreadable."""
+    if default_model_path() is None:
+        return {}
+    try:
+        info = json.loads((MODELS_DIR / "default.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return info if isinstance(info, dict) else {}
+
+
+def default_model_status() -> str:
+    """``""`` when the shipped model is installed and validated (see the module docstring), else why not."""
+    path = default_model_path()
+    if path is None:
+        return "the shipped detector model is not installed"
+    if default_model_info().get("validated") is not True:
+        return (f"the shipped detector model ({path.name}) does not meet its validation gates yet "
+                f"(see {path.parent / 'MODEL_CARD.md'})")
+    return ""
+
+
+def default_model_caveats(info: dict[str, Any] | None = None) -> list[str]:
+    """The shipped model's open accuracy goals (``"open_goals"`` of ``default.json``, or of ``info``), one line
+    each."""
+    goals = (default_model_info() if info is None else info).get("open_goals") or []
+    return [str(g) for g in goals] if isinstance(goals, list) else [str(goals)]
+
+
+def with_design(detector: PoseDetector, design: str):
+    """``detector`` as a single pass, or as both passes of a :class:`~vbl_robust.detect.TwoStageDetector`."""
+    if design not in DESIGNS:
+        raise ValueError(f"detector design must be one of {DESIGNS}, got {design!r}")
+    if design == "twostage":
+        from .twostage import TwoStageDetector
+
+        return TwoStageDetector(detector)
+    return detector
+
+
+def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str | None = None):
+    """The detector shipped with the package; ``design`` ``"twostage"`` / ``"single"`` (the paper's one pass),
+    None → the shipped default (``default.json``)."""
+    from .ultralytics import UltralyticsDetector
+
+    if default_model_path() is None:
+        raise FileNotFoundError(f"{DEFAULT_MODEL}: the shipped model is missing (reinstall vbl-robust)")
+    info = default_model_info()
+    # the shipped file is part of the installed package: trusted as its code is
+    det = UltralyticsDetector(DEFAULT_MODEL, trust=True, imgsz=imgsz or info.get("imgsz"), chunk=chunk)
+    return with_design(det, design or info.get("detector", "single"))
+
+
+# -- naming and building detectors ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class DetectorSpec:
+    """How to build a detector.
+
+    Kinds: ``"oracle"`` (projects the ground truth: a perfect detector), ``"default"`` (the shipped model),
+    ``"ultralytics"`` (a user's ``.pt``; ``trust=True`` required for files outside the package), ``"onnx"``,
+    ``"factory"`` (``path`` = ``"module:callable"`` returning a detector; for tests and plug-ins).
+    ``options["design"]`` (model kinds): ``"single"`` or ``"twostage"`` (:func:`with_design`); the shipped model
+    defaults to its ``default.json``, a user's model to a single pass.
+    """
+
+    kind: str
+    path: str | None = None
+    trust: bool = False
+    options: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.kind not in DETECTOR_KINDS:
+            raise ValueError(f"detector kind must be one of {DETECTOR_KINDS}, got {self.kind!r}")
+        if self.kind in ("ultralytics", "onnx", "factory") and not self.path:
+            raise ValueError(f"detector kind {self.kind!r} needs a path")
+        if self.kind in ("ultralytics", "onnx") and not Path(self.path).is_file():
+            raise FileNotFoundError(f"{self.path}: model file not found")
+
+    @classmethod
+    def choose(cls, *, oracle_noise_px: float = 0.0, options: dict[str, Any] | None = None,
+               ) -> tuple[DetectorSpec, str]:
+        """The shipped model when it is installed and validated, else the oracle: ``(spec, why)`` with ``why``
+        ``""`` for the shipped model, else the one-line reason the oracle stands in.
+
+        An undertrained model would turn every audit into a report on a broken detector, so it is used only
+        when asked for explicitly (``DetectorSpec("default")``, ``--model default``).
+        """
+        why = default_model_status()
+        if why == "":
+            return cls("default", options=dict(options or {})), ""
+        return cls.oracle(oracle_noise_px), why
+
+    @classmethod
+    def auto(cls, *, oracle_noise_px: float = 0.0) -> DetectorSpec:
+        """:meth:`choose`, logging why when the oracle stands in."""
+        spec, why = cls.choose(oracle_noise_px=oracle_noise_px)
+        if why:
+            logger.warning("%s; using the oracle detector (ground-truth keypoints%s)", why,
+                           f", {oracle_noise_px:g} px fixed noise" if oracle_noise_px else "")
+        return spec
+
+    @classmethod
+    def oracle(cls, noise_px: float = 0.0) -> DetectorSpec:
+        """The oracle detector, with ``noise_px`` of fixed per-image corner noise (0: exact corners)."""
+        return cls("oracle", options={"noise_px": noise_px} if noise_px else {})
+
+    @classmethod
+    def from_path(cls, path: str | Path, *, trust: bool = False) -> DetectorSpec:
+        p = Path(path)
+        if p.suffix.lower() == ".onnx":
+            return cls("onnx", str(p))
+        if p.suffix.lower() == ".pt":
+            return cls("ultralytics", str(p), trust=trust)
+        raise ValueError(f"--model {path}: expected a .pt (ultralytics) or .onnx file")
+
+    @property
+    def model_file(self) -> Path | None:
+        if self.kind == "default":
+            return default_model_path()
+        if self.kind in ("ultralytics", "onnx"):
+            return Path(self.path)
+        return None
+
+    @property
+    def name(self) -> str:
+        if self.kind == "oracle":
+            return "oracle (ground-truth keypoints)"
+        if self.kind == "default":
+            return f"shipped model ({self.model_file.name if self.model_file else 'missing'})"
+        return f"{self.kind}: {self.path}"
+
+    def identity(self) -> dict[str, Any]:
+        """JSON identity: kind, name, model file SHA-256 (None for the oracle), options; for the shipped model
+        also the SHA-256 of its ``default.json`` (single or two-stage, input size)."""
+        f = self.model_file
+        ident = {"kind": self.kind, "name": self.name, "path": None if f is None else str(f),
+                 "sha256": None if f is None else file_sha256(f), "options": dict(self.options)}
+        if self.kind == "factory":
+            ident["factory"] = self.path
+        if self.kind == "default" and f is not None and (f.parent / "default.json").is_file():
+            ident["config_sha256"] = file_sha256(f.parent / "default.json")
+            info = default_model_info()
+            if "version" in info:
+                ident["name"] += f" v{info['version']}"
+            if goals := default_model_caveats(info):
+                ident["open_goals"] = goals
+        return ident
+
+    def key(self) -> str:
+        """Digest of what determines the detector's outputs (not where the file lives)."""
+        ident = self.identity()
+        return digest({k: v for k, v in ident.items() if k not in ("name", "path")}, 24)
+
+    def build(self) -> Any:
+        """Construct the detector (call once per process; models are heavy)."""
+        if self.kind == "oracle":
+            from .oracle import OracleDetector
+
+            return OracleDetector(**self.options)
+        if self.kind == "default":
+            return default_detector(**self.options)
+        if self.kind in ("ultralytics", "onnx"):
+            opts = dict(self.options)
+            design = opts.pop("design", "single")
+            if self.kind == "onnx":
+                from .onnx import OnnxDetector
+
+                return with_design(OnnxDetector(self.path, **opts), design)
+            from .ultralytics import UltralyticsDetector
+
+            return with_design(UltralyticsDetector(self.path, trust=self.trust, **opts), design)
+        module, _, attr = self.path.partition(":")
+        return getattr(importlib.import_module(module), attr)(**self.options)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "path": self.path, "trust": self.trust, "options": dict(self.options)}
