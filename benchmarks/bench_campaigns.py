@@ -71,7 +71,7 @@ def overhead(detector, n_images: int, max_evals: int) -> tuple[str, list[dict]]:
     per_eval = t_bare / nfev
     jobs = summ.done
     over = (camp - t_bare) / jobs
-    search_s = sum(r["search_s"] for r in rows)
+    search_s = sum(r.search_s for r in rows)
     text = (
         f"{jobs} jobs ({n_images} images × {', '.join(methods)}, roll ±15°, {max_evals} evaluations each, no early stop):\n\n"
         "| | seconds | per job | per evaluation |\n|---|---:|---:|---:|\n"
@@ -103,10 +103,10 @@ def experiments(detector, n_images: int, quick: bool) -> str:
             run_campaign(exp.build(0, opts), samples, st, detector=detector, dataset_source=source)
             took = time.perf_counter() - t0
             rows = st.jobs(with_trace=False)
-        fixed = sum(r["job_s"] or 0.0 for r in rows if r["role"] == "landscape")
-        per_image = sum(r["job_s"] or 0.0 for r in rows if r["role"] != "landscape") / k
+        fixed = sum(r.job_s or 0.0 for r in rows if r.role == "landscape")
+        per_image = sum(r.job_s or 0.0 for r in rows if r.role != "landscape") / k
         start = max(0.0, took - fixed - per_image * k)  # model loading, store, scheduling: once per run
-        evals = sum(r["nfev"] or 0 for r in rows if r["role"] != "landscape") / k
+        evals = sum(r.nfev or 0 for r in rows if r.role != "landscape") / k
         full = start + fixed + per_image * exp.images
         lines.append(f"| {name} | {k} | {took:.0f} | {start:.0f} | {per_image:.1f} | {fixed:.0f} | {exp.images} | "
                      f"{full / 3600:.1f} h ({full / 60:.0f} min) | {evals:.0f} |")

@@ -28,21 +28,21 @@ BENCH_SEED = 20_261_122
 CACHE = Path(__file__).resolve().parent.parent / ".cache" / "bench_detector"
 
 
-def held_out(n: int) -> list:
-    """The held-out samples, pixels from the cache when present."""
+def held_out(n: int, seed: int = BENCH_SEED) -> list:
+    """``scenes.generate(n, seed)`` with lazily loaded pixels from the render cache (rendered and written once)."""
     import cv2
 
     from vbl_robust.scenes import generate
 
-    samples = generate(n, seed=BENCH_SEED)
-    d = CACHE / f"seed{BENCH_SEED}"
+    samples = generate(n, seed=seed)
+    d = CACHE / f"seed{seed}"
     d.mkdir(parents=True, exist_ok=True)
     for i, s in enumerate(samples):
         f = d / f"{i:05d}.png"
-        if f.exists():
-            s.image = np.ascontiguousarray(cv2.imread(str(f))[:, :, ::-1])
-        else:
+        if not f.exists():
             cv2.imwrite(str(f), np.ascontiguousarray(s.image[:, :, ::-1]))
+            s.drop_pixels()
+        s._loader = lambda f=f: np.ascontiguousarray(cv2.imread(str(f))[:, :, ::-1])
     return samples
 
 

@@ -38,9 +38,16 @@ def audit_rows(config: str, n_samples: int = 2, max_evals: int = 20) -> list[dic
     with tempfile.TemporaryDirectory() as d:
         store = ResultStore(Path(d) / "results.sqlite")
         run_campaign(spec, generate(n_samples, seed=0), store, detector=det)
-        rows = [{k: r.get(k) for k in FIELDS} for r in store.jobs(role="main", with_trace=False)]
+        rows = [_plain_row(r) for r in store.jobs(role="main", with_trace=False)]
         store.close()
     return sorted(rows, key=lambda r: (r["sample_id"], r["method"]))
+
+
+def _plain_row(r) -> dict:
+    """The compared fields of a :class:`~vbl_robust.campaigns.store.JobRow`, as JSON values."""
+    out = {k: getattr(r, k) for k in FIELDS}
+    out["verdict"] = None if r.verdict is None else str(r.verdict.value)
+    return out
 
 
 def main() -> None:

@@ -6,6 +6,7 @@ import pytest
 
 from vbl_robust.campaigns import ResultStore, experiment, run_campaign
 from vbl_robust.campaigns.experiments import EXPERIMENTS, Options
+from vbl_robust.campaigns.spec import FIGURES as FIGURE_NAMES
 from vbl_robust.report import build_report
 
 TINY = Options(max_evals=8, grid_step_deg=1.0, landscape=(9, 5), time_budgets=(0.02, 0.05), eval_budgets=(4, 8),
@@ -33,21 +34,28 @@ def test_experiment_end_to_end(name, tmp_path, small_samples, oracle, full):
         rows = st.jobs()
     assert summary.status == "finished" and summary.failed == 0
     assert summary.done == len(rows) > 0
-    main = [r for r in rows if r["role"] == "main"]
+    main = [r for r in rows if r.role == "main"]
     if name == "pnp-validation":
         for r in rows:
-            gt = r["payload"]["errors"]["ground truth"]
+            gt = r.payload["errors"]["ground truth"]
             assert gt["ippe_lm"]["abs_m"] < 5.0  # exact corners give the pose back
-            assert set(r["payload"]["errors"]) == {"ground truth", "detector"}
+            assert set(r.payload["errors"]) == {"ground truth", "detector"}
     else:
-        assert {r["method"] for r in main} == set(spec.blocks[0].methods)
-        assert all(math.isfinite(r["worst_m"]) and r["nfev"] >= (0 if r["status"] == "implied" else 1) for r in main)
+        assert {r.method for r in main} == set(spec.blocks[0].methods)
+        assert all(math.isfinite(r.worst_m) and r.nfev >= (0 if r.status == "implied" else 1) for r in main)
     if name == "convergence":
-        po = [t["po_count_before"] for r in main for t in r["trace"]]
+        po = [t.po_count_before for r in main for t in r.trace]
         assert len(po) == 2 * TINY.iterations and min(po) >= 1
-        assert all(r["trace"][0]["remaining_area"] == pytest.approx(1.0) for r in main)
+        assert all(r.trace[0].remaining_area == pytest.approx(1.0) for r in main)
     html = build_report(tmp_path).read_text()
     made = {p.stem for p in (tmp_path / "figures").glob("*.png")}
     assert FIGURES[name] <= made, made
     assert html.count("data:image/png;base64,") == len(made)
     assert "<table>" in html and "Provenance" in html and "failed to build" not in html
+
+
+def test_every_experiment_declares_its_figures():
+    for name, exp in EXPERIMENTS.items():
+        spec = exp.build(0, TINY)
+        assert spec.figures and set(spec.figures) <= set(FIGURE_NAMES), name
+    assert experiment("spatial-1d").build(0, TINY).figures == ("survival", "landscape")

@@ -3,7 +3,21 @@ import math
 import numpy as np
 import pytest
 
+from vbl_robust.campaigns import Budget, roll_box
 from vbl_robust.campaigns import metrics as mx
+from vbl_robust.campaigns.store import JobRow, Points
+from vbl_robust.search import TraceRow
+
+
+def row(**kw):
+    base = {"key": "k", "experiment": "t", "kind": "search", "role": "main", "method": "georobust", "sample_id": "s",
+            "sample_index": 0, "status": "done"}
+    return JobRow(**{**base, **kw})
+
+
+def grid_row(xs, fs, nfev, **kw):
+    return row(role="reference", method="grid", box=roll_box(30), budget=Budget(max_evals=61), nfev=nfev,
+               points=Points(xs, fs), **kw)
 
 
 def test_survival_rate_counts_failures_as_breaches():
@@ -26,7 +40,7 @@ def test_smallest_breach_levels_and_distance_profile():
     for sid, first in (("near", 5.0), ("mid", 15.0), ("far", math.inf), ("far2", 45.0)):
         for lv in (5.0, 15.0, 45.0):
             v = "breach" if lv >= first else "no breach found"
-            rows.append({"sample_id": sid, "method": "georobust", "box_level": lv, "verdict": v})
+            rows.append(row(sample_id=sid, box=roll_box(lv), verdict=v))
     lv = mx.smallest_breach_levels(rows)
     assert lv[("near", "georobust")] == 5 and lv[("far", "georobust")] == math.inf
     prof = mx.distance_profile(rows, {"near": 600.0, "mid": 2000.0, "far": 5000.0, "far2": 6000.0}, [5, 15, 45])
@@ -39,39 +53,43 @@ def test_reference_rows_restrict_a_dense_grid_to_nested_boxes():
     xs = np.linspace(-30, 30, 61)[:, None]
     fs = np.where(np.abs(xs[:, 0]) > 12, 3000.0, 10.0)
     fs[30] = np.nan  # a failed evaluation counts as the penalty
-    ref = [{"status": "done", "sample_id": "s", "box": {"box": {"bounds": {"roll_deg": [-30, 30]}}},
-            "budget": {"max_evals": 61}, "nfev": 61, "xs": xs, "fs": fs}]
-    boxes = [{"box": {"bounds": {"roll_deg": [-b, b]}}, "label": f"±{b}", "level": b} for b in (5, 10, 15, 40)]
-    out = mx.reference_rows(ref, boxes, 1000.0, 5000.0)
-    assert [r["box_level"] for r in out] == [5, 10, 15]  # ±40 is not inside the grid
-    assert [r["worst_m"] for r in out] == [5000.0, 5000.0, 5000.0]
+    boxes = [roll_box(b) for b in (5, 10, 15, 40)]
+    out = mx.reference_rows([grid_row(xs, fs, 61)], boxes, 1000.0, 5000.0)
+    assert [r.box_level for r in out] == [5, 10, 15]  # ±40 is not inside the grid
+    assert [r.worst_m for r in out] == [5000.0, 5000.0, 5000.0]
+    assert {r.method for r in out} == {mx.REFERENCE_METHOD} and out[0].box == boxes[0] and out[0].points is None
     fs[30] = 10.0
-    out = mx.reference_rows(ref, boxes, 1000.0, 5000.0)
-    assert [r["worst_m"] for r in out] == [10.0, 10.0, 3000.0]
-    assert [r["verdict"] for r in out] == ["no breach found", "no breach found", "breach"]
+    out = mx.reference_rows([grid_row(xs, fs, 61)], boxes, 1000.0, 5000.0)
+    assert [r.worst_m for r in out] == [10.0, 10.0, 3000.0]
+    assert [r.verdict for r in out] == ["no breach found", "no breach found", "breach"]
 
 
 def test_convergence_aggregates_traces():
     def trace(po, ra):
-        return [{"iteration": k + 1, "nfev": 2 * k + 1, "best_value": 1.0, "po_count_before": p, "po_count_after": p,
-                 "remaining_area": a} for k, (p, a) in enumerate(zip(po, ra, strict=True))]
+        return [TraceRow(iteration=k + 1, nfev=2 * k + 1, elapsed=0.0, best_value=1.0, best_x=None, batch_size=2,
+                         n_failed=0, po_count_before=p, po_count_after=p, remaining_area=a)
+                for k, (p, a) in enumerate(zip(po, ra, strict=True))]
 
-    rows = [{"trace": trace([1, 2, 4], [1.0, 0.5, 0.2])}, {"trace": trace([1, 4, 2], [1.0, 0.3, 0.1])}]
+    rows = [row(trace=trace([1, 2, 4], [1.0, 0.5, 0.2])), row(trace=trace([1, 4, 2], [1.0, 0.3, 0.1]))]
     conv = mx.convergence(rows)
     assert [c["iteration"] for c in conv] == [1, 2, 3]
     assert conv[0]["ra_mean"] == 100.0 and conv[1]["po_mean"] == 3.0
     assert conv[2]["ra_mean"] == pytest.approx(15.0) and conv[2]["ra_std"] == pytest.approx(5.0)
-    assert mx.convergence([{"trace": [{"iteration": 1, "nfev": 5, "best_value": 1.0, "po_count_before": None}]}]) == []
+    assert mx.convergence([row(trace=[TraceRow(1, 5, 0.0, 1.0, None, 5, 0)])]) == []
 
 
 def test_summarize_groups_in_first_seen_order():
-    rows = [{"method": m, "box_label": "±5°", "budget_label": "10 evals", "box_level": 5.0, "budget": {"max_evals": 10},
-             "worst_m": w, "verdict": "breach" if w > 1000 else "no breach found", "status": "done", "nfev": 10,
-             "search_s": 0.1} for m, w in (("random", 10.0), ("apgd", 2000.0), ("random", 3000.0))]
+    rows = [row(method=m, box=roll_box(5), budget=Budget(max_evals=10), worst_m=w, nfev=10, search_s=0.1,
+                verdict="breach" if w > 1000 else "no breach found", n_failed=nf, failures=fails)
+            for m, w, nf, fails in (("random", 10.0, 0, {}), ("apgd", 2000.0, None, {}),
+                                    ("random", 3000.0, 3, {"no_detection": 2, "pnp_failed": 1}))]
     s = mx.summarize(rows, 1000.0)
     assert [x["method"] for x in s] == ["random", "apgd"]
     assert s[0]["n"] == 2 and s[0]["survival"] == 50.0 and s[0]["median_worst_m"] == 1505.0 and s[0]["breaches"] == 1
     assert s[0]["max_evals"] == 10 and math.isnan(s[0]["max_seconds"])
+    assert (s[0]["box_label"], s[0]["budget_label"], s[0]["nfev"]) == ("±5°", "10 evals", 20)
+    assert s[0]["failed_evals"] == 3 and s[0]["failures"] == {"no_detection": 2, "pnp_failed": 1}
+    assert s[1]["failed_evals"] is None and s[1]["failures"] == {}  # a row stored before failures were recorded
 
 
 def test_pnp_summary():
@@ -79,7 +97,7 @@ def test_pnp_summary():
         e = {"abs_m": abs_m, "rel_pct": None if abs_m is None else 100 * abs_m / dist, "reason": ""}
         return {"errors": {"ground truth": {"ippe_lm": e}}}
 
-    rows = [{"status": "done", "payload": payload(v)} for v in (10.0, 30.0, None)]
+    rows = [row(kind="pnp", method="pnp", payload=payload(v)) for v in (10.0, 30.0, None)]
     (s,) = mx.pnp_summary(rows)
     assert s["n"] == 3 and s["failures"] == 1 and s["median_abs_m"] == 20.0 and s["mae_rel_pct"] == 2.0
 
@@ -89,15 +107,13 @@ def test_reference_rows_from_a_grid_stopped_at_its_first_breach():
     nodes = np.linspace(-30, 30, 61)
     seen = nodes[np.argsort(np.abs(nodes), kind="stable")][:27]  # 0, ±1 … ±13
     fs = np.where(np.abs(seen) > 12, 3000.0, 10.0 + np.abs(seen))
-    ref = [{"status": "done", "sample_id": "s", "box": {"box": {"bounds": {"roll_deg": [-30, 30]}}},
-            "budget": {"max_evals": 61}, "nfev": 27, "options": {"counts": [61]}, "xs": seen[:, None], "fs": fs}]
-    boxes = [{"box": {"bounds": {"roll_deg": [-b, b]}}, "label": f"±{b}", "level": b} for b in (5, 12, 20, 30)]
-    out = mx.reference_rows(ref, boxes, 1000.0, 5000.0)
-    assert [(r["box_level"], r["worst_m"], r["verdict"]) for r in out] == [
+    boxes = [roll_box(b) for b in (5, 12, 20, 30)]
+    out = mx.reference_rows([grid_row(seen[:, None], fs, 27, options={"counts": [61]})], boxes, 1000.0, 5000.0)
+    assert [(r.box_level, r.worst_m, r.verdict) for r in out] == [
         (5, 15.0, "no breach found"), (12, 22.0, "no breach found"), (20, 3000.0, "breach"), (30, 3000.0, "breach")]
     # without a breach in the evaluated part, a box not fully evaluated gives no row (it would understate L)
-    ref[0]["fs"] = 10.0 + np.abs(seen)
-    out = mx.reference_rows(ref, boxes, 1000.0, 5000.0)
-    assert [r["box_level"] for r in out] == [5, 12]
+    ref = grid_row(seen[:, None], 10.0 + np.abs(seen), 27, options={"counts": [61]})
+    out = mx.reference_rows([ref], boxes, 1000.0, 5000.0)
+    assert [r.box_level for r in out] == [5, 12]
     assert mx.lattice_covered(seen[:, None], [(-30, 30)], [61], [-13], [13])
     assert not mx.lattice_covered(seen[:, None], [(-30, 30)], [61], [-14], [14])

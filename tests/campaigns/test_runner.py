@@ -1,5 +1,6 @@
 import dataclasses
 
+import numpy as np
 import pytest
 
 from vbl_robust.campaigns import (
@@ -12,6 +13,8 @@ from vbl_robust.campaigns import (
     roll_box,
     run_campaign,
 )
+from vbl_robust.campaigns.store import JobStatus
+from vbl_robust.constants import FAILURE_REASONS, Verdict
 from vbl_robust.data.sample import Sample
 
 
@@ -33,14 +36,19 @@ def test_local_run_records_rows_and_a_rerun_skips_them(tmp_path, small_samples, 
     assert (s1.total, s1.done, s1.skipped, s1.status) == (6, 6, 0, "finished")
     assert (s2.done, s2.skipped, s2.status) == (0, 6, "finished")
     assert [e.done for e in events] == list(range(7)) and events[-1].total == 6
-    assert {r["key"] for r in rows} == {j.key for j in plan(small_spec(), samples, oracle)}
+    assert {r.key for r in rows} == {j.key for j in plan(small_spec(), samples, oracle)}
     for r in rows:
-        assert r["status"] == "done" and 1 <= r["nfev"] <= 12 and len(r["fs"]) == r["nfev"]
-        assert r["worst_m"] == pytest.approx(max(r["fs"]))
-        assert r["verdict"] == ("breach" if r["worst_m"] > 1000 else "no breach found")
-        assert r["trace"] and r["trace"][-1]["nfev"] == r["nfev"]
-        assert set(r["worst_x"]) == {"roll_deg"} and abs(r["worst_x"]["roll_deg"]) <= 10
-        assert r["payload"]["worst"]["error_m"] is None or r["payload"]["worst"]["error_m"] == pytest.approx(r["worst_m"])
+        assert r.status == "done" and 1 <= r.nfev <= 12 and len(r.points) == r.nfev
+        assert r.worst_m == pytest.approx(max(r.points.fs))
+        assert r.verdict == ("breach" if r.worst_m > 1000 else "no breach found")
+        assert r.trace and r.trace[-1].nfev == r.nfev
+        assert set(r.worst_x) == {"roll_deg"} and abs(r.worst_x["roll_deg"]) <= 10
+        assert r.payload["worst"]["error_m"] is None or r.payload["worst"]["error_m"] == pytest.approx(r.worst_m)
+        # every evaluation carries its failure reason (the oracle fails outside the image): counted, not re-derived
+        assert r.n_failed == sum(map(bool, r.points.reasons)) and sum(r.failures.values()) == r.n_failed
+        assert set(r.failures) <= set(FAILURE_REASONS)
+        i = int(np.argmax(r.points.fs))
+        assert r.worst_reason == r.points.reasons[i]
     assert [r["status"] for r in runs] == ["finished", "finished"]
     assert runs[0]["dataset"]["source"] == {"kind": "test"} and runs[0]["config"]["user"] == {"x": 1}
     assert runs[0]["code_version"] and runs[1]["jobs_skipped"] == 6
@@ -51,7 +59,7 @@ def test_same_seed_same_results(tmp_path, small_samples, oracle):
     for d in ("a", "b"):
         with ResultStore(tmp_path / d / "r.sqlite") as st:
             run_campaign(small_spec(), small_samples[:2], st, detector=oracle)
-            out.append([(r["key"], r["worst_m"], r["nfev"]) for r in st.jobs(with_trace=False)])
+            out.append([(r.key, r.worst_m, r.nfev) for r in st.jobs(with_trace=False)])
     assert out[0] == out[1]
 
 
@@ -63,10 +71,10 @@ def test_unreadable_image_is_a_recorded_failure_and_the_campaign_goes_on(tmp_pat
         s = run_campaign(small_spec(), [bad, good], st, detector=oracle)
         rows = st.jobs()
     assert s.failed == 2 and s.status == "finished"
-    failed = [r for r in rows if r["sample_id"] == "missing"]
-    assert {r["status"] for r in failed} == {"failed"} and {r["verdict"] for r in failed} == {"failed"}
-    assert all(r["worst_m"] == 5000.0 and "nope.png" in r["reason"] for r in failed)
-    assert {r["status"] for r in rows if r["sample_id"] != "missing"} == {"done"}
+    failed = [r for r in rows if r.sample_id == "missing"]
+    assert {r.status for r in failed} == {JobStatus.FAILED} and {r.verdict for r in failed} == {Verdict.FAILED}
+    assert all(r.worst_m == 5000.0 and "nope.png" in r.reason for r in failed)
+    assert {r.status for r in rows if r.sample_id != "missing"} == {"done"}
 
 
 def test_pipeline_exception_is_recorded_with_its_reason(tmp_path, small_samples):
@@ -75,7 +83,7 @@ def test_pipeline_exception_is_recorded_with_its_reason(tmp_path, small_samples)
         s = run_campaign(small_spec(methods=("random",)), small_samples[:2], st, detector=det)
         rows = st.jobs()
     assert s.failed == 2 and len(rows) == 2
-    assert all(r["status"] == "failed" and "RuntimeError: detector exploded" in r["reason"] for r in rows)
+    assert all(r.status == "failed" and "RuntimeError: detector exploded" in r.reason for r in rows)
 
 
 def test_chain_stops_at_the_first_breach_and_records_implied_rows(tmp_path, small_samples):
@@ -87,11 +95,11 @@ def test_chain_stops_at_the_first_breach_and_records_implied_rows(tmp_path, smal
         run_campaign(CampaignSpec("chain", (blk,)), small_samples[:2], st, detector=det)
         rows = st.jobs(with_trace=False)
     assert len(rows) == 6
-    for sid in {r["sample_id"] for r in rows}:
-        mine = sorted((r for r in rows if r["sample_id"] == sid), key=lambda r: r["box_level"])
-        assert [r["status"] for r in mine] == ["done", "implied", "implied"]
-        assert all(r["verdict"] == "breach" for r in mine)
-        assert mine[1]["nfev"] == 0 and mine[1]["worst_m"] == mine[0]["worst_m"]
+    for sid in {r.sample_id for r in rows}:
+        mine = sorted((r for r in rows if r.sample_id == sid), key=lambda r: r.box_level)
+        assert [r.status for r in mine] == ["done", "implied", "implied"]
+        assert all(r.verdict is Verdict.BREACH for r in mine)
+        assert mine[1].nfev == 0 and mine[1].worst_m == mine[0].worst_m and mine[1].worst_x == mine[0].worst_x
 
 
 def test_store_refuses_another_campaign(tmp_path, small_samples, oracle):
@@ -101,3 +109,17 @@ def test_store_refuses_another_campaign(tmp_path, small_samples, oracle):
             run_campaign(small_spec(methods=("random",), eps_safe_m=10.0), small_samples[:1], st, detector=oracle)
         with pytest.raises(ValueError, match="executor"):
             run_campaign(small_spec(methods=("random",)), small_samples[:1], st, detector=oracle, executor="gpu")
+
+
+def test_a_run_that_fails_before_its_first_job_does_not_bind_the_store(tmp_path, small_samples, oracle):
+    # issue 12, item 8: a refused model must not lock the run directory to itself
+    refused = DetectorSpec("factory", "campaign_helpers:RefusedDetector")
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        with pytest.raises(ValueError, match="refused model"):
+            run_campaign(small_spec(), small_samples[:2], st, detector=refused)
+        assert st.count() == 0
+        s = run_campaign(small_spec(methods=("random",)), small_samples[:1], st, detector=oracle)  # other settings too
+        assert s.done == 1 and set(st.samples()) == {small_samples[0].id}
+        assert st.campaign()["detector"]["kind"] == "oracle"
+        with pytest.raises(ValueError, match="holds results of detector"):  # now bound: a job row was computed
+            run_campaign(small_spec(methods=("random",)), small_samples[:1], st, detector=refused)

@@ -1,18 +1,26 @@
 import math
 import sqlite3
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from vbl_robust.campaigns import ResultStore
-from vbl_robust.campaigns.store import decode_points, encode_points
+from vbl_robust.campaigns import BoxSpec, Budget, ResultStore
+from vbl_robust.campaigns import store as store_module
+from vbl_robust.campaigns.spec import KINDS, ROLES
+from vbl_robust.campaigns.store import JobRow, JobStatus, Points, decode_points, encode_points
+from vbl_robust.constants import Verdict
+from vbl_robust.search import TraceRow
+from vbl_robust.space import ParameterBox
 
 
 def row(key, **kw):
-    r = {"key": key, "experiment": "t", "kind": "search", "role": "main", "method": "random", "sample_id": "s",
-         "sample_index": 0, "status": "done", "worst_m": 1.0, "verdict": "no breach found", "nfev": 3}
-    r.update(kw)
-    return r
+    base = {"key": key, "experiment": "t", "kind": "search", "role": "main", "method": "random", "sample_id": "s",
+            "sample_index": 0, "status": "done", "worst_m": 1.0, "verdict": "no breach found", "nfev": 3}
+    return JobRow(**{**base, **kw})
 
 
 def test_wal_mode_and_unique_keys(tmp_path):
@@ -20,7 +28,7 @@ def test_wal_mode_and_unique_keys(tmp_path):
         assert st.commit([row("a"), row("b")]) == 2
         assert st.commit([row("a", worst_m=99.0), row("c")]) == 1  # a duplicate key is ignored, not doubled
         assert st.count() == 3
-        assert {r["key"]: r["worst_m"] for r in st.jobs()}["a"] == 1.0
+        assert {r.key: r.worst_m for r in st.jobs()}["a"] == 1.0
     con = sqlite3.connect(tmp_path / "r.sqlite")
     assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
     with pytest.raises(sqlite3.IntegrityError):
@@ -33,16 +41,39 @@ def test_points_round_trip_with_failed_values():
     x2, f2 = decode_points(encode_points(xs, fs))
     assert np.array_equal(x2, xs)
     assert f2[0] == 0.5 and math.isnan(f2[1]) and math.isnan(f2[2])
+    p = Points.from_blob(encode_points(xs, fs, ("", "no_detection", "non_finite_value")))
+    assert p.reasons == ("", "no_detection", "non_finite_value") and Points.from_blob(encode_points(xs, fs)).reasons == ("",) * 3
 
 
-def test_campaign_binding_refuses_other_settings(tmp_path):
+def test_rows_read_by_attribute(tmp_path):
     with ResultStore(tmp_path / "r.sqlite") as st:
-        st.bind_campaign("x", {"a": 1, "b": [1, 2]}, {"kind": "oracle", "sha256": None})
-        st.bind_campaign("x", {"b": [1, 2], "a": 1}, {"kind": "oracle", "sha256": None})  # same: fine
+        st.commit([row("a", box=BoxSpec(ParameterBox({"roll_deg": (-5, 5)}), "±5°", 5.0), budget=Budget(max_evals=3),
+                       worst_x={"roll_deg": 1.5}, points=Points([[1.5], [0.0], [-2.0]], [1.0, 0.5, 5000.0],
+                                                                ("", "", "no_detection")))])
+        (r,) = st.jobs(with_points=True)
+    assert r.status is JobStatus.DONE and r.verdict is Verdict.NO_BREACH_FOUND and r.box_label == "±5°"
+    assert r.budget_label == "3 evals" and r.worst_x == {"roll_deg": 1.5} and r.nfev == 3
+    assert r.points.reasons[2] == "no_detection"
+
+
+def test_campaign_binding_refuses_other_settings_once_a_job_is_stored(tmp_path):
+    oracle = {"kind": "oracle", "sha256": None}
+    model = {"kind": "default", "sha256": "ff", "name": "m"}
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        st.bind_campaign("x", {"a": 1, "b": [1, 2]}, oracle)
+        st.add_samples([{"sample_id": "s1", "sample_index": 0}])
+        # nothing computed yet (e.g. the run failed on its model): the store is bound anew, its samples forgotten
+        st.bind_campaign("x", {"a": 1, "b": [1, 3]}, model)
+        assert st.campaign()["spec"] == {"a": 1, "b": [1, 3]} and st.campaign()["detector"] == model
+        assert st.samples() == {}
+        st.commit([row("a")])
+        st.bind_campaign("x", {"b": [1, 3], "a": 1}, model)  # same: fine
+        st.bind_campaign("x", {"b": [1, 3], "a": 1, "figures": ["pnp"]}, model)  # presentation only: recorded
+        assert st.campaign()["spec"]["figures"] == ["pnp"]
         with pytest.raises(ValueError, match=r"other settings \(b\[1\]"):
-            st.bind_campaign("x", {"a": 1, "b": [1, 3]}, {"kind": "oracle", "sha256": None})
-        with pytest.raises(ValueError, match="detector"):
-            st.bind_campaign("x", {"a": 1, "b": [1, 2]}, {"kind": "default", "sha256": "ff", "name": "m"})
+            st.bind_campaign("x", {"a": 1, "b": [1, 2]}, model)
+        with pytest.raises(ValueError, match="holds results of detector 'm'"):
+            st.bind_campaign("x", {"a": 1, "b": [1, 3]}, oracle)
 
 
 def test_runs_record_provenance(tmp_path):
@@ -58,3 +89,96 @@ def test_runs_record_provenance(tmp_path):
 def test_open_existing_names_the_missing_store(tmp_path):
     with pytest.raises(FileNotFoundError, match="no results store"):
         ResultStore.open_existing(tmp_path)
+
+
+def test_a_store_of_schema_1_opens_and_is_migrated(tmp_path):
+    old = "\n".join(ln for ln in store_module._SCHEMA.splitlines() if "(schema 2)" not in ln)
+    old = old.replace("finished_at TEXT,\n)", "finished_at TEXT\n)")
+    assert "n_failed" not in old
+    con = sqlite3.connect(tmp_path / "r.sqlite")
+    con.executescript(old)
+    con.execute("INSERT INTO jobs (key, experiment, kind, role, method, sample_id, sample_index, status, worst_m, "
+                "verdict, nfev, options_json) VALUES ('k', 'audit', 'search', 'main', 'random', 's', 0, 'done', 12.5, "
+                "'no breach found', 4, '{}')")
+    con.commit()
+    con.close()
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        (r,) = st.jobs()
+        assert (r.worst_m, r.nfev, r.n_failed, r.failures, r.worst_reason) == (12.5, 4, None, {}, None)
+        st.commit([row("new", n_failed=2, failures={"no_detection": 2}, worst_reason="")])
+        assert st.jobs()[1].failures == {"no_detection": 2}
+    con = sqlite3.connect(tmp_path / "r.sqlite")
+    assert con.execute("PRAGMA user_version").fetchone()[0] == store_module.SCHEMA_VERSION
+    con.execute("PRAGMA user_version = 99")
+    con.commit()
+    con.close()
+    with pytest.raises(ValueError, match="schema version 99 is newer than this vbl-robust's"):
+        ResultStore(tmp_path / "r.sqlite")
+
+
+# -- property: any valid JobRow survives commit -> jobs() unchanged --------------------------------------------
+finite = st.floats(allow_nan=False, allow_infinity=False)
+text = st.text(max_size=12)
+json_value = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6), finite, text)
+json_dict = st.dictionaries(text, st.one_of(json_value, st.lists(json_value, max_size=3)), max_size=3)
+
+
+@st.composite
+def boxes(draw):
+    names = draw(st.lists(st.sampled_from(["roll_deg", "contrast", "gamma"]), min_size=1, max_size=3, unique=True))
+    lows = draw(st.lists(st.floats(-1e6, 1e6), min_size=len(names), max_size=len(names)))
+    widths = draw(st.lists(st.floats(1e-3, 1e6), min_size=len(names), max_size=len(names)))
+    box = ParameterBox({n: (lo, lo + w) for n, lo, w in zip(names, lows, widths, strict=True)})
+    return BoxSpec(box, draw(text), draw(finite))
+
+
+budgets = st.one_of(  # at least one budget is set
+    st.builds(Budget, max_evals=st.integers(1, 10**6), max_seconds=st.none() | st.floats(1e-3, 1e4),
+              max_iters=st.none() | st.integers(1, 10**4), stop_at_breach=st.booleans()),
+    st.builds(Budget, max_seconds=st.floats(1e-3, 1e4), stop_at_breach=st.booleans()),
+)
+
+trace_rows = st.builds(
+    TraceRow, iteration=st.integers(1, 1000), nfev=st.integers(0, 10**6), elapsed=finite, best_value=finite,
+    best_x=st.none() | st.lists(finite, min_size=1, max_size=3).map(tuple), batch_size=st.integers(0, 1000),
+    n_failed=st.integers(0, 1000), po_count_before=st.none() | st.integers(0, 100),
+    remaining_area=st.none() | finite, upper_bound=st.none() | finite,
+    extra=st.dictionaries(text, st.one_of(st.integers(-100, 100), finite, text), max_size=2))
+
+
+@st.composite
+def points(draw):
+    n, d = draw(st.integers(0, 6)), draw(st.integers(1, 3))
+    xs = draw(st.lists(st.lists(finite, min_size=d, max_size=d), min_size=n, max_size=n))
+    fs = draw(st.lists(finite | st.just(math.nan), min_size=n, max_size=n))
+    reasons = draw(st.lists(st.sampled_from(["", "no_detection", "pnp_failed"]) | text, min_size=n, max_size=n))
+    return Points(np.asarray(xs, dtype=np.float64).reshape(n, d), fs, tuple(reasons))
+
+
+def opt(s):
+    return st.none() | s
+
+
+job_rows = st.builds(
+    JobRow, key=st.text(min_size=1, max_size=16), experiment=text, kind=st.sampled_from(KINDS),
+    role=st.sampled_from(ROLES), method=text, sample_id=text, sample_index=st.integers(0, 10**6),
+    status=st.sampled_from(JobStatus), run_id=opt(st.integers(1, 10**6)), box=opt(boxes()), budget=opt(budgets),
+    seed=opt(st.integers(0, 2**31 - 1)), options=json_dict, chain=opt(text), reason=opt(text), worst_m=opt(finite),
+    worst_x=opt(st.dictionaries(st.sampled_from(["roll_deg", "contrast"]), finite, min_size=1)),
+    verdict=opt(st.sampled_from(Verdict)), nfev=st.integers(0, 10**9), nit=st.integers(0, 10**6),
+    n_failed=opt(st.integers(0, 10**6)), failures=st.dictionaries(st.text(min_size=1, max_size=12), st.integers(1, 10**6),
+                                                                  max_size=3),
+    worst_reason=opt(text), search_status=opt(text), message=opt(text), search_s=opt(finite), job_s=opt(finite),
+    upper_bound=opt(finite), bound_estimate=opt(finite), lipschitz_estimate=opt(finite),
+    trace=st.lists(trace_rows, max_size=3).map(tuple), points=opt(points()), payload=opt(json_dict),
+    finished_at=opt(text),
+)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(job_rows, max_size=4, unique_by=lambda r: r.key))
+def test_job_rows_round_trip_through_the_store(rows):
+    with tempfile.TemporaryDirectory() as d, ResultStore(Path(d) / "r.sqlite") as store:
+        assert store.commit(rows) == len(rows)
+        back = store.jobs(with_points=True, with_trace=True)
+    assert back == sorted(rows, key=lambda r: r.sample_index)

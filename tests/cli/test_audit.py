@@ -78,3 +78,17 @@ def test_demo_audits_the_shipped_model_by_default(tmp_path):
     assert methods == ["apgd", "georobust", "random"]
     report = (out / "report.html").read_text()
     assert "shipped model (runway_yolov8n_pose.pt) v" in report and "oracle detector returns" not in report
+
+
+def test_a_refused_model_does_not_lock_the_run_directory(tmp_path):
+    # issue 12, item 8: an audit refused before its first job leaves --out free for another detector
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"not a checkpoint")
+    out = tmp_path / "run"
+    base = ["audit", "--out", str(out), "--n", "1", "--roll", "5", "--methods", "random", "--max-evals", "3",
+            "--no-landscape", "--no-report", "--width", "128", "--height", "128", "--quiet"]
+    res = runner.invoke(app, [*base, "--model", str(bad)])
+    assert res.exit_code == 2 and "trust" in res.output
+    res = runner.invoke(app, [*base, "--oracle"])
+    assert res.exit_code == 0, res.output
+    assert "1 new jobs" in res.output

@@ -59,3 +59,44 @@ def test_report_errors_name_the_run(tmp_path):
     ResultStore(tmp_path / "results.sqlite").close()
     with pytest.raises(ValueError, match="holds no campaign"):
         build_report(tmp_path)
+
+
+def test_sections_cover_every_declarable_figure_in_order():
+    from vbl_robust.campaigns.spec import FIGURES
+    from vbl_robust.report.build import SECTIONS
+
+    assert tuple(SECTIONS) == FIGURES
+
+
+def test_figures_come_from_the_spec_not_from_the_experiment_name(tmp_path, samples):
+    blk = Block(boxes=(roll_box(2), roll_box(5)), methods=("random",), budgets=(Budget(max_evals=4),))
+    for name, figures, made, absent in (
+        ("a-new-experiment", ("survival",), {"survival_1d"}, "Per image: worst case found"),
+        ("audit", ("per_image",), set(), "Survival vs roll budget"),  # the name "audit" draws nothing by itself
+    ):
+        out = tmp_path / name
+        with ResultStore(out / "results.sqlite") as st:
+            run_campaign(CampaignSpec(name, (blk,), figures=figures), samples[:2], st, detector=DetectorSpec("oracle"))
+        html = build_report(out).read_text()
+        assert {p.stem for p in (out / "figures").glob("*.png")} == made
+        assert absent not in html and "best_vs_evals" not in html
+    assert "Per image: worst case found" in html
+    with pytest.raises(ValueError, match="unknown figure"):
+        CampaignSpec("x", (blk,), figures=("heatmap",))
+
+
+def test_report_shows_failed_evaluations_per_reason(tmp_path):
+    from vbl_robust.campaigns.store import JobRow
+    from vbl_robust.constants import FAILURE_REASONS
+
+    spec = CampaignSpec("audit", (Block(boxes=(roll_box(5),), methods=("random",), budgets=(Budget(max_evals=10),)),))
+    with ResultStore(tmp_path / "results.sqlite") as st:
+        st.bind_campaign(spec.name, spec.to_dict(), {"kind": "oracle", "sha256": None, "name": "oracle"})
+        st.commit([JobRow(key=f"k{i}", experiment="audit", kind="search", role="main", method="random",
+                          sample_id=f"s{i}", sample_index=i, status="done", box=roll_box(5), budget=Budget(max_evals=10),
+                          worst_m=5000.0, verdict="breach", nfev=10, n_failed=n, failures=f, worst_reason="no_detection")
+                   for i, (n, f) in enumerate([(3, {"no_detection": 2, "pnp_failed": 1}), (1, {"no_detection": 1})])])
+    html = build_report(tmp_path).read_text()
+    assert "failed evals" in html and "Failed evaluations by reason" in html
+    assert FAILURE_REASONS["no_detection"] in html and FAILURE_REASONS["pnp_failed"] in html
+    assert re.search(r"<td[^>]*>20</td><td[^>]*>4</td><td[^>]*>3</td><td[^>]*>1</td>", html)  # evals, failed, per reason

@@ -9,7 +9,9 @@ import pytest
 import torch
 
 import vbl_robust.search.base as base_module
-from vbl_robust.search import METHODS, SearchResult, Status, maximize, method_options
+from vbl_robust.constants import Verdict
+from vbl_robust.search import METHODS, NON_FINITE, Evaluations, SearchResult, Status, maximize, method_options
+from vbl_robust.search import Verdict as SearchVerdict
 from vbl_robust.space import ParameterBox
 
 from .conftest import bumpy
@@ -92,6 +94,55 @@ def test_nan_and_inf_are_failed_evaluations(method, box2):
     assert np.isfinite(r.fun) and r.fun == r.fs[~failed].max()
     assert 0 <= r.x[0] <= 4.5
     assert r.trace[-1].n_failed == r.n_failed
+
+
+PENALTY = 50.0
+
+
+def _penalised(x):
+    """bumpy, but failed (reason "no_detection", a finite penalty) where roll < -1, as the pipeline does."""
+    y = bumpy(x)
+    xp = torch if isinstance(y, torch.Tensor) else np
+    lost = x[:, 0] < -1.0
+    y = xp.where(lost, xp.full_like(y, PENALTY), y)
+    return Evaluations(y, tuple("no_detection" if v else "" for v in lost.tolist()))
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_failure_reasons_are_recorded_and_the_search_is_unchanged(method, box2):
+    r = maximize(_penalised, box2, method, max_evals=120, seed=1)
+
+    def plain(x):
+        return _penalised(x).values
+
+    same = maximize(plain, box2, method, max_evals=120, seed=1)
+    assert np.array_equal(r.xs, same.xs) and np.array_equal(r.fs, same.fs) and r.fun == same.fun  # same search
+    lost = r.xs[:, 0] < -1.0
+    assert r.reasons == tuple("no_detection" if v else "" for v in lost)
+    assert r.n_failed == lost.sum() == r.trace[-1].n_failed and same.n_failed == 0 and same.reasons == ("",) * same.nfev
+    assert r.failures == ({"no_detection": int(lost.sum())} if lost.any() else {})
+    assert r.x_reason == ("no_detection" if r.fun == PENALTY else "")  # the penalty can be the worst case
+    assert SearchResult.from_dict(json.loads(json.dumps(r.to_dict()))).reasons == r.reasons
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_non_finite_values_without_a_reason_are_recorded_as_non_finite(method, box2):
+    r = maximize(_holey, box2, method, max_evals=60)
+    assert r.reasons == tuple("" if np.isfinite(v) else NON_FINITE for v in r.fs)
+    assert r.failures == {NON_FINITE: r.n_failed}
+
+
+def test_tell_accepts_evaluations_and_checks_their_length(box2):
+    opt = METHODS["random"](box2, max_evals=10, batch_size=5)
+    x = opt.ask()
+    with pytest.raises(ValueError, match="5 reasons for 4 values"):
+        Evaluations(np.zeros(4), ("",) * 5)
+    opt.tell(x, Evaluations(bumpy(x), ("", "pnp_failed", "", "", "")))
+    assert opt.result().failures == {"pnp_failed": 1} and opt.result().reasons[1] == "pnp_failed"
+
+
+def test_search_verdict_is_the_package_verdict():
+    assert SearchVerdict is Verdict and Verdict.NO_BREACH_FOUND.value == "no breach found"
 
 
 @pytest.mark.parametrize("method", ALL)

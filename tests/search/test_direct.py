@@ -144,10 +144,10 @@ def test_sound_bound_and_verdicts():
     assert bounds[-1] < bounds[0] and r.upper_bound == bounds[-1] == r.trace[-1].upper_bound
     assert r.verdict(0.9) is Verdict.BREACH
     assert r.verdict(r.upper_bound) is Verdict.CERTIFIED and r.verdict(1.0 + 1e-12) is not Verdict.BREACH
-    assert r.verdict(0.5 * (r.fun + r.upper_bound)) is Verdict.UNDECIDED or r.upper_bound == r.fun
+    assert r.verdict(0.5 * (r.fun + r.upper_bound)) is Verdict.NO_BREACH_FOUND or r.upper_bound == r.fun
     # the estimate is reported but is not a certificate
     assert r.lipschitz_estimate > 0 and r.bound_estimate >= r.fun
-    assert maximize(f, box, "direct", max_evals=50).verdict(5.0) is Verdict.UNDECIDED  # no L, no certificate
+    assert maximize(f, box, "direct", max_evals=50).verdict(5.0) is Verdict.NO_BREACH_FOUND  # no L, no certificate
 
 
 def test_sound_bound_per_dimension_constants_and_failures():
@@ -159,7 +159,7 @@ def test_sound_bound_per_dimension_constants_and_failures():
     r = maximize(f, box, "direct", max_evals=200, lipschitz=[0.1, 2.0])
     assert r.upper_bound >= 4.0 and r.lipschitz == (0.1, 2.0)
     r_nan = maximize(lambda x: np.where(x[:, 0] > 9, np.nan, f(x)), box, "direct", max_evals=200, lipschitz=[0.1, 2.0])
-    assert r_nan.upper_bound == np.inf and r_nan.verdict(100.0) is Verdict.UNDECIDED
+    assert r_nan.upper_bound == np.inf and r_nan.verdict(100.0) is Verdict.NO_BREACH_FOUND
     with pytest.raises(ValueError, match="lipschitz must be"):
         maximize(f, box, "direct", max_evals=20, lipschitz=[1.0])
     with pytest.raises(ValueError, match="lipschitz_norm"):

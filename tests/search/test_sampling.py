@@ -58,9 +58,9 @@ def test_grid_sound_bound_when_complete():
     r = maximize(_f, BOX, "grid", counts=[31, 8], max_evals=10_000, lipschitz=[0.2, 1.0])
     half = np.array([0.5, 0.05])  # half spacings
     assert r.upper_bound == pytest.approx(2.4 + 0.2 * half[0] + 1.0 * half[1])
-    assert r.verdict(2.56) is Verdict.CERTIFIED and r.verdict(2.5) is Verdict.UNDECIDED and r.verdict(2.3) is Verdict.BREACH
+    assert r.verdict(2.56) is Verdict.CERTIFIED and r.verdict(2.5) is Verdict.NO_BREACH_FOUND and r.verdict(2.3) is Verdict.BREACH
     partial = maximize(_f, BOX, "grid", counts=[31, 8], max_evals=100, lipschitz=[0.2, 1.0])
-    assert partial.upper_bound is None and partial.verdict(2.5) is Verdict.UNDECIDED
+    assert partial.upper_bound is None and partial.verdict(2.5) is Verdict.NO_BREACH_FOUND
 
 
 def test_grid_center_out_visits_every_node_once_by_growing_distance():

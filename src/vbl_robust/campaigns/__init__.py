@@ -38,7 +38,7 @@ from .spec import (
     roll_box,
     roll_contrast_box,
 )
-from .store import ResultStore
+from .store import JobRow, JobStatus, Points, ResultStore
 
 __all__ = [
     "EPS_SAFE_M",
@@ -52,7 +52,10 @@ __all__ = [
     "DetectorSpec",
     "Experiment",
     "Job",
+    "JobRow",
+    "JobStatus",
     "Options",
+    "Points",
     "Progress",
     "ResultStore",
     "RunSummary",

@@ -13,12 +13,15 @@ images, 1000 for the PnP validation). Where the paper leaves a choice open we fi
   case; in the spatial experiments and the distance profile it runs from 0° outwards and stops at its first
   breach (exact survival per budget for a fraction of the cost); 2-D: a landscape grid on the first image for
   the heat map.
+
+Each spec declares the report's figures it needs (``CampaignSpec.figures``, names from
+:data:`~vbl_robust.campaigns.spec.FIGURES`): a new experiment gets its figures by declaring them.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 from .spec import Block, BoxSpec, Budget, CampaignSpec, roll_box, roll_contrast_box
 
@@ -60,13 +63,13 @@ class Options:
 
 @dataclass(frozen=True)
 class Experiment:
-    """A named experiment: its paper section, default number of images and its spec builder."""
+    """A named experiment: its paper section, default number of images and its spec builder (which declares the
+    report's figures)."""
 
     name: str
     title: str
     images: int
     build: Callable[[int, Options], CampaignSpec]
-    figures: tuple[str, ...] = field(default=())
 
 
 def _grid_block(box: BoxSpec, counts: Sequence[int], role: str = "reference", max_samples: int | None = None,
@@ -105,7 +108,7 @@ def _runtime_blocks(box: BoxSpec, o: Options) -> list[Block]:
 
 
 def pnp_validation(seed: int, o: Options) -> CampaignSpec:
-    return CampaignSpec("pnp-validation", (Block(kind="pnp"),), seed=seed, notes=(
+    return CampaignSpec("pnp-validation", (Block(kind="pnp"),), seed=seed, figures=("pnp",), notes=(
         "Every PnP solver on the ground-truth corners and on the detector's corners of the unperturbed image; "
         "errors relative to the slant distance to the runway threshold. The differentiable layer's forward pass "
         "is the ippe_lm solver itself, so its positions equal ippe_lm's (its 'exact' and 'bpnp' modes differ "
@@ -116,7 +119,7 @@ def spatial_1d(seed: int, o: Options) -> CampaignSpec:
     main = Block(boxes=tuple(roll_box(b) for b in ROLL_BUDGETS_DEG), methods=o.methods,
                  budgets=(Budget(max_evals=o.max_evals),))
     grid = _roll_grid(max(ROLL_BUDGETS_DEG), o.grid_step_deg, stop_at_breach=True)
-    return CampaignSpec("spatial-1d", _blocks(main, grid), seed=seed, notes=(
+    return CampaignSpec("spatial-1d", _blocks(main, grid), seed=seed, figures=("survival", "landscape"), notes=(
         f"Roll budgets ±{', '.join(f'{b:g}' for b in ROLL_BUDGETS_DEG)}°; {o.max_evals} evaluations per image and "
         f"budget, early stop at the first breach. Reference: a dense grid over ±{max(ROLL_BUDGETS_DEG):g}° in "
         f"{o.grid_step_deg:g}° steps, restricted to each budget, evaluated from 0° outwards and stopped at its "
@@ -126,7 +129,8 @@ def spatial_1d(seed: int, o: Options) -> CampaignSpec:
 
 def runtime_1d(seed: int, o: Options) -> CampaignSpec:
     box = roll_box(15.0)
-    return CampaignSpec("runtime-1d", _blocks(*_runtime_blocks(box, o), _roll_grid(15.0, o.grid_step_deg)), seed=seed, notes=(
+    return CampaignSpec("runtime-1d", _blocks(*_runtime_blocks(box, o), _roll_grid(15.0, o.grid_step_deg)), seed=seed,
+                        figures=("runtime", "landscape"), notes=(
         f"Roll ±15°; time budgets {', '.join(f'{t:g}' for t in o.time_budgets)} s and evaluation budgets "
         f"{', '.join(map(str, o.eval_budgets))} per image, no early stop. Reference: dense grid in "
         f"{o.grid_step_deg:g}° steps."))
@@ -135,7 +139,8 @@ def runtime_1d(seed: int, o: Options) -> CampaignSpec:
 def spatial_2d(seed: int, o: Options) -> CampaignSpec:
     boxes = tuple(roll_contrast_box(b, c) for b, c in BOXES_2D)
     main = Block(boxes=boxes, methods=o.methods, budgets=(Budget(max_evals=o.max_evals),))
-    return CampaignSpec("spatial-2d", _blocks(main, _landscape(boxes[-1], o.landscape)), seed=seed, notes=(
+    return CampaignSpec("spatial-2d", _blocks(main, _landscape(boxes[-1], o.landscape)), seed=seed,
+                        figures=("survival", "landscape"), notes=(
         f"Roll × contrast boxes from (±2°, [0.9, 1.1]) to (±30°, [0.4, 2.5]); {o.max_evals} evaluations per image "
         f"and box, early stop at the first breach. Landscape: a {o.landscape[0]} × {o.landscape[1]} grid over the "
         "largest box on the first image."))
@@ -143,7 +148,8 @@ def spatial_2d(seed: int, o: Options) -> CampaignSpec:
 
 def runtime_2d(seed: int, o: Options) -> CampaignSpec:
     box = roll_contrast_box(10.0, (0.7, 1.4))
-    return CampaignSpec("runtime-2d", _blocks(*_runtime_blocks(box, o), _landscape(box, o.landscape)), seed=seed, notes=(
+    return CampaignSpec("runtime-2d", _blocks(*_runtime_blocks(box, o), _landscape(box, o.landscape)), seed=seed,
+                        figures=("runtime", "landscape"), notes=(
         f"Roll ±10°, contrast [0.7, 1.4]; time budgets {', '.join(f'{t:g}' for t in o.time_budgets)} s and "
         f"evaluation budgets {', '.join(map(str, o.eval_budgets))} per image, no early stop. Landscape: a "
         f"{o.landscape[0]} × {o.landscape[1]} grid on the first image."))
@@ -154,7 +160,7 @@ def distance_profile(seed: int, o: Options) -> CampaignSpec:
                  budgets=(Budget(max_evals=o.max_evals),), chain=True)
     step = 2 * o.grid_step_deg if o.grid_step_deg > 0 else 0.0  # 0.1° by default: 901 points over ±45°
     grid = _roll_grid(ROLL_LIMIT_DEG, step, stop_at_breach=True)
-    return CampaignSpec("distance-profile", _blocks(main, grid), seed=seed, notes=(
+    return CampaignSpec("distance-profile", _blocks(main, grid), seed=seed, figures=("distance", "landscape"), notes=(
         f"Images in quartiles of slant distance. Per image and method, the smallest roll budget of "
         f"{', '.join(f'{b:g}' for b in DISTANCE_BUDGETS_DEG)}° at which a breach is found ({o.max_evals} evaluations "
         f"per budget, early stop; budgets above a breach are implied). φ_crit = the smallest budget at which the "
@@ -165,7 +171,7 @@ def distance_profile(seed: int, o: Options) -> CampaignSpec:
 def convergence(seed: int, o: Options) -> CampaignSpec:
     main = Block(boxes=(roll_box(15.0),), methods=("georobust",),
                  budgets=(Budget(max_iters=o.iterations, max_evals=CONVERGENCE_MAX_EVALS, stop_at_breach=False),))
-    return CampaignSpec("convergence", (main,), seed=seed, notes=(
+    return CampaignSpec("convergence", (main,), seed=seed, figures=("convergence",), notes=(
         f"GeoRobust (α = 2), {o.iterations} iterations at ±15°, no early stop: |PO_k| (as selected) and RA(k) = "
         f"Σ vol(PO_k) / vol(Θ) when PO_k is selected. A cap of {CONVERGENCE_MAX_EVALS} evaluations per image (the "
         "GeoRobust paper's budget range) bounds images whose error is flat over a region (e.g. the failure "
@@ -175,16 +181,13 @@ def convergence(seed: int, o: Options) -> CampaignSpec:
 EXPERIMENTS: dict[str, Experiment] = {
     e.name: e
     for e in (
-        Experiment("pnp-validation", "Validation of the PnP solvers", 1000, pnp_validation, ("pnp",)),
-        Experiment("spatial-1d", "Spatial robustness to 1-D camera roll", 100, spatial_1d, ("survival_level",)),
-        Experiment("runtime-1d", "Runtime robustness, roll ±15°", 100, runtime_1d, ("runtime",)),
-        Experiment("spatial-2d", "Spatial robustness to roll and contrast", 100, spatial_2d, ("survival_level", "landscape")),
-        Experiment("runtime-2d", "Runtime robustness, roll ±10° and contrast [0.7, 1.4]", 100, runtime_2d,
-                   ("runtime", "landscape")),
-        Experiment("distance-profile", "Vulnerability profile by approach distance", 100, distance_profile,
-                   ("distance",)),
-        Experiment("convergence", "GeoRobust convergence and search-space reduction", 100, convergence,
-                   ("convergence",)),
+        Experiment("pnp-validation", "Validation of the PnP solvers", 1000, pnp_validation),
+        Experiment("spatial-1d", "Spatial robustness to 1-D camera roll", 100, spatial_1d),
+        Experiment("runtime-1d", "Runtime robustness, roll ±15°", 100, runtime_1d),
+        Experiment("spatial-2d", "Spatial robustness to roll and contrast", 100, spatial_2d),
+        Experiment("runtime-2d", "Runtime robustness, roll ±10° and contrast [0.7, 1.4]", 100, runtime_2d),
+        Experiment("distance-profile", "Vulnerability profile by approach distance", 100, distance_profile),
+        Experiment("convergence", "GeoRobust convergence and search-space reduction", 100, convergence),
     )
 }
 
@@ -198,7 +201,8 @@ def audit_spec(box: BoxSpec, *, methods: Sequence[str] = METHODS, budget: Budget
     if landscape and min(landscape) > 0:
         blocks.append(_grid_block(box, landscape, role="landscape", max_samples=1))
     stop = "early stop at the first breach" if budget.stop_at_breach else "no early stop"
-    return CampaignSpec("audit", tuple(blocks), seed=seed, lipschitz=lipschitz, pnp=pnp, notes=(
+    figures = ("convergence", "landscape", "progress", "per_image")
+    return CampaignSpec("audit", tuple(blocks), seed=seed, lipschitz=lipschitz, pnp=pnp, figures=figures, notes=(
         f"Box {box.label}; methods {', '.join(methods)}; budget per image: {budget.label} ({stop})."
         + ("" if lipschitz is None else f" Lipschitz bound given: {lipschitz} m per unit (certificates possible).")))
 

@@ -7,6 +7,8 @@ units), verdict, counts and timings; traces and evaluated points stay in the sto
 from __future__ import annotations
 
 import csv
+import json
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -15,22 +17,31 @@ from .store import ResultStore
 COLUMNS = (
     "experiment", "kind", "role", "method", "sample_id", "sample_index", "slant_distance_m", "envelope", "box_label",
     "box_level", "budget_label", "max_evals", "max_seconds", "max_iters", "stop_at_breach", "seed", "status",
-    "reason", "worst_m", "verdict", "nfev", "nit", "search_status", "search_s", "job_s", "upper_bound",
-    "bound_estimate", "run_id", "key",
+    "reason", "worst_m", "verdict", "nfev", "nit", "n_failed", "failures", "worst_reason", "search_status",
+    "search_s", "job_s", "upper_bound", "bound_estimate", "run_id", "key",
 )
 
 
+def _plain(v: Any) -> Any:
+    if isinstance(v, Enum):
+        return v.value
+    if isinstance(v, dict):
+        return json.dumps(v, sort_keys=True) if v else None
+    return v
+
+
 def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
-    """Job rows as flat dicts, and the column names (``COLUMNS`` then ``worst_<parameter>`` columns)."""
+    """Job rows as flat dicts, and the column names (``COLUMNS`` then ``worst_<parameter>`` columns);
+    ``failures`` is the JSON ``{reason: count}`` of the failed evaluations."""
     samples = store.samples()
     rows, params = [], []
     for r in store.jobs(with_trace=False):
-        s = samples.get(r["sample_id"], {})
-        b = r.get("budget") or {}
-        d = {c: r.get(c) for c in COLUMNS}
+        s = samples.get(r.sample_id, {})
+        b = {} if r.budget is None else r.budget.to_dict()
+        d = {c: _plain(getattr(r, c, None)) for c in COLUMNS}
         d.update(slant_distance_m=s.get("slant_distance_m"), envelope=s.get("envelope"), max_evals=b.get("max_evals"),
                  max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"), stop_at_breach=b.get("stop_at_breach"))
-        for name, v in (r.get("worst_x") or {}).items():
+        for name, v in (r.worst_x or {}).items():
             col = f"worst_{name}"
             if col not in params:
                 params.append(col)

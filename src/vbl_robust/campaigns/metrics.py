@@ -1,4 +1,5 @@
-"""The paper's metrics over store rows: survival rate, median worst error, φ_crit, |PO_k| and RA(k), PnP errors.
+"""The paper's metrics over store rows (:class:`~vbl_robust.campaigns.store.JobRow`): survival rate, median worst
+error, φ_crit, |PO_k| and RA(k), failed evaluations per reason, PnP errors.
 
 Conventions: a row's ``worst_m`` is the worst error the search found for that image (metres); a failed sample
 counts with the failure penalty (5000 m by default), so it is never a survivor. An image *survives* a box when
@@ -8,10 +9,18 @@ its worst error is ≤ ε_safe: S_rate = 100 · #survivors / N (%).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections import Counter
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
+
+from ..constants import Verdict
+from .spec import BoxSpec
+from .store import JobRow, JobStatus
+
+#: ``method`` of the pseudo-rows of :func:`reference_rows`.
+REFERENCE_METHOD = "grid (reference)"
 
 
 def survival_rate(worst: Sequence[float], eps_safe_m: float) -> float:
@@ -29,34 +38,46 @@ def _stats(values: Sequence[float]) -> dict[str, float]:
     return {"median": float(np.median(v)), "mean": float(np.mean(v))}
 
 
-def budget_value(row: Mapping[str, Any], axis: str) -> float:
+def budget_value(row: JobRow, axis: str) -> float:
     """The numeric budget of a row on ``axis`` ("max_seconds", "max_evals", "max_iters") or NaN."""
-    b = row.get("budget") or {}
-    v = b.get(axis)
+    v = None if row.budget is None else getattr(row.budget, axis)
     return math.nan if v is None else float(v)
 
 
-def summarize(rows: Iterable[Mapping[str, Any]], eps_safe_m: float,
-              by: Sequence[str] = ("method", "box_label", "budget_label")) -> list[dict[str, Any]]:
-    """One line per group: n images, survival %, median / mean worst error, breaches, failed, mean evaluations,
-    median search seconds, plus the group's ``box_level`` and numeric budgets. Groups keep first-seen order."""
-    groups: dict[tuple, list[Mapping[str, Any]]] = {}
+def failure_counts(rows: Iterable[JobRow]) -> dict[str, int]:
+    """Failed evaluations per reason over ``rows`` (``{reason: count}``, sorted by reason)."""
+    total: Counter[str] = Counter()
     for r in rows:
-        groups.setdefault(tuple(r.get(k) for k in by), []).append(r)
+        total.update(r.failures)
+    return dict(sorted(total.items()))
+
+
+def summarize(rows: Iterable[JobRow], eps_safe_m: float,
+              by: Sequence[str] = ("method", "box_label", "budget_label")) -> list[dict[str, Any]]:
+    """One line per group: n images, survival %, median / mean worst error, breaches, failed jobs, evaluations
+    (total ``nfev`` and ``mean_nfev``), failed evaluations (``failed_evals``: None when no row recorded them; ``failures``: per
+    reason), median search seconds, plus the group's ``box_level`` and numeric budgets. Groups keep first-seen
+    order; ``by`` names :class:`JobRow` attributes."""
+    groups: dict[tuple, list[JobRow]] = {}
+    for r in rows:
+        groups.setdefault(tuple(getattr(r, k) for k in by), []).append(r)
     out = []
     for key, rs in groups.items():
-        worst = [r["worst_m"] for r in rs]
+        worst = [r.worst_m for r in rs]
         s = _stats(worst)
+        known = [r.n_failed for r in rs if r.n_failed is not None]
         line = dict(zip(by, key, strict=True))
         line.update(
-            box_level=rs[0].get("box_level"),
+            box_level=rs[0].box_level,
             max_evals=budget_value(rs[0], "max_evals"), max_seconds=budget_value(rs[0], "max_seconds"),
             max_iters=budget_value(rs[0], "max_iters"),
             n=len(rs), survival=survival_rate(worst, eps_safe_m), median_worst_m=s["median"], mean_worst_m=s["mean"],
-            breaches=sum(r["verdict"] == "breach" for r in rs), certified=sum(r["verdict"] == "certified" for r in rs),
-            failed=sum(r["status"] == "failed" for r in rs),
-            mean_nfev=float(np.mean([r["nfev"] or 0 for r in rs])),
-            median_search_s=float(np.median([r.get("search_s") or 0.0 for r in rs])),
+            breaches=sum(r.verdict is Verdict.BREACH for r in rs),
+            certified=sum(r.verdict is Verdict.CERTIFIED for r in rs),
+            failed=sum(r.status is JobStatus.FAILED for r in rs),
+            nfev=sum(r.nfev for r in rs), mean_nfev=float(np.mean([r.nfev for r in rs])),
+            failed_evals=sum(known) if known else None, failures=failure_counts(rs),
+            median_search_s=float(np.median([r.search_s or 0.0 for r in rs])),
         )
         out.append(line)
     return out
@@ -93,58 +114,55 @@ def lattice_covered(xs: np.ndarray, grid_bounds: Sequence[Sequence[float]], coun
     return int(_inside(np.asarray(xs, dtype=np.float64).reshape(-1, len(counts)), lower, upper).sum()) >= expected
 
 
-def reference_rows(ref_rows: Iterable[Mapping[str, Any]], boxes: Sequence[Mapping[str, Any]], eps_safe_m: float,
-                   penalty_m: float) -> list[dict[str, Any]]:
-    """Pseudo-rows ``method="grid (reference)"`` giving, per image and per box of ``boxes`` (``BoxSpec`` dicts),
-    the dense grid's worst value restricted to that box — the true worst case up to the grid spacing.
+def reference_rows(ref_rows: Iterable[JobRow], boxes: Sequence[BoxSpec], eps_safe_m: float,
+                   penalty_m: float) -> list[JobRow]:
+    """Pseudo-rows ``method=REFERENCE_METHOD`` giving, per image and per box of ``boxes``, the dense grid's worst
+    value restricted to that box — the true worst case up to the grid spacing.
 
-    ``ref_rows`` need ``xs``/``fs`` (``store.jobs(role="reference", with_points=True)``); a box not inside a
+    ``ref_rows`` need their points (``store.jobs(role="reference", with_points=True)``); a box not inside a
     grid's box is skipped for that image. A grid stopped at a breach (centre-out) gives a row for a box only if
     the box holds an evaluated breach (its worst value is then a lower bound) or all its lattice nodes were
-    evaluated (:func:`lattice_covered`).
+    evaluated (:func:`lattice_covered`). The pseudo-rows keep the grid's other fields (budget, nfev, timings).
     """
     out = []
     for r in ref_rows:
-        if r["status"] != "done":
+        if r.status is not JobStatus.DONE or r.points is None or r.box is None:
             continue
-        gbox = r["box"]["box"]["bounds"]
+        grid = r.box.box
         for b in boxes:
-            bounds = b["box"]["bounds"]
-            if list(bounds) != list(gbox):
+            if b.box.names != grid.names:
                 continue
-            lo = [bounds[k][0] for k in bounds]
-            hi = [bounds[k][1] for k in bounds]
-            if any(lo[i] < gbox[k][0] - 1e-9 or hi[i] > gbox[k][1] + 1e-9 for i, k in enumerate(bounds)):
+            lo, hi = b.box.lower, b.box.upper
+            if np.any(lo < grid.lower - 1e-9) or np.any(hi > grid.upper + 1e-9):
                 continue
-            w = worst_within(r["xs"], r["fs"], lo, hi, penalty_m)
+            w = worst_within(r.points.xs, r.points.fs, lo, hi, penalty_m)
             if math.isnan(w):
                 continue
             if w <= eps_safe_m and not grid_complete(r):
-                counts = (r.get("options") or {}).get("counts")
-                if counts is None or not lattice_covered(r["xs"], [gbox[k] for k in gbox], counts, lo, hi):
+                counts = r.options.get("counts")
+                bounds = list(zip(grid.lower, grid.upper, strict=True))
+                if counts is None or not lattice_covered(r.points.xs, bounds, counts, lo, hi):
                     continue
-            out.append({"method": "grid (reference)", "sample_id": r["sample_id"], "box_label": b["label"],
-                        "box_level": b["level"], "budget_label": f"grid {r['budget']['max_evals']} pts", "budget": r["budget"],
-                        "worst_m": w, "verdict": "breach" if w > eps_safe_m else "no breach found",
-                        "status": "done", "nfev": r["nfev"], "search_s": r.get("search_s")})
+            out.append(r.replace(method=REFERENCE_METHOD, box=b, worst_m=w, worst_x=None, points=None, trace=(),
+                                 verdict=Verdict.BREACH if w > eps_safe_m else Verdict.NO_BREACH_FOUND))
     return out
 
 
-def grid_complete(r: Mapping[str, Any]) -> bool:
+def grid_complete(r: JobRow) -> bool:
     """True if a grid job row evaluated its whole lattice (its evaluation budget is the lattice size)."""
-    size = (r.get("budget") or {}).get("max_evals")
-    return size is not None and (r.get("nfev") or 0) >= size
+    size = None if r.budget is None else r.budget.max_evals
+    return size is not None and r.nfev >= size
 
 
-def smallest_breach_levels(rows: Iterable[Mapping[str, Any]]) -> dict[tuple[str, str], float]:
+def smallest_breach_levels(rows: Iterable[JobRow]) -> dict[tuple[str, str], float]:
     """Per (sample id, method): the smallest box level (roll half-width) at which a breach was found (a failed
     sample counts as breached at its smallest level), ``inf`` when none up to the largest level."""
     out: dict[tuple[str, str], float] = {}
     for r in rows:
-        key = (r["sample_id"], r["method"])
+        key = (r.sample_id, r.method)
         cur = out.setdefault(key, math.inf)
-        if r["verdict"] in ("breach", "failed"):
-            out[key] = min(cur, float(r["box_level"]))
+        if r.verdict in (Verdict.BREACH, Verdict.FAILED):
+            out[key] = min(cur, float(r.box_level))
     return out
 
 
@@ -176,7 +194,7 @@ def quartile_of(distance: float, edges: np.ndarray) -> int:
     return int(min(np.searchsorted(edges, distance, side="right") - 1, len(edges) - 2))
 
 
-def distance_profile(rows: Iterable[Mapping[str, Any]], distances: Mapping[str, float], budgets: Sequence[float],
+def distance_profile(rows: Iterable[JobRow], distances: dict[str, float], budgets: Sequence[float],
                      q: int = 4, threshold_pct: float = 10.0) -> list[dict[str, Any]]:
     """Per distance quartile and method: n, slant-distance range, median smallest breaching level, survival per
     budget and φ_crit (``inf`` = no drop below ``threshold_pct`` within the budgets)."""
@@ -201,23 +219,27 @@ def distance_profile(rows: Iterable[Mapping[str, Any]], distances: Mapping[str, 
     return out
 
 
-def convergence(rows: Iterable[Mapping[str, Any]], max_iter: int | None = None) -> list[dict[str, Any]]:
+def _or_nan(v: float | None) -> float:
+    return math.nan if v is None else float(v)
+
+
+def convergence(rows: Iterable[JobRow], max_iter: int | None = None) -> list[dict[str, Any]]:
     """Per iteration k (1-based) over the rows' DIRECT-family traces: |PO_k| (as selected, and after the budget
     filter) and RA(k) in % — mean, standard deviation, 10/25/50/75/90th percentiles and maximum over images."""
     per_k: dict[int, dict[str, list[float]]] = {}
     for r in rows:
-        for t in r.get("trace") or []:
-            if t.get("po_count_before") is None:
+        for t in r.trace:
+            if t.po_count_before is None:
                 continue
-            k = int(t["iteration"])
+            k = int(t.iteration)
             if max_iter is not None and k > max_iter:
                 continue
             d = per_k.setdefault(k, {"po": [], "po_after": [], "ra": [], "best": [], "nfev": []})
-            d["po"].append(float(t["po_count_before"]))
-            d["po_after"].append(float(t["po_count_after"] if t.get("po_count_after") is not None else math.nan))
-            d["ra"].append(100.0 * float(t["remaining_area"] if t.get("remaining_area") is not None else math.nan))
-            d["best"].append(float(t["best_value"]) if t.get("best_value") is not None else math.nan)
-            d["nfev"].append(float(t["nfev"]))
+            d["po"].append(float(t.po_count_before))
+            d["po_after"].append(_or_nan(t.po_count_after))
+            d["ra"].append(100.0 * _or_nan(t.remaining_area))
+            d["best"].append(_or_nan(t.best_value))
+            d["nfev"].append(float(t.nfev))
     out = []
     for k in sorted(per_k):
         d = per_k[k]
@@ -237,14 +259,14 @@ def convergence(rows: Iterable[Mapping[str, Any]], max_iter: int | None = None) 
     return out
 
 
-def pnp_summary(rows: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
+def pnp_summary(rows: Iterable[JobRow]) -> list[dict[str, Any]]:
     """Per (keypoint source, solver) over the PnP-comparison rows: n, failures, median and mean absolute error
     (MAE) of the position (m) and of the relative error (% of slant distance), over successful solves."""
     acc: dict[tuple[str, str], dict[str, list[float]]] = {}
     for r in rows:
-        if r["status"] != "done" or not r.get("payload"):
+        if r.status is not JobStatus.DONE or not r.payload:
             continue
-        for src, solvers in r["payload"]["errors"].items():
+        for src, solvers in r.payload["errors"].items():
             for solver, e in solvers.items():
                 d = acc.setdefault((src, solver), {"abs": [], "rel": [], "fail": []})
                 ok = e["abs_m"] is not None

@@ -19,10 +19,11 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from ..constants import Verdict
 from .provenance import DetectorSpec, code_version, dataset_identity, sample_fingerprint
 from .spec import CampaignSpec, Job
-from .store import ResultStore
-from .work import VERDICT_BREACH, SampleTask, Settings, detector_for, run_sample_task
+from .store import JobRow, JobStatus, ResultStore
+from .work import SampleTask, Settings, detector_for, run_sample_task
 
 logger = logging.getLogger(__name__)
 
@@ -39,7 +40,7 @@ class Progress:
     breaches: int
     failed: int
     elapsed: float
-    last: dict[str, Any] | None = None
+    last: JobRow | None = None
 
 
 @dataclass(frozen=True)
@@ -87,7 +88,8 @@ def run_campaign(
     Args:
         spec: the campaign.
         samples: the samples (ids unique).
-        store: where rows go; bound to this campaign on first use (a different campaign is refused).
+        store: where rows go; bound to this campaign and detector (refused when it already holds job rows of
+            another one; a store with no job row yet, e.g. after a run that failed on its detector, is re-bound).
         detector: how to build the detector (its identity is part of every job key).
         executor: "local" or "ray"; ``address``/``ray_num_cpus`` for Ray.
         progress: called after every committed job.
@@ -123,11 +125,11 @@ def run_campaign(
 
     state = {"new": 0, "failed": 0, "breaches": _stored_breaches(store)}
 
-    def on_rows(rows: list[dict[str, Any]]) -> None:
+    def on_rows(rows: list[JobRow]) -> None:
         store.commit(rows)
         state["new"] += len(rows)
-        state["failed"] += sum(r["status"] == "failed" for r in rows)
-        state["breaches"] += sum(r.get("verdict") == VERDICT_BREACH and r["role"] == "main" for r in rows)
+        state["failed"] += sum(r.status is JobStatus.FAILED for r in rows)
+        state["breaches"] += sum(r.verdict is Verdict.BREACH and r.role == "main" for r in rows)
         if progress is not None:
             progress(Progress(skipped + state["new"], len(jobs), skipped, state["breaches"], state["failed"],
                               time.perf_counter() - t0, rows[0]))
@@ -156,17 +158,17 @@ def run_campaign(
 
 
 def _stored_breaches(store: ResultStore) -> int:
-    return sum(r["verdict"] == VERDICT_BREACH for r in store.jobs(role="main", with_trace=False))
+    return sum(r.verdict is Verdict.BREACH for r in store.jobs(role="main", with_trace=False))
 
 
 # -- Ray -------------------------------------------------------------------------------------------------------
-def _ray_sample_task(task: SampleTask, detector: DetectorSpec, settings: Settings, run_id: int) -> Iterator[list[dict]]:
+def _ray_sample_task(task: SampleTask, detector: DetectorSpec, settings: Settings, run_id: int) -> Iterator[list[JobRow]]:
     """Body of a Ray task: the same code as the local executor, in a worker (detector cached per worker)."""
     yield from run_sample_task(task, detector_for(detector), settings, run_id)
 
 
 def _ray_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Settings, run_id: int,
-              address: str | None, num_cpus: int | None) -> Iterator[list[dict[str, Any]]]:
+              address: str | None, num_cpus: int | None) -> Iterator[list[JobRow]]:
     """Submit one streaming task per sample and yield rows as they arrive (in completion order)."""
     if not tasks:
         return

@@ -15,49 +15,31 @@ budget) by hashing, so it does not depend on the order of jobs or on which jobs 
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..constants import CONF_THRESHOLD, EPS_SAFE_M, PENALTY_M
+from ..digest import canonical_json, digest
 from ..space import ParameterBox
 
-#: Operational safety threshold ε_safe (metres) and failure penalty (metres) of the paper.
-EPS_SAFE_M = 1000.0
-PENALTY_M = 5000.0
-CONF_THRESHOLD = 0.25
+__all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FIGURES", "KINDS", "PENALTY_M", "ROLES", "Block", "BoxSpec", "Budget",
+           "CampaignSpec", "Job", "canonical_json", "default_figures", "derive_seed", "digest", "roll_box",
+           "roll_contrast_box"]
 
 #: Job kinds: a worst-case search, or the PnP-solver comparison of one image.
 KINDS = ("search", "pnp")
 #: Roles of a block: the compared searches, a dense-grid reference, a landscape grid for one image.
 ROLES = ("main", "reference", "landscape")
-
-
-def canonical_json(obj: Any) -> str:
-    """Deterministic JSON (sorted keys, no spaces, non-finite floats as strings) used for keys and hashes."""
-    return json.dumps(_plain(obj), sort_keys=True, separators=(",", ":"), allow_nan=False)
-
-
-def _plain(v: Any) -> Any:
-    if isinstance(v, Mapping):
-        return {str(k): _plain(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_plain(x) for x in v]
-    if isinstance(v, ParameterBox):
-        return _plain(v.to_dict())
-    if hasattr(v, "item") and not isinstance(v, str):  # numpy scalars
-        v = v.item()
-    if isinstance(v, float):
-        if not math.isfinite(v):
-            return repr(v)
-        return int(v) if v.is_integer() and abs(v) < 2**53 else v  # 15.0 and 15 give the same key
-    return v
-
-
-def digest(obj: Any, n: int = 64) -> str:
-    """Hex SHA-256 (first ``n`` characters) of :func:`canonical_json` of ``obj``."""
-    return hashlib.sha256(canonical_json(obj).encode()).hexdigest()[:n]
+#: Figures (report sections) a campaign can declare, with the rows each one draws:
+#: ``pnp`` — the PnP-solver comparison (``kind="pnp"`` blocks); ``survival`` — survival against the box level
+#: (main, unchained blocks with several boxes; plus the reference grid); ``runtime`` — survival and median worst
+#: error against the per-image budget (main blocks with several time or evaluation budgets); ``distance`` —
+#: φ_crit per slant-distance quartile (chained main blocks); ``convergence`` — |PO_k| and RA(k) of DIRECT-family
+#: traces; ``landscape`` — L over a dense grid of one image (landscape role, else the reference grid) with the
+#: methods' points; ``progress`` — worst error found against evaluations; ``per_image`` — each image's worst case.
+FIGURES = ("pnp", "survival", "runtime", "distance", "convergence", "landscape", "progress", "per_image")
 
 
 def derive_seed(base_seed: int, *parts: Any) -> int:
@@ -232,6 +214,27 @@ class Job:
         )
 
 
+def default_figures(blocks: Sequence[Block]) -> tuple[str, ...]:
+    """The figures a campaign shows when it declares none (e.g. a store written before figures were declared),
+    from what its blocks hold (see :data:`FIGURES`)."""
+    out: set[str] = set()
+    for b in blocks:
+        if b.kind == "pnp":
+            out.add("pnp")
+        elif b.role in ("reference", "landscape"):
+            out.add("landscape")
+        elif b.chain:
+            out.add("distance")
+        else:
+            if len(b.boxes) > 1:
+                out.add("survival")
+            if len(b.budgets) > 1:
+                out.add("runtime")
+            if len(b.boxes) == 1 and len(b.budgets) == 1:
+                out.update(("convergence", "progress", "per_image"))
+    return tuple(f for f in FIGURES if f in out)
+
+
 @dataclass(frozen=True)
 class CampaignSpec:
     """A campaign: shared settings plus blocks. :meth:`expand` turns it into jobs for a list of sample ids.
@@ -244,6 +247,8 @@ class CampaignSpec:
         lipschitz: optional Lipschitz constant of L in real units (m per unit of each parameter, or one number
             for the Euclidean norm) — with it, searches that keep a cover of the box can *certify* a sample.
         notes: free text for the report (budgets chosen, deviations from the paper).
+        figures: the report's figures (names from :data:`FIGURES`; the report draws them in that order);
+            empty: :func:`default_figures` of the blocks. Presentation only: not part of any job key.
     """
 
     name: str
@@ -255,6 +260,18 @@ class CampaignSpec:
     pnp: str = "ippe_lm"
     lipschitz: float | tuple[float, ...] | None = None
     notes: str = ""
+    figures: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        unknown = [f for f in self.figures if f not in FIGURES]
+        if unknown:
+            raise ValueError(f"CampaignSpec: unknown figure(s) {unknown}; figures are {FIGURES}")
+        object.__setattr__(self, "figures", tuple(self.figures))
+
+    @property
+    def report_figures(self) -> tuple[str, ...]:
+        """The figures the report draws: the declared ones, else :func:`default_figures` of the blocks."""
+        return self.figures or default_figures(self.blocks)
 
     def settings(self) -> dict[str, Any]:
         """The settings that change results (part of the job context)."""
@@ -263,7 +280,7 @@ class CampaignSpec:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "name": self.name, "seed": self.seed, **self.settings(), "notes": self.notes,
+            "name": self.name, "seed": self.seed, **self.settings(), "notes": self.notes, "figures": list(self.figures),
             "blocks": [
                 {"boxes": [b.to_dict() for b in blk.boxes], "methods": list(blk.methods),
                  "budgets": [b.to_dict() for b in blk.budgets], "role": blk.role, "kind": blk.kind,
@@ -283,7 +300,8 @@ class CampaignSpec:
         lip = d.get("lipschitz")
         return cls(name=d["name"], blocks=blocks, seed=int(d["seed"]), eps_safe_m=float(d["eps_safe_m"]),
                    penalty_m=float(d["penalty_m"]), conf_threshold=float(d["conf_threshold"]), pnp=d["pnp"],
-                   lipschitz=tuple(lip) if isinstance(lip, list) else lip, notes=d.get("notes", ""))
+                   lipschitz=tuple(lip) if isinstance(lip, list) else lip, notes=d.get("notes", ""),
+                   figures=tuple(d.get("figures", ())))
 
     def context(self, detector_id: str) -> str:
         """Digest of what every job of this campaign shares: the settings and the detector identity."""

@@ -1,32 +1,47 @@
-"""The SQLite results store: one row per finished job, provenance per run, resumable and crash-safe.
+"""The SQLite results store: one :class:`JobRow` per finished job, provenance per run, resumable and crash-safe.
 
-Layout (one file, ``results.sqlite``):
+Layout (one file, ``results.sqlite``; schema version :data:`SCHEMA_VERSION` in ``PRAGMA user_version``):
 
-- ``campaign`` — the one campaign this store holds (spec JSON, detector identity); a run with different
-  settings is refused, so a store never mixes incomparable results.
+- ``campaign`` — the one campaign this store holds (spec JSON, detector identity); once a job row is stored, a
+  run with different settings or another detector is refused, so a store never mixes incomparable results.
 - ``runs`` — one row per invocation: code version, model file SHA-256, dataset identity, full config JSON,
   seed, executor, host, start/finish times, jobs done.
 - ``samples`` — id, index, slant distance, envelope, size and a geometry fingerprint of each sample.
-- ``jobs`` — one row per finished job, ``key`` UNIQUE: worst value and point, verdict, counts, timings, the
-  search trace (JSON) and every evaluated point (JSON, zlib-compressed), or a PnP payload (JSON).
+- ``jobs`` — one row per finished job (:class:`JobRow`), ``key`` UNIQUE: worst value and point, verdict,
+  counts (failed evaluations per reason included), timings, the search trace (JSON) and every evaluated point
+  with its failure reason (JSON, zlib-compressed), or a PnP payload (JSON).
 
 Crash safety: WAL journal, one transaction per finished job (``INSERT OR IGNORE`` on the key). A process
 killed at any moment (``kill -9``) loses only the job in progress; committed rows stay and a rerun inserts no
 duplicates. Only the driver process writes (Ray workers send their rows back to it).
+
+Schema versions: 0/1 = before failures were recorded (no ``n_failed``, ``failures_json``, ``worst_reason``
+columns: they are added on open, old rows read them as unknown); 2 = now. A store written by a newer version is
+refused with a one-line error.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import json
 import math
 import sqlite3
 import zlib
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from ..constants import Verdict
+from ..search.result import TraceRow
+from .spec import BoxSpec, Budget
+
+#: Version of the layout below (``PRAGMA user_version``).
+SCHEMA_VERSION = 2
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS campaign (
@@ -84,39 +99,229 @@ CREATE TABLE IF NOT EXISTS jobs (
     job_s REAL,                     -- seconds for the whole job (objective building included)
     upper_bound REAL, bound_estimate REAL, lipschitz_estimate REAL,
     trace_json TEXT,
-    points BLOB,                    -- zlib(JSON {"xs": [[...]], "fs": [...]})
-    payload_json TEXT,              -- PnP comparison results
-    finished_at TEXT
+    points BLOB,                    -- zlib(JSON {"xs": [[...]], "fs": [...], "reasons": [...]})
+    payload_json TEXT,              -- PnP comparison results, details of the worst point
+    finished_at TEXT,
+    n_failed INTEGER,               -- failed evaluations (schema 2)
+    failures_json TEXT,             -- {reason: count} of the failed evaluations (schema 2)
+    worst_reason TEXT               -- failure reason at the worst point, "" = a successful evaluation (schema 2)
 );
 CREATE INDEX IF NOT EXISTS jobs_by_sample ON jobs (sample_id);
 """
+
+#: Columns added by schema version 2 (added to an older store when it is opened).
+_ADDED_COLUMNS = {"n_failed": "INTEGER", "failures_json": "TEXT", "worst_reason": "TEXT"}
 
 JOB_COLUMNS = (
     "key", "run_id", "experiment", "kind", "role", "method", "sample_id", "sample_index", "box_label", "box_level",
     "box_json", "budget_label", "budget_json", "seed", "options_json", "chain", "status", "reason", "worst_m",
     "worst_x_json", "verdict", "nfev", "nit", "search_status", "message", "search_s", "job_s", "upper_bound",
     "bound_estimate", "lipschitz_estimate", "trace_json", "points", "payload_json", "finished_at",
+    *_ADDED_COLUMNS,
 )
+
+#: Keys of a campaign spec that only change how results are shown (the report's figures): they never make a
+#: store refuse a run, and the newer value is recorded.
+PRESENTATION_KEYS = ("figures",)
 
 
 def now_iso() -> str:
     return dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
 
 
-def encode_points(xs: np.ndarray, fs: np.ndarray) -> bytes:
-    """Compress evaluated points ``(n, d)`` and values ``(n,)`` (non-finite values stored as null)."""
-    f = [None if not math.isfinite(v) else float(v) for v in np.asarray(fs, dtype=np.float64).ravel()]
-    return zlib.compress(json.dumps({"xs": np.asarray(xs, dtype=np.float64).tolist(), "fs": f}).encode(), 6)
+class JobStatus(StrEnum):
+    """How a job ended: searched (``DONE``), could not run (``FAILED``), or implied by a breach in a chain."""
+
+    DONE = "done"
+    FAILED = "failed"
+    IMPLIED = "implied"
+
+
+@dataclass(frozen=True, eq=False)
+class Points:
+    """Every point one search evaluated, in evaluation order.
+
+    Attributes:
+        xs: ``(n, d)`` points, real units (columns ordered as the box's names).
+        fs: ``(n,)`` values, metres (NaN where the value was not finite).
+        reasons: ``n`` failure reasons, ``""`` = success (all ``""`` when not given).
+    """
+
+    xs: np.ndarray
+    fs: np.ndarray
+    reasons: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        fs = np.asarray(self.fs, dtype=np.float64).reshape(-1)
+        xs = np.asarray(self.xs, dtype=np.float64)
+        xs = xs.reshape(len(fs), -1) if len(fs) else xs.reshape(0, xs.shape[-1] if xs.ndim == 2 else 0)
+        reasons = tuple(self.reasons) or ("",) * len(fs)
+        if len(reasons) != len(fs):
+            raise ValueError(f"Points: {len(reasons)} reasons for {len(fs)} values")
+        object.__setattr__(self, "xs", xs)
+        object.__setattr__(self, "fs", fs)
+        object.__setattr__(self, "reasons", reasons)
+
+    def __len__(self) -> int:
+        return len(self.fs)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Points):
+            return NotImplemented
+        return (self.xs.shape == other.xs.shape and np.array_equal(self.xs, other.xs)
+                and np.array_equal(self.fs, other.fs, equal_nan=True) and self.reasons == other.reasons)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def to_blob(self) -> bytes:
+        """zlib-compressed JSON; non-finite values as null, reasons only when some point failed."""
+        d: dict[str, Any] = {"xs": self.xs.tolist(), "fs": [v if math.isfinite(v) else None for v in self.fs.tolist()],
+                             "d": self.xs.shape[1]}
+        if any(self.reasons):
+            d["reasons"] = list(self.reasons)
+        return zlib.compress(json.dumps(d).encode(), 6)
+
+    @classmethod
+    def from_blob(cls, blob: bytes) -> Points:
+        """Inverse of :meth:`to_blob` (null values come back as NaN, missing reasons as ``""``)."""
+        d = json.loads(zlib.decompress(blob))
+        fs = np.array([math.nan if v is None else v for v in d["fs"]], dtype=np.float64)
+        xs = np.asarray(d["xs"], dtype=np.float64).reshape(len(fs), d.get("d", -1 if len(fs) else 0))
+        return cls(xs, fs, tuple(d.get("reasons", ())))
+
+
+def encode_points(xs: np.ndarray, fs: np.ndarray, reasons: Sequence[str] = ()) -> bytes:
+    """Compress evaluated points ``(n, d)``, values ``(n,)`` and reasons (see :meth:`Points.to_blob`)."""
+    return Points(xs, fs, tuple(reasons)).to_blob()
 
 
 def decode_points(blob: bytes | None) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse of :func:`encode_points` (null values come back as NaN); empty arrays for None."""
+    """``(xs, fs)`` of :func:`encode_points` (null values come back as NaN); empty arrays for None."""
     if not blob:
         return np.zeros((0, 0)), np.zeros(0)
-    d = json.loads(zlib.decompress(blob))
-    fs = np.array([math.nan if v is None else v for v in d["fs"]], dtype=np.float64)
-    xs = np.asarray(d["xs"], dtype=np.float64).reshape(len(fs), -1)
-    return xs, fs
+    p = Points.from_blob(blob)
+    return p.xs, p.fs
+
+
+@dataclass(frozen=True)
+class JobRow:
+    """One finished job as the store holds it (what a worker produces and ``ResultStore.jobs`` returns).
+
+    Identity (from the :class:`~vbl_robust.campaigns.spec.Job`): ``key``, ``experiment``, ``kind`` ("search" |
+    "pnp"), ``role`` ("main" | "reference" | "landscape"), ``method``, ``sample_id``, ``sample_index``, ``box``,
+    ``budget``, ``seed``, ``options``, ``chain``; ``run_id`` = the run that computed it.
+
+    Outcome: ``status``; ``reason`` (why a job failed / what implied it); ``worst_m`` = worst error found,
+    metres (the penalty for a failed job); ``worst_x`` = ``{name: value}`` of the worst point, real units;
+    ``verdict`` (None for a PnP job); ``nfev``/``nit`` = evaluations / iterations; ``n_failed`` = failed
+    evaluations and ``failures`` = their counts per reason (None / ``{}`` in rows stored before failures were
+    recorded); ``worst_reason`` = failure reason at the worst point (``""`` = a successful evaluation, None
+    unknown); ``search_status``/``message`` = why the search stopped; ``search_s``/``job_s`` = seconds in the
+    search / in the whole job; ``upper_bound`` (sound, metres; 1e300 for "unbounded"), ``bound_estimate``,
+    ``lipschitz_estimate``; ``trace`` = the search's iterations (empty unless asked for); ``points`` = every
+    evaluated point (None unless asked for); ``payload`` = PnP comparison or details of the worst point;
+    ``finished_at`` (ISO time, UTC).
+
+    Floats are finite or None (SQLite stores NaN as NULL).
+    """
+
+    key: str
+    experiment: str
+    kind: str
+    role: str
+    method: str
+    sample_id: str
+    sample_index: int
+    status: JobStatus
+    run_id: int | None = None
+    box: BoxSpec | None = None
+    budget: Budget | None = None
+    seed: int | None = None
+    options: Mapping[str, Any] = field(default_factory=dict)
+    chain: str | None = None
+    reason: str | None = None
+    worst_m: float | None = None
+    worst_x: Mapping[str, float] | None = None
+    verdict: Verdict | None = None
+    nfev: int = 0
+    nit: int = 0
+    n_failed: int | None = None
+    failures: Mapping[str, int] = field(default_factory=dict)
+    worst_reason: str | None = None
+    search_status: str | None = None
+    message: str | None = None
+    search_s: float | None = None
+    job_s: float | None = None
+    upper_bound: float | None = None
+    bound_estimate: float | None = None
+    lipschitz_estimate: float | None = None
+    trace: tuple[TraceRow, ...] = ()
+    points: Points | None = None
+    payload: Mapping[str, Any] | None = None
+    finished_at: str | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "status", JobStatus(self.status))
+        if self.verdict is not None:
+            object.__setattr__(self, "verdict", Verdict(self.verdict))
+        object.__setattr__(self, "trace", tuple(self.trace))
+
+    @property
+    def box_label(self) -> str | None:
+        return None if self.box is None else self.box.label
+
+    @property
+    def box_level(self) -> float | None:
+        return None if self.box is None else self.box.level
+
+    @property
+    def budget_label(self) -> str | None:
+        return None if self.budget is None else self.budget.label
+
+    def replace(self, **changes: Any) -> JobRow:
+        """A copy with ``changes`` (``dataclasses.replace``)."""
+        return dataclasses.replace(self, **changes)
+
+
+def _json(v: Any) -> str | None:
+    return None if v is None else json.dumps(v)
+
+
+def _to_columns(r: JobRow) -> tuple[Any, ...]:
+    c = {
+        "key": r.key, "run_id": r.run_id, "experiment": r.experiment, "kind": r.kind, "role": r.role,
+        "method": r.method, "sample_id": r.sample_id, "sample_index": r.sample_index, "box_label": r.box_label,
+        "box_level": r.box_level, "box_json": None if r.box is None else json.dumps(r.box.to_dict()),
+        "budget_label": r.budget_label, "budget_json": None if r.budget is None else json.dumps(r.budget.to_dict()),
+        "seed": r.seed, "options_json": json.dumps(dict(r.options)), "chain": r.chain, "status": r.status.value,
+        "reason": r.reason, "worst_m": r.worst_m, "worst_x_json": _json(None if r.worst_x is None else dict(r.worst_x)),
+        "verdict": None if r.verdict is None else r.verdict.value, "nfev": r.nfev, "nit": r.nit,
+        "search_status": r.search_status, "message": r.message, "search_s": r.search_s, "job_s": r.job_s,
+        "upper_bound": r.upper_bound, "bound_estimate": r.bound_estimate, "lipschitz_estimate": r.lipschitz_estimate,
+        "trace_json": json.dumps([t.to_dict() for t in r.trace]) if r.trace else None,
+        "points": None if r.points is None else r.points.to_blob(), "payload_json": _json(r.payload),
+        "finished_at": r.finished_at, "n_failed": r.n_failed,
+        "failures_json": json.dumps(dict(r.failures)) if r.failures else None, "worst_reason": r.worst_reason,
+    }
+    return tuple(c[k] for k in JOB_COLUMNS)
+
+
+def _from_columns(d: Mapping[str, Any]) -> JobRow:
+    box, budget, trace = _loads(d["box_json"]), _loads(d["budget_json"]), _loads(d.get("trace_json"))
+    blob = d.get("points")
+    return JobRow(
+        key=d["key"], experiment=d["experiment"], kind=d["kind"], role=d["role"], method=d["method"],
+        sample_id=d["sample_id"], sample_index=d["sample_index"], status=d["status"], run_id=d["run_id"],
+        box=None if box is None else BoxSpec.from_dict(box), budget=None if budget is None else Budget.from_dict(budget),
+        seed=d["seed"], options=_loads(d["options_json"]) or {}, chain=d["chain"], reason=d["reason"],
+        worst_m=d["worst_m"], worst_x=_loads(d["worst_x_json"]), verdict=d["verdict"], nfev=d["nfev"] or 0,
+        nit=d["nit"] or 0, n_failed=d["n_failed"], failures=_loads(d["failures_json"]) or {},
+        worst_reason=d["worst_reason"], search_status=d["search_status"], message=d["message"],
+        search_s=d["search_s"], job_s=d["job_s"], upper_bound=d["upper_bound"], bound_estimate=d["bound_estimate"],
+        lipschitz_estimate=d["lipschitz_estimate"], trace=tuple(TraceRow.from_dict(t) for t in trace or ()),
+        points=Points.from_blob(blob) if blob else None, payload=_loads(d["payload_json"]),
+        finished_at=d["finished_at"],
+    )
 
 
 class ResultStore:
@@ -135,7 +340,7 @@ class ResultStore:
         self._con = sqlite3.connect(str(self.path), isolation_level=None, timeout=30.0)
         self._con.execute("PRAGMA journal_mode=WAL")
         self._con.execute("PRAGMA synchronous=NORMAL")  # durable against process kills (not power loss)
-        self._con.executescript(_SCHEMA)
+        self._migrate()
 
     @classmethod
     def open_existing(cls, path: str | Path) -> ResultStore:
@@ -146,6 +351,23 @@ class ResultStore:
         if not p.is_file():
             raise FileNotFoundError(f"{p}: no results store (run `vbl-robust audit` or `reproduce` with --out first)")
         return cls(p)
+
+    def _migrate(self) -> None:
+        """Create the tables of a new store; bring an older one to :data:`SCHEMA_VERSION` (adds columns)."""
+        version = int(self._con.execute("PRAGMA user_version").fetchone()[0])
+        if version > SCHEMA_VERSION:
+            self._con.close()
+            raise ValueError(f"{self.path}: results store schema version {version} is newer than this vbl-robust's "
+                             f"({SCHEMA_VERSION}); upgrade vbl-robust to read it")
+        self._con.executescript(_SCHEMA)
+        if version == SCHEMA_VERSION:
+            return
+        have = {r[1] for r in self._con.execute("PRAGMA table_info(jobs)")}
+        with self._tx():
+            for name, kind in _ADDED_COLUMNS.items():
+                if name not in have:
+                    self._con.execute(f"ALTER TABLE jobs ADD COLUMN {name} {kind}")
+            self._con.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def close(self) -> None:
         self._con.close()
@@ -165,16 +387,31 @@ class ResultStore:
         return {"name": row[0], "spec": json.loads(row[1]), "detector": json.loads(row[2]), "created_at": row[3]}
 
     def bind_campaign(self, name: str, spec: Mapping[str, Any], detector: Mapping[str, Any]) -> None:
-        """Record the campaign on first use; refuse (``ValueError``) a different one later."""
+        """Bind the store to a campaign and detector, or check that it holds this one.
+
+        A store is bound by what was computed in it: while it holds no job row (a new store, or a run that
+        failed before its first job, e.g. on a refused model file), the campaign and detector are recorded
+        anew and samples recorded by that run are forgotten. Once it holds a job row, another campaign (spec,
+        :data:`PRESENTATION_KEYS` aside) or another detector (kind, model SHA-256) is refused (``ValueError``).
+        """
         have = self.campaign()
         spec_j = json.dumps(spec, sort_keys=True)
         det_j = json.dumps(detector, sort_keys=True)
-        if have is None:
-            with self._tx():
-                self._con.execute("INSERT INTO campaign VALUES (1, ?, ?, ?, ?)", (name, spec_j, det_j, now_iso()))
-            return
-        if json.dumps(have["spec"], sort_keys=True) != spec_j:
-            diff = _first_difference(have["spec"], json.loads(spec_j))
+        bound = have is not None and self.count() > 0
+        if bound:
+            self._check_same(have, dict(spec), detector)
+        with self._tx():
+            if not bound:
+                self._con.execute("DELETE FROM samples")
+            created = have["created_at"] if bound else now_iso()
+            self._con.execute("INSERT OR REPLACE INTO campaign VALUES (1, ?, ?, ?, ?)", (name, spec_j, det_j, created))
+
+    def _check_same(self, have: Mapping[str, Any], spec: dict[str, Any], detector: Mapping[str, Any]) -> None:
+        def shown(d: Mapping[str, Any]) -> str:
+            return json.dumps({k: v for k, v in d.items() if k not in PRESENTATION_KEYS}, sort_keys=True)
+
+        if shown(have["spec"]) != shown(spec):
+            diff = _first_difference(have["spec"], spec)
             raise ValueError(
                 f"{self.path}: holds campaign {have['name']!r} with other settings ({diff}); "
                 "rerun with the same options to resume, or use another --out"
@@ -234,20 +471,20 @@ class ResultStore:
     def count(self) -> int:
         return int(self._con.execute("SELECT COUNT(*) FROM jobs").fetchone()[0])
 
-    def commit(self, rows: Sequence[Mapping[str, Any]]) -> int:
+    def commit(self, rows: Sequence[JobRow]) -> int:
         """Insert the rows of finished jobs in one transaction; returns how many were new (duplicates ignored)."""
         if not rows:
             return 0
         sql = f"INSERT OR IGNORE INTO jobs ({', '.join(JOB_COLUMNS)}) VALUES ({', '.join('?' * len(JOB_COLUMNS))})"
         with self._tx():
             before = self._con.total_changes
-            self._con.executemany(sql, [tuple(r.get(c) for c in JOB_COLUMNS) for r in rows])
+            self._con.executemany(sql, [_to_columns(r) for r in rows])
             return self._con.total_changes - before
 
     def jobs(self, *, kind: str | None = None, role: str | None = None, with_points: bool = False,
-             with_trace: bool = True) -> list[dict[str, Any]]:
-        """Job rows as dicts with JSON decoded (``box``, ``budget``, ``worst_x``, ``trace``, ``payload``,
-        ``options``); ``xs``/``fs`` arrays when ``with_points``. Ordered by sample index, then insertion."""
+             with_trace: bool = True) -> list[JobRow]:
+        """The stored :class:`JobRow` s, ordered by sample index, then insertion; ``points`` only when
+        ``with_points`` (else None), ``trace`` only when ``with_trace`` (else empty)."""
         where, args = [], []
         if kind is not None:
             where.append("kind = ?")
@@ -258,16 +495,7 @@ class ResultStore:
         cols = [c for c in JOB_COLUMNS if (with_points or c != "points") and (with_trace or c != "trace_json")]
         sql = f"SELECT {', '.join(cols)} FROM jobs" + (f" WHERE {' AND '.join(where)}" if where else "")
         sql += " ORDER BY sample_index, rowid"
-        out = []
-        for r in self._con.execute(sql, args):
-            d = dict(zip(cols, r, strict=True))
-            for k in ("box_json", "budget_json", "options_json", "worst_x_json", "trace_json", "payload_json"):
-                if k in d:
-                    d[k.removesuffix("_json")] = _loads(d.pop(k))
-            if with_points:
-                d["xs"], d["fs"] = decode_points(d.pop("points"))
-            out.append(d)
-        return out
+        return [_from_columns(dict(zip(cols, r, strict=True))) for r in self._con.execute(sql, args)]
 
     # -- helpers ------------------------------------------------------------------------------------------
     def _tx(self) -> _Transaction:

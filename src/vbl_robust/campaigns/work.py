@@ -5,6 +5,10 @@ The unit of work is a :class:`SampleTask` (one sample + its pending jobs): the o
 yields, job after job, the rows to commit together (usually one; a breach in a chain brings the implied rows
 of the larger boxes with it, so a chain is never half-recorded).
 
+Rows are :class:`~vbl_robust.campaigns.store.JobRow` s. Every search evaluation carries its failure reason (no
+detection, PnP failure, …) from the objective into the search result and the row (``n_failed``, ``failures``,
+``worst_reason``, the reason of every stored point); the search itself sees the penalty value, as before.
+
 A sample the pipeline cannot process (unreadable image, an exception while building or evaluating the
 objective) gives a row with status "failed", its reason, worst error = the failure penalty and verdict
 "failed"; the campaign goes on.
@@ -17,22 +21,19 @@ import logging
 import math
 import time
 import traceback
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ..constants import Verdict
+from ..search.result import verdict_for
 from .provenance import DetectorSpec
 from .spec import Job
-from .store import encode_points, now_iso
+from .store import JobRow, JobStatus, Points, now_iso
 
 logger = logging.getLogger(__name__)
-
-VERDICT_BREACH = "breach"
-VERDICT_NONE = "no breach found"
-VERDICT_CERTIFIED = "certified"
-VERDICT_FAILED = "failed"
 
 _DETECTORS: dict[str, Any] = {}
 
@@ -68,85 +69,85 @@ class SampleTask:
     jobs: Sequence[Job]
 
 
-def verdict(worst: float, upper_bound: float | None, eps: float) -> str:
-    """breach (worst > ε) / certified (a sound upper bound ≤ ε) / no breach found."""
-    if math.isfinite(worst) and worst > eps:
-        return VERDICT_BREACH
-    if upper_bound is not None and math.isfinite(upper_bound) and upper_bound <= eps:
-        return VERDICT_CERTIFIED
-    return VERDICT_NONE
+def _row(job: Job, run_id: int | None, status: JobStatus, **outcome: Any) -> JobRow:
+    return JobRow(
+        key=job.key, experiment=job.experiment, kind=job.kind, role=job.role, method=job.method,
+        sample_id=job.sample_id, sample_index=job.sample_index, status=status, run_id=run_id,
+        box=job.box, budget=job.budget, seed=job.seed, options=dict(job.options), chain=job.chain,
+        finished_at=now_iso(), **outcome,
+    )
 
 
-def _base_row(job: Job, run_id: int | None) -> dict[str, Any]:
-    return {
-        "key": job.key, "run_id": run_id, "experiment": job.experiment, "kind": job.kind, "role": job.role,
-        "method": job.method, "sample_id": job.sample_id, "sample_index": job.sample_index,
-        "box_label": None if job.box is None else job.box.label,
-        "box_level": None if job.box is None else job.box.level,
-        "box_json": None if job.box is None else json.dumps(job.box.to_dict()),
-        "budget_label": None if job.budget is None else job.budget.label,
-        "budget_json": None if job.budget is None else json.dumps(job.budget.to_dict()),
-        "seed": job.seed, "options_json": json.dumps(dict(job.options)), "chain": job.chain,
-        "finished_at": now_iso(),
-    }
-
-
-def failed_row(job: Job, reason: str, settings: Settings, run_id: int | None = None, job_s: float = 0.0) -> dict[str, Any]:
-    row = _base_row(job, run_id)
-    row.update(status="failed", reason=reason, worst_m=settings.penalty_m, verdict=VERDICT_FAILED, nfev=0, nit=0,
-               job_s=job_s)
-    return row
+def failed_row(job: Job, reason: str, settings: Settings, run_id: int | None = None, job_s: float = 0.0) -> JobRow:
+    """A job that could not run: worst error = the penalty, verdict FAILED."""
+    return _row(job, run_id, JobStatus.FAILED, reason=reason, worst_m=settings.penalty_m, verdict=Verdict.FAILED,
+                n_failed=0, job_s=job_s)
 
 
 def _finite(v: float | None) -> float | None:
     return None if v is None or not math.isfinite(v) else float(v)
 
 
-def search_row(job: Job, result: Any, settings: Settings, run_id: int | None, job_s: float) -> dict[str, Any]:
+def search_row(job: Job, result: Any, settings: Settings, run_id: int | None, job_s: float) -> JobRow:
     """Row of a finished search (a :class:`~vbl_robust.search.SearchResult`)."""
-    row = _base_row(job, run_id)
     worst = float(result.fun) if math.isfinite(result.fun) else settings.penalty_m
-    ub = getattr(result, "upper_bound", None)
-    row.update(
-        status="done", reason=None, worst_m=worst,
-        worst_x_json=None if result.x is None else json.dumps(result.x_dict()),
-        verdict=verdict(worst, ub, settings.eps_safe_m), nfev=int(result.nfev), nit=int(result.nit),
+    ub = result.upper_bound
+    return _row(
+        job, run_id, JobStatus.DONE, worst_m=worst, worst_x=result.x_dict(),
+        verdict=verdict_for(worst, ub, settings.eps_safe_m), nfev=int(result.nfev), nit=int(result.nit),
+        n_failed=int(result.n_failed), failures=result.failures,
+        worst_reason=None if result.x is None else result.x_reason,
         search_status=result.status.value, message=result.message, search_s=float(result.elapsed), job_s=job_s,
         upper_bound=None if ub is None else (float(ub) if math.isfinite(ub) else 1e300),
-        bound_estimate=_finite(getattr(result, "bound_estimate", None)),
-        lipschitz_estimate=_finite(getattr(result, "lipschitz_estimate", None)),
-        trace_json=json.dumps([r.to_dict() for r in result.trace]),
-        points=encode_points(result.xs, result.fs),
+        bound_estimate=_finite(result.bound_estimate), lipschitz_estimate=_finite(result.lipschitz_estimate),
+        trace=result.trace, points=Points(result.xs, result.fs, result.reasons),
     )
-    return row
 
 
-def implied_row(job: Job, breach_row: Mapping[str, Any], settings: Settings, run_id: int | None) -> dict[str, Any]:
+def implied_row(job: Job, breach: JobRow, settings: Settings, run_id: int | None) -> JobRow:
     """A larger box of a chain after a breach at a smaller, nested box: the same breach point lies in it."""
-    row = _base_row(job, run_id)
-    row.update(status="implied", reason=f"breach found at {breach_row['box_label']}", worst_m=breach_row["worst_m"],
-               worst_x_json=breach_row.get("worst_x_json"), verdict=VERDICT_BREACH, nfev=0, nit=0, search_s=0.0,
-               job_s=0.0)
-    return row
+    return _row(job, run_id, JobStatus.IMPLIED, reason=f"breach found at {breach.box_label}", worst_m=breach.worst_m,
+                worst_x=breach.worst_x, verdict=Verdict.BREACH, worst_reason=breach.worst_reason, search_s=0.0,
+                job_s=0.0)
 
 
 def worst_details(objective: Any, x: np.ndarray) -> dict[str, Any]:
-    """What happened at the worst point (one more evaluation): failure reason ("" = a wrong pose, not a
-    detection failure), top confidence, position error and estimated position."""
+    """What the pipeline gives at the worst point (one more evaluation): top confidence, position error and
+    estimated position (the failure reason is the one the search recorded, ``JobRow.worst_reason``)."""
     rec = objective.evaluate(np.asarray(x, dtype=np.float64)[None])
     conf = float(rec.conf[0])
     err = float(rec.error_m[0])
-    return {"reason": rec.reason[0], "conf": conf if math.isfinite(conf) else None,
-            "error_m": err if math.isfinite(err) else None,
+    return {"conf": conf if math.isfinite(conf) else None, "error_m": err if math.isfinite(err) else None,
             "position": [float(v) if math.isfinite(v) else None for v in rec.position[0]]}
 
 
+def search_function(objective: Any, needs_gradient: bool) -> Callable[[Any], Any]:
+    """What a search calls on a pipeline :class:`~vbl_robust.pipeline.Objective`: per point the loss (metres, the
+    penalty where failed) and the failure reason, as :class:`~vbl_robust.search.Evaluations` —
+    ``objective.evaluate(theta)`` (black box) or ``objective.torch(theta, reasons=True)`` (gradient path)."""
+    from ..search import Evaluations
+
+    if needs_gradient:
+        def differentiable(theta: Any) -> Evaluations:
+            loss, reasons = objective.torch(theta, reasons=True)
+            return Evaluations(loss, tuple(reasons))
+
+        return differentiable
+
+    def black_box(theta: np.ndarray) -> Evaluations:
+        rec = objective.evaluate(theta)
+        return Evaluations(rec.loss, tuple(rec.reason))
+
+    return black_box
+
+
 def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
-    """Run one search job on a built objective; returns the :class:`~vbl_robust.search.SearchResult`."""
+    """Run one search job on a built objective; returns the :class:`~vbl_robust.search.SearchResult` (with the
+    failure reason of every evaluated point)."""
     from ..search import METHODS, maximize
 
     b = job.budget
-    f = objective.torch if METHODS[job.method].needs_gradient else objective
+    f = search_function(objective, METHODS[job.method].needs_gradient)
     opts = dict(job.options)
     if settings.lipschitz is not None and "lipschitz" not in opts:
         opts["lipschitz"] = settings.lipschitz
@@ -163,12 +164,12 @@ def _reason(exc: BaseException) -> str:
 
 
 def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id: int | None = None,
-                    ) -> Iterator[list[dict[str, Any]]]:
+                    ) -> Iterator[list[JobRow]]:
     """Run a sample's jobs in order; yield the rows to commit after each job."""
     from ..pipeline import Objective
 
     objectives: dict[str, Any] = {}
-    breached: dict[str, dict[str, Any]] = {}  # chain -> breaching row
+    breached: dict[str, JobRow] = {}  # chain -> breaching row
     for job in task.jobs:
         if job.chain is not None and job.chain in breached:
             continue  # recorded together with the breach
@@ -177,10 +178,8 @@ def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id:
             if job.kind == "pnp":
                 from .pnpcheck import pnp_comparison
 
-                row = _base_row(job, run_id)
-                row.update(status="done", verdict=None, payload_json=json.dumps(pnp_comparison(task.sample, detector, settings)),
-                           nfev=1, nit=1, job_s=time.perf_counter() - t0)
-                yield [row]
+                payload = pnp_comparison(task.sample, detector, settings)
+                yield [_row(job, run_id, JobStatus.DONE, payload=payload, nfev=1, nit=1, job_s=time.perf_counter() - t0)]
                 continue
             label = job.box.label
             if label not in objectives:
@@ -194,14 +193,14 @@ def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id:
                 continue
             row = search_row(job, result, settings, run_id, time.perf_counter() - t0)
             if job.role == "main" and result.x is not None and hasattr(objective, "evaluate"):
-                row["payload_json"] = json.dumps({"worst": worst_details(objective, result.x)})
+                row = row.replace(payload={"worst": worst_details(objective, result.x)})
         except Exception as exc:  # a sample the pipeline cannot handle is a recorded failure
             logger.warning("sample %s, job %s/%s failed: %s", job.sample_id, job.method, job.box and job.box.label,
                            _reason(exc))
             yield [failed_row(job, _reason(exc), settings, run_id, time.perf_counter() - t0)]
             continue
         rows = [row]
-        if job.chain is not None and row["verdict"] == VERDICT_BREACH:
+        if job.chain is not None and row.verdict is Verdict.BREACH:
             breached[job.chain] = row
             rows += [implied_row(j, row, settings, run_id) for j in task.jobs
                      if j.chain == job.chain and j.box.level > job.box.level]

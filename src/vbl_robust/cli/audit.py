@@ -170,11 +170,13 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
         heads = {"method": "method", "box_label": "box", "budget_label": "budget"}
         for c in cols:
             table.add_column(heads[c])
-        for col in ("images", "survival %", "median worst (m)", "breaches", "failed"):
+        for col in ("images", "survival %", "median worst (m)", "breaches", "failed jobs", "failed evals"):
             table.add_column(col, justify="right")
         for line in lines:
+            fe = line.get("failed_evals")
             table.add_row(*(str(line[c]) for c in cols), str(line["n"]), f"{line['survival']:.1f}",
-                          f"{line['median_worst_m']:.1f}", str(line["breaches"]), str(line["failed"]))
+                          f"{line['median_worst_m']:.1f}", str(line["breaches"]), str(line["failed"]),
+                          "–" if fe is None else str(fe))
         Console().print(table)
     status = f"{summary.done} new jobs, {summary.skipped} already done, {summary.failed} failed, {summary.seconds:.0f} s"
     typer.echo(f"{spec.name}: {status}; results in {out / 'results.sqlite'}")

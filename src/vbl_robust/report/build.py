@@ -3,6 +3,12 @@
 The report is rebuilt from the store alone: every figure is drawn from the stored rows, every figure comes with
 the table of the numbers behind it, and the provenance of every run (code version, model SHA-256, dataset
 identity, configuration) closes the page. Figures are also written as PNG files next to the report.
+
+Which figures: the ones the campaign spec declares (``CampaignSpec.figures``, see
+:data:`vbl_robust.campaigns.spec.FIGURES`; a spec stored without a declaration gets
+:func:`~vbl_robust.campaigns.spec.default_figures` of its blocks), each drawn by its entry of :data:`SECTIONS`
+from the rows it needs; a declared figure without data is left out. The summary always shows the failed
+evaluations (``n_failed``) and their counts per failure reason.
 """
 
 from __future__ import annotations
@@ -10,7 +16,7 @@ from __future__ import annotations
 import json
 import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,13 +25,18 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..campaigns import metrics as mx
-from ..campaigns.experiments import DISTANCE_BUDGETS_DEG, EXPERIMENTS, ROLL_LIMIT_DEG
-from ..campaigns.spec import CampaignSpec
-from ..campaigns.store import ResultStore
+from ..campaigns.experiments import EXPERIMENTS
+from ..campaigns.spec import FIGURES, BoxSpec, CampaignSpec
+from ..campaigns.store import JobRow, JobStatus, ResultStore
+from ..constants import FAILURE_REASONS, Verdict
+from ..search import NON_FINITE
 from . import figures as F
 from .html import esc, figure_png, fmt_num, img, page, table
 
 logger = logging.getLogger(__name__)
+
+#: Search methods whose traces hold |PO_k| and RA(k).
+DIRECT_FAMILY = ("georobust", "direct", "direct-l")
 
 
 @dataclass
@@ -41,7 +52,7 @@ class Context:
     store: ResultStore
     spec: CampaignSpec
     out_dir: Path
-    main: list[dict[str, Any]]
+    main: list[JobRow]
     samples: dict[str, dict[str, Any]]
     figures: list[Path] = field(default_factory=list)
 
@@ -63,7 +74,7 @@ _SUMMARY_COLS = [
     ("method", "method", None), ("box_label", "box", None), ("budget_label", "budget per image", None),
     ("n", "images", None), ("survival", "survival %", None), ("median_worst_m", "median worst (m)", None),
     ("breaches", "breaches", None), ("certified", "certified", None), ("failed", "failed", None),
-    ("mean_nfev", "mean evals", None), ("median_search_s", "median s", None),
+    ("mean_nfev", "mean evals", None), ("failed_evals", "failed evals", None), ("median_search_s", "median s", None),
 ]
 
 
@@ -71,15 +82,31 @@ def _summary_table(summary: Sequence[Mapping[str, Any]]) -> str:
     return table(summary, _SUMMARY_COLS, left=("method", "box_label", "budget_label"))
 
 
-def _reference(ctx: Context, boxes: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+def _failures_table(summary: Sequence[Mapping[str, Any]], penalty_m: float) -> str:
+    """Failed evaluations per reason and group (the search used the penalty for them), with the codes' meaning."""
+    codes = sorted({c for line in summary for c in line["failures"]})
+    if not codes:
+        return ""
+    lines = [{**line, **{f"reason:{c}": line["failures"].get(c, 0) for c in codes}} for line in summary]
+    cols = [("method", "method", None), ("box_label", "box", None), ("budget_label", "budget per image", None),
+            ("nfev", "evaluations", None), ("failed_evals", "failed", None),
+            *[(f"reason:{c}", c, None) for c in codes]]
+    meaning = {**FAILURE_REASONS, NON_FINITE: "the objective returned NaN or ±inf"}
+    legend = "; ".join(f"<code>{esc(c)}</code>: {esc(meaning.get(c, c))}" for c in codes)
+    return (f"<p>Failed evaluations by reason (each counts in the search with the {penalty_m:g} m penalty): "
+            f"{legend}.</p>" + table(lines, cols, left=("method", "box_label", "budget_label")))
+
+
+def _reference(ctx: Context, boxes: Sequence[BoxSpec]) -> list[JobRow]:
     ref = ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
     return mx.reference_rows(ref, boxes, ctx.eps, ctx.spec.penalty_m)
 
 
-def _main_boxes(ctx: Context) -> list[dict[str, Any]]:
-    seen: dict[str, dict[str, Any]] = {}
+def _main_boxes(ctx: Context) -> list[BoxSpec]:
+    seen: dict[str, BoxSpec] = {}
     for r in ctx.main:
-        seen.setdefault(r["box_label"], r["box"])
+        if r.box is not None:
+            seen.setdefault(r.box.label, r.box)
     return list(seen.values())
 
 
@@ -108,26 +135,30 @@ def section_overview(ctx: Context, title: str) -> Section:
         s.html.append(f'<p class="warn">The campaign is incomplete ({n_done} of {total} jobs): rerun the same '
                       "command to resume.</p>")
     if ctx.main:
-        s.html.append(_summary_table(mx.summarize(ctx.main, ctx.eps)))
-    failed = [r for r in ctx.store.jobs(with_trace=False) if r["status"] == "failed"]
+        summary = mx.summarize(ctx.main, ctx.eps)
+        s.html.append(_summary_table(summary))
+        s.html.append(_failures_table(summary, ctx.spec.penalty_m))
+    failed = [r for r in ctx.store.jobs(with_trace=False) if r.status is JobStatus.FAILED]
     if failed:
         s.html.append(f'<p class="warn">{len(failed)} job(s) failed and count with the {ctx.spec.penalty_m:g} m '
                       "penalty (never as survivors):</p>")
-        s.html.append(table(failed[:50], [("sample_id", "sample", None), ("method", "method", None),
-                                          ("box_label", "box", None), ("reason", "reason", None)],
+        lines = [{"sample_id": r.sample_id, "method": r.method, "box_label": r.box_label, "reason": r.reason}
+                 for r in failed[:50]]
+        s.html.append(table(lines, [("sample_id", "sample", None), ("method", "method", None),
+                                    ("box_label", "box", None), ("reason", "reason", None)],
                             left=("sample_id", "method", "box_label", "reason")))
     return s
 
 
 def section_survival_level(ctx: Context) -> Section | None:
-    rows = [r for r in ctx.main if r.get("chain") is None]
-    if len({r["box_level"] for r in rows}) < 2:
+    rows = [r for r in ctx.main if r.chain is None]
+    if len({r.box_level for r in rows}) < 2:
         return None
     boxes = _main_boxes(ctx)
     summary = mx.summarize(rows, ctx.eps, by=("method", "box_label"))
     ref = mx.summarize(_reference(ctx, boxes), ctx.eps, by=("method", "box_label"))
-    two_d = any(len(b["box"]["bounds"]) > 1 for b in boxes)
-    ticks = {b["level"]: b["label"] for b in boxes} if two_d else None
+    two_d = any(b.box.dim > 1 for b in boxes)
+    ticks = {b.level: b.label for b in boxes} if two_d else None
     title = "Survival vs roll and contrast budget" if two_d else "Survival vs roll budget"
     s = Section(title)
     fig = F.survival_vs_level(summary + ref, title=title, tick_labels=ticks,
@@ -140,26 +171,26 @@ def section_survival_level(ctx: Context) -> Section | None:
 
 
 def section_runtime(ctx: Context) -> Section | None:
-    rows = [r for r in ctx.main if r.get("budget")]
-    time_rows = [r for r in rows if r["budget"].get("max_seconds") is not None]
-    eval_rows = [r for r in rows if r["budget"].get("max_seconds") is None and r["budget"].get("max_evals") is not None]
-    if len({r["budget_label"] for r in time_rows}) < 2 and len({r["budget_label"] for r in eval_rows}) < 2:
+    rows = [r for r in ctx.main if r.budget is not None]
+    time_rows = [r for r in rows if r.budget.max_seconds is not None]
+    eval_rows = [r for r in rows if r.budget.max_seconds is None and r.budget.max_evals is not None]
+    if len({r.budget_label for r in time_rows}) < 2 and len({r.budget_label for r in eval_rows}) < 2:
         return None
     boxes = _main_boxes(ctx)
     ref_rows = _reference(ctx, boxes)
     ref = None
     if ref_rows:
-        w = [r["worst_m"] for r in ref_rows]
+        w = [r.worst_m for r in ref_rows]
         ref = {"survival": mx.survival_rate(w, ctx.eps), "median_worst_m": float(np.median(w))}
-    box_label = boxes[0]["label"] if boxes else ""
+    box_label = boxes[0].label if boxes else ""
     s = Section(f"Runtime budgets ({box_label})")
     for axis, rs, name in (("max_seconds", time_rows, "time"), ("max_evals", eval_rows, "evals")):
-        if len({r["budget_label"] for r in rs}) < 2:
+        if len({r.budget_label for r in rs}) < 2:
             continue
         summary = mx.summarize(rs, ctx.eps, by=("method", "budget_label"))
         for line in summary:
             line["box_label"] = box_label
-        dims = "2d" if boxes and len(boxes[0]["box"]["bounds"]) > 1 else "1d"
+        dims = "2d" if boxes and boxes[0].box.dim > 1 else "1d"
         fig = F.runtime(summary, axis=axis, eps_safe_m=ctx.eps, reference=ref,
                         title=f"{'Time' if axis == 'max_seconds' else 'Evaluation'} budget per image, box {box_label}")
         s.html.append(ctx.figure(fig, f"runtime_{dims}_{name}",
@@ -173,12 +204,12 @@ def section_runtime(ctx: Context) -> Section | None:
 
 
 def section_distance(ctx: Context) -> Section | None:
-    rows = [r for r in ctx.main if r.get("chain") is not None]
+    rows = [r for r in ctx.main if r.chain is not None]
     if not rows:
         return None
     distances = {sid: s["slant_distance_m"] for sid, s in ctx.samples.items()}
-    budgets = sorted({r["box_level"] for r in rows}) or list(DISTANCE_BUDGETS_DEG)
-    limit = max(budgets) if budgets else ROLL_LIMIT_DEG
+    budgets = sorted({r.box_level for r in rows})
+    limit = max(budgets)
     ref = _reference(ctx, _main_boxes(ctx))
     profile = mx.distance_profile(rows + ref, distances, budgets)
     s = Section("Vulnerability profile by approach distance")
@@ -199,9 +230,8 @@ def section_distance(ctx: Context) -> Section | None:
 
 
 def section_convergence(ctx: Context) -> Section | None:
-    rows = [r for r in ctx.main if r["method"] in ("georobust", "direct", "direct-l")]
-    conv = mx.convergence(rows)
-    if not conv or ctx.spec.name not in ("convergence", "audit"):
+    conv = mx.convergence([r for r in ctx.main if r.method in DIRECT_FAMILY])
+    if not conv:
         return None
     s = Section("GeoRobust convergence: |PO_k| and RA(k)")
     s.html.append(ctx.figure(F.convergence(conv, title="GeoRobust convergence"), "convergence",
@@ -233,7 +263,7 @@ def section_pnp(ctx: Context) -> Section | None:
                                   ("mae_abs_m", "MAE (m)", None), ("median_rel_pct", "median (%)", None),
                                   ("mae_rel_pct", "MAE (%)", None), ("p95_rel_pct", "95th pct (%)", None)],
                         left=("source", "solver")))
-    cos = [r["payload"].get("grad_cosine_bpnp_vs_exact") for r in rows if r.get("payload")]
+    cos = [r.payload.get("grad_cosine_bpnp_vs_exact") for r in rows if r.payload]
     cos = [c for c in cos if c is not None]
     if cos:
         s.html.append(f"<p>Gradient agreement of the differentiable layer's BPnP mode with the exact implicit "
@@ -242,92 +272,94 @@ def section_pnp(ctx: Context) -> Section | None:
     return s
 
 
+def _evaluated(r: JobRow) -> bool:
+    return r.status is JobStatus.DONE and r.points is not None and len(r.points) > 0
+
+
 def section_landscapes(ctx: Context) -> Section | None:
     grids = ctx.store.jobs(kind="search", role="landscape", with_points=True, with_trace=False)
     if not grids:
         refs = [r for r in ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
-                if r["status"] == "done" and len(r["fs"])]
+                if _evaluated(r)]
         grids = [_interesting(refs, ctx.eps)] if refs else []
-    grids = [g for g in grids if g["status"] == "done" and len(g["fs"])]
+    grids = [g for g in grids if _evaluated(g)]
     if not grids:
         return None
     s = Section("Loss landscape of one image")
+    runs = ctx.store.jobs(kind="search", role="main", with_points=True, with_trace=False)
     for g in grids[:2]:
-        names = list(g["box"]["box"]["bounds"])
-        sid = g["sample_id"]
-        pts = ctx.store.jobs(kind="search", role="main", with_points=True, with_trace=False)
-        same = [r for r in pts if r["sample_id"] == sid and r["status"] == "done"
-                and list(r["box"]["box"]["bounds"]) == names]
+        names = list(g.box.box.names)
+        sid = g.sample_id
+        same = [r for r in runs if r.sample_id == sid and _evaluated(r) and list(r.box.box.names) == names]
         # the methods' runs on the grid's box, else on the largest box inside it
-        on_box = [r for r in same if r["box"]["box"]["bounds"] == g["box"]["box"]["bounds"]]
+        on_box = [r for r in same if r.box.box.bounds() == g.box.box.bounds()]
         if not on_box and same:
-            top = max(r["box_level"] for r in same)
-            on_box = [r for r in same if r["box_level"] == top]
+            top = max(r.box_level for r in same)
+            on_box = [r for r in same if r.box_level == top]
         # per method one run: evaluation budgets before time budgets (a time budget can mean thousands of
         # points), then the largest
-        first: dict[str, dict[str, Any]] = {}
-        for r in sorted(on_box, key=lambda r: ((r.get("budget") or {}).get("max_seconds") is not None, -(r.get("nfev") or 0))):
-            first.setdefault(r["method"], r)
-        by_method = {m: first[m] for m in F._methods(list(first.values()))}
+        first: dict[str, JobRow] = {}
+        for r in sorted(on_box, key=lambda r: (r.budget.max_seconds is not None, -r.nfev)):
+            first.setdefault(r.method, r)
+        by_method = {m: first[m] for m in F.method_order(first)}
         dist = ctx.samples.get(sid, {}).get("slant_distance_m")
         where = f"image {sid}" + (f" (slant distance {dist:.0f} m)" if dist else "")
+        xs, fs = g.points.xs, g.points.fs
         if len(names) == 2:
-            fig = F.landscape_2d(g["xs"], g["fs"], names, {m: r["xs"] for m, r in by_method.items()}, eps_safe_m=ctx.eps,
-                                 worst={m: r["xs"][int(np.nanargmax(r["fs"]))] if len(r["fs"]) else None
-                                        for m, r in by_method.items()},
-                                 title=f"L over {g['box_label']}, {where}")
+            fig = F.landscape_2d(xs, fs, names, {m: r.points.xs for m, r in by_method.items()}, eps_safe_m=ctx.eps,
+                                 worst={m: r.points.xs[int(np.nanargmax(r.points.fs))] for m, r in by_method.items()},
+                                 title=f"L over {g.box_label}, {where}")
             name = "landscape_2d"
         else:
-            fig = F.landscape_1d(g["xs"], g["fs"], names[0], {m: (r["xs"], r["fs"]) for m, r in by_method.items()},
-                                 eps_safe_m=ctx.eps, title=f"L over {g['box_label']}, {where}")
+            fig = F.landscape_1d(xs, fs, names[0], {m: (r.points.xs, r.points.fs) for m, r in by_method.items()},
+                                 eps_safe_m=ctx.eps, title=f"L over {g.box_label}, {where}")
             name = "landscape_1d"
-        lab = ", ".join(f"{F.style(m)['label']} on {r['box_label']} ({r['budget_label']})" for m, r in by_method.items())
+        lab = ", ".join(f"{F.style(m)['label']} on {r.box_label} ({r.budget_label})" for m, r in by_method.items())
         part = "" if mx.grid_complete(g) else (f", evaluated from the centre outwards and stopped at its first "
-                                               f"breach after {len(g['fs'])} of {g['budget']['max_evals']} points")
-        s.html.append(ctx.figure(fig, name, f"Dense grid of {len(g['fs'])} points ({esc(g['box_label'])}{part}); "
+                                               f"breach after {len(fs)} of {g.budget.max_evals} points")
+        s.html.append(ctx.figure(fig, name, f"Dense grid of {len(fs)} points ({esc(g.box_label)}{part}); "
                                             "markers: "
                                             f"the points each method evaluated — {esc(lab)}; stars: each method's worst "
                                             "point. Red: the ε_safe level set."))
-        lines = [{"method": F.style(m)["label"], "box": r["box_label"], "budget": r["budget_label"], "nfev": r["nfev"],
-                  "worst": r["worst_m"], "x": _theta(r["worst_x"]), "verdict": r["verdict"]} for m, r in by_method.items()]
-        lines.append({"method": "dense grid", "box": g["box_label"], "budget": g["budget_label"], "nfev": g["nfev"],
-                      "worst": g["worst_m"], "x": _theta(g["worst_x"]), "verdict": g["verdict"]})
+        lines = [{"method": F.style(m)["label"], "box": r.box_label, "budget": r.budget_label, "nfev": r.nfev,
+                  "worst": r.worst_m, "x": _theta(r.worst_x), "verdict": r.verdict} for m, r in by_method.items()]
+        lines.append({"method": "dense grid", "box": g.box_label, "budget": g.budget_label, "nfev": g.nfev,
+                      "worst": g.worst_m, "x": _theta(g.worst_x), "verdict": g.verdict})
         s.html.append(table(lines, [("method", "method", None), ("box", "box", None), ("budget", "budget", None),
                                     ("nfev", "evals", None), ("worst", "worst (m)", None), ("x", "worst θ", esc),
                                     ("verdict", "verdict", None)], left=("method", "box", "budget", "x", "verdict")))
     return s
 
 
-def _interesting(grids: Sequence[dict[str, Any]], eps: float) -> dict[str, Any]:
+def _interesting(grids: Sequence[JobRow], eps: float) -> JobRow:
     """The 1-D reference grid worth drawing: an image that survives unperturbed (L(0) ≤ ε) but breaches somewhere
     in the box, with its breach region smallest; else the surviving image with the largest worst value."""
-    def nominal(g: dict[str, Any]) -> float:
-        i = int(np.argmin(np.abs(g["xs"][:, 0])))
-        return float(g["fs"][i]) if np.isfinite(g["fs"][i]) else math.inf
+    def nominal(g: JobRow) -> float:
+        i = int(np.argmin(np.abs(g.points.xs[:, 0])))
+        return float(g.points.fs[i]) if np.isfinite(g.points.fs[i]) else math.inf
 
     ok = [g for g in grids if nominal(g) <= eps]
     if not ok:
         return grids[0]
-    breach = [g for g in ok if np.nanmax(g["fs"]) > eps]
+    breach = [g for g in ok if np.nanmax(g.points.fs) > eps]
     if breach:
-        return min(breach, key=lambda g: (np.mean(np.where(np.isfinite(g["fs"]), g["fs"], math.inf) > eps), g["sample_index"]))
-    return max(ok, key=lambda g: np.nanmax(g["fs"]))
+        return min(breach, key=lambda g: (np.mean(np.where(np.isfinite(g.points.fs), g.points.fs, math.inf) > eps),
+                                          g.sample_index))
+    return max(ok, key=lambda g: np.nanmax(g.points.fs))
 
 
 def section_best_vs_evals(ctx: Context) -> Section | None:
-    if ctx.spec.name != "audit" or not ctx.main:
-        return None
-    rows = [r for r in ctx.main if r["status"] == "done" and r.get("trace")]
+    rows = [r for r in ctx.main if r.status is JobStatus.DONE and r.trace]
     if not rows:
         return None
-    n_max = max(r["nfev"] for r in rows)
+    n_max = max(r.nfev for r in rows)
     grid_n = np.unique(np.linspace(1, max(n_max, 1), 200).astype(int))
     curves = {}
-    for m in F._methods(rows):
+    for m in F.method_order(r.method for r in rows):
         mats = []
-        for r in (r for r in rows if r["method"] == m):
-            n = np.array([t["nfev"] for t in r["trace"]])
-            b = np.array([np.nan if t["best_value"] is None else t["best_value"] for t in r["trace"]])
+        for r in (r for r in rows if r.method == m):
+            n = np.array([t.nfev for t in r.trace])
+            b = np.array([t.best_value for t in r.trace], dtype=np.float64)
             idx = np.searchsorted(n, grid_n, side="right") - 1
             v = np.where(idx >= 0, b[np.clip(idx, 0, None)], np.nan)
             v[grid_n > n[-1]] = b[-1]  # stopped early (breach): keeps its best
@@ -344,26 +376,27 @@ def section_best_vs_evals(ctx: Context) -> Section | None:
 
 
 def section_per_image(ctx: Context) -> Section | None:
-    if ctx.spec.name != "audit" or not ctx.main:
+    if not ctx.main:
         return None
-    methods = F._methods(ctx.main)
+    methods = F.method_order(r.method for r in ctx.main)
     by: dict[str, dict[str, Any]] = {}
     for r in ctx.main:
-        line = by.setdefault(r["sample_id"], {"sample_id": r["sample_id"], **_sample_cols(ctx, r["sample_id"])})
-        line[f"{r['method']}_worst"] = r["worst_m"]
-        line[f"{r['method']}_verdict"] = r["verdict"]
-        line[f"{r['method']}_x"] = _theta(r.get("worst_x"))
+        line = by.setdefault(r.sample_id, {"sample_id": r.sample_id, **_sample_cols(ctx, r.sample_id)})
+        line[f"{r.method}_worst"] = r.worst_m
+        line[f"{r.method}_verdict"] = r.verdict
+        line[f"{r.method}_x"] = _theta(r.worst_x)
     lines = list(by.values())
     for line in lines:
         line["worst"] = max(line.get(f"{m}_worst", -math.inf) for m in methods)
-        line["verdict"] = ("breach" if line["worst"] > ctx.eps else
-                           "certified" if any(line.get(f"{m}_verdict") == "certified" for m in methods) else "no breach found")
+        line["verdict"] = (Verdict.BREACH if line["worst"] > ctx.eps else
+                           Verdict.CERTIFIED if any(line.get(f"{m}_verdict") is Verdict.CERTIFIED for m in methods)
+                           else Verdict.NO_BREACH_FOUND)
     cols = [("sample_id", "image", None), ("slant_distance_m", "slant dist. (m)", None), ("envelope", "envelope", None)]
     for m in methods:
         cols += [(f"{m}_worst", f"{F.style(m)['label']} worst (m)", None), (f"{m}_x", "at θ", esc)]
     cols += [("worst", "worst of all (m)", None), ("verdict", "verdict", None)]
     s = Section("Per image: worst case found")
-    s.html.append(table(lines, cols, row_class=lambda r: "breach" if r["verdict"] == "breach" else "",
+    s.html.append(table(lines, cols, row_class=lambda r: "breach" if r["verdict"] is Verdict.BREACH else "",
                         left=("sample_id", "envelope", "verdict", *[f"{m}_x" for m in methods])))
     return s
 
@@ -399,8 +432,12 @@ def section_provenance(ctx: Context) -> Section:
     return s
 
 
-SECTIONS = (section_pnp, section_survival_level, section_runtime, section_distance, section_convergence,
-            section_landscapes, section_best_vs_evals, section_per_image)
+#: The section drawing each figure a campaign can declare (``CampaignSpec.figures``), in report order.
+SECTIONS: dict[str, Callable[[Context], Section | None]] = {
+    "pnp": section_pnp, "survival": section_survival_level, "runtime": section_runtime, "distance": section_distance,
+    "convergence": section_convergence, "landscape": section_landscapes, "progress": section_best_vs_evals,
+    "per_image": section_per_image,
+}
 
 
 def build_report(run: str | Path, out: str | Path | None = None) -> Path:
@@ -417,7 +454,8 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
         exp = EXPERIMENTS.get(spec.name)
         title = exp.title if exp else "Robustness audit"
         sections = [section_overview(ctx, title)]
-        for build in SECTIONS:
+        declared = spec.report_figures
+        for build in (SECTIONS[name] for name in FIGURES if name in declared):
             try:
                 sec = build(ctx)
             except Exception:  # one broken section must not hide the others

@@ -8,7 +8,7 @@ method (:data:`STYLE`), the dense-grid reference (true worst case up to the grid
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import matplotlib
@@ -42,9 +42,14 @@ def style(method: str) -> dict[str, Any]:
     return {"linestyle": "-", **s}
 
 
-def _methods(rows: Sequence[Mapping[str, Any]]) -> list[str]:
-    ms = list(dict.fromkeys(r["method"] for r in rows))
+def method_order(methods: Iterable[str]) -> list[str]:
+    """The distinct ``methods`` in plotting order (the order of :data:`STYLE`, the reference last)."""
+    ms = list(dict.fromkeys(methods))
     return sorted(ms, key=lambda m: (m == REFERENCE, list(STYLE).index(m) if m in STYLE else 99, m))
+
+
+def _methods(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    return method_order(r["method"] for r in rows)
 
 
 _PLAIN = FuncFormatter(lambda v, _: f"{v:g}")
@@ -260,7 +265,7 @@ def landscape_2d(xs: np.ndarray, fs: np.ndarray, names: Sequence[str], overlays:
     cb.set_label("position error L (m), log scale (values < 1 cm shown at 1 cm)")
     if np.nanmax(g) > eps_safe_m > np.nanmin(g):
         ax.contour(u0, u1, g, levels=[eps_safe_m], colors="#ff4040", linewidths=1.4)
-    for m in _methods([{"method": m} for m in overlays]):
+    for m in method_order(overlays):
         pts = overlays[m]
         if len(pts):
             st = style(m)
@@ -285,7 +290,7 @@ def landscape_1d(xs: np.ndarray, fs: np.ndarray, name: str, overlays: Mapping[st
     fig, ax = _fig(size=(8.0, 4.0))
     o = np.argsort(xs[:, 0])
     ax.plot(xs[o, 0], np.clip(fs[o], 1e-2, None), color="black", linewidth=1.0, label="dense grid")
-    for m in _methods([{"method": m} for m in overlays]):
+    for m in method_order(overlays):
         px, pf = overlays[m]
         if len(px):
             st = style(m)

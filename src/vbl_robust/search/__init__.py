@@ -1,6 +1,8 @@
 """Searches that maximise a batched function over a :class:`~vbl_robust.space.ParameterBox`.
 
-They know nothing of images: ``f`` maps ``(n, d)`` real-unit points to ``(n,)`` values. Every method has the
+They know nothing of images: ``f`` maps ``(n, d)`` real-unit points to ``(n,)`` values, or to
+:class:`Evaluations` (values and a failure reason per point: a failed evaluation is a recorded state, counted
+per reason in :attr:`SearchResult.failures`). Every method has the
 same ask/tell interface (:class:`Optimizer`) and is registered by name in :data:`METHODS`:
 ``"georobust"``, ``"direct"``, ``"direct-l"`` (the DIRECT family), ``"random"``, ``"sobol"``, ``"apgd"``
 (needs a torch-differentiable ``f``) and ``"grid"`` (ground truth in low dimension).
@@ -18,6 +20,7 @@ from .api import METHODS, make_optimizer, maximize, method_options
 from .base import Optimizer
 from .bounds import sound_upper_bound
 from .direct import Direct, DirectL, GeoRobust
+from .evaluations import NON_FINITE, Evaluations
 from .po import potentially_optimal
 from .result import SearchResult, Status, TraceRow, Verdict
 from .sampling import GridSearch, RandomSearch, SobolSearch
@@ -25,8 +28,10 @@ from .sampling import GridSearch, RandomSearch, SobolSearch
 __all__ = [
     "APGD",
     "METHODS",
+    "NON_FINITE",
     "Direct",
     "DirectL",
+    "Evaluations",
     "GeoRobust",
     "GridSearch",
     "Optimizer",

@@ -12,6 +12,7 @@ from ..space import ParameterBox
 from .apgd import APGD
 from .base import Optimizer
 from .direct import Direct, DirectL, GeoRobust
+from .evaluations import Evaluations, split
 from .result import SearchResult, TraceRow
 from .sampling import GridSearch, RandomSearch, SobolSearch
 
@@ -74,7 +75,10 @@ def maximize(
             ``requires_grad=True`` and must return a ``(n,)`` tensor connected to it by autograd, each value
             depending on its own row only (the gradient is taken of the sum). An object with a callable
             ``torch`` attribute (such as :class:`vbl_robust.Objective`) is called through it for ``"apgd"``
-            and directly for the other methods. NaN/inf values are failed evaluations, never errors.
+            and directly for the other methods. Either kind of ``f`` may instead return
+            :class:`~vbl_robust.search.Evaluations` (the values as above, and a failure reason per point, ``""``
+            = success): the search uses the values, the result counts the failures per reason. NaN/inf values
+            are failed evaluations, never errors.
         box: the search space.
         method: a key of :data:`METHODS`.
         max_evals, max_iters, max_seconds: budgets; at least one is required. ``max_evals`` is never
@@ -124,14 +128,19 @@ def _as_values(y: Any, n: int) -> np.ndarray:
     return v
 
 
-def _values_only(f: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], tuple[np.ndarray, None]]:
-    def evaluate(x: np.ndarray) -> tuple[np.ndarray, None]:
-        return _as_values(f(x), len(x)), None
+def _with_reasons(values: np.ndarray, reasons: tuple[str, ...] | None) -> np.ndarray | Evaluations:
+    return values if reasons is None else Evaluations(values, reasons)
+
+
+def _values_only(f: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], tuple[np.ndarray | Evaluations, None]]:
+    def evaluate(x: np.ndarray) -> tuple[np.ndarray | Evaluations, None]:
+        y, reasons = split(f(x))
+        return _with_reasons(_as_values(y, len(x)), reasons), None
 
     return evaluate
 
 
-def _with_gradient(f: Callable[[Any], Any], method: str) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
+def _with_gradient(f: Callable[[Any], Any], method: str) -> Callable[[np.ndarray], tuple[Any, np.ndarray]]:
     import torch
 
     hint = (
@@ -139,11 +148,11 @@ def _with_gradient(f: Callable[[Any], Any], method: str) -> Callable[[np.ndarray
         "with requires_grad=True and must return a (n,) tensor computed from it with torch operations"
     )
 
-    def evaluate(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def evaluate(x: np.ndarray) -> tuple[np.ndarray | Evaluations, np.ndarray]:
         xt = torch.tensor(x, dtype=torch.float64, requires_grad=True)
         with torch.enable_grad():
             try:
-                y = f(xt)
+                y, reasons = split(f(xt))
             except (TypeError, RuntimeError) as e:
                 raise ValueError(f"{hint}; calling f failed: {e}") from e
             if not isinstance(y, torch.Tensor):
@@ -155,6 +164,7 @@ def _with_gradient(f: Callable[[Any], Any], method: str) -> Callable[[np.ndarray
             (g,) = torch.autograd.grad(y.sum(), xt, allow_unused=True)
         if g is None:
             raise ValueError(f"{hint}; the returned tensor does not depend on the input")
-        return y.detach().cpu().numpy().astype(np.float64), g.detach().cpu().numpy().astype(np.float64)
+        values = y.detach().cpu().numpy().astype(np.float64)
+        return _with_reasons(values, reasons), g.detach().cpu().numpy().astype(np.float64)
 
     return evaluate

@@ -6,8 +6,12 @@ implement two hooks on the unit cube:
 * ``_ask(remaining) -> (n, d)`` unit-cube points of the next batch (all points of one iteration), with
   ``n <= remaining`` when an evaluation budget is set; an empty batch means "nothing left" (the subclass may
   call :meth:`Optimizer._finish` first to say why).
-* ``_tell(u, values, failed, grad)`` with the batch's unit-cube points, raw values, a failure mask
-  (value NaN/±inf) and, for gradient methods, the gradient w.r.t. the *real-unit* point.
+* ``_tell(u, values, failed, grad)`` with the batch's unit-cube points, raw values, a mask of the values the
+  method cannot use (NaN/±inf) and, for gradient methods, the gradient w.r.t. the *real-unit* point.
+
+Failures: :meth:`Optimizer.tell` takes plain values or :class:`~vbl_robust.search.evaluations.Evaluations`
+(values + failure reasons). The method sees the values only, so a point failed with a finite penalty is
+searched like any other; the bookkeeping records every point's reason and counts failures (``n_failed``).
 
 Budgets: ``max_evals`` is never exceeded (subclasses size their batches to fit); ``max_iters`` counts batches;
 ``max_seconds`` is checked between batches (a batch is never interrupted), the clock starting at the first ask.
@@ -24,6 +28,7 @@ import numpy as np
 
 from ..space import ParameterBox
 from .bounds import check_lipschitz, sound_upper_bound
+from .evaluations import Evaluations, recorded_reasons, split
 from .result import SearchResult, Status, TraceRow, Verdict, verdict_for
 
 logger = logging.getLogger(__name__)
@@ -105,8 +110,10 @@ class Optimizer:
         self.trace: list[TraceRow] = []
         self._xs: list[np.ndarray] = []
         self._fs: list[np.ndarray] = []
+        self._reasons: list[str] = []
         self._best_value = math.nan
         self._best_x: np.ndarray | None = None
+        self._best_reason = ""
         self._t0: float | None = None
         self._t_last = 0.0
         self._pending: tuple[np.ndarray, np.ndarray] | None = None  # (real, unit) of the last ask
@@ -142,10 +149,12 @@ class Optimizer:
         self._pending = (x, u)
         return x.copy()
 
-    def tell(self, x: np.ndarray, values: np.ndarray, *, grad: np.ndarray | None = None) -> None:
+    def tell(self, x: np.ndarray, values: np.ndarray | Evaluations, *, grad: np.ndarray | None = None) -> None:
         """Record the values ``(n,)`` of the batch ``x`` ``(n, d)`` returned by the last :meth:`ask`.
 
-        NaN/±inf values are failed evaluations (recorded, never the best). ``grad`` ``(n, d)`` is the gradient
+        ``values``: ``(n,)`` values, or :class:`Evaluations` (values and a failure reason per point, ``""`` =
+        success). A point with a reason is a failed evaluation whose value the search still uses; NaN/±inf
+        values are failed evaluations too (recorded, never the best). ``grad`` ``(n, d)`` is the gradient
         w.r.t. the real-unit point, required by gradient methods (``needs_gradient``) and ignored otherwise.
         """
         if self._pending is None:
@@ -154,11 +163,13 @@ class Optimizer:
         x = np.asarray(x, dtype=np.float64)
         if x.shape != xr.shape or not np.array_equal(x, xr):
             raise ValueError(f"tell: x must be the batch returned by the last ask() (shape {xr.shape}), got shape {x.shape}")
+        values, given = split(values)
         v = np.asarray(values, dtype=np.float64)
         if v.shape != (len(xr),):
             v = v.reshape(-1) if v.size == len(xr) else v
         if v.shape != (len(xr),):
             raise ValueError(f"tell: values must have shape ({len(xr)},), got {np.shape(values)}")
+        reasons = recorded_reasons(v, given)
         if grad is not None:
             grad = np.asarray(grad, dtype=np.float64)
             if grad.shape != xr.shape:
@@ -169,13 +180,14 @@ class Optimizer:
         failed = ~np.isfinite(v)
         self._xs.append(xr)
         self._fs.append(v.copy())
+        self._reasons.extend(reasons)
         self.nfev += len(v)
         self.nit += 1
-        self.n_failed += int(failed.sum())
+        self.n_failed += sum(1 for r in reasons if r)
         if not failed.all():
             i = int(np.argmax(np.where(failed, -np.inf, v)))
             if self._best_x is None or v[i] > self._best_value:
-                self._best_value, self._best_x = float(v[i]), xr[i].copy()
+                self._best_value, self._best_x, self._best_reason = float(v[i]), xr[i].copy(), reasons[i]
         extras = self._tell(u, v, failed, grad) or {}
         self._t_last = self.elapsed()
         self.trace.append(self._row(len(v), extras))
@@ -208,6 +220,8 @@ class Optimizer:
             names=self.box.names,
             seed=self.seed,
             n_failed=self.n_failed,
+            reasons=tuple(self._reasons),
+            x_reason=self._best_reason,
             lipschitz_estimate=None if last is None else last.lipschitz_estimate,
             bound_estimate=None if last is None else last.bound_estimate,
             upper_bound=self.upper_bound(),

@@ -1,18 +1,27 @@
 """The outcome of a search: :class:`SearchResult`, its per-iteration :class:`TraceRow` and the status enums.
 
 Sense: every search *maximises*. ``fun`` is the largest finite value told, ``x`` where it was found (real
-units, ordered as ``names``). Evaluations whose value is NaN or ±inf are *failed*: they are kept in ``xs``/``fs``
-(with their raw value) and counted in ``nfev`` but never become ``fun``.
+units, ordered as ``names``). An evaluation is *failed* when the objective gave it a failure reason (see
+:mod:`~vbl_robust.search.evaluations`; its value, e.g. a penalty, is used by the search like any other) or its
+value is NaN/±inf (kept in ``xs``/``fs`` with its raw value, counted in ``nfev``, never ``fun``). ``reasons``
+holds the reason of every evaluated point (``""`` = success), ``failures`` the counts per reason.
+
+Verdicts use the package-wide :class:`vbl_robust.constants.Verdict` (re-exported here).
 """
 
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import asdict, dataclass, field, fields
 from enum import Enum, StrEnum
 from typing import Any
 
 import numpy as np
+
+from ..constants import Verdict
+
+__all__ = ["SearchResult", "Status", "TraceRow", "Verdict", "verdict_for"]
 
 
 class Status(StrEnum):
@@ -26,28 +35,23 @@ class Status(StrEnum):
     STOPPED = "stopped"  # stopped by the caller (callback returned True, or Optimizer.stop())
 
 
-class Verdict(StrEnum):
-    """Answer to "can the objective exceed ``threshold`` on the box?"."""
-
-    CERTIFIED = "certified"  # a sound upper bound is <= threshold: no point of the box exceeds it
-    BREACH = "breach"  # an evaluated point exceeds threshold (a concrete counter-example)
-    UNDECIDED = "undecided"  # neither
-
-
 def verdict_for(best: float, upper_bound: float | None, threshold: float) -> Verdict:
-    """Verdict for ``threshold`` from the best finite value found and a *sound* upper bound (or None)."""
+    """Answer to "can the objective exceed ``threshold`` on the box?" from the best finite value found and a
+    *sound* upper bound (or None): BREACH (an evaluated point exceeds it), CERTIFIED (the bound is ≤ it), else
+    NO_BREACH_FOUND."""
     if math.isfinite(best) and best > threshold:
         return Verdict.BREACH
     if upper_bound is not None and upper_bound <= threshold:
         return Verdict.CERTIFIED
-    return Verdict.UNDECIDED
+    return Verdict.NO_BREACH_FOUND
 
 
 @dataclass(frozen=True)
 class TraceRow:
     """One iteration (= one batch = one objective call) of a search.
 
-    ``best_value``/``best_x`` are the best so far (NaN/None before any finite value). DIRECT-family fields
+    ``best_value``/``best_x`` are the best so far (NaN/None before any finite value); ``n_failed`` counts the
+    failed evaluations so far (a failure reason given, or a NaN/inf value). DIRECT-family fields
     (None for other methods): ``po_count_before``/``po_count_after`` = |PO_k| as selected and after the
     budget filter; ``remaining_area``/``remaining_area_after`` = RA(k) = sum of vol(p) / vol(box) over those
     two sets, computed when PO_k is selected (before division); ``lipschitz_estimate`` = largest observed
@@ -75,6 +79,14 @@ class TraceRow:
     def to_dict(self) -> dict[str, Any]:
         return _json_safe(asdict(self))
 
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> TraceRow:
+        """Inverse of :meth:`to_dict` (a None ``best_value`` comes back as NaN)."""
+        r = dict(d)
+        r["best_value"] = math.nan if r["best_value"] is None else r["best_value"]
+        r["best_x"] = None if r["best_x"] is None else tuple(r["best_x"])
+        return cls(**r)
+
 
 @dataclass(frozen=True, eq=False)
 class SearchResult:
@@ -90,7 +102,9 @@ class SearchResult:
         trace: one :class:`TraceRow` per iteration.
         xs, fs: ``(nfev, d)`` every evaluated point (real units) and ``(nfev,)`` its raw value.
         method, names, seed: provenance.
-        n_failed: evaluations whose value was NaN/inf.
+        n_failed: failed evaluations (a failure reason given, or a NaN/inf value).
+        reasons: ``(nfev,)`` failure reason of every evaluated point, ordered as ``xs`` (``""`` = success).
+        x_reason: failure reason of the evaluation at ``x`` (``""`` = success; a penalised point can be the best).
         lipschitz_estimate, bound_estimate: GeoRobust-style estimates (DIRECT family) — *not* certificates.
         upper_bound: sound upper bound of the objective over the box, valid only under the assumption that
             the objective is ``lipschitz``-Lipschitz in the ``lipschitz_norm`` of real units (None when no
@@ -111,11 +125,18 @@ class SearchResult:
     names: tuple[str, ...] = ()
     seed: int | None = None
     n_failed: int = 0
+    reasons: tuple[str, ...] = ()
+    x_reason: str = ""
     lipschitz_estimate: float | None = None
     bound_estimate: float | None = None
     upper_bound: float | None = None
     lipschitz: float | tuple[float, ...] | None = None
     lipschitz_norm: str | None = None
+
+    @property
+    def failures(self) -> dict[str, int]:
+        """Failed evaluations per reason, ``{reason: count}`` sorted by reason (empty when none failed)."""
+        return dict(sorted(Counter(r for r in self.reasons if r).items()))
 
     @property
     def success(self) -> bool:
@@ -127,8 +148,8 @@ class SearchResult:
         return None if self.x is None else dict(zip(self.names, map(float, self.x), strict=True))
 
     def verdict(self, threshold: float) -> Verdict:
-        """"breach" if some evaluated value exceeds ``threshold``; "certified" if the *sound* upper bound is
-        ``<= threshold``; else "undecided". The GeoRobust estimate never certifies."""
+        """BREACH if some evaluated value exceeds ``threshold``; CERTIFIED if the *sound* upper bound is
+        ``<= threshold``; else NO_BREACH_FOUND. The GeoRobust estimate never certifies."""
         return verdict_for(self.fun, self.upper_bound, float(threshold))
 
     def to_dict(self) -> dict[str, Any]:
@@ -156,13 +177,8 @@ class SearchResult:
         kw["fs"] = np.array([math.nan if v is None else v for v in kw["fs"]], dtype=np.float64)
         if isinstance(kw.get("lipschitz"), list):
             kw["lipschitz"] = tuple(kw["lipschitz"])
-        rows = []
-        for r in kw["trace"]:
-            r = dict(r)
-            r["best_value"] = math.nan if r["best_value"] is None else r["best_value"]
-            r["best_x"] = None if r["best_x"] is None else tuple(r["best_x"])
-            rows.append(TraceRow(**r))
-        kw["trace"] = tuple(rows)
+        kw["reasons"] = tuple(kw.get("reasons", ()))
+        kw["trace"] = tuple(TraceRow.from_dict(r) for r in kw["trace"])
         return cls(**kw)
 
 
