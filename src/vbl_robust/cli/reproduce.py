@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from .audit import detector_spec, finish, load, parse_methods, run_with_progress
+from .audit import ENGINE_HELP, detector_spec, finish, load, parse_methods, run_with_progress
 from .common import fail
 
 
@@ -41,6 +41,7 @@ def register(app: typer.Typer) -> None:
         trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading a .pt pickle from outside the package."),
         design: str = typer.Option("auto", "--detector", help="Detector design: auto (the shipped model's own; a "
                                    "user's model as one pass), single (one pass: the paper's pipeline) or twostage."),
+        engine: str = typer.Option("auto", "--engine", help=ENGINE_HELP),
         oracle: bool = typer.Option(False, "--oracle", help="Use the oracle detector (exact projected corners)."),
         oracle_noise: float = typer.Option(0.0, "--oracle-noise", help="Oracle: fixed per-image corner noise (px)."),
         methods: str | None = typer.Option(None, "--methods", help="Comma-separated methods (default georobust,random,apgd)."),
@@ -79,7 +80,7 @@ def register(app: typer.Typer) -> None:
         spec = exp.build(seed, opts)
         n = images or exp.images
         out_dir = out or Path("runs") / exp.name
-        det = detector_spec(model, trust_model, oracle, oracle_noise, design)
+        det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine)
         samples, source = load(n, seed, lard, width, height)
         config = {"command": "reproduce", "experiment": exp.name, "images": n, "seed": seed,
                   "lard": str(lard) if lard else None, "options": repr(opts), "width": width, "height": height}

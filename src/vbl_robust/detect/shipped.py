@@ -83,9 +83,11 @@ def with_design(detector: PoseDetector, design: str):
     return detector
 
 
-def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str | None = None):
+def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str | None = None,
+                     engine: str = "torch"):
     """The detector shipped with the package; ``design`` ``"twostage"`` / ``"single"`` (the paper's one pass),
-    None → the shipped default (``default.json``)."""
+    None → the shipped default (``default.json``); ``engine`` of the black-box path (:mod:`.engines`)."""
+    from .engines import with_engine
     from .ultralytics import UltralyticsDetector
 
     if default_model_path() is None:
@@ -93,7 +95,7 @@ def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str |
     info = default_model_info()
     # the shipped file is part of the installed package: trusted as its code is
     det = UltralyticsDetector(DEFAULT_MODEL, trust=True, imgsz=imgsz or info.get("imgsz"), chunk=chunk)
-    return with_design(det, design or info.get("detector", "single"))
+    return with_design(with_engine(det, engine, trust=True), design or info.get("detector", "single"))
 
 
 # -- naming and building detectors ------------------------------------------------------------------------------
@@ -105,7 +107,10 @@ class DetectorSpec:
     ``"ultralytics"`` (a user's ``.pt``; ``trust=True`` required for files outside the package), ``"onnx"``,
     ``"factory"`` (``path`` = ``"module:callable"`` returning a detector; for tests and plug-ins).
     ``options["design"]`` (model kinds): ``"single"`` or ``"twostage"`` (:func:`with_design`); the shipped model
-    defaults to its ``default.json``, a user's model to a single pass.
+    defaults to its ``default.json``, a user's model to a single pass. ``options["engine"]``: what runs the
+    black-box forwards (``torch`` default, ``onnxruntime``, ``openvino``, ``auto``; :mod:`.engines`) — it changes
+    speed, not outputs (≤ 1e-3 px), so it is recorded in the identity but is not part of the key: a run may resume
+    on another engine.
     """
 
     kind: str
@@ -182,6 +187,12 @@ class DetectorSpec:
                  "sha256": None if f is None else file_sha256(f), "options": dict(self.options)}
         if self.kind == "factory":
             ident["factory"] = self.path
+        if self.kind in ("default", "ultralytics", "onnx"):
+            from .engines import resolve_engine
+
+            default = "onnxruntime" if self.kind == "onnx" else "torch"
+            ident["engine"] = resolve_engine(self.options.get("engine", default))
+            ident["precision"] = "fp32"
         if self.kind == "default" and f is not None and (f.parent / "default.json").is_file():
             ident["config_sha256"] = file_sha256(f.parent / "default.json")
             info = default_model_info()
@@ -194,7 +205,8 @@ class DetectorSpec:
     def key(self) -> str:
         """Digest of what determines the detector's outputs (not where the file lives)."""
         ident = self.identity()
-        return digest({k: v for k, v in ident.items() if k not in ("name", "path")}, 24)
+        ident["options"] = {k: v for k, v in ident["options"].items() if k != "engine"}
+        return digest({k: v for k, v in ident.items() if k not in ("name", "path", "engine", "precision")}, 24)
 
     def build(self) -> Any:
         """Construct the detector (call once per process; models are heavy)."""
@@ -207,13 +219,24 @@ class DetectorSpec:
         if self.kind in ("ultralytics", "onnx"):
             opts = dict(self.options)
             design = opts.pop("design", "single")
+            engine = opts.pop("engine", "onnxruntime" if self.kind == "onnx" else "torch")
             if self.kind == "onnx":
+                from .engines import resolve_engine
+
+                if resolve_engine(engine) == "openvino":
+                    from .openvino import OpenVinoDetector
+
+                    return with_design(OpenVinoDetector(self.path, **opts), design)
+                if resolve_engine(engine) == "torch":
+                    raise ValueError(f"{self.path}: an ONNX model runs on onnxruntime or openvino, not torch")
                 from .onnx import OnnxDetector
 
                 return with_design(OnnxDetector(self.path, **opts), design)
+            from .engines import with_engine
             from .ultralytics import UltralyticsDetector
 
-            return with_design(UltralyticsDetector(self.path, trust=self.trust, **opts), design)
+            model = UltralyticsDetector(self.path, trust=self.trust, **opts)
+            return with_design(with_engine(model, engine, trust=self.trust), design)
         module, _, attr = self.path.partition(":")
         return getattr(importlib.import_module(module), attr)(**self.options)
 

@@ -1,0 +1,82 @@
+"""Runway-corner detectors run by OpenVINO, always in fp32.
+
+OpenVINO compiles an ultralytics pose export (``.onnx``) or its own IR (``.xml`` + ``.bin``) for the CPU. On
+CPUs with AVX-512 BF16 / AMX its *default* inference precision is bf16, which moved keypoints by up to 3 px at
+320 px here (issue 13): this adapter always sets ``INFERENCE_PRECISION_HINT = f32`` and reads the precision back
+from the compiled model (``precision``), so the model under test stays the model. No gradients: the
+differentiable path stays in torch (:mod:`.engines`).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .pose import PoseDetector
+
+__all__ = ["OpenVinoDetector"]
+
+
+class OpenVinoDetector(PoseDetector):
+    """A YOLO-pose export (``.onnx`` or OpenVINO ``.xml``) compiled by OpenVINO for the CPU, fp32.
+
+    Args:
+        path: ``.onnx`` (an ultralytics pose export, dynamic batch) or ``.xml`` IR.
+        imgsz: input side; None → the ``imgsz`` in the model's metadata (ONNX) or its static input shape.
+        chunk: views per inference call.
+        threads: inference threads (None: OpenVINO's default).
+    """
+
+    differentiable = False
+
+    def __init__(self, path: str | Path, *, imgsz: int | None = None, chunk: int = 16,
+                 threads: int | None = None) -> None:
+        import openvino as ov
+
+        p = Path(path)
+        if not p.is_file():
+            raise FileNotFoundError(f"{p}: model file not found")
+        core = ov.Core()
+        try:
+            model = core.read_model(str(p))
+        except Exception as e:  # noqa: BLE001 - any OpenVINO read failure means the same to the user
+            raise ValueError(f"{p}: not a model OpenVINO can read ({type(e).__name__}: {e})") from e
+        meta = _onnx_metadata(p) if p.suffix.lower() == ".onnx" else {}
+        kpt = ast.literal_eval(meta.get("kpt_shape", "[4, 3]"))
+        if int(kpt[0]) != 4:
+            raise ValueError(f"{p}: pose model has {kpt[0]} keypoints; runway corners need 4")
+        self.nc = max(1, len(ast.literal_eval(meta.get("names", "{0: 'runway'}"))))
+        size = ast.literal_eval(meta.get("imgsz", "None"))
+        shape = model.inputs[0].get_partial_shape()
+        static = shape[2].get_length() if shape.rank.get_length() == 4 and shape[2].is_static else None
+        self.imgsz = int(imgsz or (size if isinstance(size, int) else max(size) if size else static or 640))
+        config = {"INFERENCE_PRECISION_HINT": "f32"}
+        if threads:
+            config["INFERENCE_NUM_THREADS"] = int(threads)
+        self.compiled = core.compile_model(model, "CPU", config)
+        #: the precision the compiled model really runs at (checked: must be f32)
+        self.precision = str(self.compiled.get_property("INFERENCE_PRECISION_HINT"))
+        if "32" not in self.precision:
+            raise ValueError(f"{p}: OpenVINO compiled at {self.precision}, not fp32; refusing (outputs would change)")
+        self.request = self.compiled.create_infer_request()
+        self.input_size = self.imgsz
+        self.chunk = int(chunk)
+        self.path = p
+
+    def __repr__(self) -> str:
+        return f"OpenVinoDetector({str(self.path)!r}, imgsz={self.imgsz}, precision={self.precision})"
+
+    def raw(self, views: torch.Tensor) -> torch.Tensor:
+        x = np.ascontiguousarray(views.detach().cpu().numpy(), dtype=np.float32)
+        y = self.request.infer({0: x})[self.compiled.outputs[0]]
+        return torch.from_numpy(np.array(y)).to(views.dtype)
+
+
+def _onnx_metadata(path: Path) -> dict[str, str]:
+    import onnx
+
+    m = onnx.load(str(path), load_external_data=False)
+    return {p.key: p.value for p in m.metadata_props}
