@@ -1,4 +1,8 @@
-"""``vbl-robust reproduce EXPERIMENT``: run one of the paper's experiments (defaults are the paper's)."""
+"""``vbl-robust reproduce EXPERIMENT|all``: run one of the paper's experiments, or all of them (defaults are the
+paper's). ``all`` gives each experiment its own run directory under ``--out`` (each resumable on its own) and an
+``index.html`` linking their reports; ``--estimate`` prints, from a short measured probe of the detector on this
+machine, an upper bound of each experiment's duration (every evaluation budget spent, no early stop) and exits.
+"""
 
 from __future__ import annotations
 
@@ -22,6 +26,63 @@ def _floats(text: str | None, name: str) -> tuple[float, ...] | None:
     return vals
 
 
+def planned_work(spec, n_images: int) -> tuple[int, float]:
+    """``(evaluations, seconds)`` an experiment can spend on ``n_images``: the evaluation budgets (grids: their
+    points) of every job, and the time budgets of the time-bounded ones — an upper bound (early stops and chains
+    cut it)."""
+    import math
+
+    jobs = spec.expand([(f"probe{i}", "") for i in range(n_images)])
+    evals, seconds = 0, 0.0
+    for j in jobs:
+        if j.kind == "pnp":
+            evals += 1
+            continue
+        counts = (j.options or {}).get("counts")
+        if counts:
+            evals += math.prod(int(c) for c in counts)
+        elif j.budget.max_evals is not None:
+            evals += j.budget.max_evals
+        if j.budget.max_seconds is not None and j.budget.max_evals is None:
+            seconds += j.budget.max_seconds
+    return evals, seconds
+
+
+def probe_rate(det, seconds: float = 5.0) -> float:
+    """Evaluations per second of the audit objective (roll ± 15°, contrast) on one synthetic image, measured."""
+    import time
+
+    import numpy as np
+
+    from vbl_robust.campaigns.work import detector_for
+    from vbl_robust.pipeline import Objective
+    from vbl_robust.scenes import generate
+    from vbl_robust.space import ParameterBox
+
+    box = ParameterBox({"roll_deg": (-15, 15), "contrast": (0.7, 1.4)})
+    obj = Objective(generate(1, seed=0)[0], detector_for(det), box)
+    rng = np.random.default_rng(0)
+    obj(box.from_unit(rng.random((8, 2))))  # warm-up: model, pixels
+    n, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        obj(box.from_unit(rng.random((32, 2))))
+        n += 32
+    return n / (time.perf_counter() - t0)
+
+
+def write_index(out: Path, names: list[str]) -> Path:
+    """``out/index.html``: one link per experiment report (those that exist)."""
+    import html
+
+    items = "".join(
+        f'<li><a href="{html.escape(n)}/report.html">{html.escape(n)}</a></li>' if (out / n / "report.html").exists()
+        else f"<li>{html.escape(n)} (no report yet: rerun to resume)</li>" for n in names)
+    page = (f"<!doctype html><meta charset='utf-8'><title>vbl-robust: the paper's experiments</title>"
+            f"<h1>vbl-robust: the paper's experiments</h1><ul>{items}</ul>")
+    (out / "index.html").write_text(page)
+    return out / "index.html"
+
+
 def register(app: typer.Typer) -> None:
     from vbl_robust.campaigns.experiments import EXPERIMENTS
 
@@ -29,7 +90,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def reproduce(
-        experiment: str = typer.Argument(..., help=f"One of: {names}."),
+        experiment: str = typer.Argument(..., help=f"One of: {names}; or 'all'."),
         out: Path | None = typer.Option(None, "--out", help="Run directory (default runs/<experiment>)."),
         images: int | None = typer.Option(None, "--images", min=1, help="Number of images (default: the paper's, "
                                           "100; 1000 for pnp-validation)."),
@@ -59,31 +120,50 @@ def register(app: typer.Typer) -> None:
         csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to CSV."),
         parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to Parquet."),
         report: bool = typer.Option(True, "--report/--no-report", help="Write report.html into --out."),
+        estimate: bool = typer.Option(False, "--estimate", help="Print each experiment's expected duration (upper "
+                                      "bound, from a measured probe of the detector here) and exit."),
         quiet: bool = typer.Option(False, "--quiet", "-q"),
     ) -> None:
-        """Run one of the paper's experiments; rerunning the same command resumes it."""
+        """Run one of the paper's experiments, or all; rerunning the same command resumes it."""
         from vbl_robust.campaigns.experiments import Options, with_options
         from vbl_robust.campaigns.experiments import experiment as get_experiment
 
-        try:
-            exp = get_experiment(experiment)
-        except ValueError as exc:
-            fail(str(exc))
         if executor not in ("local", "ray"):
             fail(f"--executor must be 'local' or 'ray', got {executor!r}")
+        try:
+            exps = list(EXPERIMENTS.values()) if experiment == "all" else [get_experiment(experiment)]
+        except ValueError as exc:
+            fail(str(exc))
         eb = _floats(eval_budgets, "--eval-budgets")
         opts = with_options(
             Options(), methods=parse_methods(methods) if methods else None, max_evals=max_evals, grid_step_deg=grid_step,
             time_budgets=_floats(time_budgets, "--time-budgets"), eval_budgets=tuple(int(v) for v in eb) if eb else None,
             iterations=iterations,
         )
-        spec = exp.build(seed, opts)
-        n = images or exp.images
-        out_dir = out or Path("runs") / exp.name
         det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine)
-        samples, source = load(n, seed, lard, width, height)
-        config = {"command": "reproduce", "experiment": exp.name, "images": n, "seed": seed,
-                  "lard": str(lard) if lard else None, "options": repr(opts), "width": width, "height": height}
-        summary = run_with_progress(spec, samples, out_dir, det, executor=executor, address=address, source=source,
-                                    config=config, quiet=quiet)
-        finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
+        if estimate:
+            rate = probe_rate(det)
+            typer.echo(f"probe: {rate:.1f} evaluations/s ({det.name}, roll + contrast, one image, this machine)")
+            total = 0.0
+            for exp in exps:
+                n = images or exp.images
+                evals, secs = planned_work(exp.build(seed, opts), n)
+                t = evals / rate + secs
+                total += t
+                typer.echo(f"{exp.name:18s} {n:5d} images  ≤ {evals:9d} evaluations  ≤ {t / 3600:6.2f} h")
+            typer.echo(f"{'all' if len(exps) > 1 else exps[0].name:18s} ≤ {total / 3600:.2f} h (upper bound: every "
+                       "budget spent, no early stop)")
+            return
+        root = out or Path("runs") / ("paper" if experiment == "all" else exps[0].name)
+        for exp in exps:
+            spec = exp.build(seed, opts)
+            n = images or exp.images
+            out_dir = root / exp.name if experiment == "all" else root
+            samples, source = load(n, seed, lard, width, height)
+            config = {"command": "reproduce", "experiment": exp.name, "images": n, "seed": seed,
+                      "lard": str(lard) if lard else None, "options": repr(opts), "width": width, "height": height}
+            summary = run_with_progress(spec, samples, out_dir, det, executor=executor, address=address,
+                                        source=source, config=config, quiet=quiet)
+            finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
+        if experiment == "all":
+            typer.echo(f"index: {write_index(root, [e.name for e in exps])}")

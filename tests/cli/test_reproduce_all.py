@@ -1,0 +1,40 @@
+"""``vbl-robust reproduce all``: every experiment in its own run directory, an index page, and --estimate."""
+
+from __future__ import annotations
+
+from typer.testing import CliRunner
+
+from vbl_robust.campaigns.experiments import EXPERIMENTS, Options
+from vbl_robust.cli import app
+from vbl_robust.cli.reproduce import planned_work
+
+runner = CliRunner()
+SMALL = ["--oracle", "--oracle-noise", "0.5", "--width", "128", "--height", "128", "--quiet", "--images", "1",
+         "--max-evals", "4", "--grid-step", "0", "--iterations", "2", "--time-budgets", "0.05", "--eval-budgets", "4"]
+
+
+def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
+    out = tmp_path / "paper"
+    res = runner.invoke(app, ["reproduce", "all", "--out", str(out), *SMALL])
+    assert res.exit_code == 0, res.output
+    for name in EXPERIMENTS:
+        assert (out / name / "results.sqlite").exists() and (out / name / "report.html").exists(), name
+    index = (out / "index.html").read_text()
+    assert all(f'href="{name}/report.html"' in index for name in EXPERIMENTS)
+    again = runner.invoke(app, ["reproduce", "all", "--out", str(out), *SMALL])
+    assert again.exit_code == 0 and "0 new jobs" in again.output
+
+
+def test_estimate_prints_an_upper_bound_per_experiment():
+    res = runner.invoke(app, ["reproduce", "all", "--estimate", "--oracle", "--images", "2"])
+    assert res.exit_code == 0, res.output
+    assert "evaluations/s" in res.output and all(name in res.output for name in EXPERIMENTS)
+
+
+def test_planned_work_counts_budgets_and_grids():
+    exp = EXPERIMENTS["spatial-1d"]
+    evals, seconds = planned_work(exp.build(0, Options(grid_step_deg=0.0)), 3)
+    # 6 boxes x 3 methods x 200 evaluations per image (no reference grid), no time budgets
+    assert evals == 3 * 6 * 3 * 200 and seconds == 0.0
+    _, seconds = planned_work(EXPERIMENTS["runtime-1d"].build(0, Options(time_budgets=(0.5,), eval_budgets=(10,))), 2)
+    assert seconds > 0
