@@ -80,8 +80,18 @@ def test_experiment_defaults_follow_the_paper():
     assert conv.blocks[0].budgets[0].max_iters == 30 and conv.blocks[0].methods == ("georobust",)
     assert conv.blocks[0].budgets[0].max_evals == 3000  # a flat region would make PO_k explode
     rt = experiment("runtime-1d").build(0, Options())
-    assert sorted(b.max_seconds for b in rt.blocks[0].budgets) == [0.1, 0.5, 1.0, 2.0, 5.0]
-    assert all(not b.stop_at_breach for b in rt.blocks[0].budgets)
+    # anytime methods: one run at the largest budget, every budget read off its trace
+    (once,) = rt.blocks[0].budgets
+    assert rt.blocks[0].methods == ("georobust", "random")
+    assert once.max_seconds == 5.0 and once.min_evals == 200 and not once.stop_at_breach
+    assert once.read_seconds == (0.1, 0.5, 1.0, 2.0, 5.0) and once.read_evals == (10, 25, 50, 100, 200)
+    assert [b.label for b in once.read_budgets()] == [f"{t:g} s, no early stop" for t in once.read_seconds] + [
+        f"{n} evals, no early stop" for n in once.read_evals]
+    # APGD (its schedule depends on the budget): one run per budget, with the same budget labels
+    assert rt.blocks[1].methods == rt.blocks[2].methods == ("apgd",)
+    assert sorted(b.max_seconds for b in rt.blocks[1].budgets) == [0.1, 0.5, 1.0, 2.0, 5.0]
+    assert [b.max_evals for b in rt.blocks[2].budgets] == [10, 25, 50, 100, 200]
+    assert "read off" in rt.notes
     dp = experiment("distance-profile").build(0, Options())
     assert dp.blocks[0].chain and dp.blocks[0].boxes[-1].level == 45
     assert [e.images for e in EXPERIMENTS.values()].count(100) == 6 and EXPERIMENTS["pnp-validation"].images == 1000

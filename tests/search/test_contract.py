@@ -48,17 +48,21 @@ def test_honours_max_iters(method, box2):
 
 
 @pytest.mark.parametrize("method", ALL)
-def test_honours_max_seconds_between_batches(method, box2, monkeypatch):
+def test_honours_max_seconds_between_chunks(method, box2, monkeypatch):
     clock = {"t": 0.0}
+    starts = []
     monkeypatch.setattr(base_module, "_clock", lambda: clock["t"])
 
-    def slow(x):  # every objective call takes one (fake) second
+    def slow(x):  # every objective call takes one (fake) second, whatever its size
+        starts.append(clock["t"])
         clock["t"] += 1.0
         return bumpy(x)
 
     r = maximize(slow, box2, method, max_seconds=3.5)
     assert r.status is Status.TIME_OUT and "max_seconds=3.5" in r.message
-    assert r.nit == 4  # the batch running when time ran out completes; no batch starts after
+    # no chunk starts after the budget; the one running when it ran out (3 s → 4 s) is not counted
+    assert max(starts) < 3.5 and len(starts) == 4
+    assert r.nfev == 3 and np.array_equal(r.times, [1.0, 2.0, 3.0]) and r.elapsed == 3.0
 
 
 @pytest.mark.parametrize("method", ALL)

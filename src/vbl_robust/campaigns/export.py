@@ -1,7 +1,9 @@
 """Flat exports of a store's job rows: CSV (standard library) and Parquet (pyarrow).
 
 One line per job with the identifying columns, the worst error and point (one column per parameter, real
-units), verdict, counts and timings; traces and evaluated points stay in the store.
+units), verdict, counts and timings; traces and evaluated points stay in the store. A run that reads smaller
+budgets off its trace (runtime experiments) is followed by one line per read budget, derived from it
+(:func:`~vbl_robust.campaigns.metrics.read_off_rows`; column ``read_from`` = the run's budget label).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ COLUMNS = (
     "experiment", "kind", "role", "method", "sample_id", "sample_index", "slant_distance_m", "envelope", "box_label",
     "box_level", "budget_label", "max_evals", "max_seconds", "max_iters", "stop_at_breach", "seed", "status",
     "reason", "worst_m", "verdict", "nfev", "nit", "n_failed", "failures", "worst_reason", "search_status",
-    "search_s", "job_s", "upper_bound", "bound_estimate", "run_id", "key",
+    "search_s", "job_s", "upper_bound", "bound_estimate", "run_id", "key", "read_from",
 )
 
 
@@ -33,9 +35,19 @@ def _plain(v: Any) -> Any:
 def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
     """Job rows as flat dicts, and the column names (``COLUMNS`` then ``worst_<parameter>`` columns);
     ``failures`` is the JSON ``{reason: count}`` of the failed evaluations."""
+    from .metrics import read_off
+
     samples = store.samples()
+    camp = store.campaign()
+    eps, penalty = ((camp["spec"].get("eps_safe_m"), camp["spec"].get("penalty_m")) if camp else (None, None))
+    stored = store.jobs(with_trace=False)
+    if any(r.budget is not None and r.budget.reads for r in stored):
+        full = {r.key: r for r in store.jobs(role="main", with_points=True) if r.budget is not None and r.budget.reads}
+        stored = [x for r in stored for x in
+                  ([r] + ([read_off(full[r.key], b, eps, penalty) for b in r.budget.read_budgets()]
+                          if r.key in full else []))]
     rows, params = [], []
-    for r in store.jobs(with_trace=False):
+    for r in stored:
         s = samples.get(r.sample_id, {})
         b = {} if r.budget is None else r.budget.to_dict()
         d = {c: _plain(getattr(r, c, None)) for c in COLUMNS}

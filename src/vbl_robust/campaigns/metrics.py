@@ -4,6 +4,11 @@ error, φ_crit, |PO_k| and RA(k), failed evaluations per reason, PnP errors.
 Conventions: a row's ``worst_m`` is the worst error the search found for that image (metres); a failed sample
 counts with the failure penalty (5000 m by default), so it is never a survivor. An image *survives* a box when
 its worst error is ≤ ε_safe: S_rate = 100 · #survivors / N (%).
+
+Budgets read off a trace: a stored run whose budget reads smaller budgets (``Budget.reads``, the runtime
+experiments' anytime methods) stands for one result per read budget; :func:`read_off_rows` derives those rows
+(``JobRow.read_from`` = the run's budget label) from the run's stamped evaluations
+(:func:`vbl_robust.search.at_budget`): at a time budget t only the evaluations completed by t count.
 """
 
 from __future__ import annotations
@@ -16,8 +21,8 @@ from typing import Any
 import numpy as np
 
 from ..constants import Verdict
-from .spec import BoxSpec
-from .store import JobRow, JobStatus
+from .spec import BoxSpec, Budget
+from .store import JobRow, JobStatus, Points
 
 #: ``method`` of the pseudo-rows of :func:`reference_rows`.
 REFERENCE_METHOD = "grid (reference)"
@@ -56,28 +61,36 @@ def summarize(rows: Iterable[JobRow], eps_safe_m: float,
               by: Sequence[str] = ("method", "box_label", "budget_label")) -> list[dict[str, Any]]:
     """One line per group: n images, survival %, median / mean worst error, breaches, failed jobs, evaluations
     (total ``nfev`` and ``mean_nfev``), failed evaluations (``failed_evals``: None when no row recorded them; ``failures``: per
-    reason), median search seconds, plus the group's ``box_level`` and numeric budgets. Groups keep first-seen
+    reason), median search seconds, plus the group's ``box_level`` and numeric budgets, and ``read_from`` (the
+    budget label of the runs the group was read off, :func:`read_off_rows`; "" for runs of their own). A row
+    with no evaluation completed within its time budget (``nfev == 0``, no worst error) counts as a survivor
+    (nothing found) and is left out of the worst-error statistics (``n_empty`` counts them). Groups keep first-seen
     order; ``by`` names :class:`JobRow` attributes."""
     groups: dict[tuple, list[JobRow]] = {}
     for r in rows:
         groups.setdefault(tuple(getattr(r, k) for k in by), []).append(r)
     out = []
     for key, rs in groups.items():
-        worst = [r.worst_m for r in rs]
-        s = _stats(worst)
+        # a search that completed no evaluation within its time budget found nothing: a survivor, and not part
+        # of the worst-error statistics
+        empty = [r.status is JobStatus.DONE and r.nfev == 0 and r.worst_m is None for r in rs]
+        worst = [-math.inf if e else r.worst_m for r, e in zip(rs, empty, strict=True)]
+        s = _stats([w for w, e in zip(worst, empty, strict=True) if not e])
         known = [r.n_failed for r in rs if r.n_failed is not None]
         line = dict(zip(by, key, strict=True))
         line.update(
             box_level=rs[0].box_level,
             max_evals=budget_value(rs[0], "max_evals"), max_seconds=budget_value(rs[0], "max_seconds"),
             max_iters=budget_value(rs[0], "max_iters"),
-            n=len(rs), survival=survival_rate(worst, eps_safe_m), median_worst_m=s["median"], mean_worst_m=s["mean"],
+            n=len(rs), survival=survival_rate([0.0 if w == -math.inf else w for w in worst], eps_safe_m),
+            n_empty=sum(empty), median_worst_m=s["median"], mean_worst_m=s["mean"],
             breaches=sum(r.verdict is Verdict.BREACH for r in rs),
             certified=sum(r.verdict is Verdict.CERTIFIED for r in rs),
             failed=sum(r.status is JobStatus.FAILED for r in rs),
             nfev=sum(r.nfev for r in rs), mean_nfev=float(np.mean([r.nfev for r in rs])),
             failed_evals=sum(known) if known else None, failures=failure_counts(rs),
             median_search_s=float(np.median([r.search_s or 0.0 for r in rs])),
+            read_from=next((r.read_from for r in rs if r.read_from), ""),
         )
         out.append(line)
     return out
@@ -285,3 +298,68 @@ def pnp_summary(rows: Iterable[JobRow]) -> list[dict[str, Any]]:
             "p95_rel_pct": float(np.percentile(rl, 95)) if rl.size else math.nan,
         })
     return out
+
+
+def row_result(row: JobRow) -> Any:
+    """The :class:`~vbl_robust.search.SearchResult` a stored search row stands for, rebuilt from its points and
+    trace (``row`` needs ``points``: ``store.jobs(with_points=True)``)."""
+    from ..search import SearchResult, Status
+
+    if row.points is None or row.box is None:
+        raise ValueError(f"row {row.key}: a result needs the row's box and points (load with with_points=True)")
+    p = row.points
+    finite = np.isfinite(p.fs)
+    i = int(np.argmax(np.where(finite, p.fs, -np.inf))) if finite.any() else None
+    ub = row.upper_bound
+    return SearchResult(
+        x=None if i is None else p.xs[i].copy(), fun=math.nan if i is None else float(p.fs[i]), nfev=len(p),
+        nit=row.nit, status=Status(row.search_status or "running"), message=row.message or "",
+        elapsed=row.search_s or 0.0, trace=row.trace, xs=p.xs, fs=p.fs, method=row.method, names=row.box.box.names,
+        seed=row.seed, n_failed=sum(1 for r in p.reasons if r), reasons=p.reasons,
+        x_reason="" if i is None else p.reasons[i],
+        lipschitz_estimate=row.lipschitz_estimate, bound_estimate=row.bound_estimate,
+        upper_bound=None if ub is None else (math.inf if ub >= 1e300 else ub), times=p.times,
+    )
+
+
+def read_off(row: JobRow, budget: Budget, eps_safe_m: float, penalty_m: float) -> JobRow:
+    """The row of ``budget`` (a time or an evaluation budget) read off the stored run ``row`` (with points): the
+    best value and point, counts and trace of the evaluations within the budget; ``read_from`` = the run's
+    budget label. A failed run gives a failed row for the budget."""
+    from ..search import at_budget
+    from .work import result_fields
+
+    base = row.replace(budget=budget, key=f"{row.key}@{budget.label}", read_from=row.budget_label, payload=None)
+    if row.status is not JobStatus.DONE:
+        return base
+    r = at_budget(row_result(row), seconds=budget.max_seconds, evals=budget.max_evals)
+    fields = result_fields(r, eps_safe_m, penalty_m)
+    if row.points is not None and row.points.times is None:
+        fields["points"] = Points(r.xs, r.fs, r.reasons)
+    return base.replace(**fields)
+
+
+def read_off_rows(rows: Iterable[JobRow], eps_safe_m: float, penalty_m: float) -> list[JobRow]:
+    """``rows`` with every run that reads smaller budgets (``row.budget.reads``) replaced by one row per read
+    budget (:func:`read_off`; such rows need their points); other rows unchanged, order kept."""
+    out: list[JobRow] = []
+    for r in rows:
+        if r.budget is None or not r.budget.reads:
+            out.append(r)
+            continue
+        out.extend(read_off(r, b, eps_safe_m, penalty_m) for b in r.budget.read_budgets())
+    return out
+
+
+def reads_trace(spec: Any) -> bool:
+    """True when a campaign spec holds a budget read off a trace (its main rows need :func:`read_off_rows`)."""
+    return any(b.reads for blk in spec.blocks for b in blk.budgets)
+
+
+def main_rows(store: Any, spec: Any, *, with_trace: bool = True) -> list[JobRow]:
+    """The main search rows of a campaign as its tables and figures show them: stored rows, with every run that
+    reads smaller budgets off its trace replaced by its read-off rows (:func:`read_off_rows`; ``points`` are
+    loaded for the campaigns that need them)."""
+    reads = reads_trace(spec)
+    rows = store.jobs(kind="search", role="main", with_points=reads, with_trace=with_trace or reads)
+    return read_off_rows(rows, spec.eps_safe_m, spec.penalty_m) if reads else rows

@@ -9,15 +9,17 @@ Layout (one file, ``results.sqlite``; schema version :data:`SCHEMA_VERSION` in `
 - ``samples`` — id, index, slant distance, envelope, size and a geometry fingerprint of each sample.
 - ``jobs`` — one row per finished job (:class:`JobRow`), ``key`` UNIQUE: worst value and point, verdict,
   counts (failed evaluations per reason included), timings, the search trace (JSON) and every evaluated point
-  with its failure reason (JSON, zlib-compressed), or a PnP payload (JSON).
+  with its failure reason and completion time (JSON, zlib-compressed), or a PnP payload (JSON).
 
 Crash safety: WAL journal, one transaction per finished job (``INSERT OR IGNORE`` on the key). A process
 killed at any moment (``kill -9``) loses only the job in progress; committed rows stay and a rerun inserts no
 duplicates. Only the driver process writes (Ray workers send their rows back to it).
 
 Schema versions: 0/1 = before failures were recorded (no ``n_failed``, ``failures_json``, ``worst_reason``
-columns: they are added on open, old rows read them as unknown); 2 = now. A store written by a newer version is
-refused with a one-line error.
+columns: they are added on open, old rows read them as unknown); 2 = failures recorded; 3 = now: every evaluated
+point carries its completion time on the search's clock (``ts`` in the points blob, so no column is added; rows
+written before read ``Points.times`` as None, and no time budget can be read off them). A store written by a
+newer version is refused with a one-line error.
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ from ..search.result import TraceRow
 from .spec import BoxSpec, Budget
 
 #: Version of the layout below (``PRAGMA user_version``).
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS campaign (
@@ -99,7 +101,7 @@ CREATE TABLE IF NOT EXISTS jobs (
     job_s REAL,                     -- seconds for the whole job (objective building included)
     upper_bound REAL, bound_estimate REAL, lipschitz_estimate REAL,
     trace_json TEXT,
-    points BLOB,                    -- zlib(JSON {"xs": [[...]], "fs": [...], "reasons": [...]})
+    points BLOB,                    -- zlib(JSON {"xs": [[...]], "fs": [...], "reasons": [...], "ts": [...]})
     payload_json TEXT,              -- PnP comparison results, details of the worst point
     finished_at TEXT,
     n_failed INTEGER,               -- failed evaluations (schema 2)
@@ -145,11 +147,14 @@ class Points:
         xs: ``(n, d)`` points, real units (columns ordered as the box's names).
         fs: ``(n,)`` values, metres (NaN where the value was not finite).
         reasons: ``n`` failure reasons, ``""`` = success (all ``""`` when not given).
+        times: ``(n,)`` completion time of each evaluation, seconds on the search's clock (None: not recorded,
+            rows stored before schema 3).
     """
 
     xs: np.ndarray
     fs: np.ndarray
     reasons: tuple[str, ...] = ()
+    times: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         fs = np.asarray(self.fs, dtype=np.float64).reshape(-1)
@@ -161,6 +166,11 @@ class Points:
         object.__setattr__(self, "xs", xs)
         object.__setattr__(self, "fs", fs)
         object.__setattr__(self, "reasons", reasons)
+        if self.times is not None:
+            ts = np.asarray(self.times, dtype=np.float64).reshape(-1)
+            if len(ts) != len(fs):
+                raise ValueError(f"Points: {len(ts)} times for {len(fs)} values")
+            object.__setattr__(self, "times", ts)
 
     def __len__(self) -> int:
         return len(self.fs)
@@ -169,25 +179,32 @@ class Points:
         if not isinstance(other, Points):
             return NotImplemented
         return (self.xs.shape == other.xs.shape and np.array_equal(self.xs, other.xs)
-                and np.array_equal(self.fs, other.fs, equal_nan=True) and self.reasons == other.reasons)
+                and np.array_equal(self.fs, other.fs, equal_nan=True) and self.reasons == other.reasons
+                and (self.times is None) == (other.times is None)
+                and (self.times is None or np.array_equal(self.times, other.times, equal_nan=True)))
 
     __hash__ = None  # type: ignore[assignment]
 
     def to_blob(self) -> bytes:
-        """zlib-compressed JSON; non-finite values as null, reasons only when some point failed."""
+        """zlib-compressed JSON; non-finite values as null, reasons only when some point failed, times when known."""
         d: dict[str, Any] = {"xs": self.xs.tolist(), "fs": [v if math.isfinite(v) else None for v in self.fs.tolist()],
                              "d": self.xs.shape[1]}
         if any(self.reasons):
             d["reasons"] = list(self.reasons)
+        if self.times is not None:
+            d["ts"] = [v if math.isfinite(v) else None for v in self.times.tolist()]
         return zlib.compress(json.dumps(d).encode(), 6)
 
     @classmethod
     def from_blob(cls, blob: bytes) -> Points:
-        """Inverse of :meth:`to_blob` (null values come back as NaN, missing reasons as ``""``)."""
+        """Inverse of :meth:`to_blob` (null values come back as NaN, missing reasons as ``""``, missing times as
+        None)."""
         d = json.loads(zlib.decompress(blob))
         fs = np.array([math.nan if v is None else v for v in d["fs"]], dtype=np.float64)
         xs = np.asarray(d["xs"], dtype=np.float64).reshape(len(fs), d.get("d", -1 if len(fs) else 0))
-        return cls(xs, fs, tuple(d.get("reasons", ())))
+        ts = d.get("ts")
+        times = None if ts is None else np.array([math.nan if v is None else v for v in ts], dtype=np.float64)
+        return cls(xs, fs, tuple(d.get("reasons", ())), times)
 
 
 def encode_points(xs: np.ndarray, fs: np.ndarray, reasons: Sequence[str] = ()) -> bytes:
@@ -220,7 +237,8 @@ class JobRow:
     search / in the whole job; ``upper_bound`` (sound, metres; 1e300 for "unbounded"), ``bound_estimate``,
     ``lipschitz_estimate``; ``trace`` = the search's iterations (empty unless asked for); ``points`` = every
     evaluated point (None unless asked for); ``payload`` = PnP comparison or details of the worst point;
-    ``finished_at`` (ISO time, UTC).
+    ``finished_at`` (ISO time, UTC). ``read_from`` is set only on rows *derived* from a stored run at a smaller
+    budget (:func:`vbl_robust.campaigns.metrics.read_off_rows`; never stored): the budget label of that run.
 
     Floats are finite or None (SQLite stores NaN as NULL).
     """
@@ -259,6 +277,7 @@ class JobRow:
     points: Points | None = None
     payload: Mapping[str, Any] | None = None
     finished_at: str | None = None
+    read_from: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "status", JobStatus(self.status))

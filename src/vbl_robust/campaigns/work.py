@@ -88,20 +88,30 @@ def _finite(v: float | None) -> float | None:
     return None if v is None or not math.isfinite(v) else float(v)
 
 
-def search_row(job: Job, result: Any, settings: Settings, run_id: int | None, job_s: float) -> JobRow:
-    """Row of a finished search (a :class:`~vbl_robust.search.SearchResult`)."""
-    worst = float(result.fun) if math.isfinite(result.fun) else settings.penalty_m
+def result_fields(result: Any, eps_safe_m: float, penalty_m: float) -> dict[str, Any]:
+    """The :class:`JobRow` fields of a :class:`~vbl_robust.search.SearchResult` (worst error = the penalty when
+    no evaluation was finite; None, verdict "no breach found", when none completed within a time budget)."""
     ub = result.upper_bound
-    return _row(
-        job, run_id, JobStatus.DONE, worst_m=worst, worst_x=result.x_dict(),
-        verdict=verdict_for(worst, ub, settings.eps_safe_m), nfev=int(result.nfev), nit=int(result.nit),
-        n_failed=int(result.n_failed), failures=result.failures,
+    if result.nfev == 0:  # no evaluation completed within the budget: nothing found (no worst error)
+        worst, verdict = None, Verdict.NO_BREACH_FOUND
+    else:
+        worst = float(result.fun) if math.isfinite(result.fun) else penalty_m
+        verdict = verdict_for(worst, ub, eps_safe_m)
+    return dict(
+        worst_m=worst, worst_x=result.x_dict(), verdict=verdict, nfev=int(result.nfev),
+        nit=int(result.nit), n_failed=int(result.n_failed), failures=result.failures,
         worst_reason=None if result.x is None else result.x_reason,
-        search_status=result.status.value, message=result.message, search_s=float(result.elapsed), job_s=job_s,
+        search_status=result.status.value, message=result.message, search_s=float(result.elapsed),
         upper_bound=None if ub is None else (float(ub) if math.isfinite(ub) else 1e300),
         bound_estimate=_finite(result.bound_estimate), lipschitz_estimate=_finite(result.lipschitz_estimate),
-        trace=result.trace, points=Points(result.xs, result.fs, result.reasons),
+        trace=result.trace, points=Points(result.xs, result.fs, result.reasons, result.times),
     )
+
+
+def search_row(job: Job, result: Any, settings: Settings, run_id: int | None, job_s: float) -> JobRow:
+    """Row of a finished search (a :class:`~vbl_robust.search.SearchResult`)."""
+    return _row(job, run_id, JobStatus.DONE, job_s=job_s,
+                **result_fields(result, settings.eps_safe_m, settings.penalty_m))
 
 
 def implied_row(job: Job, breach: JobRow, settings: Settings, run_id: int | None) -> JobRow:
@@ -143,18 +153,44 @@ def search_function(objective: Any, needs_gradient: bool) -> Callable[[Any], Any
 
 def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
     """Run one search job on a built objective; returns the :class:`~vbl_robust.search.SearchResult` (with the
-    failure reason of every evaluated point)."""
+    failure reason and completion time of every evaluated point).
+
+    A time-budgeted job first warms the objective up with one evaluation of the box centre outside the search's
+    clock (image loading, first detector call), so no method pays that one-off cost inside its budget; then the
+    search evaluates in chunks of the objective's detector batch (``batch_size``) and stops between chunks. A
+    budget that reads smaller budgets off the run (``Budget.reads``) passes them on: the run goes on until
+    ``max(read_evals)`` evaluations are done and sizes its chunks against each of ``read_seconds``."""
     from ..search import METHODS, maximize
+    from ..search.api import DEFAULT_CHUNK
 
     b = job.budget
-    f = search_function(objective, METHODS[job.method].needs_gradient)
+    needs_gradient = METHODS[job.method].needs_gradient
+    f = search_function(objective, needs_gradient)
     opts = dict(job.options)
     if settings.lipschitz is not None and "lipschitz" not in opts:
         opts["lipschitz"] = settings.lipschitz
+    timing: dict[str, Any] = {}
+    if b.max_seconds is not None:
+        _warm_up(f, job.box.box, needs_gradient)
+        timing = {"min_evals": b.min_evals, "time_marks": b.read_seconds,
+                  "chunk_size": int(getattr(objective, "batch_size", DEFAULT_CHUNK))}
     return maximize(
         f, job.box.box, job.method, max_evals=b.max_evals, max_iters=b.max_iters, max_seconds=b.max_seconds,
-        stop_above=settings.eps_safe_m if b.stop_at_breach else None, seed=job.seed, **opts,
+        stop_above=settings.eps_safe_m if b.stop_at_breach else None, seed=job.seed, **timing, **opts,
     )
+
+
+def _warm_up(f: Callable[[Any], Any], box: Any, needs_gradient: bool) -> None:
+    """One evaluation of the box centre (its value is discarded)."""
+    centre = ((np.asarray(box.lower, dtype=np.float64) + np.asarray(box.upper, dtype=np.float64)) / 2)[None]
+    if needs_gradient:
+        import torch
+
+        theta = torch.tensor(centre, dtype=torch.float64, requires_grad=True)
+        with torch.enable_grad():
+            f(theta)
+    else:
+        f(centre)
 
 
 def _reason(exc: BaseException) -> str:

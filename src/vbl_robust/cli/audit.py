@@ -163,11 +163,12 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
     from rich.table import Table
 
     from vbl_robust.campaigns import ResultStore, export, summarize
+    from vbl_robust.campaigns.metrics import main_rows
     from vbl_robust.campaigns.spec import CampaignSpec
 
     with ResultStore.open_existing(out) as store:
         spec = CampaignSpec.from_dict(store.campaign()["spec"])
-        rows = store.jobs(kind="search", role="main", with_trace=False)
+        rows = main_rows(store, spec, with_trace=False)  # runs that read smaller budgets off their trace: per budget
         for path in (csv, parquet):
             if path is not None:
                 try:

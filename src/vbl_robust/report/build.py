@@ -9,6 +9,10 @@ Which figures: the ones the campaign spec declares (``CampaignSpec.figures``, se
 :func:`~vbl_robust.campaigns.spec.default_figures` of its blocks), each drawn by its entry of :data:`SECTIONS`
 from the rows it needs; a declared figure without data is left out. The summary always shows the failed
 evaluations (``n_failed``) and their counts per failure reason.
+
+Budgets read off a trace (the runtime experiments' anytime methods): the main rows are derived per read budget
+from the stored runs (:func:`vbl_robust.campaigns.metrics.read_off_rows`), and every table that shows them has a
+column "read off the run" naming the run they were read from; results of runs of their own leave it empty.
 """
 
 from __future__ import annotations
@@ -79,7 +83,10 @@ _SUMMARY_COLS = [
 
 
 def _summary_table(summary: Sequence[Mapping[str, Any]]) -> str:
-    return table(summary, _SUMMARY_COLS, left=("method", "box_label", "budget_label"))
+    cols = list(_SUMMARY_COLS)
+    if any(line.get("read_from") for line in summary):
+        cols.append(("read_from", "read off the run", None))
+    return table(summary, cols, left=("method", "box_label", "budget_label", "read_from"))
 
 
 def _failures_table(summary: Sequence[Mapping[str, Any]], penalty_m: float) -> str:
@@ -197,6 +204,13 @@ def section_runtime(ctx: Context) -> Section | None:
                                  "Left: survival rate; right: median over images of the worst error found "
                                  "(no early stop). Dashed black: the dense grid's true worst case."))
         s.html.append(_summary_table(summary))
+    read = sorted({r.method for r in rows if r.read_from})
+    if read:
+        own = sorted({r.method for r in rows if not r.read_from})
+        s.html.append(f'<p class="note">Read off a trace: {esc(", ".join(read))} ran once per image (budget '
+                      f"{esc(next(r.read_from for r in rows if r.read_from))}); each time budget t counts only the "
+                      "evaluations completed by t, each evaluation budget n the run's first n evaluations."
+                      + (f" Run once per budget: {esc(', '.join(own))}." if own else "") + "</p>")
     if ref:
         s.html.append(f"<p>Dense-grid reference on {len(ref_rows)} images: survival {fmt_num(ref['survival'])} %, "
                       f"median worst {fmt_num(ref['median_worst_m'])} m.</p>")
@@ -387,7 +401,7 @@ def section_per_image(ctx: Context) -> Section | None:
         line[f"{r.method}_x"] = _theta(r.worst_x)
     lines = list(by.values())
     for line in lines:
-        line["worst"] = max(line.get(f"{m}_worst", -math.inf) for m in methods)
+        line["worst"] = max(-math.inf if line.get(f"{m}_worst") is None else line[f"{m}_worst"] for m in methods)
         line["verdict"] = (Verdict.BREACH if line["worst"] > ctx.eps else
                            Verdict.CERTIFIED if any(line.get(f"{m}_verdict") is Verdict.CERTIFIED for m in methods)
                            else Verdict.NO_BREACH_FOUND)
@@ -450,7 +464,7 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
             raise ValueError(f"{run}: the results store holds no campaign yet")
         spec = CampaignSpec.from_dict(camp["spec"])
         out_dir = Path(out) if out is not None else (run if run.is_dir() else run.parent)
-        ctx = Context(store, spec, out_dir, store.jobs(kind="search", role="main"), store.samples())
+        ctx = Context(store, spec, out_dir, mx.main_rows(store, spec), store.samples())
         exp = EXPERIMENTS.get(spec.name)
         title = exp.title if exp else "Robustness audit"
         sections = [section_overview(ctx, title)]

@@ -7,6 +7,10 @@ same ask/tell interface (:class:`Optimizer`) and is registered by name in :data:
 ``"georobust"``, ``"direct"``, ``"direct-l"`` (the DIRECT family), ``"random"``, ``"sobol"``, ``"apgd"``
 (needs a torch-differentiable ``f``) and ``"grid"`` (ground truth in low dimension).
 
+Every evaluation is stamped with its completion time; :func:`at_budget` reads a result at any smaller time or
+evaluation budget off those stamps (one run of an *anytime* method answers every smaller budget, see
+:mod:`~vbl_robust.search.anytime`).
+
 >>> import numpy as np
 >>> from vbl_robust.space import ParameterBox
 >>> box = ParameterBox({"roll_deg": (-15, 15), "contrast": (0.7, 1.4)})
@@ -15,8 +19,9 @@ same ask/tell interface (:class:`Optimizer`) and is registered by name in :data:
 ('budget_exhausted', True, True)
 """
 
+from .anytime import at_budget, prefix_length
 from .apgd import APGD, apgd_checkpoints
-from .api import METHODS, make_optimizer, maximize, method_options
+from .api import METHODS, anytime_methods, make_optimizer, maximize, method_options
 from .base import Optimizer
 from .bounds import sound_upper_bound
 from .direct import Direct, DirectL, GeoRobust
@@ -41,10 +46,13 @@ __all__ = [
     "Status",
     "TraceRow",
     "Verdict",
+    "anytime_methods",
     "apgd_checkpoints",
+    "at_budget",
     "make_optimizer",
     "maximize",
     "method_options",
     "potentially_optimal",
+    "prefix_length",
     "sound_upper_bound",
 ]

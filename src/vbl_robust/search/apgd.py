@@ -68,6 +68,7 @@ class APGD(Optimizer):
 
     name: ClassVar[str] = "apgd"
     needs_gradient: ClassVar[bool] = True
+    anytime: ClassVar[bool] = False  # n_iter (the step-size schedule) is fitted to max_evals
 
     def __init__(
         self,

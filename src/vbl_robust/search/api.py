@@ -1,14 +1,28 @@
-"""``maximize(f, box, method=...)``: the ask/tell loop, and the registry of methods by name."""
+"""``maximize(f, box, method=...)``: the ask/tell loop, and the registry of methods by name.
+
+Time budgets: with ``max_seconds`` the loop evaluates each batch in *chunks* and stops between chunks, so a search
+overshoots its budget by at most the chunk running when the budget ran out; the result then counts only the
+evaluations completed by ``max_seconds`` (:func:`~vbl_robust.search.anytime.at_budget`). Chunk sizes: the first
+chunk of a search is one point (it measures the rate, points per second of objective calls); each later one
+takes at most :data:`CHUNK_TIME_FRACTION` of the time left before the next deadline at the measured rate (at
+least 1 point, at most ``chunk_size``), so chunks shrink towards a deadline and the overshoot is small besides
+bounded. The deadlines are ``max_seconds`` and the ``time_marks`` (smaller time budgets to be read off the run):
+sized against the same deadlines, the run's prefix at a mark is exactly the run a search stopped there (with the
+marks below it) would have made, and one run answers every time budget.
+Without a time budget a batch is one objective call, as before.
+"""
 
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable
+import math
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
 from ..space import ParameterBox
+from .anytime import at_budget
 from .apgd import APGD
 from .base import Optimizer
 from .direct import Direct, DirectL, GeoRobust
@@ -27,7 +41,18 @@ METHODS: dict[str, type[Optimizer]] = {
     "grid": GridSearch,
 }
 
-_BUDGET_ARGS = {"max_evals", "max_iters", "max_seconds", "stop_above", "seed"}
+_BUDGET_ARGS = {"max_evals", "max_iters", "max_seconds", "min_evals", "stop_above", "seed"}
+
+#: Most points per objective call while a time budget runs (the pipeline objective's default detector batch).
+DEFAULT_CHUNK = 32
+#: A chunk is sized to take at most this fraction of the time left before the next deadline (measured rate).
+CHUNK_TIME_FRACTION = 0.5
+
+
+def anytime_methods() -> tuple[str, ...]:
+    """Names of the registered methods whose points do not depend on their budget (``Optimizer.anytime``): a run at
+    the largest budget answers every smaller one (:func:`~vbl_robust.search.anytime.at_budget`)."""
+    return tuple(name for name, cls in METHODS.items() if cls.anytime)
 
 
 def method_options(method: str) -> list[str]:
@@ -61,6 +86,9 @@ def maximize(
     max_evals: int | None = None,
     max_iters: int | None = None,
     max_seconds: float | None = None,
+    min_evals: int | None = None,
+    time_marks: Sequence[float] = (),
+    chunk_size: int = DEFAULT_CHUNK,
     stop_above: float | None = None,
     seed: int = 0,
     callback: Callable[[TraceRow], bool | None] | None = None,
@@ -82,7 +110,12 @@ def maximize(
         box: the search space.
         method: a key of :data:`METHODS`.
         max_evals, max_iters, max_seconds: budgets; at least one is required. ``max_evals`` is never
-            exceeded; ``max_seconds`` is checked between batches.
+            exceeded; ``max_seconds`` is checked between chunks of a batch (see the module docstring) and the
+            result counts only the evaluations completed by then.
+        min_evals: with ``max_seconds``, keep going until this many evaluations are done too (a run from which
+            every smaller time and evaluation budget is read; its result is not cut at ``max_seconds``).
+        time_marks: smaller time budgets to be read off this run (chunks are sized against each in turn).
+        chunk_size: most points per objective call while a time budget runs.
         stop_above: stop after the first batch containing a value ``> stop_above`` (status TARGET_REACHED).
         seed: seed of the method's random choices (same seed → same run).
         callback: called with each iteration's :class:`TraceRow`; returning True stops (status STOPPED).
@@ -96,20 +129,86 @@ def maximize(
     """
     if max_evals is None and max_iters is None and max_seconds is None:
         raise ValueError("maximize: at least one budget is required (max_evals, max_iters or max_seconds)")
+    if not isinstance(chunk_size, int | np.integer) or isinstance(chunk_size, bool) or chunk_size < 1:
+        raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
+    marks = _check_marks(time_marks, max_seconds)
     opt = make_optimizer(
-        method, box, max_evals=max_evals, max_iters=max_iters, max_seconds=max_seconds,
+        method, box, max_evals=max_evals, max_iters=max_iters, max_seconds=max_seconds, min_evals=min_evals,
         stop_above=stop_above, seed=seed, **method_options,
     )
     if opt.needs_gradient:
         evaluate = _with_gradient(getattr(f, "torch", None) if callable(getattr(f, "torch", None)) else f, method)
     else:
         evaluate = _values_only(f)
+    chunks = _Chunks(opt, int(chunk_size), marks) if max_seconds is not None else None
     while len(x := opt.ask()):
-        values, grad = evaluate(x)
-        opt.tell(x, values, grad=grad)
+        if chunks is None:
+            values, grad = evaluate(x)
+            opt.tell(x, values, grad=grad)
+        elif not chunks.run(x, evaluate):
+            break  # cut by the time budget (recorded by tell_partial)
         if callback is not None and callback(opt.trace[-1]) is True and not opt.done:
             opt.stop("stopped by callback")
-    return opt.result()
+    result = opt.result()
+    if max_seconds is not None and min_evals is None:
+        result = at_budget(result, seconds=max_seconds)
+    return result
+
+
+def _check_marks(time_marks: Sequence[float], max_seconds: float | None) -> tuple[float, ...]:
+    marks = tuple(time_marks)
+    if marks and max_seconds is None:
+        raise ValueError(f"time_marks={marks!r} need max_seconds")
+    for t in marks:
+        if isinstance(t, bool) or not isinstance(t, int | float | np.number) or not (math.isfinite(t) and t > 0):
+            raise ValueError(f"time_marks must be finite numbers > 0, got {marks!r}")
+    return tuple(float(t) for t in marks)
+
+
+class _Chunks:
+    """Evaluates a batch in chunks while a time budget runs (sizes: see the module docstring)."""
+
+    def __init__(self, opt: Optimizer, cap: int, marks: tuple[float, ...]):
+        self.opt, self.cap = opt, cap
+        self.deadlines = sorted({*marks, float(opt.max_seconds)})
+        self.points, self.seconds = 0, 0.0  # evaluated so far, and the seconds their objective calls took
+
+    def size(self, left: int) -> int:
+        now = self.opt.elapsed()
+        nxt = next((d for d in self.deadlines if d > now), None)
+        if nxt is None:  # past every deadline (min_evals keeps it going): full chunks
+            return min(left, self.cap)
+        if self.points == 0:
+            return 1  # a probe of the rate
+        rate = self.points / max(self.seconds, 1e-12)
+        return max(1, min(left, self.cap, int(CHUNK_TIME_FRACTION * rate * (nxt - now))))
+
+    def run(self, x: np.ndarray, evaluate: Callable[[np.ndarray], tuple[Any, Any]]) -> bool:
+        """Evaluate and tell the batch ``x``; False when the time budget cut it (told with ``tell_partial``)."""
+        opt, n, done = self.opt, len(x), 0
+        parts: list[tuple[np.ndarray, tuple[str, ...] | None, Any, np.ndarray]] = []
+        while done < n:
+            if done and opt.time_up(done):
+                break
+            k = self.size(n - done)
+            t0 = opt.elapsed()
+            values, grad = evaluate(x[done : done + k])
+            t1 = opt.elapsed()
+            self.points, self.seconds = self.points + k, self.seconds + (t1 - t0)
+            v, reasons = split(values)
+            parts.append((np.asarray(v, dtype=np.float64), reasons, grad, np.full(k, t1)))
+            done += k
+        v = np.concatenate([p[0] for p in parts])
+        given = [p[1] for p in parts]
+        values = v if all(r is None for r in given) else Evaluations(
+            v, tuple(r for p, g in zip(parts, given, strict=True) for r in (g if g is not None else ("",) * len(p[0]))))
+        times = np.concatenate([p[3] for p in parts])
+        if done < n:
+            opt.tell_partial(x[:done], values, times=times)
+            return False
+        grad = None if parts[0][2] is None else np.concatenate([p[2] for p in parts])
+        opt.tell(x, values, grad=grad, times=times)
+        return True
 
 
 def _method(method: str) -> type[Optimizer]:

@@ -14,7 +14,21 @@ Failures: :meth:`Optimizer.tell` takes plain values or :class:`~vbl_robust.searc
 searched like any other; the bookkeeping records every point's reason and counts failures (``n_failed``).
 
 Budgets: ``max_evals`` is never exceeded (subclasses size their batches to fit); ``max_iters`` counts batches;
-``max_seconds`` is checked between batches (a batch is never interrupted), the clock starting at the first ask.
+``max_seconds`` is checked before every ask, and the driver (:func:`~vbl_robust.search.maximize`) evaluates a
+batch in chunks and checks it between chunks too: a batch cut by the time budget is recorded with
+:meth:`Optimizer.tell_partial` (its evaluated points count; the method never sees it) and the search stops. The
+clock starts at the first ask, so it covers the method's own work (selection, bookkeeping) as well as the
+objective. ``min_evals`` (with ``max_seconds``) defers the time stop until that many evaluations are done: one
+run from which every time budget ≤ ``max_seconds`` and every evaluation budget ≤ ``min_evals`` can be read
+(:mod:`~vbl_robust.search.anytime`).
+
+Time stamps: every told point carries the time its evaluation completed (``times=`` of :meth:`tell`, default
+"now"), seconds on the search's clock; :attr:`SearchResult.times` holds them in evaluation order.
+
+``anytime`` (class attribute): True when the sequence of points a method asks for does not depend on its
+budgets (the DIRECT family, random, Sobol, grid — given no ``max_evals``, which DIRECT uses to fit its last
+batch and the grid to size its lattice), so a run stopped at any budget is a prefix of a longer run; False for
+APGD (its step schedule is fitted to ``max_evals``).
 """
 
 from __future__ import annotations
@@ -29,7 +43,7 @@ import numpy as np
 from ..space import ParameterBox
 from .bounds import check_lipschitz, sound_upper_bound
 from .evaluations import Evaluations, recorded_reasons, split
-from .result import SearchResult, Status, TraceRow, Verdict, verdict_for
+from .result import PARTIAL, SearchResult, Status, TraceRow, Verdict, verdict_for
 
 logger = logging.getLogger(__name__)
 _clock = time.perf_counter  # module-level so tests can drive the clock
@@ -53,7 +67,10 @@ class Optimizer:
         box: the search space (real units).
         max_evals: evaluation budget (exact: never exceeded), or None.
         max_iters: batch budget, or None.
-        max_seconds: wall-clock budget checked between batches, or None.
+        max_seconds: wall-clock budget checked before every batch (and by :func:`maximize` between the chunks of
+            a batch), or None.
+        min_evals: with ``max_seconds``: the time budget stops the search only once this many evaluations are
+            done (a run that covers both a time and an evaluation budget), or None.
         stop_above: stop after the batch containing the first finite value ``> stop_above`` (a breach).
         seed: seed of every random choice of the method.
         lipschitz, lipschitz_norm: optional Lipschitz constant of the objective in real units (see
@@ -70,6 +87,8 @@ class Optimizer:
 
     name: ClassVar[str] = ""
     needs_gradient: ClassVar[bool] = False
+    #: The points asked for do not depend on the budgets (see the module docstring).
+    anytime: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -78,6 +97,7 @@ class Optimizer:
         max_evals: int | None = None,
         max_iters: int | None = None,
         max_seconds: float | None = None,
+        min_evals: int | None = None,
         stop_above: float | None = None,
         seed: int = 0,
         lipschitz: float | tuple[float, ...] | None = None,
@@ -88,6 +108,11 @@ class Optimizer:
         _check_budget("max_evals", max_evals, integer=True)
         _check_budget("max_iters", max_iters, integer=True)
         _check_budget("max_seconds", max_seconds, integer=False)
+        _check_budget("min_evals", min_evals, integer=True)
+        if min_evals is not None and max_seconds is None:
+            raise ValueError(f"min_evals={min_evals!r} needs max_seconds (it defers the time stop)")
+        if min_evals is not None and max_evals is not None and min_evals > max_evals:
+            raise ValueError(f"min_evals={min_evals!r} exceeds max_evals={max_evals!r}")
         if stop_above is not None and not (isinstance(stop_above, int | float | np.number) and not math.isnan(stop_above)):
             raise ValueError(f"stop_above must be a number or None, got {stop_above!r}")
         if not isinstance(seed, int | np.integer) or isinstance(seed, bool):
@@ -97,6 +122,7 @@ class Optimizer:
         self.max_evals = None if max_evals is None else int(max_evals)
         self.max_iters = None if max_iters is None else int(max_iters)
         self.max_seconds = None if max_seconds is None else float(max_seconds)
+        self.min_evals = None if min_evals is None else int(min_evals)
         self.stop_above = None if stop_above is None else float(stop_above)
         self.seed = int(seed)
         self.lipschitz = check_lipschitz(lipschitz, lipschitz_norm, box.dim)
@@ -111,6 +137,7 @@ class Optimizer:
         self._xs: list[np.ndarray] = []
         self._fs: list[np.ndarray] = []
         self._reasons: list[str] = []
+        self._ts: list[np.ndarray] = []
         self._best_value = math.nan
         self._best_x: np.ndarray | None = None
         self._best_reason = ""
@@ -149,13 +176,16 @@ class Optimizer:
         self._pending = (x, u)
         return x.copy()
 
-    def tell(self, x: np.ndarray, values: np.ndarray | Evaluations, *, grad: np.ndarray | None = None) -> None:
+    def tell(self, x: np.ndarray, values: np.ndarray | Evaluations, *, grad: np.ndarray | None = None,
+             times: np.ndarray | None = None) -> None:
         """Record the values ``(n,)`` of the batch ``x`` ``(n, d)`` returned by the last :meth:`ask`.
 
         ``values``: ``(n,)`` values, or :class:`Evaluations` (values and a failure reason per point, ``""`` =
         success). A point with a reason is a failed evaluation whose value the search still uses; NaN/±inf
         values are failed evaluations too (recorded, never the best). ``grad`` ``(n, d)`` is the gradient
         w.r.t. the real-unit point, required by gradient methods (``needs_gradient``) and ignored otherwise.
+        ``times`` ``(n,)``: when each evaluation completed, seconds on the search's clock (:meth:`elapsed`);
+        None = now for all.
         """
         if self._pending is None:
             raise RuntimeError(f"{type(self).__name__}.tell: no batch pending; call ask() first")
@@ -163,13 +193,8 @@ class Optimizer:
         x = np.asarray(x, dtype=np.float64)
         if x.shape != xr.shape or not np.array_equal(x, xr):
             raise ValueError(f"tell: x must be the batch returned by the last ask() (shape {xr.shape}), got shape {x.shape}")
-        values, given = split(values)
-        v = np.asarray(values, dtype=np.float64)
-        if v.shape != (len(xr),):
-            v = v.reshape(-1) if v.size == len(xr) else v
-        if v.shape != (len(xr),):
-            raise ValueError(f"tell: values must have shape ({len(xr)},), got {np.shape(values)}")
-        reasons = recorded_reasons(v, given)
+        v, reasons = self._values(values, len(xr))
+        ts = self._times(times, len(xr))
         if grad is not None:
             grad = np.asarray(grad, dtype=np.float64)
             if grad.shape != xr.shape:
@@ -177,21 +202,44 @@ class Optimizer:
         elif self.needs_gradient:
             raise ValueError(f"tell: method {self.name!r} needs grad= (gradient of the values w.r.t. x, shape {xr.shape})")
         self._pending = None
-        failed = ~np.isfinite(v)
-        self._xs.append(xr)
-        self._fs.append(v.copy())
-        self._reasons.extend(reasons)
-        self.nfev += len(v)
-        self.nit += 1
-        self.n_failed += sum(1 for r in reasons if r)
-        if not failed.all():
-            i = int(np.argmax(np.where(failed, -np.inf, v)))
-            if self._best_x is None or v[i] > self._best_value:
-                self._best_value, self._best_x, self._best_reason = float(v[i]), xr[i].copy(), reasons[i]
+        failed = self._record(xr, v, reasons, ts)
         extras = self._tell(u, v, failed, grad) or {}
         self._t_last = self.elapsed()
         self.trace.append(self._row(len(v), extras))
         self._check_stops(v, failed)
+
+    def tell_partial(self, x: np.ndarray, values: np.ndarray | Evaluations, *, times: np.ndarray | None = None,
+                     message: str | None = None) -> None:
+        """Record the evaluated first ``k`` points of the pending batch (``x`` = its first ``k`` rows, ``k`` may be
+        0) when the time budget ran out between chunks, and stop (status TIME_OUT).
+
+        The points count like any other (``nfev``, best, trace row with ``extra["partial"]``); the method never
+        sees the cut batch, so its state stays that of the last complete batch.
+        """
+        if self._pending is None:
+            raise RuntimeError(f"{type(self).__name__}.tell_partial: no batch pending; call ask() first")
+        xr, _ = self._pending
+        x = np.asarray(x, dtype=np.float64).reshape(-1, self.dim)
+        k = len(x)
+        if k > len(xr) or not np.array_equal(x, xr[:k]):
+            raise ValueError(f"tell_partial: x must be the first rows of the last ask()'s batch ({len(xr)} points), "
+                             f"got shape {x.shape}")
+        v, reasons = self._values(values, k)
+        ts = self._times(times, k)
+        self._pending = None
+        if k:
+            self._record(xr[:k], v, reasons, ts)
+            self._t_last = float(ts[-1])
+            self.trace.append(self._row(k, {"extra": {PARTIAL: True}}))
+        self._finish(Status.TIME_OUT, message or f"max_seconds={self.max_seconds:g} reached after {self.nfev} "
+                                                  f"evaluations (a batch of {len(xr)} cut after {k})")
+
+    def time_up(self, pending: int = 0) -> bool:
+        """True when the time budget is spent (and ``min_evals``, counting ``pending`` evaluations of the batch
+        in progress, is reached): no further batch or chunk may start."""
+        if self.max_seconds is None or self.elapsed() < self.max_seconds:
+            return False
+        return self.min_evals is None or self.nfev + pending >= self.min_evals
 
     def stop(self, message: str = "stopped by the caller") -> None:
         """End the search now (status STOPPED) unless it already stopped."""
@@ -204,6 +252,7 @@ class Optimizer:
         """The current :class:`SearchResult` (status RUNNING while the search has not stopped)."""
         xs = np.concatenate(self._xs) if self._xs else np.zeros((0, self.dim))
         fs = np.concatenate(self._fs) if self._fs else np.zeros(0)
+        ts = np.concatenate(self._ts) if self._ts else np.zeros(0)
         last = self.trace[-1] if self.trace else None
         return SearchResult(
             x=None if self._best_x is None else self._best_x.copy(),
@@ -227,6 +276,7 @@ class Optimizer:
             upper_bound=self.upper_bound(),
             lipschitz=self.lipschitz,
             lipschitz_norm=self.lipschitz_norm,
+            times=ts,
         )
 
     def verdict(self, threshold: float) -> Verdict:
@@ -259,12 +309,45 @@ class Optimizer:
         return None
 
     # -- internals --------------------------------------------------------------------------------------
+    def _values(self, values: np.ndarray | Evaluations, n: int) -> tuple[np.ndarray, tuple[str, ...]]:
+        values, given = split(values)
+        v = np.asarray(values, dtype=np.float64)
+        if v.shape != (n,):
+            v = v.reshape(-1) if v.size == n else v
+        if v.shape != (n,):
+            raise ValueError(f"tell: values must have shape ({n},), got {np.shape(values)}")
+        return v, recorded_reasons(v, given)
+
+    def _times(self, times: np.ndarray | None, n: int) -> np.ndarray:
+        if times is None:
+            return np.full(n, self.elapsed())
+        ts = np.asarray(times, dtype=np.float64).reshape(-1)
+        if ts.shape != (n,):
+            raise ValueError(f"tell: times must have shape ({n},), got {np.shape(times)}")
+        return ts
+
+    def _record(self, xr: np.ndarray, v: np.ndarray, reasons: tuple[str, ...], ts: np.ndarray) -> np.ndarray:
+        """Bookkeeping of evaluated points (counts, best, stored points); returns the mask of non-finite values."""
+        failed = ~np.isfinite(v)
+        self._xs.append(xr)
+        self._fs.append(v.copy())
+        self._reasons.extend(reasons)
+        self._ts.append(ts.copy())
+        self.nfev += len(v)
+        self.nit += 1
+        self.n_failed += sum(1 for r in reasons if r)
+        if not failed.all():
+            i = int(np.argmax(np.where(failed, -np.inf, v)))
+            if self._best_x is None or v[i] > self._best_value:
+                self._best_value, self._best_x, self._best_reason = float(v[i]), xr[i].copy(), reasons[i]
+        return failed
+
     def _finish(self, status: Status, message: str) -> None:
         self.status, self.message = status, message
         logger.debug("%s stopped: %s (%s) after %d evaluations", self.name, status.value, message, self.nfev)
 
     def _check_time(self) -> None:
-        if not self.done and self.max_seconds is not None and self.elapsed() >= self.max_seconds:
+        if not self.done and self.time_up():
             self._finish(Status.TIME_OUT, f"max_seconds={self.max_seconds:g} reached after {self.nfev} evaluations")
 
     def _check_stops(self, v: np.ndarray, failed: np.ndarray) -> None:

@@ -6,6 +6,11 @@ units, ordered as ``names``). An evaluation is *failed* when the objective gave 
 value is NaN/±inf (kept in ``xs``/``fs`` with its raw value, counted in ``nfev``, never ``fun``). ``reasons``
 holds the reason of every evaluated point (``""`` = success), ``failures`` the counts per reason.
 
+Time stamps: ``times[i]`` is when the evaluation of ``xs[i]`` completed, in seconds on the search's clock
+(started by the first ``ask``, so it covers the method's own work too); the objective is called in chunks and
+every point of a chunk carries the chunk's completion time. :func:`~vbl_robust.search.anytime.at_budget` reads the
+result at any smaller time or evaluation budget off these stamps.
+
 Verdicts use the package-wide :class:`vbl_robust.constants.Verdict` (re-exported here).
 """
 
@@ -21,7 +26,7 @@ import numpy as np
 
 from ..constants import Verdict
 
-__all__ = ["SearchResult", "Status", "TraceRow", "Verdict", "verdict_for"]
+__all__ = ["PARTIAL", "SearchResult", "Status", "TraceRow", "Verdict", "verdict_for"]
 
 
 class Status(StrEnum):
@@ -33,6 +38,11 @@ class Status(StrEnum):
     TARGET_REACHED = "target_reached"  # a finite value > stop_above was told
     CONVERGED = "converged"  # the method has nothing left to evaluate (grid done, DIRECT at max depth)
     STOPPED = "stopped"  # stopped by the caller (callback returned True, or Optimizer.stop())
+
+
+#: ``TraceRow.extra`` key marking a row of a batch that was cut (by a time budget, or by reading a smaller
+#: budget off a longer run): the method never saw that batch; the row counts its evaluated points.
+PARTIAL = "partial"
 
 
 def verdict_for(best: float, upper_bound: float | None, threshold: float) -> Verdict:
@@ -57,7 +67,9 @@ class TraceRow:
     two sets, computed when PO_k is selected (before division); ``lipschitz_estimate`` = largest observed
     parent-child slope (unit-cube coordinates) and ``bound_estimate`` = best + estimate x size of the best
     rectangle (an *estimate*, not sound). ``upper_bound`` is the sound bound, only when the caller supplied a
-    Lipschitz constant and the method keeps a cover of the box. ``extra`` holds method-specific numbers.
+    Lipschitz constant and the method keeps a cover of the box. ``extra`` holds method-specific numbers
+    (``extra["partial"] = True``: a batch cut by a time budget, see :data:`PARTIAL`). ``elapsed`` is the search's
+    clock after the batch (a cut batch: when its last counted evaluation completed).
     """
 
     iteration: int
@@ -98,7 +110,8 @@ class SearchResult:
         nfev: evaluations made (failed ones included); never more than ``max_evals``.
         nit: iterations = batches = objective calls.
         status, message: why it stopped.
-        elapsed: seconds from the first ``ask`` to the last ``tell``.
+        elapsed: seconds from the first ``ask`` to the last ``tell`` (a result read at a smaller budget: to the
+            completion of its last counted evaluation).
         trace: one :class:`TraceRow` per iteration.
         xs, fs: ``(nfev, d)`` every evaluated point (real units) and ``(nfev,)`` its raw value.
         method, names, seed: provenance.
@@ -109,6 +122,8 @@ class SearchResult:
         upper_bound: sound upper bound of the objective over the box, valid only under the assumption that
             the objective is ``lipschitz``-Lipschitz in the ``lipschitz_norm`` of real units (None when no
             constant was given or the method keeps no cover of the box; inf when a cell had a failed value).
+        times: ``(nfev,)`` completion time of each evaluation, seconds on the search's clock (see the module
+            docstring); None when unknown (results stored before evaluations were stamped).
     """
 
     x: np.ndarray | None
@@ -132,6 +147,7 @@ class SearchResult:
     upper_bound: float | None = None
     lipschitz: float | tuple[float, ...] | None = None
     lipschitz_norm: str | None = None
+    times: np.ndarray | None = None
 
     @property
     def failures(self) -> dict[str, int]:
@@ -178,6 +194,8 @@ class SearchResult:
         if isinstance(kw.get("lipschitz"), list):
             kw["lipschitz"] = tuple(kw["lipschitz"])
         kw["reasons"] = tuple(kw.get("reasons", ()))
+        if kw.get("times") is not None:
+            kw["times"] = np.array([math.nan if v is None else v for v in kw["times"]], dtype=np.float64)
         kw["trace"] = tuple(TraceRow.from_dict(r) for r in kw["trace"])
         return cls(**kw)
 
