@@ -47,14 +47,15 @@ def held_out(n: int, seed: int = BENCH_SEED) -> list:
 
 
 def detectors(model: str | None) -> dict:
+    from vbl_robust.detect.shipped import DEFAULT_MODEL
     from vbl_robust.detect.twostage import TwoStageDetector
     from vbl_robust.detect.ultralytics import UltralyticsDetector
 
-    trust = model is not None
-    d320 = UltralyticsDetector(model, trust=trust, imgsz=320)
+    path = model or DEFAULT_MODEL  # a model named by the user is trusted by naming it; the shipped one is ours
+    d320 = UltralyticsDetector(path, trust=True, imgsz=320)
     return {
         "single 320": d320,
-        "single 640": UltralyticsDetector(model, trust=trust, imgsz=640),
+        "single 640": UltralyticsDetector(path, trust=True, imgsz=640),
         "two-stage 320+320": TwoStageDetector(d320),
     }
 
