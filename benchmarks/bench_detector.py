@@ -157,7 +157,7 @@ def main(quick: bool = False) -> str:
         "Throughput (roll + contrast perturbation → detect → select → ippe_lm PnP), same run. Bare: the "
         "detector alone on a batch of images of the size the objective hands it (input size for a single pass; "
         "full resolution for the two-stage design, which samples its views of the perturbed image from the "
-        "unperturbed one — the row *perturb full image first* warps the 1024-px image per evaluation instead):",
+        "unperturbed one, chosen by the view sampler from the windows it is asked for):",
         "",
         thr,
         "",
