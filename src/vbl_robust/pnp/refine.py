@@ -8,6 +8,10 @@ stationary point, and the black-box path must compute the same forward, so both 
 Model: OpenCV world → camera pose ``X_cv = R z + t``, pixels ``π = (p₀/p₂, p₁/p₂)`` with ``p = K X_cv``; objective
 ``o = Σᵢ ‖π(zᵢ) − xᵢ‖²``. Steps are taken in the local chart ``R ← exp([δω]×) R``, ``t ← t + δt`` (the
 stationary point does not depend on the chart), with Marquardt's diagonal scaling of ``JᵀJ``.
+
+Two implementations of the same iteration: :func:`refine_candidates` (all candidates of all rows at once, the one
+behind ``solve(method="ippe_lm")``) and :func:`refine_lm` (the earlier one, kept unchanged as the reference of
+``solve(method="ippe_lm_rowwise")``).
 """
 
 from __future__ import annotations
@@ -22,6 +26,10 @@ STEP_TOL = 1e-12
 
 #: Relative cost increase still accepted as a step (rounding of Σ‖π − x‖²).
 COST_RTOL = 1e-12
+
+#: :func:`refine_candidates` also accepts a step predicted to lower the cost by less than this fraction of it
+#: (below the cost's rounding) when it lowers the scaled gradient.
+FLAT_RTOL = 1e-10
 
 #: A pose whose cost exceeds its group's best by more than this many times its last predicted reduction stops.
 HOPELESS_FACTOR = 20.0
@@ -48,6 +56,27 @@ def rotvec_to_matrix(w: np.ndarray) -> np.ndarray:
     b = np.where(small, 0.5 - th2 / 24.0 + th2**2 / 720.0, (1.0 - np.cos(th)) / np.where(small, 1.0, th2))
     W = skew(w)
     return np.eye(3) + a[:, None, None] * W + b[:, None, None] * (W @ W)
+
+
+def matrix_to_rotvec(R: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`rotvec_to_matrix`, batched: rotations (N, 3, 3) → axis-angle (N, 3), angle in [0, π].
+
+    The angle is ``atan2(|s|, (tr R − 1)/2)`` with ``s`` the axial vector of ``(R − Rᵀ)/2``; the axis is ``s``
+    unless the angle is near π, where ``s`` vanishes and the axis comes from the symmetric part
+    ``(R + Rᵀ)/2 − cos θ I = (1 − cos θ) k kᵀ`` (largest column, sign taken from ``s``).
+    """
+    s = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1)
+    cos = np.clip(0.5 * (R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2] - 1.0), -1.0, 1.0)
+    sin = np.sqrt(np.sum(s * s, axis=1))
+    theta = np.arctan2(sin, cos)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = s * np.where(sin > 0.0, theta / sin, 1.0)[:, None]
+        S = 0.5 * (R + R.transpose(0, 2, 1)) - cos[:, None, None] * np.eye(3)
+        col = np.take_along_axis(S, np.argmax(np.diagonal(S, axis1=1, axis2=2), axis=1)[:, None, None], axis=2)[..., 0]
+        k = col / np.sqrt(np.sum(col * col, axis=1, keepdims=True))
+        k = np.where(np.sum(k * s, axis=1, keepdims=True) < 0.0, -k, k)
+    near_pi = (cos < -0.9) & np.all(np.isfinite(k), axis=1)
+    return np.where(near_pi[:, None], theta[:, None] * k, w)
 
 
 def residuals(
@@ -146,3 +175,198 @@ def refine_lm(
             margin = HOPELESS_FACTOR * np.maximum(np.nan_to_num(predicted, nan=np.inf), 0.0)
             active &= ~(cost > best[groups] * (1.0 + 1e-9) + margin)
     return R, t, cost
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Vectorised form: all candidates of all rows at once. Elementwise work runs on arrays component-first with the
+# poses on the last axis (long inner loops); JᵀJ, Jᵀr and the damped solve are stacked per-pose BLAS / LAPACK
+# calls. Reductions run over axes shorter than 8 (summed left to right whatever the layout), so a pose's
+# arithmetic never depends on which other poses share the arrays.
+# ---------------------------------------------------------------------------------------------------------------
+
+_R1, _R2 = [1, 2, 0], [2, 0, 1]
+_D6 = np.arange(6)
+_max = np.maximum.reduce
+_add = np.add.reduce  # the ufunc method itself: ndarray.sum adds a Python layer per call
+_EYE3 = np.eye(3)[:, :, None]
+
+
+class _Model:
+    """The reprojection objective of one call in normalised camera coordinates.
+
+    With ``K = [[A₂, c], [0, 0, 1]]`` the pixel residual is ``π − x = A₂ (n − m)`` with ``n = (X/Z, Y/Z)`` and
+    ``m = A₂⁻¹ (x − c)``, so ``‖π − x‖² = ‖U n − U m‖²`` with ``U`` the upper Cholesky factor of ``A₂ᵀA₂``
+    (``diag(f_x, f_y)`` for square pixels without skew): the same objective, with fewer operations.
+    """
+
+    def __init__(self, z: np.ndarray, K: np.ndarray) -> None:
+        A2 = K[:2, :2]
+        U = np.linalg.cholesky(A2.T @ A2).T
+        self.diagonal = bool(U[0, 1] == 0.0)
+        self.U, self.Ud = U[:, :, None, None], np.diag(U)[:, None, None]
+        self.A2inv, self.c = np.linalg.inv(A2), K[:2, 2]
+        self.zk = [(k, z[:, k, None]) for k in range(3) if np.any(z[:, k] != 0.0)]
+
+    def _u(self, v: np.ndarray) -> np.ndarray:
+        """U v for v (2, 4, n)."""
+        return self.Ud * v if self.diagonal else _add(self.U * v[None], axis=1)
+
+    def observations(self, x: np.ndarray) -> np.ndarray:
+        """U m (2, 4, B) of pixels x (B, 4, 2)."""
+        return self._u(((x - self.c) @ self.A2inv.T).transpose(2, 1, 0))
+
+    def residuals(self, R: np.ndarray, t: np.ndarray, um: np.ndarray) -> tuple:
+        """For poses R (3, 3, n), t (3, n) against U m (2, 4, n): rotated corners Y = R z (3, 4, n), inverse
+        depths (4, n), U n (2, 4, n), residuals U (n − m) (2, 4, n) and cost (n,)."""
+        (k0, z0), *rest = self.zk
+        Y = R[:, k0, None] * z0
+        for k, zk in rest:
+            Y = Y + R[:, k, None] * zk
+        X = Y + t[:, None]
+        iz = 1.0 / X[2]
+        un = self._u(X[:2] * iz)
+        r = un - um
+        return Y, iz, un, r, _add(_add(r * r, axis=0), axis=0)
+
+    def derivatives(self, Y: np.ndarray, iz: np.ndarray, un: np.ndarray, r: np.ndarray) -> tuple:
+        """JᵀJ (n, 6, 6) and Jᵀr (n, 6), pose-first, of J = ∂r/∂(δω, δt) in the local chart."""
+        a = np.empty((2, 3, *iz.shape))  # ∂r/∂δt = ∂r/∂X_cv = iz (U, −U n)
+        np.multiply(self.U, iz, out=a[:, :2])
+        np.multiply(un, -iz, out=a[:, 2])
+        J = np.concatenate([Y[_R1] * a[:, _R2] - Y[_R2] * a[:, _R1], a], axis=1)  # ∂r/∂δω = Y × a; (2, 6, 4, n)
+        J = J.transpose(3, 0, 2, 1).reshape(-1, 8, 6)
+        Jt = J.transpose(0, 2, 1)
+        # a stacked matmul is one BLAS call per pose: a pose's result does not depend on the batch
+        return Jt @ J, (Jt @ r.transpose(2, 0, 1).reshape(-1, 8, 1))[..., 0]
+
+
+def _solve_each(M: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Solve M x = b for M (n, 6, 6), b (n, 6): one LAPACK call per matrix (so per pose, whatever n is)."""
+    try:
+        return np.linalg.solve(M, b[..., None])[..., 0]
+    except np.linalg.LinAlgError:  # an exactly singular matrix: the others as usual, that one by least squares
+        out = np.empty_like(b)
+        for i in range(M.shape[0]):
+            try:
+                out[i] = np.linalg.solve(M[i:i + 1], b[i:i + 1, :, None])[0, :, 0]
+            except np.linalg.LinAlgError:
+                out[i] = np.linalg.lstsq(M[i], b[i], rcond=None)[0]
+        return out
+
+
+def _rotate(w: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """exp([w]×) R for axis-angle steps w (3, n) and rotations R (3, 3, n) (Rodrigues' formula)."""
+    th2 = _add(w * w, axis=0)
+    th = np.sqrt(th2) + 1e-300  # sin θ / θ → 1 at θ = 0
+    h = np.sin(0.5 * th) / th
+    b = 2.0 * h * h  # (1 − cos θ) / θ², without cancellation
+    aw = (np.sin(th) / th) * w
+    # E = I + a [w]× + b [w]×², with [w]×² = w wᵀ − |w|² I
+    E = (b * w)[:, None] * w[None] + (1.0 - b * th2) * _EYE3
+    E[0, 1] -= aw[2]
+    E[1, 0] += aw[2]
+    E[0, 2] += aw[1]
+    E[2, 0] -= aw[1]
+    E[1, 2] -= aw[0]
+    E[2, 1] += aw[0]
+    return _add(E[:, :, None] * R[None], axis=1)
+
+
+def refine_candidates(
+    z: np.ndarray,
+    x: np.ndarray,
+    K: np.ndarray,
+    R: np.ndarray,
+    t: np.ndarray,
+    *,
+    max_iter: int = MAX_ITER,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Refine C candidate poses of each of B rows to the least-squares stationary point, all at once.
+
+    The Levenberg–Marquardt of :func:`refine_lm` with ``groups`` = rows (same chart, Marquardt scaling, damping
+    schedule, stopping rules and constants), written for speed and with one change that makes it converge tightly.
+
+    *Speed*: one iteration is a fixed ~100 NumPy operations on the poses still active, whatever B is: elementwise
+    expressions on arrays with the poses on the last axis, the objective in normalised camera coordinates
+    (:class:`_Model`), and one BLAS / LAPACK call per pose for JᵀJ, Jᵀr and the damped, Jacobi-scaled normal
+    equations (no einsum). Each pose keeps its own damping; a pose that converges, is hopeless (see
+    :func:`refine_lm`) or gets stuck leaves the working set, and the loop ends when none is left or after
+    ``max_iter`` iterations. A row's result never depends on the rest of the batch.
+
+    *Tight convergence*: at the flat bottom of a far view the cost cannot resolve the last Gauss–Newton steps
+    (their predicted reduction is ~1e-14 of the cost, its rounding ~1e-12), so a cost test alone rejects
+    them at random, the damping grows and the pose stops on a tiny *damped* step a few µm short of the
+    stationary point (:func:`refine_lm` does, for ~0.05 % of noisy rows). Here a step whose predicted
+    reduction is below :data:`FLAT_RTOL` of the cost is also accepted when it lowers the scaled gradient
+    ``max_i |gᵢ| / √Aᵢᵢ``, so every pose ends at the stationary point to rounding.
+
+    Args:
+        z: (4, 3) object points (runway frame, metres).
+        x: (B, 4, 2) observed pixels of row b.
+        K: (3, 3) intrinsics with last row exactly (0, 0, 1).
+        R: (B, C, 3, 3) initial world → camera rotations (OpenCV axes).
+        t: (B, C, 3) initial translations, metres.
+        max_iter: iteration cap.
+
+    Returns:
+        ``(R, t, cost)``: (B, C, 3, 3), (B, C, 3) and the objective Σ‖π − x‖² (B, C) in px². A pose whose
+        objective is not finite at the start is returned unchanged.
+    """
+    if not np.array_equal(K[2], [0.0, 0.0, 1.0]):
+        raise ValueError(f"K: refine_candidates needs the last row exactly (0, 0, 1), got {K[2].tolist()}")
+    model = _Model(z, K)
+    B, C = t.shape[:2]
+    # pose n = c·B + b, on the last axis
+    R_all = np.ascontiguousarray(R.transpose(2, 3, 1, 0)).reshape(3, 3, C * B)
+    t_all = np.ascontiguousarray(t.transpose(2, 1, 0)).reshape(3, C * B)
+    row = np.tile(np.arange(B), C)
+    um_all = model.observations(x)[..., row]
+    with np.errstate(all="ignore"):
+        Y, iz, un, r, cost_all = model.residuals(R_all, t_all, um_all)
+        idx = np.flatnonzero(np.isfinite(cost_all))  # the working set
+        Rw, tw, cost, um = R_all[..., idx], t_all[:, idx], cost_all[idx], um_all[..., idx]
+        A, g = model.derivatives(Y[..., idx], iz[:, idx], un[..., idx], r[..., idx])
+        lam = np.full(idx.size, LAMBDA_INIT)
+        for _ in range(max_iter):
+            if idx.size == 0:
+                break
+            s = 1.0 / np.sqrt(np.maximum(A[:, _D6, _D6], 1e-300))  # Jacobi scaling (n, 6)
+            sg = s * g
+            Ms = A * (s[:, :, None] * s[:, None])
+            Ms[:, _D6, _D6] += lam[:, None]
+            y = -_solve_each(Ms, sg)
+            predicted = lam * _add(y * y, axis=1) - _add(sg * y, axis=1)  # = −(2 gᵀδ + δᵀAδ)
+            step = (s * y).T
+            R_new = _rotate(step[:3], Rw)
+            t_new = tw + step[3:]
+            Y, iz, un, r, cost_new = model.residuals(R_new, t_new, um)
+            A_new, g_new = model.derivatives(Y, iz, un, r)
+            # equal within rounding counts as progress (as in refine_lm); below the cost's resolution, a lower
+            # scaled gradient does
+            flat = (predicted <= FLAT_RTOL * cost) & (_max(np.abs(s * g_new), axis=1) < _max(np.abs(sg), axis=1))
+            accept = (cost_new <= cost * (1.0 + COST_RTOL) + 1e-300) | flat  # False for NaN
+            Rw = np.where(accept, R_new, Rw)
+            tw = np.where(accept, t_new, tw)
+            cost = np.where(accept, cost_new, cost)
+            A = np.where(accept[:, None, None], A_new, A)
+            g = np.where(accept[:, None], g_new, g)
+            lam = np.where(accept, np.maximum(lam / 3.0, LAMBDA_MIN), lam * 4.0)
+            cost_all[idx] = cost
+            best = cost_all[:B]
+            for c in range(1, C):
+                best = np.fmin(best, cost_all[c * B:(c + 1) * B])  # ignores NaN costs
+            ad = np.abs(step)
+            t_tol = STEP_TOL * (1.0 + np.sqrt(_add(tw * tw, axis=0)))
+            # a NaN predicted reduction never makes a pose hopeless (refine_lm: margin ∞)
+            stop = (((_max(ad[:3], axis=0) <= STEP_TOL) & (_max(ad[3:], axis=0) <= t_tol))
+                    | (lam > LAMBDA_STOP) | ~(_max(ad, axis=0) < np.inf)
+                    | (cost > best[row[idx]] * (1.0 + 1e-9) + HOPELESS_FACTOR * np.maximum(predicted, 0.0)))
+            if stop.any():
+                R_all[..., idx], t_all[:, idx] = Rw, tw
+                k = np.flatnonzero(~stop)
+                idx, Rw, tw, cost, lam, A, g, um = (idx.take(k), Rw.take(k, axis=2), tw.take(k, axis=1), cost.take(k),
+                                                    lam.take(k), A.take(k, axis=0), g.take(k, axis=0),
+                                                    um.take(k, axis=2))
+        R_all[..., idx], t_all[:, idx] = Rw, tw
+    return (R_all.reshape(3, 3, C, B).transpose(3, 2, 0, 1), t_all.reshape(3, C, B).transpose(2, 1, 0),
+            cost_all.reshape(C, B).T)

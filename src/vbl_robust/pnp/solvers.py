@@ -13,15 +13,23 @@ Conventions
 Solvers (``SOLVERS``; facts in ``notes/pnp.md``)
 -----------------------------------------------
 ``"ippe_lm"`` (default)
-    ``SOLVEPNP_IPPE`` returns the two poses of the planar ambiguity; both are refined with Levenberg–Marquardt in
-    float64 to the stationary point of the reprojection objective (:func:`.refine.refine_lm`, batched numpy)
-    and the one with the lower *final* reprojection error is kept. Two deliberate departures from the recipe
+    The two IPPE poses of the planar ambiguity (:func:`.ippe.ippe_poses`, all rows at once, hand-written NumPy
+    because OpenCV has no batched IPPE) are both refined with Levenberg–Marquardt in float64 to the stationary
+    point of the reprojection objective (:func:`.refine.refine_candidates`, all rows and candidates at once) and
+    the one with the lower *final* reprojection error is kept. Two deliberate departures from the recipe
     "lower IPPE solution, then ``cv2.solvePnPRefineLM``": (1) OpenCV 5.0's LM ignores its termination criteria
     and stops 0.26–0.5 m short of the optimum at 6 km (the implicit gradient needs the true stationary point),
     and costs several IPPE solves; (2) keeping the lower IPPE solution *before* refinement ends in a worse
     local minimum for about 3 % of poses with 2 px corner noise (23 of 800 measured over 500–6000 m; none of
-    800 with 0.5 px). ``benchmarks/bench_pnp.py`` measures the recipe side by side. When OpenCV's IPPE returns
-    only NaN poses (it does for some exact, noise-free keypoint sets), the SQPNP pose is refined instead.
+    800 with 0.5 px). ``benchmarks/bench_pnp.py`` measures the recipe side by side. Where a row has no finite IPPE
+    pose, OpenCV's SQPNP pose is refined instead.
+``"ippe_lm_rowwise"`` (not in ``SOLVERS``; the reference for tests and ``benchmarks/bench_pnp.py``)
+    The previous implementation of ``"ippe_lm"``, row by row: OpenCV's ``SOLVEPNP_IPPE`` per row (SQPNP where it
+    returns only NaN poses, as it does for some exact keypoint sets), then :func:`.refine.refine_lm`. Same
+    objective, candidates and stopping rules; ``tests/pnp/test_ippe_batched.py`` compares the two (same
+    success and reasons; same position within 1e-6 m except where ``refine_lm`` stops a few µm short of the
+    stationary point, see :func:`.refine.refine_candidates`). ``"ippe_lm"`` also runs this path for a ``K``
+    whose last row is not exactly (0, 0, 1) (``check_intrinsics`` accepts it within 1e-8).
 ``"ippe"``
     ``SOLVEPNP_IPPE``, lower-reprojection solution, no refinement.
 ``"iterative"``
@@ -48,11 +56,15 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .refine import refine_lm, residuals, rotvec_to_matrix
+from .ippe import ippe_poses
+from .refine import matrix_to_rotvec, refine_candidates, refine_lm, residuals, rotvec_to_matrix
 
 logger = logging.getLogger(__name__)
 
 SOLVERS: tuple[str, ...] = ("ippe_lm", "iterative", "sqpnp", "ippe")
+
+#: The row-by-row implementation of ``"ippe_lm"``, accepted by :func:`solve` but not listed in ``SOLVERS``.
+ROWWISE = "ippe_lm_rowwise"
 
 #: Three keypoints count as collinear when the triangle's height is below this fraction of its longest side.
 COLLINEAR_TOL = 1e-6
@@ -131,7 +143,7 @@ def check_intrinsics(K: object) -> np.ndarray:
 
 
 def check_method(method: str) -> str:
-    if method not in SOLVERS:
+    if method not in SOLVERS and method != ROWWISE:
         raise ValueError(f"method: unknown PnP solver {method!r}; choose from {SOLVERS}")
     return method
 
@@ -182,7 +194,7 @@ def _rows(points_2d: object) -> tuple[np.ndarray, list[str]]:
 
 def _opencv_candidates(method: str, z: np.ndarray, x: np.ndarray, K: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     """Pose candidates (rvec (3,), tvec (3,)) of one row from OpenCV; may raise ``cv2.error``."""
-    if method in ("ippe", "ippe_lm"):
+    if method in ("ippe", "ippe_lm", ROWWISE):
         n, rvecs, tvecs, errs = cv2.solvePnPGeneric(z, x, K, None, flags=cv2.SOLVEPNP_IPPE)
         cands = [(np.asarray(r, np.float64).reshape(3), np.asarray(t, np.float64).reshape(3))
                  for r, t in zip(rvecs[:n], tvecs[:n], strict=True)]
@@ -209,7 +221,8 @@ def _pick_best(
     finite = np.all(np.isfinite(rv), axis=1) & np.all(np.isfinite(tv), axis=1)
     R = rotvec_to_matrix(np.where(finite[:, None], rv, 0.0))
     xs = x[owner]
-    if method == "ippe_lm":
+    refined = method in ("ippe_lm", ROWWISE)
+    if refined:
         R, tv, _ = refine_lm(z, xs, K, R, np.where(finite[:, None], tv, 0.0), groups=owner)
         finite &= np.all(np.isfinite(tv), axis=1)
     Xc, _, r = residuals(z, xs, K, R, np.where(finite[:, None], tv, 0.0))
@@ -225,9 +238,68 @@ def _pick_best(
             continue
         i = ok[np.argmin(rms[ok])]
         reasons[b] = ""
-        rvec[b] = cv2.Rodrigues(R[i])[0].ravel() if method == "ippe_lm" else rv[i]
+        rvec[b] = cv2.Rodrigues(R[i])[0].ravel() if refined else rv[i]
         tvec[b], err[b] = tv[i], rms[i]
         position[b] = -R[i].T @ tv[i]
+
+
+def _sqpnp_start(z: np.ndarray, x: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray] | str:
+    """OpenCV's SQPNP pose (R (3, 3), t (3,)) of one row, or the failure reason."""
+    try:
+        ok, rv, tv = cv2.solvePnP(z, np.ascontiguousarray(x), K, None, flags=cv2.SOLVEPNP_SQPNP)
+    except cv2.error as e:
+        msg = str(e).strip().splitlines()[-1] if str(e).strip() else "cv2.error"
+        logger.debug("PnP ippe_lm: OpenCV error %s in the SQPNP fallback", msg)
+        return f"OpenCV error: {msg}"
+    if not ok:
+        return "non-finite solution"  # the IPPE poses were not finite and SQPNP found none
+    return rotvec_to_matrix(np.asarray(rv, np.float64).reshape(1, 3))[0], np.asarray(tv, np.float64).reshape(3)
+
+
+def _solve_ippe_lm(
+    z: np.ndarray, x: np.ndarray, K: np.ndarray, todo: np.ndarray, reasons: list[str],
+    rvec: np.ndarray, tvec: np.ndarray, err: np.ndarray, position: np.ndarray,
+) -> None:
+    """``"ippe_lm"`` for the usable rows ``todo``, vectorised; writes the outputs and reasons of those rows.
+
+    Both IPPE poses of every row, LM on all of them at once, then per row the valid candidate (finite, all
+    corners in front of the camera) with the lower final error, as :func:`_pick_best` does row by row.
+    """
+    xs = x[todo]
+    R, t = ippe_poses(z, xs, K)
+    finite = np.all(np.isfinite(R), axis=(2, 3)) & np.all(np.isfinite(t), axis=2)  # (n, 2)
+    R, t, cost = refine_candidates(z, xs, K, R, t)
+    fallback = np.flatnonzero(~finite.any(axis=1))
+    if fallback.size:  # no finite IPPE pose (e.g. the centroid projects to infinity): refine SQPNP's pose instead
+        R, t, cost, finite = (np.concatenate([a, np.full_like(a[:, :1], f)], axis=1)
+                              for a, f in ((R, np.nan), (t, np.nan), (cost, np.nan), (finite, False)))
+        starts = {int(i): _sqpnp_start(z, xs[i], K) for i in fallback}
+        rows = np.array([i for i, s in starts.items() if not isinstance(s, str)], dtype=int)
+        for i, s in starts.items():
+            if isinstance(s, str):
+                reasons[todo[i]] = s
+        if rows.size:
+            R1 = np.stack([starts[int(i)][0] for i in rows])[:, None]
+            t1 = np.stack([starts[int(i)][1] for i in rows])[:, None]
+            R1, t1, c1 = refine_candidates(z, xs[rows], K, R1, t1)
+            R[rows, 2], t[rows, 2], cost[rows, 2], finite[rows, 2] = R1[:, 0], t1[:, 0], c1[:, 0], True
+    finite &= np.all(np.isfinite(t), axis=2) & np.all(np.isfinite(R), axis=(2, 3))
+    depth = R[..., 2, 0, None] * z[:, 0] + R[..., 2, 1, None] * z[:, 1] + R[..., 2, 2, None] * z[:, 2] + t[..., 2, None]
+    rms = np.sqrt(cost / 4.0)
+    valid = finite & np.all(depth > 0, axis=2) & np.isfinite(rms)
+    best = np.argmin(np.where(valid, rms, np.inf), axis=1)
+    ok = valid.any(axis=1)
+    for i in np.flatnonzero(~ok):
+        if not reasons[todo[i]]:
+            reasons[todo[i]] = ("non-finite solution" if not finite[i].all()
+                                else "solution puts the runway behind the camera")
+    i = np.flatnonzero(ok)
+    if i.size == 0:
+        return
+    Rb, tb = R[i, best[i]], t[i, best[i]]
+    rows = todo[i]
+    rvec[rows], tvec[rows], err[rows] = matrix_to_rotvec(Rb), tb, rms[i, best[i]]
+    position[rows] = -(Rb[:, 0] * tb[:, :1] + Rb[:, 1] * tb[:, 1:2] + Rb[:, 2] * tb[:, 2:])  # −Rᵀ t
 
 
 def solve(points_2d: object, corners_3d: object, K: object, method: str = "ippe_lm") -> PnPResult:
@@ -239,7 +311,7 @@ def solve(points_2d: object, corners_3d: object, K: object, method: str = "ippe_
             detached. An unbatched (4, 2) input gives B = 1.
         corners_3d: (4, 3) runway corners TR, TL, BL, BR in the runway frame, metres.
         K: (3, 3) pinhole intrinsics (no distortion).
-        method: one of :data:`SOLVERS` (see the module docstring).
+        method: one of :data:`SOLVERS`, or ``"ippe_lm_rowwise"`` (see the module docstring).
 
     Returns:
         :class:`PnPResult` with (B, ...) arrays; failed rows are NaN with ``success`` False.
@@ -252,15 +324,20 @@ def solve(points_2d: object, corners_3d: object, K: object, method: str = "ippe_
     k = check_intrinsics(K)
     x, reasons = _rows(points_2d)
     B = x.shape[0]
+    # the vectorised LM models K = [[A₂, c], [0, 0, 1]] exactly; check_intrinsics accepts a last row within 1e-8
+    vectorised = method == "ippe_lm" and np.array_equal(k[2], [0.0, 0.0, 1.0])
     finite = np.all(np.isfinite(x), axis=(1, 2))
     in_range = np.all(np.abs(np.where(finite[:, None, None], x, 0.0)) <= MAX_COORD_PX, axis=(1, 2))
     degenerate = np.zeros(B, dtype=bool)
     usable = finite & in_range
     if usable.any():
         degenerate[usable] = _degenerate_rows(x[usable])
+    rvec, tvec, err, position = (np.full((B, 3), np.nan), np.full((B, 3), np.nan), np.full(B, np.nan),
+                                 np.full((B, 3), np.nan))
     owner: list[int] = []
     cand_r: list[np.ndarray] = []
     cand_t: list[np.ndarray] = []
+    todo: list[int] = []
     for b in range(B):
         if reasons[b]:
             continue
@@ -270,6 +347,8 @@ def solve(points_2d: object, corners_3d: object, K: object, method: str = "ippe_
             reasons[b] = f"keypoints farther than {MAX_COORD_PX:.0e} px from the image origin"
         elif degenerate[b]:
             reasons[b] = "collinear or coincident keypoints"
+        elif vectorised:
+            todo.append(b)
         else:
             try:
                 cands = _opencv_candidates(method, z, np.ascontiguousarray(x[b]), k)
@@ -283,8 +362,8 @@ def solve(points_2d: object, corners_3d: object, K: object, method: str = "ippe_
                 owner.append(b)
                 cand_r.append(r)
                 cand_t.append(t)
-    rvec, tvec, err, position = (np.full((B, 3), np.nan), np.full((B, 3), np.nan), np.full(B, np.nan),
-                                 np.full((B, 3), np.nan))
+    if todo:
+        _solve_ippe_lm(z, x, k, np.asarray(todo), reasons, rvec, tvec, err, position)
     if owner:
         _pick_best(method, z, x, k, np.asarray(owner), np.stack(cand_r), np.stack(cand_t),
                    reasons, rvec, tvec, err, position)
