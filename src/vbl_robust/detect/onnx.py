@@ -47,6 +47,20 @@ def export_onnx(pt_path: str | Path, out_path: str | Path, *, trust: bool = Fals
     return out_path
 
 
+def pose_metadata(path: Path, meta: dict[str, str]) -> tuple[int, int | None]:
+    """``(classes, imgsz or None)`` from an ultralytics pose export's metadata; ``ValueError`` naming the file when
+    it is not a 4-keypoint pose model."""
+    kpt = meta.get("kpt_shape")
+    if kpt is None:
+        raise ValueError(f"{path}: no 'kpt_shape' in the ONNX metadata; not an ultralytics pose export")
+    kpt_shape = ast.literal_eval(kpt)
+    if int(kpt_shape[0]) != 4:
+        raise ValueError(f"{path}: pose model has {kpt_shape[0]} keypoints; runway corners need 4")
+    nc = max(1, len(ast.literal_eval(meta.get("names", "{0: 'runway'}"))))
+    size = ast.literal_eval(meta.get("imgsz", "None"))
+    return nc, (size if isinstance(size, int) or size is None else max(size))
+
+
 class OnnxDetector(PoseDetector):
     """A YOLO-pose ONNX export as a runway-corner detector (black box).
 
@@ -73,22 +87,13 @@ class OnnxDetector(PoseDetector):
             self.session = ort.InferenceSession(str(p), opts, providers=["CPUExecutionProvider"])
         except Exception as e:  # noqa: BLE001 - any ORT load failure means the same to the user
             raise ValueError(f"{p}: not a loadable ONNX model ({type(e).__name__}: {e})") from e
-        meta = self.session.get_modelmeta().custom_metadata_map
-        kpt = meta.get("kpt_shape")
-        if kpt is None:
-            raise ValueError(f"{p}: no 'kpt_shape' in the ONNX metadata; not an ultralytics pose export")
-        kpt_shape = ast.literal_eval(kpt)
-        if int(kpt_shape[0]) != 4:
-            raise ValueError(f"{p}: pose model has {kpt_shape[0]} keypoints; runway corners need 4")
-        names = ast.literal_eval(meta.get("names", "{0: 'runway'}"))
-        self.nc = max(1, len(names))
+        self.nc, size = pose_metadata(p, self.session.get_modelmeta().custom_metadata_map)
         inp = self.session.get_inputs()[0]
         self.input_name = inp.name
         out_shape = self.session.get_outputs()[0].shape
         if len(out_shape) == 3 and isinstance(out_shape[2], int) and out_shape[2] == 6 + 12:
             raise ValueError(f"{p}: end-to-end (NMS-free) output layout is not supported")
-        size = ast.literal_eval(meta.get("imgsz", "[640, 640]"))
-        self.imgsz = int(imgsz or (size if isinstance(size, int) else max(size)))
+        self.imgsz = int(imgsz or size or 640)
         if not isinstance(inp.shape[0], str) and not isinstance(inp.shape[2], str):
             if imgsz is not None and int(inp.shape[2]) != self.imgsz:
                 raise ValueError(f"{p}: static input size {inp.shape[2]}, got imgsz={imgsz}")

@@ -9,12 +9,12 @@ differentiable path stays in torch (:mod:`.engines`).
 
 from __future__ import annotations
 
-import ast
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from .onnx import pose_metadata
 from .pose import PoseDetector
 
 __all__ = ["OpenVinoDetector"]
@@ -44,15 +44,11 @@ class OpenVinoDetector(PoseDetector):
             model = core.read_model(str(p))
         except Exception as e:  # noqa: BLE001 - any OpenVINO read failure means the same to the user
             raise ValueError(f"{p}: not a model OpenVINO can read ({type(e).__name__}: {e})") from e
-        meta = _onnx_metadata(p) if p.suffix.lower() == ".onnx" else {}
-        kpt = ast.literal_eval(meta.get("kpt_shape", "[4, 3]"))
-        if int(kpt[0]) != 4:
-            raise ValueError(f"{p}: pose model has {kpt[0]} keypoints; runway corners need 4")
-        self.nc = max(1, len(ast.literal_eval(meta.get("names", "{0: 'runway'}"))))
-        size = ast.literal_eval(meta.get("imgsz", "None"))
+        # an ONNX export is checked like OnnxDetector does; an IR carries no such metadata (1 class assumed)
+        self.nc, size = pose_metadata(p, _onnx_metadata(p)) if p.suffix.lower() == ".onnx" else (1, None)
         shape = model.inputs[0].get_partial_shape()
         static = shape[2].get_length() if shape.rank.get_length() == 4 and shape[2].is_static else None
-        self.imgsz = int(imgsz or (size if isinstance(size, int) else max(size) if size else static or 640))
+        self.imgsz = int(imgsz or size or static or 640)
         config = {"INFERENCE_PRECISION_HINT": "f32"}
         if threads:
             config["INFERENCE_NUM_THREADS"] = int(threads)
