@@ -139,8 +139,8 @@ def test_unloadable_pixels_penalise_every_row_without_raising(tmp_path):
 
 def test_user_errors_are_value_errors_at_construction(samples):
     s = samples[0]
-    with pytest.raises(ValueError, match="unknown parameter 'brightness'; known perturbations: roll_deg, contrast"):
-        Objective(s, OracleDetector(), ParameterBox({"brightness": (0.5, 1.5)}))
+    with pytest.raises(ValueError, match="unknown parameter 'fog'; known perturbations: roll_deg, pitch_deg, "):
+        Objective(s, OracleDetector(), ParameterBox({"fog": (0.5, 1.5)}))
     with pytest.raises(ValueError, match="pnp='epnp'"):
         Objective(s, OracleDetector(), BOX, pnp="epnp")
     with pytest.raises(ValueError, match="batch_size"):

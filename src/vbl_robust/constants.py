@@ -32,6 +32,7 @@ FAILURE_REASONS: dict[str, str] = {
     "non_finite_keypoints": "the selected keypoints are not finite",
     "pnp_failed": "the PnP solver found no pose",
     "non_finite_position": "the PnP position is not finite",
+    "out_of_view": "the perturbation turned the runway out of the camera's view (a corner behind the camera)",
 }
 
 

@@ -245,7 +245,7 @@ class Objective:
         """The :class:`~vbl_robust.detect.DetectContext` of θ rows ``(B, d)`` (NumPy or a tensor)."""
         self._load()
         sampler = ViewSampler(self.perturbation, self._base_t, theta, self._scale.to_scaled(self.sample.K[:2, 2]),
-                              frame=self._base)
+                              K=self._scale.intrinsics(self.sample.K), scale=self._scale, frame=self._base)
         return DetectContext(self.sample, sampler, self._scale)
 
     # -- the two entry points ------------------------------------------------------------------------------------

@@ -19,10 +19,15 @@ import numpy as np
 #: Units of the parameters this package knows. Unknown names are allowed (unit "").
 KNOWN_UNITS: dict[str, str] = {
     "roll_deg": "deg",
+    "pitch_deg": "deg",
+    "yaw_deg": "deg",
+    "blur_px": "px",
+    "motion_blur_px": "px",
+    "haze": "fraction",
     "contrast": "factor",
-    "brightness": "factor",
-    "gamma": "factor",
-    "blur_sigma_px": "px",
+    "brightness": "full scale",
+    "gamma": "exponent",
+    "noise_std": "full scale",
     "scale": "factor",
 }
 

@@ -10,11 +10,15 @@ CENTER = (77.0, 61.5)
 
 
 def test_unknown_name_lists_known_ones():
-    with pytest.raises(ValueError, match=r"unknown parameter 'gamma'; known perturbations: roll_deg, contrast"):
-        Perturbation(ParameterBox({"roll_deg": (-5, 5), "gamma": (0.5, 2)}))
+    known = ", ".join(PERTURBATIONS)
+    with pytest.raises(ValueError, match=rf"unknown parameter 'fog'; known perturbations: {known}$"):
+        Perturbation(ParameterBox({"roll_deg": (-5, 5), "fog": (0.5, 2)}))
     with pytest.raises(ValueError, match="contrast.*>= 0"):
         Perturbation(ParameterBox({"contrast": (-0.5, 2)}))
-    assert set(PERTURBATIONS) == {"roll_deg", "contrast"}
+    with pytest.raises(ValueError, match="haze.*<= 1"):
+        Perturbation(ParameterBox({"haze": (0.0, 1.5)}))
+    assert list(PERTURBATIONS) == ["roll_deg", "pitch_deg", "yaw_deg", "blur_px", "motion_blur_px", "haze",
+                                   "contrast", "brightness", "gamma", "noise_std"]
 
 
 def test_theta_validation():

@@ -52,3 +52,19 @@ def test_rotate_then_resize_equals_resize_then_rotate(angle, make_image):
     # a wrong centre (the unmapped one) is clearly worse: the equivalence test can fail
     c = p.images(resize_image(full.astype(np.float32) / 255.0, size), theta, center=center)[0]
     assert np.abs(a - c).mean() > 3 * d.mean()
+
+
+def test_scaled_intrinsics_project_like_resized_pixels():
+    from vbl_robust.geometry.camera import intrinsics
+
+    K = intrinsics(1024, 768, 60.0)
+    s, _ = PixelScale.for_long_side(1024, 768, 640)
+    K2 = s.intrinsics(K)
+    X = np.array([[0.3, -0.2, 1.0], [-0.1, 0.25, 2.0]])  # camera-frame points (OpenCV axes)
+    uv = (X @ K.T)[:, :2] / X[:, 2:]
+    np.testing.assert_allclose((X @ K2.T)[:, :2] / X[:, 2:], s.to_scaled(uv), atol=1e-9)
+    assert np.array_equal(K2[:2, 2], s.to_scaled(K[:2, 2]))  # bit for bit: the rotation centre
+    assert np.array_equal(PixelScale().intrinsics(K), K)
+    assert s.original_size(640, 480) == (1024, 768) and PixelScale().original_size(5, 7) == (5, 7)
+    with pytest.raises(ValueError, match="3, 3"):
+        s.intrinsics(np.eye(2))

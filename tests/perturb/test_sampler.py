@@ -92,3 +92,21 @@ def test_points_move_like_the_content():
     frame = s.views(torch.tensor([[0.0, 0.0, 64.0]]), 64)[0, 0]
     v, u = np.unravel_index(int(frame.argmax()), frame.shape)
     np.testing.assert_allclose(s.points(np.array([[45.0, 20.0]]))[0, 0], (u, v), atol=1e-6)
+
+
+def test_the_sampler_threads_the_intrinsics(scene):
+    """K reaches the attitude homography (views, frames and points); center defaults to K's principal point."""
+    img = to_tensor(scene.image)
+    box = ParameterBox({"pitch_deg": (-10, 10), "roll_deg": (-10, 10)})
+    theta = np.array([[4.0, -3.0]])
+    with pytest.raises(ValueError, match="pitch_deg need the camera intrinsics"):
+        ViewSampler(Perturbation(box), img, theta, scene.K[:2, 2])
+    with pytest.raises(ValueError, match="not the principal point"):
+        ViewSampler(Perturbation(box), img, theta, (1.0, 2.0), K=scene.K)
+    s = ViewSampler(Perturbation(box), img, theta, K=scene.K)
+    np.testing.assert_array_equal(s.center, scene.K[:2, 2])
+    pt = np.array([[300.0, 700.0]])
+    np.testing.assert_allclose(s.points(pt), Perturbation(box).points(pt, theta, K=scene.K))
+    direct = s.views(torch.tensor([[0.0, 0.0, 1024.0]]), 256)
+    framed = resample(s.frames(), torch.tensor([[0.0, 0.0, 1024.0]]), 256)
+    assert float((direct - framed).abs().mean()) < 0.01  # as for roll: pooling before or after the warp

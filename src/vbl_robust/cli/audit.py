@@ -98,6 +98,34 @@ def box_label(bounds: dict[str, tuple[float, float]]) -> str:
     return ", ".join(parts)
 
 
+def parse_perturb(items: list[str] | None) -> dict[str, tuple[float, float]]:
+    """``--perturb NAME=LO,HI`` (repeatable; a bare ``NAME`` takes the family's plausible default range) →
+    ``{name: (lo, hi)}`` in the order given; a one-line error naming the flag and the value on bad input."""
+    from vbl_robust.perturb import PERTURBATIONS
+
+    out: dict[str, tuple[float, float]] = {}
+    for item in items or ():
+        name, sep, text = (part.strip() for part in item.partition("="))
+        if name not in PERTURBATIONS:
+            fail(f"--perturb {item}: unknown perturbation {name!r}; known perturbations: {', '.join(PERTURBATIONS)}")
+        if name in out:
+            fail(f"--perturb {item}: {name} is given more than once")
+        spec = PERTURBATIONS[name]
+        if not sep:
+            out[name] = spec.default
+            continue
+        try:
+            lo, hi = (float(v) for v in text.split(","))
+        except ValueError:
+            fail(f"--perturb {item}: expected {name}=LOWER,UPPER (two numbers), got {text!r}")
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            fail(f"--perturb {item}: expected finite bounds with LOWER < UPPER, got {text!r}")
+        if lo < spec.minimum or hi > spec.maximum:
+            fail(f"--perturb {item}: {name} must lie within [{spec.minimum:g}, {spec.maximum:g}] ({spec.description})")
+        out[name] = (lo, hi)
+    return out
+
+
 def parse_methods(text: str) -> tuple[str, ...]:
     from vbl_robust.search import METHODS
 
@@ -234,6 +262,10 @@ def register(app: typer.Typer) -> None:
         oracle_noise: float = typer.Option(0.0, "--oracle-noise", help="Oracle: fixed per-image corner noise (px)."),
         roll: str = typer.Option("15", "--roll", help="Roll range in degrees: '15' (= ±15) or 'lo,hi'; 'none' to omit."),
         contrast: str | None = typer.Option(None, "--contrast", help="Contrast factor range 'lo,hi' (e.g. 0.7,1.4)."),
+        perturb: list[str] | None = typer.Option(None, "--perturb", help="Another perturbation family and its range, "
+                                                 "NAME=LO,HI (repeatable; a bare NAME takes its plausible default "
+                                                 "range): pitch_deg, yaw_deg, blur_px, motion_blur_px, haze, "
+                                                 "brightness, gamma, noise_std (roll_deg here replaces --roll)."),
         methods: str = typer.Option(METHODS_DEFAULT, "--methods", help="Comma-separated search methods."),
         max_evals: int | None = typer.Option(200, "--max-evals", help="Evaluations per image and method (0 = none)."),
         max_seconds: float | None = typer.Option(None, "--max-seconds", help="Seconds per image and method."),
@@ -250,18 +282,30 @@ def register(app: typer.Typer) -> None:
         parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to this Parquet file."),
         report: bool = typer.Option(True, "--report/--no-report", help="Write report.html into --out."),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or table."),
+        sequences: str | None = typer.Option(None, "--sequences", help="Audit approach sequences instead of images: "
+                                             "a number N (generated) or a LARD V2 directory grouped into sequences; "
+                                             "one θ is held over each sequence (see --sustain)."),
+        sustain: int = typer.Option(1, "--sustain", min=1, help="With --sequences: frames the error must hold "
+                                    "(the worst error sustained over K consecutive frames)."),
+        frames: int = typer.Option(20, "--frames", min=1, help="With --sequences N: frames per sequence."),
+        rate: float = typer.Option(10.0, "--rate", help="With --sequences: frame rate in Hz (generated sequences; "
+                                   "LARD data without times)."),
     ) -> None:
         """Find each image's worst case over a perturbation box: worst θ, worst error, verdict, survival, report."""
         from vbl_robust.campaigns import BoxSpec, Budget, audit_spec
         from vbl_robust.space import ParameterBox
 
         bounds: dict[str, tuple[float, float]] = {}
-        if roll.strip().lower() != "none":
+        extra = parse_perturb(perturb)
+        if roll.strip().lower() != "none" and "roll_deg" not in extra:
             bounds["roll_deg"] = parse_range(roll, name="--roll", symmetric=True)
         if contrast is not None:
+            if "contrast" in extra:
+                fail("--contrast and --perturb contrast=...: give the contrast range once")
             bounds["contrast"] = parse_range(contrast, name="--contrast")
+        bounds.update(extra)
         if not bounds:
-            fail("give at least one of --roll, --contrast")
+            fail("give at least one of --roll, --contrast, --perturb")
         if executor not in ("local", "ray"):
             fail(f"--executor must be 'local' or 'ray', got {executor!r}")
         try:
@@ -276,10 +320,26 @@ def register(app: typer.Typer) -> None:
         spec = audit_spec(BoxSpec(box, label, level), methods=method_list, budget=budget, seed=seed,
                           lipschitz=parse_lipschitz(lipschitz), pnp=pnp, landscape=counts)
         det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine)
+        if sequences is not None:  # sequence audits: vbl_robust.cli.sequence_audit
+            from .sequence_audit import run_sequence_audit
+
+            run_sequence_audit(
+                out, sequences, frames=frames, rate=rate, seed=seed, width=width, height=height, sustain=sustain,
+                box=box, methods=method_list, max_evals=max_evals, max_seconds=max_seconds, early_stop=early_stop,
+                pnp=pnp, detector=det, quiet=quiet, config={"command": "audit --sequences", "sequences": sequences,
+                "sustain": sustain, "frames": frames, "rate": rate, "seed": seed, "roll": roll, "contrast": contrast,
+                "methods": list(method_list), "max_evals": max_evals, "max_seconds": max_seconds,
+                "early_stop": early_stop, "pnp": pnp, "width": width, "height": height, "perturb": list(perturb or [])},
+                unsupported={"--lard (use --sequences DIR)": lard is not None, "--lipschitz": lipschitz is not None,
+                             "--executor ray": executor != "local", "--csv": csv is not None,
+                             "--parquet": parquet is not None})
+            return
         samples, source = load(n, seed, lard, width, height)
         config = {"command": "audit", "n": n, "seed": seed, "lard": str(lard) if lard else None, "roll": roll,
                   "contrast": contrast, "methods": list(method_list), "max_evals": max_evals, "max_seconds": max_seconds,
                   "early_stop": early_stop, "lipschitz": lipschitz, "pnp": pnp, "width": width, "height": height}
+        if perturb:
+            config["perturb"] = list(perturb)
         summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
                                     config=config, quiet=quiet)
         finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)

@@ -12,7 +12,9 @@ Metadata CSV (``;``-separated, read by column name)
 
 Extensions written by this package (ignored by LARD tools, which read by name)
     ``x_TR_exact … y_BR_exact``: the exact float corner projections (full precision), preferred by the reader;
-    ``reference``: free text naming the synthetic airport / generator.
+    ``reference``: free text naming the synthetic airport / generator;
+    ``sequence_id, frame_index, time_s`` (approach sequences only, :mod:`.sequence`): the sequence a frame belongs
+    to, its 0-based index along the approach and its time in seconds since the sequence's first frame.
 
 Runway database (JSON)
     ``ICAO → runway → A|B|C|D → {"position": {x, y, z}, "coordinate": {latitude, longitude, altitude}}``,
@@ -41,6 +43,8 @@ LARD_COLUMNS = (
 )
 CORNER_COLUMNS = tuple(f"{c}_{n}" for n in CORNER_NAMES for c in ("x", "y"))
 EXACT_CORNER_COLUMNS = tuple(f"{name}_exact" for name in CORNER_COLUMNS)
+#: Extension columns of approach sequences (written only for samples that belong to one, see :mod:`.sequence`).
+SEQUENCE_COLUMNS = ("sequence_id", "frame_index", "time_s")
 #: Columns the reader cannot do without.
 REQUIRED_COLUMNS = (
     "image", "width", "height", "airport", "runway", "lat_cam", "lon_cam", "alt_cam", "yaw", "pitch", "roll",

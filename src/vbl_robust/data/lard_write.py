@@ -8,7 +8,9 @@ See :mod:`.lard` for the format. What is written, and why:
   tools built for LARD see LARD labels; the exact float projections go to ``x_TR_exact … y_BR_exact`` (full
   precision) and :func:`.lard_read.read_lard` prefers them, so our own ground truth stays exact;
 - ``fov_deg`` (extension): the horizontal field of view of ``sample.K``, used by the reader unless overridden;
-- ``reference`` (extension): free text naming the synthetic airport/generator, repeated on every row.
+- ``reference`` (extension): free text naming the synthetic airport/generator, repeated on every row;
+- ``sequence_id``, ``frame_index``, ``time_s`` (extension, :data:`.lard.SEQUENCE_COLUMNS`): written when the
+  samples are frames of approach sequences (``meta`` has these keys: all samples or none), see :mod:`.sequence`.
 
 The camera ``lat_cam/lon_cam/alt_cam`` come from ``sample.position`` and ``yaw/pitch/roll`` from ``sample.R``
 through the :class:`~vbl_robust.geometry.geodesy.RunwayFrame` of the runway named by ``sample.meta["airport"]`` /
@@ -30,7 +32,14 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry.geodesy import RunwayFrame
-from .lard import CORNER_COLUMNS, EXACT_CORNER_COLUMNS, LARD_COLUMNS, approach_metrics, normalize_runway
+from .lard import (
+    CORNER_COLUMNS,
+    EXACT_CORNER_COLUMNS,
+    LARD_COLUMNS,
+    SEQUENCE_COLUMNS,
+    approach_metrics,
+    normalize_runway,
+)
 from .sample import Sample
 
 logger = logging.getLogger(__name__)
@@ -67,7 +76,8 @@ def write_lard(
     Raises:
         ValueError: unknown format, a sample without airport/runway/pixels/attitude, a runway missing from
             ``runway_db``, corners that disagree with the DB runway (> 1 mm), non-LARD intrinsics, corners that
-            do not project (behind the camera), or duplicate sample ids.
+            do not project (behind the camera), duplicate sample ids, or sequence fields on some samples only
+            (or a non-integer ``frame_index`` / non-finite ``time_s``).
     """
     import cv2
 
@@ -94,9 +104,15 @@ def write_lard(
             raise ValueError(f"write_lard: sample {sample.id}: OpenCV could not write {out / 'images' / name}")
         rows.append(_row(sample, frame, airport, runway, f"images/{name}", reference))
 
+    in_sequence = ["sequence_id" in r for r in rows]
+    if any(in_sequence) and not all(in_sequence):
+        with_id, without = rows[in_sequence.index(True)], rows[in_sequence.index(False)]
+        raise ValueError(f"write_lard: image {without['image']!r} has no meta 'sequence_id' but image "
+                         f"{with_id['image']!r} has one: either every sample belongs to a sequence or none does")
+    columns = (*OUTPUT_COLUMNS, *SEQUENCE_COLUMNS) if any(in_sequence) else OUTPUT_COLUMNS
     csv_path = out / csv_name
     with open(csv_path, "w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=OUTPUT_COLUMNS, delimiter=";", lineterminator="\n")
+        writer = csv.DictWriter(f, fieldnames=columns, delimiter=";", lineterminator="\n")
         writer.writeheader()
         writer.writerows(rows)
     (out / db_name).write_text(json.dumps(runway_db, indent=4) + "\n", encoding="utf-8")
@@ -189,4 +205,18 @@ def _row(sample: Sample, frame: RunwayFrame, airport: str, runway: str, image: s
     flat = uv.reshape(-1)  # TR(u, v), TL(u, v), BL(u, v), BR(u, v) = the column order
     row.update({c: str(int(v)) for c, v in zip(CORNER_COLUMNS, flat, strict=True)})
     row.update({c: repr(float(v)) for c, v in zip(EXACT_CORNER_COLUMNS, flat, strict=True)})
+    if "sequence_id" in meta:
+        row.update(_sequence_fields(sample, meta))
     return row
+
+
+def _sequence_fields(sample: Sample, meta: Mapping) -> dict[str, str]:
+    seq = str(meta["sequence_id"]).strip()
+    frame, time_s = meta.get("frame_index"), meta.get("time_s")
+    if not seq:
+        raise ValueError(f"write_lard: sample {sample.id}: meta 'sequence_id' is empty")
+    if isinstance(frame, bool) or not isinstance(frame, int | np.integer) or frame < 0:
+        raise ValueError(f"write_lard: sample {sample.id}: meta 'frame_index' = {frame!r} is not an integer >= 0")
+    if isinstance(time_s, bool) or not isinstance(time_s, int | float | np.number) or not math.isfinite(time_s):
+        raise ValueError(f"write_lard: sample {sample.id}: meta 'time_s' = {time_s!r} is not a finite number")
+    return {"sequence_id": seq, "frame_index": str(int(frame)), "time_s": f"{float(time_s):.6f}"}

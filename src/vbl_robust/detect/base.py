@@ -83,12 +83,15 @@ class Detections:
         conf: ``(M,)`` confidences in ``[0, 1]``.
         keypoints: ``(M, 4, 2)`` corners TR, TL, BL, BR, same pixels as ``boxes``.
         keypoint_conf: optional ``(M, 4)`` per-keypoint visibility/confidence.
+        reason: for an image without candidates, why (a code of :data:`vbl_robust.constants.FAILURE_REASONS`,
+            e.g. ``"out_of_view"``); ``""`` = :func:`select` reports ``"no_detection"``.
     """
 
     boxes: np.ndarray
     conf: np.ndarray
     keypoints: np.ndarray
     keypoint_conf: np.ndarray | None = None
+    reason: str = ""
 
     def __post_init__(self) -> None:
         self.conf = _np(self.conf).reshape(-1)
@@ -102,9 +105,9 @@ class Detections:
         return int(self.conf.shape[0])
 
     @classmethod
-    def empty(cls) -> Detections:
-        """No candidate at all."""
-        return cls(np.zeros((0, 4)), np.zeros(0), np.zeros((0, 4, 2)))
+    def empty(cls, reason: str = "") -> Detections:
+        """No candidate at all (``reason``: why, when the detector knows; see :attr:`reason`)."""
+        return cls(np.zeros((0, 4)), np.zeros(0), np.zeros((0, 4, 2)), reason=reason)
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,11 +134,15 @@ class DetectContext:
     def for_sample(cls, sample: Sample, perturbation: Perturbation, theta, scale: PixelScale = PixelScale(),
                    image=None) -> DetectContext:
         """The context of θ rows for ``sample``: its views sampled from ``image`` (the sample's pixels at ``scale``;
-        None → a blank image, for detectors that read no pixels, such as the oracle)."""
+        None → a blank image, for detectors that read no pixels, such as the oracle). The sampler gets the
+        sample's intrinsics at ``scale`` (:meth:`PixelScale.intrinsics
+        <vbl_robust.perturb.PixelScale.intrinsics>`: the attitude homography needs the focal length) and
+        ``scale`` itself (blur lengths are in the sample's pixels)."""
         w, h = round(sample.width * scale.sx), round(sample.height * scale.sy)
         src = torch.zeros(1, 3, 1, 1).expand(1, 3, h, w) if image is None else image
         center = scale.to_scaled(np.asarray(sample.K, np.float64)[:2, 2])
-        return cls(sample, ViewSampler(perturbation, src, theta, center), scale)
+        K = scale.intrinsics(sample.K)  # its principal point is `center`, bit for bit
+        return cls(sample, ViewSampler(perturbation, src, theta, center, K=K, scale=scale), scale)
 
     @property
     def theta(self):
@@ -241,7 +248,8 @@ class Selection:
         keypoints: ``(B, 4, 2)`` keypoints of the selected candidate (NaN where ``ok`` is False).
         conf: ``(B,)`` maximum confidence per image (NaN when the image has no candidate).
         ok: ``(B,)`` True when a candidate with ``conf ≥ τ_conf`` was selected.
-        reason: ``B`` strings: ``""``, ``"no_detection"`` or ``"low_confidence"``.
+        reason: ``B`` strings: ``""``, ``"no_detection"`` (or the reason an empty :class:`Detections` gives) or
+            ``"low_confidence"``.
     """
 
     keypoints: np.ndarray
@@ -271,7 +279,7 @@ def select(detections: Sequence[Detections] | Detections, conf_threshold: float 
     reason = []
     for i, d in enumerate(detections):
         if len(d) == 0:
-            reason.append("no_detection")
+            reason.append(getattr(d, "reason", "") or "no_detection")
             continue
         dc = _np(d.conf).reshape(-1)  # tolerate tensors from detectors with their own containers
         c = np.where(np.isfinite(dc), dc, -np.inf)

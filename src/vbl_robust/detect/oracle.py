@@ -2,9 +2,13 @@
 
 It never asks for pixels: it reads the sample from the :class:`~vbl_robust.detect.base.DetectContext` and moves its
 corners with the context's view sampler (the same point map the perturbation applies to the image), so the whole
-pipeline (perturb → detect → select → PnP → error) can be tested and audited without a network. With camera
-roll about the principal point the moved corners are exactly the corners the rolled camera would see, so with
-an exact PnP solver the position error stays ~0 over any roll: a departure from that is a solver failure.
+pipeline (perturb → detect → select → PnP → error) can be tested and audited without a network. With a camera
+rotation (roll, pitch, yaw: the homography ``K R K⁻¹`` about the optical centre) the moved corners are exactly the
+corners the rotated camera would see, so with an exact PnP solver the position error stays ~0 over any rotation:
+a departure from that is a solver failure. Photometric, optical and noise families move no corner.
+
+A corner that the rotation puts behind the camera has no image (the sampler's point map gives NaN): the oracle
+then reports no candidate with the reason ``"out_of_view"`` (black box) / confidence 0 (differentiable path).
 """
 
 from __future__ import annotations
@@ -112,14 +116,19 @@ class OracleDetector:
 
     # -- the protocol -----------------------------------------------------------------------------------------
     def detect(self, context: DetectContext) -> list[Detections]:
-        """Black-box path: one candidate per row (or none when ``fail_outside`` and a corner left the image)."""
+        """Black-box path: one candidate per row (or none: ``"out_of_view"`` when a corner is behind the camera,
+        ``"no_detection"`` when ``fail_outside`` and a corner left the image)."""
         ctx = self._need_context(context)
         kp = np.asarray(ctx.move_points(self.true_corners(ctx.sample)))
         n = kp.shape[0]
         kp = kp + self._noise(ctx, n)
         out_of_image = self._outside(ctx, kp) if self.fail_outside else np.zeros(n, dtype=bool)
+        behind = ~np.isfinite(kp).all(axis=(1, 2))
         dets = []
         for k in range(n):
+            if behind[k]:
+                dets.append(Detections.empty("out_of_view"))
+                continue
             if out_of_image[k]:
                 dets.append(Detections.empty())
                 continue
@@ -128,14 +137,16 @@ class OracleDetector:
         return dets
 
     def detect_top(self, context: DetectContext) -> tuple[torch.Tensor, torch.Tensor]:
-        """Differentiable path: ``conf (B,)`` (1, or 0 for a corner outside with ``fail_outside``) and keypoints
-        ``(B, 4, 2)`` differentiable w.r.t. a tensor θ in the context."""
+        """Differentiable path: ``conf (B,)`` (1, or 0 for a corner outside with ``fail_outside`` or behind the
+        camera) and keypoints ``(B, 4, 2)`` differentiable w.r.t. a tensor θ in the context."""
         ctx = self._need_context(context)
         kp = ctx.move_points(self.true_corners(ctx.sample))
         kp = torch.as_tensor(kp) if not isinstance(kp, torch.Tensor) else kp
         n = kp.shape[0]
         kp = kp + torch.as_tensor(self._noise(ctx, n), dtype=kp.dtype, device=kp.device)
         conf = torch.ones(n, dtype=kp.dtype, device=kp.device)
+        behind = ~torch.isfinite(kp.detach()).all(dim=2).all(dim=1)
+        conf = torch.where(behind, torch.zeros_like(conf), conf)
         if self.fail_outside:
             outside = torch.as_tensor(self._outside(ctx, kp.detach().cpu().numpy()), device=kp.device)
             conf = torch.where(outside, torch.zeros_like(conf), conf)

@@ -1,7 +1,8 @@
-"""Contrast: blend each image with the mean of its grayscale (torchvision's definition of a contrast factor).
+"""Photometric families: contrast, brightness and gamma — pointwise maps of pixel values in ``[0, 1]``.
 
 Convention
 ----------
+**Contrast** (torchvision's definition of a contrast factor): blend each image with the mean of its grayscale.
 For an RGB image ``x`` with values in ``[0, 1]`` and a factor ``α ≥ 0``::
 
     m  = mean over all pixels of (0.2989 R + 0.587 G + 0.114 B)      # ITU-R 601-2 luma, per image
@@ -9,16 +10,41 @@ For an RGB image ``x`` with values in ``[0, 1]`` and a factor ``α ≥ 0``::
 
 ``α = 1`` is the identity, ``α = 0`` a uniform grey image, ``α > 1`` more contrast. Identical to
 ``torchvision.transforms.functional.adjust_contrast`` on float images (tested). Single-channel images use the
-channel mean. Contrast does not move pixels: its point transform is the identity.
+channel mean.
+
+**Brightness** ``b`` (an additive offset, fraction of full scale: ``b = 0.1`` adds 25.5 grey levels)::
+
+    x' = clamp(x + b, 0, 1)                                           # kornia.enhance.adjust_brightness
+
+**Gamma** ``γ ≥ 0`` (a tone curve; ``γ < 1`` brightens the shadows, ``γ > 1`` darkens them)::
+
+    x' = x ** γ                                                       # kornia.enhance.adjust_gamma (gain 1)
+
+All three move no pixel: their point transform is the identity. Each is differentiable w.r.t. its parameter
+(torch's ``pow`` has a finite gradient in the exponent at ``x = 0``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import torch
+from kornia.enhance import adjust_brightness, adjust_gamma
 from torch import nn
 
-__all__ = ["LUMA_WEIGHTS", "Contrast", "contrast", "contrast_about", "contrast_numpy", "gray_mean"]
+__all__ = [
+    "LUMA_WEIGHTS",
+    "Brightness",
+    "Contrast",
+    "Gamma",
+    "brightness",
+    "brightness_numpy",
+    "contrast",
+    "contrast_about",
+    "contrast_numpy",
+    "gamma",
+    "gamma_numpy",
+    "gray_mean",
+]
 
 #: ITU-R 601-2 luma weights used by torchvision's ``rgb_to_grayscale``.
 LUMA_WEIGHTS = (0.2989, 0.587, 0.114)
@@ -88,3 +114,81 @@ class Contrast(nn.Module):
 
     def forward(self, images: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
         return contrast(images, factor)
+
+
+def _factor(values: torch.Tensor, factor, what: str) -> torch.Tensor:
+    f = torch.as_tensor(factor, device=values.device).to(values.dtype).reshape(-1)
+    if values.ndim < 2 or values.shape[0] not in (1, f.shape[0]):
+        raise ValueError(f"{what}: {tuple(values.shape)} images for {f.shape[0]} factors (give 1 image or one per "
+                         "factor, shape (B, C, ...))")
+    return f
+
+
+def _broadcast_rows(values: torch.Tensor, b: int) -> torch.Tensor:
+    return values.expand(b, *values.shape[1:]) if values.shape[0] == 1 and b > 1 else values
+
+
+def brightness(images: torch.Tensor, offset) -> torch.Tensor:
+    """Add ``offset`` (fraction of full scale) to every pixel and clamp to ``[0, 1]`` (see module *Convention*).
+
+    Args:
+        images: ``(B, C, …)`` or ``(1, C, …)`` (broadcast over the offsets), float in ``[0, 1]``.
+        offset: ``(B,)`` offsets (any sign).
+
+    Returns:
+        like ``images`` (batch ``B``); differentiable w.r.t. ``offset`` and ``images`` (zero gradient where clamped).
+
+    >>> [round(v, 6) for v in brightness(torch.tensor([[[0.2, 0.95]]]), torch.tensor([0.1])).flatten().tolist()]
+    [0.3, 1.0]
+    """
+    if not images.is_floating_point():
+        raise ValueError(f"brightness: images must be floating point in [0, 1], got {images.dtype}")
+    f = _factor(images, offset, "brightness")
+    return adjust_brightness(_broadcast_rows(images, f.shape[0]), f)
+
+
+def brightness_numpy(image: np.ndarray, offset: float, out: np.ndarray | None = None) -> np.ndarray:
+    """NumPy twin of :func:`brightness` for one float image ``(H, W, C)``; ``out`` may be ``image`` itself."""
+    out = np.add(image, np.asarray(offset, dtype=image.dtype), out=out, dtype=image.dtype)
+    return np.clip(out, 0.0, 1.0, out=out)
+
+
+def gamma(images: torch.Tensor, exponent) -> torch.Tensor:
+    """Raise every pixel to the power ``γ`` (see module *Convention*).
+
+    Args:
+        images: ``(B, C, …)`` or ``(1, C, …)`` (broadcast over the exponents), float in ``[0, 1]``.
+        exponent: ``(B,)`` exponents ``γ ≥ 0``.
+
+    Returns:
+        like ``images`` (batch ``B``) in ``[0, 1]``; differentiable w.r.t. ``γ`` and ``images``.
+
+    >>> gamma(torch.tensor([[[0.25]]], dtype=torch.float64), torch.tensor([0.5])).flatten().tolist()
+    [0.5]
+    """
+    if not images.is_floating_point():
+        raise ValueError(f"gamma: images must be floating point in [0, 1], got {images.dtype}")
+    f = _factor(images, exponent, "gamma")
+    if bool((f < 0).any()):
+        raise ValueError(f"gamma: exponents must be >= 0, got {float(f.min()):g}")
+    return adjust_gamma(_broadcast_rows(images, f.shape[0]), f)
+
+
+def gamma_numpy(image: np.ndarray, exponent: float, out: np.ndarray | None = None) -> np.ndarray:
+    """NumPy twin of :func:`gamma` for one float image ``(H, W, C)`` in ``[0, 1]``; ``out`` may be ``image``."""
+    out = np.power(image, np.asarray(exponent, dtype=image.dtype), out=out, dtype=image.dtype)
+    return np.clip(out, 0.0, 1.0, out=out)
+
+
+class Brightness(nn.Module):
+    """Module form of :func:`brightness`: ``Brightness()(images, offset)``."""
+
+    def forward(self, images: torch.Tensor, offset) -> torch.Tensor:
+        return brightness(images, offset)
+
+
+class Gamma(nn.Module):
+    """Module form of :func:`gamma`: ``Gamma()(images, exponent)``."""
+
+    def forward(self, images: torch.Tensor, exponent) -> torch.Tensor:
+        return gamma(images, exponent)

@@ -67,6 +67,30 @@ class PixelScale:
         """Resized pixels ``(..., 2)`` → original pixels (numpy or torch, differentiable)."""
         return points if self.is_identity else self._apply(points, 1.0 / self.sx, 1.0 / self.sy)
 
+    def intrinsics(self, K) -> np.ndarray:
+        """The pinhole matrix of the resized image: ``K (3, 3)`` of the original pixels → ``(3, 3)`` float64.
+
+        Focal lengths scale by ``(s_x, s_y)``; the principal point maps like any point (:meth:`to_scaled`, bit for
+        bit, so it equals the rotation centre computed from ``K[:2, 2]``). The identity returns a float64 copy.
+        """
+        K = np.array(K, dtype=np.float64)
+        if K.shape != (3, 3):
+            raise ValueError(f"PixelScale.intrinsics: K must be (3, 3), got {K.shape}")
+        if self.is_identity:
+            return K
+        out = K.copy()
+        out[0, :2] *= self.sx
+        out[1, :2] *= self.sy
+        out[:2, 2] = self.to_scaled(K[:2, 2])
+        return out
+
+    def original_size(self, width: int, height: int) -> tuple[int, int]:
+        """``(W, H)`` of the original image whose resized size is ``width × height`` (inverse of
+        :meth:`for_long_side`'s rounding)."""
+        if self.is_identity:
+            return int(width), int(height)
+        return max(1, round(width / self.sx)), max(1, round(height / self.sy))
+
 
 def resize_image(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """Resize an ``(H, W, C)`` image to ``size = (W', H')`` (area averaging when shrinking, bilinear otherwise)."""

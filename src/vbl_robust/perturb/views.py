@@ -173,30 +173,52 @@ class ViewSampler:
         image: ``(1, 3, H, W)`` or ``(3, H, W)`` unperturbed image, float in [0, 1] (the *source*: the sample's
             image, possibly resized to the detector's input size — see ``scale``).
         theta: ``(N, d)`` parameters in real units, NumPy (black box) or a tensor (differentiable w.r.t. θ).
-        center: ``(2,)`` principal point in source pixels (the centre of camera rotations).
+        center: ``(2,)`` principal point in source pixels (the centre of camera rotations); ``None``: ``K``'s,
+            else ``(W/2, H/2)``.
+        K: ``(3, 3)`` pinhole matrix in source pixels (the sample's ``K`` through
+            :meth:`PixelScale.intrinsics <vbl_robust.perturb.PixelScale.intrinsics>`); required by the attitude
+            homography (``pitch_deg``, ``yaw_deg``).
+        scale: the :class:`~vbl_robust.perturb.PixelScale` from the sample's pixels to the source's (blur lengths
+            and the noise grid are in the sample's pixels); ``None`` = identity.
         frame: optionally the source as an ``(H, W, 3)`` float32 NumPy array (the OpenCV path reads it).
 
-    Two ways to make a view, chosen by the windows asked for, never by the caller:
+    Two ways to make a view, chosen by the windows asked for and the families, never by the caller:
 
     - **frame first** — every window has the side of the view (no scaling: e.g. the letterbox of a source that
-      is already at the detector's input size): ``T(x; θ)`` is rendered once at the source resolution (OpenCV
-      for a NumPy θ, kornia for a tensor θ) and the views are copied/resampled from it;
+      is already at the detector's input size), *or* the box has an optical or noise family: ``T(x; θ)`` is
+      rendered once at the source resolution (OpenCV for a NumPy θ, kornia for a tensor θ) and the views are
+      copied/resampled from it;
     - **direct** — otherwise (a downsampling letterbox, crops): every view pixel reads the source at the
-      perturbation's inverse map (geometric families), then the photometric families apply — one interpolation,
-      no full-resolution warp (the views agree with frame first to interpolation smoothing; tested).
+      perturbation's inverse map (geometric families), then the pointwise photometric families apply — one
+      interpolation, no full-resolution warp (the views agree with frame first to interpolation smoothing;
+      tested for every family).
+
+    Why the optical and noise families force frame first: a blur is a convolution of the *perturbed* frame at
+    the source resolution — it needs each pixel's neighbourhood there, which a view sample does not have (a
+    blurred source would be wrong as soon as the geometry rotates the motion-blur direction, and a blur in view
+    pixels after the anti-aliasing pool is a different kernel); it costs one full-resolution pass per row anyway,
+    so rendering the frame first costs about as much as any alternative. The noise pattern lives on the sensor's
+    pixel grid and is clamped there; resampling commutes with the addition but not with the clamp. Rendering
+    frames first keeps every view exactly a crop of ``T(x; θ)``; ``strategy="direct"`` is refused for them.
 
     Both are differentiable for a tensor θ. ``views`` is all a detector needs; :meth:`points` moves
     points like the image content (for the oracle and for crop geometry).
     """
 
-    def __init__(self, perturbation, image, theta, center, *, frame: np.ndarray | None = None) -> None:
+    def __init__(self, perturbation, image, theta, center=None, *, K=None, scale=None,
+                 frame: np.ndarray | None = None) -> None:
         x = to_tensor(image)
         if x.shape[0] != 1:
             raise ValueError(f"ViewSampler: one source image expected, got a batch of {x.shape[0]}")
         self.perturbation = perturbation
         self.source = x
         self.theta = perturbation.check_theta(theta)
+        self.K = None if K is None else np.asarray(K, dtype=np.float64)
+        if center is None:
+            center = self.K[:2, 2] if self.K is not None else (x.shape[-1] / 2.0, x.shape[-2] / 2.0)
         self.center = np.asarray(center, dtype=np.float64)
+        perturbation._camera(self.center, self.K)  # ValueError now, not at the first view
+        self.scale = scale
         self._frame_np = frame
         self._frames: torch.Tensor | None = None
         self._pooled: dict[int, torch.Tensor] = {}
@@ -226,12 +248,14 @@ class ViewSampler:
         """``(N, 3, H, W)`` the whole perturbed images at the source resolution (rendered once)."""
         if self._frames is None:
             if self.differentiable:
-                self._frames = self.perturbation.images_torch(self.source, self.theta, center=self.center)
+                self._frames = self.perturbation.images_torch(self.source, self.theta, center=self.center, K=self.K,
+                                                              scale=self.scale)
             else:
                 base = self._frame_np
                 if base is None:
                     base = self.source[0].permute(1, 2, 0).contiguous().numpy()
-                imgs = self.perturbation.images_numpy(base, self.theta, center=self.center)
+                imgs = self.perturbation.images_numpy(base, self.theta, center=self.center, K=self.K,
+                                                      scale=self.scale)
                 self._frames = torch.from_numpy(imgs).permute(0, 3, 1, 2)  # a view; detectors copy if needed
         return self._frames
 
@@ -239,25 +263,30 @@ class ViewSampler:
         """``(N, 3, size, size)`` views of the perturbed images; ``windows`` ``(N, 3)`` or ``(3,)`` edge coordinates
         of the source (see the module docstring). Differentiable w.r.t. θ and the windows.
 
-        ``strategy``: ``"auto"`` (frame first when every window has side ``size``, else direct), ``"frame"`` or
-        ``"direct"`` (for comparisons).
+        ``strategy``: ``"auto"`` (frame first when every window has side ``size`` or the box has an optical or
+        noise family, else direct), ``"frame"`` or ``"direct"`` (for comparisons; refused for optical and noise
+        families, see the class docstring).
         """
         if strategy not in ("auto", "frame", "direct"):
             raise ValueError(f"ViewSampler.views: strategy must be 'auto', 'frame' or 'direct', got {strategy!r}")
+        framed = self.perturbation.needs_frame
+        if strategy == "direct" and framed:
+            raise ValueError(f"ViewSampler.views: strategy 'direct' cannot apply {self.perturbation!r}: its optical "
+                             "or noise families act on whole frames (use 'auto' or 'frame')")
         n = len(self)
         w = torch.as_tensor(windows, dtype=self.source.dtype)
         if w.ndim == 1:
             w = w.expand(n, 3)
         if w.shape != (n, 3):
             raise ValueError(f"ViewSampler.views: windows must be (3,) or ({n}, 3), got {tuple(w.shape)}")
-        if strategy == "frame" or (strategy == "auto" and n and bool((w[:, 2] == size).all())):
+        if strategy == "frame" or (strategy == "auto" and (framed or (n and bool((w[:, 2] == size).all())))):
             return resample(self.frames(), w, size)
         return self._direct(w, size)
 
     def points(self, points):
         """Source pixels ``(P, 2)`` → where the perturbation moves them, ``(N, P, 2)`` source pixels (a tensor θ
         gives a tensor differentiable w.r.t. θ)."""
-        return self.perturbation.points(points, self.theta, center=self.center)
+        return self.perturbation.points(points, self.theta, center=self.center, K=self.K)
 
     # -- direct sampling ---------------------------------------------------------------------------------------
     def _pooled_source(self, p: int) -> torch.Tensor:
@@ -276,7 +305,8 @@ class ViewSampler:
         mask = (1.0 + mu).clamp(0, 1) * (wp - mu).clamp(0, 1) * (1.0 + mv).clamp(0, 1) * (hp - mv).clamp(0, 1)
         theta = self.theta[rows] if len(rows) != len(self) else self.theta
         center = torch.as_tensor(self.center, dtype=xs.dtype)
-        su, sv = self.perturbation.source_coords(qu, qv, theta, center)
+        K = None if self.K is None else torch.as_tensor(self.K, dtype=xs.dtype)
+        su, sv = self.perturbation.source_coords(qu, qv, theta, center, K)
         su, sv = reflect101(su, self.width), reflect101(sv, self.height)
         grid = torch.stack([2.0 * ((su + 0.5) / p) / wp - 1.0, 2.0 * ((sv + 0.5) / p) / hp - 1.0], dim=-1)
         grid = grid.to(src.dtype)
@@ -302,7 +332,7 @@ class ViewSampler:
         n, dtype = len(self), self.source.dtype
         out = torch.empty(n, self.source.shape[1], size, size, dtype=dtype)
         t = (torch.arange(size, dtype=dtype) + 0.5) / size
-        photometric = self.perturbation.has_photometric
+        photometric, needs_stats = self.perturbation.has_photometric, self.perturbation.needs_stats
         for p, idx in _pool_groups(windows, size):
             win = windows[idx]
             xs = win[:, 0:1] + t[None, :] * win[:, 2:3]
@@ -310,6 +340,6 @@ class ViewSampler:
             v, mask = self._sample(xs, ys, p, idx)
             if photometric:
                 v = self.perturbation.photometric_torch(v, self.theta[idx] if len(idx) != n else self.theta,
-                                                        self.stats()[idx])
+                                                        self.stats()[idx] if needs_stats else None)
             out[idx] = v * mask + PAD_VALUE * (1.0 - mask)
         return out

@@ -11,6 +11,7 @@ from .envelopes import ENVELOPES, Approach, Envelope, corners_visible, sample_ap
 from .export import write_dataset
 from .generate import generate, render_sample
 from .render import Look, debug_look, ground_homography, render_scene, sample_look
+from .sequences import envelope_of, generate_sequences, write_sequences
 
 __all__ = [
     "ENVELOPES",
@@ -22,7 +23,9 @@ __all__ = [
     "corners_visible",
     "debug_look",
     "designation",
+    "envelope_of",
     "generate",
+    "generate_sequences",
     "ground_homography",
     "make_airports",
     "render_sample",
@@ -31,4 +34,5 @@ __all__ = [
     "sample_approaches",
     "sample_look",
     "write_dataset",
+    "write_sequences",
 ]

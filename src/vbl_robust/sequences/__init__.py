@@ -1,0 +1,31 @@
+"""Sequence audits: one perturbation θ held over the frames of an approach, and the error it sustains.
+
+A filter downstream of the pose estimate rides out one bad frame, not a perturbation that lasts. For an
+:class:`~vbl_robust.data.ApproachSequence` and a box Θ, :class:`SequenceObjective` scores θ by the error sustained
+over ``k`` consecutive frames (:func:`sustained`), callable by every method of :func:`vbl_robust.search.maximize`
+(APGD through :meth:`SequenceObjective.torch`); :func:`breach_summary` gives the breach runs and where along
+the approach they start; :func:`plot_errors_along_approach` draws the per-frame errors against distance.
+
+>>> import vbl_robust as vr                                                                # doctest: +SKIP
+>>> from vbl_robust.sequences import SequenceObjective
+>>> seq = vr.scenes.generate_sequences(1, frames=20, rate_hz=10.0, seed=0)[0]             # doctest: +SKIP
+>>> box = vr.ParameterBox({"roll_deg": (-15, 15)})                                          # doctest: +SKIP
+>>> f = SequenceObjective(seq, vr.OracleDetector(noise_px=1.0), box, sustain=10)            # doctest: +SKIP
+>>> r = vr.search.maximize(f, box, "georobust", max_evals=60)                              # doctest: +SKIP
+>>> f.evaluate(r.x[None]).summary(0)["longest_run_frames"]                                 # doctest: +SKIP
+"""
+
+from .figure import plot_errors_along_approach
+from .objective import SequenceObjective, SequenceRecord, nominal_theta
+from .sustain import breach_runs, breach_summary, sustained, sustained_torch
+
+__all__ = [
+    "SequenceObjective",
+    "SequenceRecord",
+    "breach_runs",
+    "breach_summary",
+    "nominal_theta",
+    "plot_errors_along_approach",
+    "sustained",
+    "sustained_torch",
+]

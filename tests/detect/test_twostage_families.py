@@ -1,0 +1,67 @@
+"""The two-stage detector with every perturbation family: all through the one view sampler (crop windows are
+cut from T(x; θ), points moved by its geometry), on both paths."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from detect_helpers import runway_image
+
+from vbl_robust.detect import DetectContext
+from vbl_robust.detect.twostage import TwoStageDetector
+from vbl_robust.detect.ultralytics import UltralyticsDetector
+from vbl_robust.perturb import PERTURBATIONS
+from vbl_robust.pipeline import Objective
+from vbl_robust.space import ParameterBox
+
+ALL = ParameterBox({n: spec.levels[2] for n, spec in PERTURBATIONS.items()})
+
+
+def _sample(size=128):
+    from vbl_robust.data.sample import Sample
+    from vbl_robust.geometry.camera import intrinsics, project, rot_y, runway_corners
+
+    img, _ = runway_image(size, seed=3)
+    K, z = intrinsics(size, size), runway_corners(3000.0, 45.0)
+    C = np.array([-2000.0, 0.0, 2000.0 * np.tan(np.radians(3.0))])
+    return Sample(id="s", K=K, corners_3d=z, corners_2d=project(z, rot_y(3.0), C, K), position=C, width=size,
+                  height=size, _image=img)
+
+
+@pytest.fixture(scope="module")
+def two(tiny_pose_pt):
+    return TwoStageDetector(UltralyticsDetector(tiny_pose_pt, trust=True), min_side=32)
+
+
+@pytest.mark.parametrize("names", [("pitch_deg", "yaw_deg", "haze", "brightness", "gamma"),
+                                   ("blur_px", "motion_blur_px", "noise_std", "roll_deg")])
+def test_views_through_the_objective_agree_with_perturbing_first(two, names):
+    """Crops the detector asks for equal crops of the whole perturbed frames: exactly for the optical and noise
+    families (frames first), within interpolation smoothing for the others (sampled straight from the source)."""
+    s = _sample()
+    box = ParameterBox({n: PERTURBATIONS[n].levels[2] for n in names})
+    obj = Objective(s, two, box, conf_threshold=0.0)
+
+    def perturbed_first(theta):
+        frames = obj.context(theta).frames()
+        return np.stack([d.keypoints[0] for d in two.detect(DetectContext.of_images(frames))])
+
+    theta = box.from_unit(np.random.default_rng(0).random((6, box.dim)))
+    diff = np.abs(obj.evaluate(theta).keypoints - perturbed_first(theta))
+    if obj.perturbation.needs_frame:
+        assert diff.max() < 1e-4
+    else:
+        assert np.median(diff) < 0.5  # px of 128 (as for roll and contrast)
+
+
+def test_every_family_at_once_on_both_paths(two):
+    s = _sample()
+    obj = Objective(s, two, ALL, conf_threshold=0.0)
+    theta = ALL.from_unit(np.random.default_rng(1).random((4, ALL.dim)))
+    rec = obj.evaluate(theta)
+    assert rec.loss.shape == (4,) and np.isfinite(rec.loss).all()
+    assert set(rec.reason) <= {"", "pnp_failed", "non_finite_position"}
+    t = torch.tensor(theta[:2], requires_grad=True)
+    obj.torch(t).sum().backward()
+    assert torch.isfinite(t.grad).all()
