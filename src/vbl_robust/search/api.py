@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..space import ParameterBox
+from .adaptive import AdaptiveGeoRobust
 from .anytime import at_budget
 from .apgd import APGD
 from .base import Optimizer
@@ -33,6 +34,7 @@ from .sampling import GridSearch, RandomSearch, SobolSearch
 #: Search methods by name (campaigns and the CLI pick them by name).
 METHODS: dict[str, type[Optimizer]] = {
     "georobust": GeoRobust,
+    "georobust-a": AdaptiveGeoRobust,
     "direct": Direct,
     "direct-l": DirectL,
     "random": RandomSearch,

@@ -1,13 +1,17 @@
-"""The classical test functions of the DIRECT literature (Jones et al. 1993; Gablonsky 2001), batched.
+"""The classical test functions of the DIRECT literature (Jones et al. 1993; Gablonsky 2001), batched, and
+anisotropic ones (a rough 1-D function embedded in more dimensions).
 
 Each :class:`TestFunction` is to be *minimised* (``f(x)`` for ``x`` of shape ``(n, d)`` returns ``(n,)``),
-with its box and known global minimum ``f_star``; maximise ``-f`` with our searches.
+with its box and known global minimum ``f_star``; maximise ``-f`` with our searches. An :class:`Anisotropic`
+function is to be *maximised* over the unit cube (its maximum ``f_max`` is computed once).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -183,3 +187,102 @@ def count_nlopt(t: TestFunction, algorithm: str, *, tol: float = 1e-4, max_evals
     except (RuntimeError, ValueError):  # NLopt reports some stops as exceptions; the counts stay valid
         pass
     return _count(t, seen, tol)
+
+
+# -- anisotropic test functions: a rough 1-D function embedded in d dimensions -------------------------------
+#: Widths of the rough function's peaks (unit interval): 0.1–0.3° of a 30° roll box, the pipeline's scale.
+ROUGH_WIDTHS = (0.003, 0.01)
+#: Width of its tallest peak.
+ROUGH_TOP_WIDTH = 0.004
+
+
+@lru_cache(maxsize=64)
+def _rough(seed: int) -> tuple[Callable[[np.ndarray], np.ndarray], float]:
+    g = _rough_1d(seed)
+    return g, _max_1d(g)
+
+
+def _rough_1d(seed: int, n_peaks: int = 12) -> Callable[[np.ndarray], np.ndarray]:
+    rng = np.random.default_rng(seed)
+    phase = rng.uniform(0.0, 2 * np.pi, 2)
+    centre = rng.uniform(0.02, 0.98, n_peaks + 1)
+    width = np.r_[rng.uniform(*ROUGH_WIDTHS, n_peaks), ROUGH_TOP_WIDTH]
+    height = np.r_[rng.uniform(0.4, 1.4, n_peaks), 2.0]
+
+    def g(a: np.ndarray) -> np.ndarray:
+        a = np.asarray(a, dtype=np.float64)
+        smooth = 1.5 + 0.3 * np.sin(6 * np.pi * a + phase[0]) + 0.2 * np.sin(22 * np.pi * a + phase[1])
+        return smooth + np.sum(height * np.exp(-(((a[..., None] - centre) / width) ** 2)), axis=-1)
+
+    return g
+
+
+def _max_1d(g: Callable[[np.ndarray], np.ndarray], n: int = 400_001) -> float:
+    """Maximum of ``g`` on [0, 1]: a dense grid (spacing 2.5e-6, far below the peak widths), then golden-section
+    refinement around the best node."""
+    a = np.linspace(0.0, 1.0, n)
+    i = int(np.argmax(g(a)))
+    lo, hi = a[max(i - 1, 0)], a[min(i + 1, n - 1)]
+    r = (math.sqrt(5) - 1) / 2
+    for _ in range(60):
+        x1, x2 = hi - r * (hi - lo), lo + r * (hi - lo)
+        if g(np.array([x1]))[0] >= g(np.array([x2]))[0]:
+            hi = x2
+        else:
+            lo = x1
+    return float(max(g(np.array([0.5 * (lo + hi)]))[0], g(a[i : i + 1])[0]))
+
+
+@dataclass(frozen=True)
+class Anisotropic:
+    """A rough 1-D function ``g`` of the *last* coordinate of the unit cube ``[0, 1]^dim``, to be *maximised*.
+
+    ``g`` (instance ``seed``): a smooth background ``1.5 + 0.3 sin(6πa + φ1) + 0.2 sin(22πa + φ2)`` plus 12 Gaussian
+    peaks of heights 0.4–1.4 and widths 0.003–0.01 and one of height 2 and width 0.004, at uniform positions —
+    the pipeline's error varies with roll at 0.1–0.3° in a 30° box. The other ``dim - 1`` coordinates are
+    irrelevant (``weak = 0``) or add ``weak · sin(3 x_j)`` each (barely relevant, as contrast is). The last
+    coordinate is the relevant one so that DIRECT's tie-breaks (lower dimension first) do not favour it.
+    ``f_max`` is the maximum over the cube (grid + golden section on ``g``; ``weak · (dim - 1)`` more when weak).
+    """
+
+    seed: int
+    dim: int
+    weak: float = 0.0
+    g: Callable[[np.ndarray], np.ndarray] = field(init=False, repr=False, compare=False)
+    f_max: float = field(init=False, compare=False)
+
+    __test__ = False
+
+    def __post_init__(self) -> None:
+        g, g_max = _rough(self.seed)
+        object.__setattr__(self, "g", g)
+        object.__setattr__(self, "f_max", g_max + self.weak * (self.dim - 1))
+
+    @property
+    def name(self) -> str:
+        return f"rough{self.seed}-{self.dim}d" + (f"-weak{self.weak:g}" if self.weak else "")
+
+    def box(self) -> ParameterBox:
+        return ParameterBox({f"x{i}": (0.0, 1.0) for i in range(self.dim)})
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+        v = self.g(x[:, -1])
+        if self.weak and self.dim > 1:
+            v = v + self.weak * np.sum(np.sin(3.0 * x[:, :-1]), axis=1)
+        return v
+
+    def target(self, tol: float = 0.01) -> float:
+        """The value to exceed: within ``tol`` (relative) of the maximum."""
+        return self.f_max - tol * abs(self.f_max)
+
+
+def evals_to_target(t: Anisotropic, method: str, *, tol: float = 0.01, max_evals: int = 4000, seed: int = 0,
+                    **options) -> int | None:
+    """Index (1-based) of the first evaluation above ``t.target(tol)``, or None if not reached in ``max_evals``."""
+    from .api import maximize
+
+    target = t.target(tol)
+    r = maximize(t, t.box(), method, max_evals=max_evals, stop_above=target, seed=seed, **options)
+    hits = np.flatnonzero(r.fs > target)
+    return int(hits[0]) + 1 if len(hits) else None

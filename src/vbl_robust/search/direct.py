@@ -17,7 +17,14 @@ Conventions:
   ranked by ``w_i`` = best of the two values (ties: lower dimension first); the pair ranked ``r`` is shrunk in
   the dimensions ranked ``1..r``, the parent in all of ``I``.
 * Failed evaluations (NaN/inf) keep their rectangle; for selection they take the worst finite value seen.
-* ``max_depth``: a rectangle whose longest side has been trisected ``max_depth`` times is not divided again.
+* ``max_depth``: a side trisected ``max_depth`` times is not divided again; a rectangle with no such side left
+  is not selected.
+* Hooks for variants (:mod:`~vbl_robust.search.adaptive`), all no-ops here: :meth:`Direct._effective_levels`
+  gives the levels in the metric that decides a rectangle's size class and its longest sides (the true levels
+  here); :meth:`Direct._observed` / :meth:`Direct._observations_done` see every division's sampled values before
+  any rectangle of the batch is split; :meth:`Direct._split_dims` may then cut a rectangle along only some of its
+  sampled sides; ``_inherited`` names per-rectangle arrays a child copies from its parent. The geometry of a
+  rectangle (children's offsets, volumes, the sound bound's half-widths) always uses its true levels.
 """
 
 from __future__ import annotations
@@ -69,6 +76,9 @@ class Direct(Optimizer):
     """
 
     name: ClassVar[str] = "direct"
+    #: Per-rectangle arrays (first axis = rectangle), and those a child copies from its parent when created.
+    _arrays: ClassVar[tuple[str, ...]] = ("_centers", "_levels", "_g", "_failed")
+    _inherited: ClassVar[tuple[str, ...]] = ()
     defaults: ClassVar[dict[str, Any]] = {"size": "diagonal", "ties": "all", "alpha": 1, "f_scale": 0.0}
 
     def __init__(
@@ -119,12 +129,39 @@ class Direct(Optimizer):
         if need <= self._cap:
             return
         cap = max(need, 2 * self._cap)
-        for name in ("_centers", "_levels", "_g", "_failed"):
+        for name in self._arrays:
             old = getattr(self, name)
             new = np.zeros((cap, *old.shape[1:]), dtype=old.dtype)
             new[: self._m] = old[: self._m]
             setattr(self, name, new)
         self._cap = cap
+
+    def _effective_levels(self, idx: np.ndarray) -> np.ndarray:
+        """Levels ``(len(idx), d)`` of rectangles ``idx`` in the metric of the size classes and of "longest side"
+        (here the unit cube: their true levels)."""
+        return self._levels[idx]
+
+    def _division_dims(self, p: int) -> np.ndarray:
+        """The dimensions ``I`` along which rectangle ``p`` is divided: its longest sides (in the metric of
+        :meth:`_effective_levels`) among those not yet at ``max_depth``, ascending."""
+        lv = self._levels[p]
+        eff = self._effective_levels(np.array([p]))[0]
+        open_ = lv < self.max_depth
+        return np.flatnonzero(open_ & (eff == eff[open_].min()))
+
+    def _observed(self, p: int, dims: np.ndarray, g_children: np.ndarray, failed: np.ndarray,
+                  delta: np.ndarray) -> None:
+        """Called for every divided rectangle ``p`` (before its levels change): ``g_children (m, 2)`` internal
+        values (``-f``) at ``c + delta_i e_i`` and ``c - delta_i e_i`` for ``i`` in ``dims``, ``failed (m, 2)``."""
+
+    def _observations_done(self) -> None:
+        """Called once per batch, after every :meth:`_observed` and before the rectangles are split."""
+
+    def _split_dims(self, p: int, dims: np.ndarray) -> np.ndarray:
+        """The dimensions (a non-empty subset of the sampled ``dims``, ascending) along which rectangle ``p`` is
+        trisected once all of a batch is observed: all of them here. The samples of the others are kept as
+        evaluations but are no rectangle's centre."""
+        return dims
 
     def _keys(self, levels: np.ndarray) -> np.ndarray:
         k = levels.min(axis=1)
@@ -147,17 +184,17 @@ class Direct(Optimizer):
     def select(self) -> np.ndarray:
         """Indices of the PO rectangles among those that may still be divided (max depth), ascending."""
         levels = self._levels[: self._m]
-        eligible = np.flatnonzero(levels.min(axis=1) < self.max_depth)
+        eligible = np.flatnonzero((levels < self.max_depth).any(axis=1))
         if len(eligible) == 0:
             return eligible
         g = self._effective_g()
-        keys = self._keys(levels)
+        keys = self._keys(self._effective_levels(eligible))
         finite = g[~self._failed[: self._m]]
         f_scale = self.f_scale
         if f_scale == "auto":
             f_scale = AUTO_F_SCALE * float(finite.max() - finite.min()) if len(finite) else 0.0
         sel = potentially_optimal(
-            keys[eligible], self._sizes(keys[eligible]), g[eligible],
+            keys, self._sizes(keys), g[eligible],
             alpha=self.alpha, ties=self.ties, eps=self.eps, f_scale=f_scale,
         )
         return eligible[sel]
@@ -166,12 +203,11 @@ class Direct(Optimizer):
         """PO rectangles kept so that all their children fit: largest size first, then best value, then age."""
         if remaining is None or len(po) == 0:
             return po
-        levels = self._levels[po]
-        keys = self._keys(levels)
+        keys = self._keys(self._effective_levels(po))
         order = po[np.lexsort((po, self._effective_g()[po], keys))]
         kept, left = [], remaining
         for p in order:
-            cost = 2 * int(np.sum(self._levels[p] == self._levels[p].min()))
+            cost = 2 * len(self._division_dims(int(p)))
             if cost <= left:
                 kept.append(p)
                 left -= cost
@@ -209,16 +245,15 @@ class Direct(Optimizer):
         }
         self._plan = []
         for p in np.sort(kept):
-            lv = self._levels[p]
-            self._plan.append((int(p), np.flatnonzero(lv == lv.min())))
+            self._plan.append((int(p), self._division_dims(int(p))))
         return self._children()
 
     def _children(self) -> np.ndarray:
         pts = []
         for p, dims in self._plan:
             c = self._centers[p]
-            delta = 3.0 ** (-(int(self._levels[p, dims[0]]) + 1))
             for i in dims:
+                delta = 3.0 ** (-(int(self._levels[p, i]) + 1))  # a third of side i
                 for s in (1.0, -1.0):
                     q = c.copy()
                     q[i] += s * delta
@@ -232,29 +267,43 @@ class Direct(Optimizer):
             self._g[0], self._failed[0] = g[0], failed[0]
             self._m = 1
             pos = 1
-        n_children = len(u) - pos
-        self._grow(n_children)
-        base = self._m
-        self._centers[base : base + n_children] = u[pos:]
-        self._g[base : base + n_children] = g[pos:]
-        self._failed[base : base + n_children] = failed[pos:]
+        # first every division is observed (a variant may update its metric), then each rectangle is split
+        blocks = []
         for p, dims in self._plan:
             m = len(dims)
-            gc = self._g[base : base + 2 * m].reshape(m, 2)
-            fc = self._failed[base : base + 2 * m].reshape(m, 2)
-            w = np.where(fc, np.inf, gc).min(axis=1)  # a failed child ranks its dimension last
-            ranked = dims[np.argsort(w, kind="stable")]
-            delta = 3.0 ** (-(int(self._levels[p, dims[0]]) + 1))
+            gc = g[pos : pos + 2 * m].reshape(m, 2)
+            fc = failed[pos : pos + 2 * m].reshape(m, 2)
+            delta = 3.0 ** (-(self._levels[p, dims] + 1).astype(np.float64))
             ok = ~fc & ~self._failed[p]
             if ok.any():
-                self._slope = max(self._slope, float(np.max(np.abs(gc - self._g[p])[ok])) / delta)
+                self._slope = max(self._slope, float(np.max((np.abs(gc - self._g[p]) / delta[:, None])[ok])))
+            self._observed(p, dims, gc, fc | self._failed[p], delta)
+            blocks.append((p, dims, pos))
+            pos += 2 * m
+        self._observations_done()
+        self._grow(len(u))
+        base = self._m
+        for p, dims, first in blocks:
+            split = self._split_dims(p, dims)
+            rows = first + 2 * np.flatnonzero(np.isin(dims, split))[:, None] + np.arange(2)[None, :]
+            rows = rows.reshape(-1)
+            m = len(split)
+            self._centers[base : base + 2 * m] = u[rows]
+            self._g[base : base + 2 * m] = g[rows]
+            self._failed[base : base + 2 * m] = failed[rows]
+            gc, fc = g[rows].reshape(m, 2), failed[rows].reshape(m, 2)
+            w = np.where(fc, np.inf, gc).min(axis=1)  # a failed child ranks its dimension last
+            ranked = split[np.argsort(w, kind="stable")]
             rank_of = {int(dim): r for r, dim in enumerate(ranked)}
             parent_levels = self._levels[p].copy()
-            for t, dim in enumerate(dims):
+            for t, dim in enumerate(split):
                 lv = parent_levels.copy()
                 lv[ranked[: rank_of[int(dim)] + 1]] += 1
                 self._levels[base + 2 * t : base + 2 * t + 2] = lv
-            self._levels[p, dims] += 1
+            self._levels[p, split] += 1
+            for name in self._inherited:
+                arr = getattr(self, name)
+                arr[base : base + 2 * m] = arr[p]
             base += 2 * m
         self._m = base
         self._plan = []
