@@ -132,6 +132,9 @@ class Objective:
         resolution: ``"auto"`` (resize to the detector's ``input_size`` when smaller than the image), ``"full"``,
             or an int long side in pixels.
         pnp_grad: gradient of the differentiable PnP layer (``"exact"`` or ``"bpnp"``).
+        device: where the perturbation, the views and the differentiable PnP run (``auto``, ``cpu``,
+            ``cuda[:N]``; :mod:`vbl_robust.detect.device`); None → the detector's ``device`` (CPU if it has none).
+            θ, the losses and the black-box PnP stay on the CPU.
 
     Raises:
         ValueError: a user mistake (unknown parameter name, unknown PnP solver, bad threshold/penalty/batch size,
@@ -156,6 +159,7 @@ class Objective:
         batch_size: int = 32,
         resolution: str | int = "auto",
         pnp_grad: str = "exact",
+        device: str | None = None,
     ):
         if not isinstance(box, ParameterBox):
             raise ValueError(f"Objective: box must be a vbl_robust.ParameterBox, got {type(box).__name__}")
@@ -183,6 +187,11 @@ class Objective:
         self.batch_size = int(batch_size)
         self.resolution = resolution
         self.pnp_grad = pnp_grad
+        from .detect.device import resolve_device
+
+        # where the views are made: the detector's device unless told (a mismatch works, at a transfer per batch)
+        self.device = torch.device(resolve_device(device if device is not None else
+                                                  str(getattr(detector, "device", "cpu"))))
         self.nfev = 0
         self._loaded = False
         self._image_error = ""
@@ -227,7 +236,7 @@ class Objective:
         self._scale, size = PixelScale.for_long_side(s.width, s.height, self._long_side())
         base = img.astype(np.float32) / 255.0 if img.dtype == np.uint8 else img.astype(np.float32)
         self._base = np.ascontiguousarray(resize_image(base, size))
-        self._base_t = torch.from_numpy(self._base).permute(2, 0, 1)
+        self._base_t = torch.from_numpy(self._base).permute(2, 0, 1).to(self.device)
 
     @property
     def scale(self) -> PixelScale:
@@ -339,11 +348,12 @@ class Objective:
                          position, conf, kp, reproj, tuple(reason), tuple(detail), self.penalty_m)
         if not grad:
             return rec, None
-        loss = torch.full((n,), self.penalty_m, dtype=torch.float64)
+        loss = torch.full((n,), self.penalty_m, dtype=torch.float64, device=th.device)
         good = np.nonzero(~failed[rows])[0] if rows.size else np.zeros(0, dtype=int)
-        if good.size:
-            yt = torch.as_tensor(y, dtype=torch.float64)
-            loss = loss.index_put((torch.as_tensor(rows[good]),), torch.linalg.vector_norm(pos_t[good] - yt, dim=1))
+        if good.size:  # the loss lives with θ (the CPU for APGD), whatever device ran the pipeline
+            yt = torch.as_tensor(y, dtype=torch.float64, device=th.device)
+            err_t = torch.linalg.vector_norm(pos_t[good].to(th.device) - yt, dim=1)
+            loss = loss.index_put((torch.as_tensor(rows[good], device=th.device),), err_t)
         return rec, loss
 
     def _all_failed(self, t: np.ndarray, reason: str, detail: str) -> EvalRecord:

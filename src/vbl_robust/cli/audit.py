@@ -26,14 +26,16 @@ DEMO_ORACLE_NOISE_PX = 1.0
 
 ENGINE_HELP = ("Inference engine of the black-box path: auto (ONNX Runtime when installed), torch, onnxruntime or "
                "openvino — always fp32; the outputs stay within 1e-3 px of torch's, APGD stays on torch.")
+DEVICE_HELP = ("Where the pipeline runs: cpu (default), cuda, cuda:N, or auto (CUDA when available). On a GPU the "
+               "perturbation, views, detector and differentiable PnP run there; --engine auto then means torch.")
 
 
 def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_noise: float,
-                  design: str = "auto", engine: str = "torch") -> Any:
+                  design: str = "auto", engine: str = "torch", device: str = "cpu") -> Any:
     """The detector the user asked for: --oracle, --model PATH, else the shipped model (oracle if not installed).
 
     ``design`` (``--detector``): ``auto`` (the shipped model's own design; a user's model as a single pass),
-    ``single`` or ``twostage``.
+    ``single`` or ``twostage``. ``device`` (``--device``): ``auto``, ``cpu``, ``cuda[:N]``.
     """
     import dataclasses
 
@@ -45,14 +47,21 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
         fail("--detector applies to a model, not to --oracle")
     opts = {} if design == "auto" else {"design": design}
     if not oracle:
+        from vbl_robust.detect.device import resolve_device
         from vbl_robust.detect.engines import resolve_engine
 
         try:
-            resolved = resolve_engine(engine)
+            dev = resolve_device(device)
+        except ValueError as exc:
+            fail(f"--device {device}: {exc}")
+        try:
+            resolved = resolve_engine(engine, dev)
         except ValueError as exc:
             fail(f"--engine {engine}: {exc}")
         if resolved != "torch":  # torch is every spec's default engine
             opts["engine"] = resolved
+        if dev != "cpu":  # the CPU is every spec's default device
+            opts["device"] = dev
 
     if oracle and model is not None:
         fail("--oracle and --model are exclusive")
@@ -258,6 +267,7 @@ def register(app: typer.Typer) -> None:
         design: str = typer.Option("auto", "--detector", help="Detector design: auto (the shipped model's own; a "
                                    "user's model as one pass), single (one pass: the paper's pipeline) or twostage."),
         engine: str = typer.Option("auto", "--engine", help=ENGINE_HELP),
+        device: str = typer.Option("cpu", "--device", help=DEVICE_HELP),
         oracle: bool = typer.Option(False, "--oracle", help="Use the oracle detector (exact projected corners)."),
         oracle_noise: float = typer.Option(0.0, "--oracle-noise", help="Oracle: fixed per-image corner noise (px)."),
         roll: str = typer.Option("15", "--roll", help="Roll range in degrees: '15' (= ±15) or 'lo,hi'; 'none' to omit."),
@@ -319,7 +329,7 @@ def register(app: typer.Typer) -> None:
         counts = (21, 11)[: box.dim] if landscape and box.dim <= 2 else None
         spec = audit_spec(BoxSpec(box, label, level), methods=method_list, budget=budget, seed=seed,
                           lipschitz=parse_lipschitz(lipschitz), pnp=pnp, landscape=counts)
-        det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine)
+        det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
         if sequences is not None:  # sequence audits: vbl_robust.cli.sequence_audit
             from .sequence_audit import run_sequence_audit
 
@@ -352,6 +362,7 @@ def register(app: typer.Typer) -> None:
         max_evals: int = typer.Option(40, "--max-evals", min=1, help="Evaluations per image and method."),
         oracle: bool = typer.Option(False, "--oracle", help="Use the oracle detector instead of the shipped model."),
         engine: str = typer.Option("auto", "--engine", help=ENGINE_HELP),
+        device: str = typer.Option("cpu", "--device", help=DEVICE_HELP),
         landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="Dense 21 × 11 grid on the first "
                                        "image for the report's landscape figure."),
         quiet: bool = typer.Option(False, "--quiet", "-q"),
@@ -366,7 +377,7 @@ def register(app: typer.Typer) -> None:
             torch.set_num_threads(max(1, min(4, os.cpu_count() or 1)))
         spec = audit_spec(roll_contrast_box(15.0, (0.7, 1.4)), budget=Budget(max_evals=max_evals), seed=seed,
                           landscape=(21, 11) if landscape else None)
-        det = detector_spec(None, False, oracle, DEMO_ORACLE_NOISE_PX, engine=engine)
+        det = detector_spec(None, False, oracle, DEMO_ORACLE_NOISE_PX, engine=engine, device=device)
         samples, source = load(n, seed, None, 1024, 1024)
         config = {"command": "demo", "n": n, "seed": seed, "max_evals": max_evals, "landscape": landscape}
         summary = run_with_progress(spec, samples, out, det, executor="local", address=None, source=source,

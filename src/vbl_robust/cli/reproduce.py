@@ -10,7 +10,7 @@ from pathlib import Path
 
 import typer
 
-from .audit import ENGINE_HELP, detector_spec, finish, load, parse_methods, run_with_progress
+from .audit import DEVICE_HELP, ENGINE_HELP, detector_spec, finish, load, parse_methods, run_with_progress
 from .common import fail
 
 
@@ -103,9 +103,11 @@ def register(app: typer.Typer) -> None:
         design: str = typer.Option("auto", "--detector", help="Detector design: auto (the shipped model's own; a "
                                    "user's model as one pass), single (one pass: the paper's pipeline) or twostage."),
         engine: str = typer.Option("auto", "--engine", help=ENGINE_HELP),
+        device: str = typer.Option("cpu", "--device", help=DEVICE_HELP),
         oracle: bool = typer.Option(False, "--oracle", help="Use the oracle detector (exact projected corners)."),
         oracle_noise: float = typer.Option(0.0, "--oracle-noise", help="Oracle: fixed per-image corner noise (px)."),
-        methods: str | None = typer.Option(None, "--methods", help="Comma-separated methods (default georobust,random,apgd)."),
+        methods: str | None = typer.Option(None, "--methods", help="Comma-separated methods (default "
+                                           "georobust,random,apgd; families: the same less apgd)."),
         max_evals: int | None = typer.Option(None, "--max-evals", min=1, help="Per-image evaluations of the spatial "
                                              "experiments (default 200)."),
         grid_step: float | None = typer.Option(None, "--grid-step", min=0.0, help="1-D dense-grid reference step in "
@@ -115,6 +117,9 @@ def register(app: typer.Typer) -> None:
         eval_budgets: str | None = typer.Option(None, "--eval-budgets", help="Runtime experiments: evaluations per "
                                                 "image (default 10,25,50,100,200)."),
         iterations: int | None = typer.Option(None, "--iterations", min=1, help="Convergence: GeoRobust iterations (30)."),
+        family_grid: int | None = typer.Option(None, "--family-grid", min=0, help="Families: fewest points of each "
+                                               "family's dense-grid reference over its largest level (default 201; "
+                                               "0 = none)."),
         executor: str = typer.Option("local", "--executor", help="local or ray."),
         address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray)."),
         csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to CSV."),
@@ -138,9 +143,9 @@ def register(app: typer.Typer) -> None:
         opts = with_options(
             Options(), methods=parse_methods(methods) if methods else None, max_evals=max_evals, grid_step_deg=grid_step,
             time_budgets=_floats(time_budgets, "--time-budgets"), eval_budgets=tuple(int(v) for v in eb) if eb else None,
-            iterations=iterations,
+            iterations=iterations, family_grid=family_grid,
         )
-        det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine)
+        det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
         if estimate:
             rate = probe_rate(det)
             typer.echo(f"probe: {rate:.1f} evaluations/s ({det.name}, roll + contrast, one image, this machine)")

@@ -165,6 +165,11 @@ class DetectContext:
     def width(self) -> int:
         return self.sampler.width
 
+    @property
+    def device(self) -> torch.device:
+        """Where the views are made (the source image's device): detectors create their windows there."""
+        return self.sampler.device
+
     def views(self, windows, size: int) -> torch.Tensor:
         """``(B, 3, size, size)`` views of the perturbed images (see :meth:`ViewSampler.views`)."""
         return self.sampler.views(windows, size)
@@ -198,6 +203,10 @@ class ImageViews:
     @property
     def width(self) -> int:
         return int(self.images.shape[-1])
+
+    @property
+    def device(self) -> torch.device:
+        return self.images.device
 
     def frames(self) -> torch.Tensor:
         return self.images

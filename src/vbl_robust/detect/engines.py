@@ -38,9 +38,12 @@ def installed_engines() -> tuple[str, ...]:
     return tuple(e for e in ENGINES if e == "torch" or importlib.util.find_spec(e) is not None)
 
 
-def resolve_engine(engine: str) -> str:
-    """``auto`` → the engine the documented rule picks (module docstring); a name → itself if installed."""
+def resolve_engine(engine: str, device: str = "cpu") -> str:
+    """``auto`` → the engine the documented rule picks (module docstring; on a CUDA ``device``: torch, see
+    :mod:`.device`); a name → itself if installed."""
     if engine == "auto":
+        if str(device).startswith("cuda"):
+            return "torch"
         return "onnxruntime" if "onnxruntime" in installed_engines() else "torch"
     if engine not in ENGINES:
         raise ValueError(f"engine must be auto or one of {', '.join(ENGINES)}, got {engine!r}")
@@ -81,6 +84,7 @@ class EnginePose(PoseDetector):
         self.imgsz, self.nc, self.chunk = torch_model.imgsz, torch_model.nc, torch_model.chunk
         self.input_size = torch_model.input_size
         self.precision = str(getattr(engine_model, "precision", "fp32"))
+        self.device = getattr(torch_model, "device", torch.device("cpu"))
 
     def __repr__(self) -> str:
         return f"EnginePose({self.torch_model!r}, engine={self.engine})"
@@ -94,7 +98,8 @@ class EnginePose(PoseDetector):
 def with_engine(model: PoseDetector, engine: str, *, trust: bool = False) -> PoseDetector:
     """``model`` (an :class:`~vbl_robust.detect.ultralytics.UltralyticsDetector`) with its black-box forwards on
     ``engine`` (``auto`` resolved by :func:`resolve_engine`); ``torch`` returns it unchanged."""
-    engine = resolve_engine(engine)
+    device = str(getattr(model, "device", "cpu"))
+    engine = resolve_engine(engine, device)
     if engine == "torch":
         return model
     onnx_path = exported_onnx(model.path, trust=trust, imgsz=model.imgsz)
@@ -102,9 +107,9 @@ def with_engine(model: PoseDetector, engine: str, *, trust: bool = False) -> Pos
     if engine == "onnxruntime":
         from .onnx import OnnxDetector
 
-        fast = OnnxDetector(onnx_path, imgsz=model.imgsz, chunk=model.chunk, threads=threads)
+        fast = OnnxDetector(onnx_path, imgsz=model.imgsz, chunk=model.chunk, threads=threads, device=device)
     else:
         from .openvino import OpenVinoDetector
 
-        fast = OpenVinoDetector(onnx_path, imgsz=model.imgsz, chunk=model.chunk, threads=threads)
+        fast = OpenVinoDetector(onnx_path, imgsz=model.imgsz, chunk=model.chunk, threads=threads, device=device)
     return EnginePose(model, fast, engine)

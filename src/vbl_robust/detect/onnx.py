@@ -69,13 +69,17 @@ class OnnxDetector(PoseDetector):
         imgsz: input side; None → the ``imgsz`` stored in the file's metadata.
         chunk: images per inference call.
         threads: ONNX Runtime intra-op threads (None: its default).
+        device: ``cpu`` (CPU provider) or ``cuda[:N]`` (ONNX Runtime's CUDA provider, which must be installed:
+            ``onnxruntime-gpu``); ``auto`` → CUDA when torch sees one and the provider is installed.
     """
 
     differentiable = False
 
     def __init__(self, path: str | Path, *, imgsz: int | None = None, chunk: int = 16,
-                 threads: int | None = None) -> None:
+                 threads: int | None = None, device: str = "cpu") -> None:
         import onnxruntime as ort
+
+        from .device import resolve_device
 
         p = Path(path)
         if not p.is_file():
@@ -83,8 +87,17 @@ class OnnxDetector(PoseDetector):
         opts = ort.SessionOptions()
         if threads:
             opts.intra_op_num_threads = int(threads)
+        cuda_ok = "CUDAExecutionProvider" in ort.get_available_providers()
+        wanted = resolve_device("cuda" if device == "auto" and cuda_ok else ("cpu" if device == "auto" else device))
+        if wanted.startswith("cuda") and not cuda_ok:
+            raise ValueError(f"{p}: ONNX Runtime on {wanted} needs its CUDA provider (pip install onnxruntime-gpu); "
+                             f"installed providers: {', '.join(ort.get_available_providers())}")
+        providers: list = ["CPUExecutionProvider"]
+        if wanted.startswith("cuda"):
+            providers = [("CUDAExecutionProvider", {"device_id": int(wanted.partition(":")[2])}), *providers]
+        self.device = torch.device(wanted)
         try:
-            self.session = ort.InferenceSession(str(p), opts, providers=["CPUExecutionProvider"])
+            self.session = ort.InferenceSession(str(p), opts, providers=providers)
         except Exception as e:  # noqa: BLE001 - any ORT load failure means the same to the user
             raise ValueError(f"{p}: not a loadable ONNX model ({type(e).__name__}: {e})") from e
         self.nc, size = pose_metadata(p, self.session.get_modelmeta().custom_metadata_map)
@@ -106,4 +119,4 @@ class OnnxDetector(PoseDetector):
     def raw(self, views: torch.Tensor) -> torch.Tensor:
         x = views.detach().cpu().numpy().astype(np.float32, copy=False)
         y = self.session.run(None, {self.input_name: x})[0]
-        return torch.from_numpy(y).to(views.dtype)
+        return torch.from_numpy(y).to(views.device, views.dtype)

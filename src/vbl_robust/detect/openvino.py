@@ -28,15 +28,20 @@ class OpenVinoDetector(PoseDetector):
         imgsz: input side; None → the ``imgsz`` in the model's metadata (ONNX) or its static input shape.
         chunk: views per inference call.
         threads: inference threads (None: OpenVINO's default).
+        device: ``cpu`` only (``auto`` means the CPU here): this project runs OpenVINO on its CPU plugin, fp32.
     """
 
     differentiable = False
 
     def __init__(self, path: str | Path, *, imgsz: int | None = None, chunk: int = 16,
-                 threads: int | None = None) -> None:
+                 threads: int | None = None, device: str = "cpu") -> None:
         import openvino as ov
 
         p = Path(path)
+        if str(device).lower() not in ("cpu", "auto"):
+            raise ValueError(f"{p}: the OpenVINO engine runs on the CPU only, got device {device!r} "
+                             "(use --engine torch or onnxruntime on a GPU)")
+        self.device = torch.device("cpu")
         if not p.is_file():
             raise FileNotFoundError(f"{p}: model file not found")
         core = ov.Core()
@@ -68,7 +73,7 @@ class OpenVinoDetector(PoseDetector):
     def raw(self, views: torch.Tensor) -> torch.Tensor:
         x = np.ascontiguousarray(views.detach().cpu().numpy(), dtype=np.float32)
         y = self.request.infer({0: x})[self.compiled.outputs[0]]
-        return torch.from_numpy(np.array(y)).to(views.dtype)
+        return torch.from_numpy(np.array(y)).to(views.device, views.dtype)
 
 
 def _onnx_metadata(path: Path) -> dict[str, str]:

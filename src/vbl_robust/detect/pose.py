@@ -87,7 +87,8 @@ class PoseDetector:
 
     def letterbox(self, context: DetectContext) -> tuple[torch.Tensor, torch.Tensor]:
         """``(views, windows)`` of the letterboxed perturbed images at ``imgsz``."""
-        win = torch.tensor(letterbox_window(context.height, context.width), dtype=torch.float32)
+        win = torch.tensor(letterbox_window(context.height, context.width), dtype=torch.float32,
+                           device=context.device)
         win = win.expand(len(context), 3)
         return context.views(win, self.imgsz), win
 

@@ -84,9 +84,10 @@ def with_design(detector: PoseDetector, design: str):
 
 
 def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str | None = None,
-                     engine: str = "torch"):
+                     engine: str = "torch", device: str = "cpu"):
     """The detector shipped with the package; ``design`` ``"twostage"`` / ``"single"`` (the paper's one pass),
-    None → the shipped default (``default.json``); ``engine`` of the black-box path (:mod:`.engines`)."""
+    None → the shipped default (``default.json``); ``engine`` of the black-box path (:mod:`.engines`); ``device``
+    ``auto``/``cpu``/``cuda[:N]`` (:mod:`.device`)."""
     from .engines import with_engine
     from .ultralytics import UltralyticsDetector
 
@@ -94,7 +95,8 @@ def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str |
         raise FileNotFoundError(f"{DEFAULT_MODEL}: the shipped model is missing (reinstall vbl-robust)")
     info = default_model_info()
     # the shipped file is part of the installed package: trusted as its code is
-    det = UltralyticsDetector(DEFAULT_MODEL, trust=True, imgsz=imgsz or info.get("imgsz"), chunk=chunk)
+    det = UltralyticsDetector(DEFAULT_MODEL, trust=True, imgsz=imgsz or info.get("imgsz"), chunk=chunk,
+                              device=device)
     return with_design(with_engine(det, engine, trust=True), design or info.get("detector", "single"))
 
 
@@ -110,7 +112,8 @@ class DetectorSpec:
     defaults to its ``default.json``, a user's model to a single pass. ``options["engine"]``: what runs the
     black-box forwards (``torch`` default, ``onnxruntime``, ``openvino``, ``auto``; :mod:`.engines`) — it changes
     speed, not outputs (≤ 1e-3 px), so it is recorded in the identity but is not part of the key: a run may resume
-    on another engine.
+    on another engine. ``options["device"]`` (``auto``, ``cpu``, ``cuda[:N]``; :mod:`.device`) likewise: recorded,
+    not keyed (a GPU's convolutions differ from the CPU's by ~1e-3 px, far below any error that matters here).
     """
 
     kind: str
@@ -188,10 +191,12 @@ class DetectorSpec:
         if self.kind == "factory":
             ident["factory"] = self.path
         if self.kind in ("default", "ultralytics", "onnx"):
+            from .device import resolve_device
             from .engines import resolve_engine
 
             default = "onnxruntime" if self.kind == "onnx" else "torch"
-            ident["engine"] = resolve_engine(self.options.get("engine", default))
+            ident["device"] = resolve_device(self.options.get("device", "cpu"))
+            ident["engine"] = resolve_engine(self.options.get("engine", default), ident["device"])
             ident["precision"] = "fp32"
         if self.kind == "default" and f is not None and (f.parent / "default.json").is_file():
             ident["config_sha256"] = file_sha256(f.parent / "default.json")
@@ -205,8 +210,9 @@ class DetectorSpec:
     def key(self) -> str:
         """Digest of what determines the detector's outputs (not where the file lives)."""
         ident = self.identity()
-        ident["options"] = {k: v for k, v in ident["options"].items() if k != "engine"}
-        return digest({k: v for k, v in ident.items() if k not in ("name", "path", "engine", "precision")}, 24)
+        ident["options"] = {k: v for k, v in ident["options"].items() if k not in ("engine", "device")}
+        return digest({k: v for k, v in ident.items() if k not in ("name", "path", "engine", "precision", "device")},
+                      24)
 
     def build(self) -> Any:
         """Construct the detector (call once per process; models are heavy)."""

@@ -56,6 +56,11 @@ class TwoStageDetector:
         return f"TwoStageDetector({self.first!r}, margin={self.margin}, min_side={self.min_side})"
 
     @property
+    def device(self):
+        """The first pass's device (where :class:`vbl_robust.Objective` makes the views)."""
+        return getattr(self.first, "device", "cpu")
+
+    @property
     def imgsz(self) -> int:
         return self.first.imgsz
 

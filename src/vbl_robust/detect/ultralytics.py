@@ -83,12 +83,15 @@ class UltralyticsDetector(PoseDetector):
         path: checkpoint (the shipped one: :func:`vbl_robust.detect.default_detector`).
         trust: required (True) to load a ``.pt`` from outside the package: a pickle runs code when loaded.
         imgsz: input side (multiple of 32); None → the size the model was trained at (or 640).
-        device: torch device (CPU in this project).
+        device: ``auto``, ``cpu``, ``cuda`` or ``cuda:N`` (:func:`~vbl_robust.detect.device.resolve_device`).
         chunk: images per forward pass.
     """
 
     def __init__(self, path: str | Path, *, trust: bool = False, imgsz: int | None = None,
                  device: str = "cpu", chunk: int = 16) -> None:
+        from .device import resolve_device
+
+        device = resolve_device(device)
         self.path = Path(path)
         model, ckpt = load_pose_model(self.path, trust=trust)
         self.model = model.fuse().to(device) if hasattr(model, "fuse") else model.to(device)

@@ -382,6 +382,7 @@ class Perturbation:
         """
         x = _as_chw_tensor(image)
         t = self.check_theta(theta if isinstance(theta, torch.Tensor) else torch.as_tensor(np.asarray(theta)))
+        t = t.to(x.device)  # θ follows the image to its device (differentiable: the gradient flows back)
         n = t.shape[0]
         h, w = x.shape[-2:]
         center, K = self._camera(center, K)
@@ -397,7 +398,7 @@ class Perturbation:
             x = motion_blur(x, self.column(t, "motion_blur_px") * sc.sx)
         x = self._photometric(x, t, None)
         if self.has("noise_std"):
-            pattern = noise_pattern_tensor(h, w, x.shape[1], base_size=sc.original_size(w, h))
+            pattern = noise_pattern_tensor(h, w, x.shape[1], base_size=sc.original_size(w, h)).to(x.device)
             x = gaussian_noise(x, self.column(t, "noise_std"), pattern)
         if x.shape[0] != n:
             x = x.expand(n, -1, -1, -1)
@@ -407,10 +408,10 @@ class Perturbation:
         """Haze, contrast, brightness and gamma, in that order; ``stats`` = the grey means of the frames before
         them (None: compute them from ``values``, which are then whole frames)."""
         if self.has("haze"):
-            amount = _column_tensor(self.column(theta, "haze"))
+            amount = _column_tensor(self.column(theta, "haze"), values)
             values = haze(values, amount)
         if self.has("contrast"):
-            factor = _column_tensor(self.column(theta, "contrast"))
+            factor = _column_tensor(self.column(theta, "contrast"), values)
             if stats is None:
                 values = contrast(values, factor)
             else:
@@ -420,9 +421,9 @@ class Perturbation:
                     stats = (1.0 - a) * stats + a * grey
                 values = contrast_about(values, factor, stats)
         if self.has("brightness"):
-            values = brightness(values, _column_tensor(self.column(theta, "brightness")))
+            values = brightness(values, _column_tensor(self.column(theta, "brightness"), values))
         if self.has("gamma"):
-            values = gamma(values, _column_tensor(self.column(theta, "gamma")))
+            values = gamma(values, _column_tensor(self.column(theta, "gamma"), values))
         return values
 
     # -- what the view sampler needs (vbl_robust.perturb.views.ViewSampler) ---------------------------------
@@ -443,11 +444,11 @@ class Perturbation:
         if self.uses_homography:
             if K is None:
                 raise ValueError("Perturbation.source_coords: pitch_deg/yaw_deg need the intrinsics K")
-            cols = [_column_tensor(self.column(theta, a)) for a in ATTITUDE]
+            cols = [_column_tensor(self.column(theta, a), qu) for a in ATTITUDE]
             return attitude_source_coords(qu, qv, *cols, K)
         if "roll_deg" not in self._index:
             return qu, qv
-        return roll_source_coords(qu, qv, _column_tensor(self.column(theta, "roll_deg")), center)
+        return roll_source_coords(qu, qv, _column_tensor(self.column(theta, "roll_deg"), qu), center)
 
     def photometric_stats(self, values: torch.Tensor) -> torch.Tensor:
         """``(B,)`` statistics the photometric families need, from samples ``(B, 3, n, n)`` of the geometrically
@@ -485,8 +486,10 @@ class Perturbation:
         return np.broadcast_to(p, (n, *p.shape[-2:])).copy()
 
 
-def _column_tensor(col) -> torch.Tensor:
-    return col if isinstance(col, torch.Tensor) else torch.as_tensor(np.asarray(col, dtype=np.float64))
+def _column_tensor(col, like: torch.Tensor | None = None) -> torch.Tensor:
+    """A θ column as a tensor, on ``like``'s device when given (float64 for a NumPy column)."""
+    t = col if isinstance(col, torch.Tensor) else torch.as_tensor(np.asarray(col, dtype=np.float64))
+    return t if like is None else t.to(like.device)
 
 
 def _as_chw_tensor(image) -> torch.Tensor:

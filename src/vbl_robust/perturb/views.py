@@ -106,11 +106,12 @@ def _integer_shift(images: torch.Tensor, windows: torch.Tensor, size: int) -> to
     return out
 
 
-def _pool_groups(windows: torch.Tensor, size: int):
-    """``(p, rows)`` for each pooling factor ``p`` among the windows (B, 3), rows as an index tensor."""
+def _pool_groups(windows: torch.Tensor, size: int, device=None):
+    """``(p, rows)`` for each pooling factor ``p`` among the windows (B, 3), rows as an index tensor on ``device``
+    (default: the windows')."""
     factors = [pool_factor(float(s), size) for s in windows[:, 2].detach().cpu().tolist()]
     for p in sorted(set(factors)):
-        yield p, torch.tensor([i for i, f in enumerate(factors) if f == p], device=windows.device)
+        yield p, torch.tensor([i for i, f in enumerate(factors) if f == p], device=device or windows.device)
 
 
 def pooled_source(image: torch.Tensor, p: int, cache: dict[int, torch.Tensor]) -> torch.Tensor:
@@ -211,8 +212,9 @@ class ViewSampler:
         if x.shape[0] != 1:
             raise ValueError(f"ViewSampler: one source image expected, got a batch of {x.shape[0]}")
         self.perturbation = perturbation
-        self.source = x
+        self.source = x  # its device is where the views are made (``Objective(device=...)``)
         self.theta = perturbation.check_theta(theta)
+        self._theta_t: torch.Tensor | None = None
         self.K = None if K is None else np.asarray(K, dtype=np.float64)
         if center is None:
             center = self.K[:2, 2] if self.K is not None else (x.shape[-1] / 2.0, x.shape[-2] / 2.0)
@@ -239,9 +241,19 @@ class ViewSampler:
     def width(self) -> int:
         return int(self.source.shape[-1])
 
+    @property
+    def device(self) -> torch.device:
+        return self.source.device
+
     def theta_tensor(self, dtype=torch.float64) -> torch.Tensor:
         t = self.theta
         return t if isinstance(t, torch.Tensor) else torch.as_tensor(t, dtype=dtype)
+
+    def _theta_on_device(self) -> torch.Tensor:
+        """θ as a tensor on the source's device (differentiable w.r.t. a tensor θ; float64 for a NumPy θ)."""
+        if self._theta_t is None:
+            self._theta_t = self.theta_tensor().to(self.device)
+        return self._theta_t
 
     # -- what detectors call -----------------------------------------------------------------------------------
     def frames(self) -> torch.Tensor:
@@ -253,10 +265,11 @@ class ViewSampler:
             else:
                 base = self._frame_np
                 if base is None:
-                    base = self.source[0].permute(1, 2, 0).contiguous().numpy()
+                    base = self.source[0].permute(1, 2, 0).contiguous().cpu().numpy()
                 imgs = self.perturbation.images_numpy(base, self.theta, center=self.center, K=self.K,
                                                       scale=self.scale)
-                self._frames = torch.from_numpy(imgs).permute(0, 3, 1, 2)  # a view; detectors copy if needed
+                # a view on the CPU (detectors copy if needed); one transfer to an accelerator
+                self._frames = torch.from_numpy(imgs).permute(0, 3, 1, 2).to(self.device)
         return self._frames
 
     def views(self, windows, size: int, *, strategy: str = "auto") -> torch.Tensor:
@@ -279,9 +292,11 @@ class ViewSampler:
             w = w.expand(n, 3)
         if w.shape != (n, 3):
             raise ValueError(f"ViewSampler.views: windows must be (3,) or ({n}, 3), got {tuple(w.shape)}")
-        if strategy == "frame" or (strategy == "auto" and (framed or (n and bool((w[:, 2] == size).all())))):
+        host = w.detach().cpu()  # the choices below read the window sizes: on the host, once
+        w = w.to(self.device)
+        if strategy == "frame" or (strategy == "auto" and (framed or (n and bool((host[:, 2] == size).all())))):
             return resample(self.frames(), w, size)
-        return self._direct(w, size)
+        return self._direct(w, size, host)
 
     def points(self, points):
         """Source pixels ``(P, 2)`` → where the perturbation moves them, ``(N, P, 2)`` source pixels (a tensor θ
@@ -303,9 +318,10 @@ class ViewSampler:
         qv = (ys - 0.5)[:, :, None].expand(b, ys.shape[1], xs.shape[1])
         mu, mv = (qu + 0.5) / p - 0.5, (qv + 0.5) / p - 0.5
         mask = (1.0 + mu).clamp(0, 1) * (wp - mu).clamp(0, 1) * (1.0 + mv).clamp(0, 1) * (hp - mv).clamp(0, 1)
-        theta = self.theta[rows] if len(rows) != len(self) else self.theta
-        center = torch.as_tensor(self.center, dtype=xs.dtype)
-        K = None if self.K is None else torch.as_tensor(self.K, dtype=xs.dtype)
+        theta = self._theta_on_device()
+        theta = theta[rows] if len(rows) != len(self) else theta
+        center = torch.as_tensor(self.center, dtype=xs.dtype, device=xs.device)
+        K = None if self.K is None else torch.as_tensor(self.K, dtype=xs.dtype, device=xs.device)
         su, sv = self.perturbation.source_coords(qu, qv, theta, center, K)
         su, sv = reflect101(su, self.width), reflect101(sv, self.height)
         grid = torch.stack([2.0 * ((su + 0.5) / p) / wp - 1.0, 2.0 * ((sv + 0.5) / p) / hp - 1.0], dim=-1)
@@ -322,24 +338,25 @@ class ViewSampler:
         if self._stats is None:
             n, dtype = len(self), self.source.dtype
             p = pool_factor(float(max(self.height, self.width)), STATS_VIEW_SIDE)
-            t = (torch.arange(STATS_GRID, dtype=dtype) + 0.5) / STATS_GRID
+            t = (torch.arange(STATS_GRID, dtype=dtype, device=self.device) + 0.5) / STATS_GRID
             xs, ys = (t * self.width).expand(n, STATS_GRID), (t * self.height).expand(n, STATS_GRID)
-            values, _ = self._sample(xs, ys, p, torch.arange(n))
+            values, _ = self._sample(xs, ys, p, torch.arange(n, device=self.device))
             self._stats = self.perturbation.photometric_stats(values)
         return self._stats
 
-    def _direct(self, windows: torch.Tensor, size: int) -> torch.Tensor:
+    def _direct(self, windows: torch.Tensor, size: int, host: torch.Tensor) -> torch.Tensor:
         n, dtype = len(self), self.source.dtype
-        out = torch.empty(n, self.source.shape[1], size, size, dtype=dtype)
-        t = (torch.arange(size, dtype=dtype) + 0.5) / size
+        out = torch.empty(n, self.source.shape[1], size, size, dtype=dtype, device=self.device)
+        t = (torch.arange(size, dtype=dtype, device=self.device) + 0.5) / size
         photometric, needs_stats = self.perturbation.has_photometric, self.perturbation.needs_stats
-        for p, idx in _pool_groups(windows, size):
+        for p, idx in _pool_groups(host, size, self.device):
             win = windows[idx]
             xs = win[:, 0:1] + t[None, :] * win[:, 2:3]
             ys = win[:, 1:2] + t[None, :] * win[:, 2:3]
             v, mask = self._sample(xs, ys, p, idx)
             if photometric:
-                v = self.perturbation.photometric_torch(v, self.theta[idx] if len(idx) != n else self.theta,
+                theta = self._theta_on_device()
+                v = self.perturbation.photometric_torch(v, theta[idx] if len(idx) != n else theta,
                                                         self.stats()[idx] if needs_stats else None)
             out[idx] = v * mask + PAD_VALUE * (1.0 - mask)
         return out
