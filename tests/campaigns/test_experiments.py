@@ -21,6 +21,7 @@ FIGURES = {
     "runtime-2d": {"runtime_2d_time", "runtime_2d_evals", "landscape_2d"},
     "distance-profile": {"distance_profile", "landscape_1d"},
     "convergence": {"convergence"},
+    "families": {"families_ranking", "families_survival"},
 }
 
 

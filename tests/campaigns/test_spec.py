@@ -94,4 +94,4 @@ def test_experiment_defaults_follow_the_paper():
     assert "read off" in rt.notes
     dp = experiment("distance-profile").build(0, Options())
     assert dp.blocks[0].chain and dp.blocks[0].boxes[-1].level == 45
-    assert [e.images for e in EXPERIMENTS.values()].count(100) == 6 and EXPERIMENTS["pnp-validation"].images == 1000
+    assert [e.images for e in EXPERIMENTS.values()].count(100) == 7 and EXPERIMENTS["pnp-validation"].images == 1000

@@ -11,6 +11,10 @@ images, 1000 for the PnP validation). Where the paper leaves a choice open we fi
   budget is read off their stamped trace, APGD runs once per budget;
 - distance profile: roll budgets 5°, 10°, …, 45° chained per image (a breach at ±b implies one at every larger
   budget, so larger budgets are not searched again), 200 evaluations each;
+- perturbation families (``families``): every family of :data:`vbl_robust.perturb.PERTURBATIONS` alone, at its five
+  nested budget levels (the registry's ``levels``, mild to extreme; box level = the level index 1–5) chained per
+  image like the distance profile, GeoRobust and random (APGD left out, see :func:`families`), 200 evaluations
+  per level, and a dense-grid reference per family over its largest level;
 - a dense-grid reference (1-D: 0.05° steps) so each figure shows how far each method is from the true worst
   case; in the spatial experiments and the distance profile it runs from 0° outwards and stops at its first
   breach (exact survival per budget for a fraction of the cost); 2-D: a landscape grid on the first image for
@@ -22,8 +26,10 @@ Each spec declares the report's figures it needs (``CampaignSpec.figures``, name
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from fractions import Fraction
 
 from .spec import Block, BoxSpec, Budget, CampaignSpec, roll_box, roll_contrast_box
 
@@ -39,6 +45,11 @@ ROLL_LIMIT_DEG = 45.0
 CONVERGENCE_MAX_EVALS = 3000
 #: Batch of a centre-out reference grid that stops at the first breach (the stop is checked once per batch).
 GRID_STOP_BATCH = 32
+#: Fewest points of a family's dense-grid reference over its largest level (``families``): at least 10 grid steps
+#: inside the mildest level of every family of the registry (its largest level is at most 20 times its mildest).
+FAMILY_GRID_POINTS = 201
+#: Methods of the ``families`` experiment taken out of ``Options.methods`` (see :func:`families`).
+FAMILY_EXCLUDED = ("apgd",)
 
 
 @dataclass(frozen=True)
@@ -52,6 +63,9 @@ class Options:
         landscape: (roll, contrast) grid counts of the 2-D landscape (first image); (0, 0) disables it.
         time_budgets, eval_budgets: the runtime experiments' budgets.
         iterations: GeoRobust iterations of the convergence experiment.
+        family_grid: fewest points of each family's dense-grid reference in ``families`` (rounded up so that the
+            levels' bounds and the identity are grid nodes, :func:`family_grid_count`); 0 disables it, and so
+            does ``grid_step_deg = 0`` (no reference anywhere).
     """
 
     methods: tuple[str, ...] = METHODS
@@ -61,6 +75,7 @@ class Options:
     time_budgets: tuple[float, ...] = TIME_BUDGETS_S
     eval_budgets: tuple[int, ...] = EVAL_BUDGETS
     iterations: int = 30
+    family_grid: int = FAMILY_GRID_POINTS
 
 
 @dataclass(frozen=True)
@@ -214,6 +229,134 @@ def convergence(seed: int, o: Options) -> CampaignSpec:
         "penalty): there every rectangle ties, PO_k triples at each iteration and the search stops early."))
 
 
+# -- perturbation families one by one ---------------------------------------------------------------------
+#: How a unit prints in a level's range (dimensionless units print nothing; FS = fraction of full scale).
+_UNIT_SUFFIX = {"deg": "°", "px": " px", "full scale": " FS"}
+
+
+def unit_suffix(unit: str) -> str:
+    """How ``unit`` follows a number in a range (``"°"``, ``" px"``, ``" FS"``; ``""`` when dimensionless)."""
+    return _UNIT_SUFFIX.get(unit, "")
+
+
+def range_text(lower: float, upper: float, unit: str = "") -> str:
+    """A budget level's range in its unit: ``±2°``, ``[0, 0.5] px``, ``[0.9, 1.1]``, ``±0.05 FS``."""
+    if lower == -upper and upper > 0:
+        return f"±{upper:g}{unit_suffix(unit)}"
+    return f"[{lower:g}, {upper:g}]{unit_suffix(unit)}"
+
+
+def levels_text(bounds: Sequence[tuple[float, float]], unit: str = "") -> str:
+    """Nested levels in short form: ``±2/5/10/20/30°``, ``0 to 0.5/1/2/4/8 px``, ``[0.9, 1.1] … [0.4, 2.5]``."""
+    if not bounds:
+        return ""
+    his = "/".join(f"{hi:g}" for _, hi in bounds)
+    if all(lo == -hi and hi > 0 for lo, hi in bounds):
+        return f"±{his}{unit_suffix(unit)}"
+    if len({lo for lo, _ in bounds}) == 1:
+        return f"{bounds[0][0]:g} to {his}{unit_suffix(unit)}"
+    if len(bounds) == 1:
+        return range_text(*bounds[0], unit)
+    return f"{range_text(*bounds[0], unit)} … {range_text(*bounds[-1], unit)}"
+
+
+def family_boxes(name: str) -> tuple[BoxSpec, ...]:
+    """The five nested budget levels of the perturbation family ``name`` as 1-D boxes; box level = the level index
+    (1 = mild … 5 = extreme), label = the parameter and its range (``"blur_px [0, 0.5] px"``)."""
+    from ..perturb import PERTURBATIONS
+    from ..space import ParameterBox
+
+    spec = PERTURBATIONS[name]
+    return tuple(BoxSpec(ParameterBox({name: (lo, hi)}), f"{name} {range_text(lo, hi, spec.unit)}", float(k))
+                 for k, (lo, hi) in enumerate(spec.levels, start=1))
+
+
+def family_grid_count(levels: Sequence[tuple[float, float]], identity: float, points: int) -> int:
+    """Nodes of a family's dense grid over its largest level: at least ``points``, rounded up to a count that puts
+    every level's bounds and the identity on grid nodes (a level's worst case is often at its edge) when that
+    needs at most 4 times the requested spacing's steps; else ``points``."""
+    lo, hi = levels[-1]
+    steps = max(int(points) - 1, 1)
+    den = 1
+    for v in (identity, *(b for lv in levels for b in lv)):
+        den = math.lcm(den, Fraction((v - lo) / (hi - lo)).limit_denominator(1000).denominator)
+    k = -(-steps // den) * den
+    return k + 1 if k <= 4 * steps else int(points)
+
+
+def _family_grid(name: str, points: int) -> tuple[Block, str]:
+    """The reference grid of one family over its largest level, and how it runs (for the notes).
+
+    Evaluated outwards from the identity and stopped at the first breach where the lattice allows it (exact
+    survival at every level for the cost of the breach's distance): centre-out when every level is centred on
+    the identity (attitude, brightness), in ascending order when every level starts at it (blurs, haze, noise).
+    Levels that are neither (contrast, gamma: multiplicatively symmetric about 1) get the complete grid."""
+    from ..perturb import PERTURBATIONS
+
+    spec = PERTURBATIONS[name]
+    levels = spec.levels
+    n = family_grid_count(levels, spec.identity, points)
+    grid: dict[str, object] = {"counts": [n]}
+    if all(math.isclose(a + b, 2 * spec.identity, abs_tol=1e-12) for a, b in levels):
+        grid.update(order="center-out", batch_size=GRID_STOP_BATCH)
+        stop, how = True, "centre-out"
+    elif all(a == spec.identity for a, _ in levels):
+        grid.update(order="c", batch_size=GRID_STOP_BATCH)
+        stop, how = True, "ascending"
+    else:
+        stop, how = False, "complete"
+    box = family_boxes(name)[-1]
+    block = Block(boxes=(box,), methods=("grid",), budgets=(Budget(max_evals=n, stop_at_breach=stop),),
+                  role="reference", options={"grid": grid})
+    return block, f"{n} points, {how}"
+
+
+def family_methods(o: Options) -> tuple[str, ...]:
+    """The methods of ``families``: ``o.methods`` without APGD (:data:`FAMILY_EXCLUDED`), or ``o.methods`` as
+    given when nothing else is left (``--methods apgd``)."""
+    return tuple(m for m in o.methods if m not in FAMILY_EXCLUDED) or tuple(o.methods)
+
+
+def families(seed: int, o: Options) -> CampaignSpec:
+    """Each perturbation family alone: survival against its five nested budget levels.
+
+    One chained block per family (a breach at a level implies one at every larger, nested level of the same
+    family, so larger levels are not searched again), searched with ``Options.methods`` less APGD — GeoRobust
+    and random by default: the issue's black-box comparison (APGD is compared on roll in the other experiments;
+    a gradient through a blur's σ at 0 or a clamped photometric map adds little on a 1-D box), and the families'
+    ranking should not depend on which families a gradient happens to suit. A dense-grid reference per family
+    (:func:`_family_grid`) gives the true survival per level up to the grid spacing."""
+    from ..perturb import PERTURBATIONS
+
+    methods = family_methods(o)
+    budget = Budget(max_evals=o.max_evals)
+    blocks: list[Block] = [Block(boxes=family_boxes(name), methods=methods, budgets=(budget,), chain=True)
+                           for name in PERTURBATIONS]
+    grids = []
+    if o.family_grid > 0 and o.grid_step_deg > 0:
+        for name in PERTURBATIONS:
+            block, how = _family_grid(name, o.family_grid)
+            blocks.append(block)
+            grids.append(f"{name} {how}")
+    levels = "; ".join(f"{name} ({spec.unit}): " + ", ".join(f"L{k} {range_text(lo, hi, spec.unit)}"
+                                                             for k, (lo, hi) in enumerate(spec.levels, start=1))
+                       for name, spec in PERTURBATIONS.items())
+    reference = (f" Reference: per family a dense grid over its largest level ({'; '.join(grids)}; spacing chosen so "
+                 "that every level's bounds and the identity are nodes), evaluated outwards from the identity and "
+                 "stopped at its first breach where the levels are centred on the identity (centre-out) or start "
+                 "at it (ascending), complete otherwise: exact survival at every level up to the grid spacing."
+                 if grids else " No dense-grid reference.")
+    return CampaignSpec("families", tuple(blocks), seed=seed, figures=("families",), notes=(
+        f"Each perturbation family alone, at the five nested budget levels of the perturbation registry (mild to "
+        f"extreme; the figures' x-axis is the level index 1–5, FS = fraction of full scale, haze = fraction of "
+        f"airlight, contrast and gamma dimensionless): {levels}. Methods {', '.join(methods)} (APGD left out: the "
+        f"issue's black-box comparison; it is compared on roll elsewhere); {o.max_evals} evaluations per image, "
+        "family and level, early stop at the first breach; levels chained per image and method (a breach at a "
+        "level implies one at every larger, nested level, which is not searched again). Families are ranked by "
+        "the level at which survival drops below 50 % and below 10 % (an image survives a level when no method, "
+        "the grid included, found a breach within it)." + reference))
+
+
 EXPERIMENTS: dict[str, Experiment] = {
     e.name: e
     for e in (
@@ -224,6 +367,7 @@ EXPERIMENTS: dict[str, Experiment] = {
         Experiment("runtime-2d", "Runtime robustness, roll ±10° and contrast [0.7, 1.4]", 100, runtime_2d),
         Experiment("distance-profile", "Vulnerability profile by approach distance", 100, distance_profile),
         Experiment("convergence", "GeoRobust convergence and search-space reduction", 100, convergence),
+        Experiment("families", "Perturbation families one by one: survival vs budget level", 100, families),
     )
 }
 

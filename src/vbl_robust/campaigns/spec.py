@@ -36,10 +36,12 @@ ROLES = ("main", "reference", "landscape")
 #: ``pnp`` — the PnP-solver comparison (``kind="pnp"`` blocks); ``survival`` — survival against the box level
 #: (main, unchained blocks with several boxes; plus the reference grid); ``runtime`` — survival and median worst
 #: error against the per-image budget (main blocks with several time or evaluation budgets); ``distance`` —
-#: φ_crit per slant-distance quartile (chained main blocks); ``convergence`` — |PO_k| and RA(k) of DIRECT-family
-#: traces; ``landscape`` — L over a dense grid of one image (landscape role, else the reference grid) with the
+#: φ_crit per slant-distance quartile (chained main blocks); ``families`` — per perturbation family (the parameter
+#: of 1-D main boxes, level = budget index) survival against the level and the families ranked by the level at
+#: which survival drops below 50 % and 10 % (plus the reference grids); ``convergence`` — |PO_k| and RA(k) of
+#: DIRECT-family traces; ``landscape`` — L over a dense grid of one image (landscape role, else the reference grid) with the
 #: methods' points; ``progress`` — worst error found against evaluations; ``per_image`` — each image's worst case.
-FIGURES = ("pnp", "survival", "runtime", "distance", "convergence", "landscape", "progress", "per_image")
+FIGURES = ("pnp", "survival", "runtime", "distance", "families", "convergence", "landscape", "progress", "per_image")
 
 
 def derive_seed(base_seed: int, *parts: Any) -> int:
@@ -180,7 +182,8 @@ class Block:
         max_samples: only the first ``max_samples`` samples (None: all).
         chain: per (sample, method), run boxes in order and, once a breach is found at a box, record the larger
             boxes as implied breaches without searching (used for the smallest breaching roll budget; boxes
-            must be nested and sorted by level).
+            must be nested, over the same parameters, and sorted by level). Each chained block is a chain of its
+            own (two blocks' chains never imply each other's boxes).
         options: per-method keyword options for the search (e.g. ``{"grid": {"counts": [1201]}}``).
     """
 
@@ -204,6 +207,9 @@ class Block:
             levels = [b.level for b in self.boxes]
             if levels != sorted(levels):
                 raise ValueError(f"Block: chained boxes must be sorted by level, got {levels}")
+            names = {b.box.names for b in self.boxes}
+            if len(names) > 1:
+                raise ValueError(f"Block: chained boxes must share their parameters, got {sorted(names)}")
 
 
 @dataclass(frozen=True)
@@ -377,7 +383,9 @@ class CampaignSpec:
                 for method in blk.methods:
                     opts = dict(blk.options.get(method, {}))
                     for budget in blk.budgets:
-                        chain = digest([sid, blk.role, method, budget.to_dict()], 16) if blk.chain else None
+                        # the boxes' labels keep the chains of two blocks apart (e.g. one per perturbation family)
+                        chain = (digest([sid, blk.role, method, budget.to_dict(), [b.label for b in blk.boxes]], 16)
+                                 if blk.chain else None)
                         for box in blk.boxes:
                             seed = derive_seed(self.seed, sid, method, box.label, budget.label)
                             jobs.append(Job(self.name, sid, fp, i, "search", blk.role, method, box, budget, seed, opts,

@@ -10,7 +10,8 @@ directory grouped into sequences, :mod:`vbl_robust.data.sequence`) and every sea
 - ``sequences.csv``: one row per sequence (the worst over the methods): worst sustained error, θ, longest run of
   breached frames, the distance from the runway threshold where the first run of ≥ K breached frames starts;
 - ``sequence_frames.csv``: one row per frame: distance, time, nominal and worst error and reason;
-- ``figures/sequence_errors.png``: error against distance along the approach, nominal and worst θ.
+- ``figures/sequence_errors.png``: error against distance along the approach, nominal and worst θ;
+- ``report.html``: that figure and the table of ``sequences.csv`` in one self-contained page.
 """
 
 from __future__ import annotations
@@ -154,8 +155,40 @@ def run_sequence_audit(out: Path, source: str, *, frames: int, rate: float, seed
     figure = plot_errors_along_approach(curves, out / "figures" / "sequence_errors.png", eps_m=EPS_SAFE_M,
                                         penalty_m=PENALTY_M, title=f"Error along the approach (sustain k = {sustain})")
     breached = sum(r["verdict"] == str(Verdict.BREACH) for r in rows)
-    typer.echo(f"{len(rows)} sequences, {breached} with an error sustained over {sustain} frames above "
-               f"{EPS_SAFE_M:g} m; results in {out / 'sequences.json'}, {out / 'sequences.csv'}; figure {figure}")
+    headline = (f"{len(rows)} sequences, {breached} with an error sustained over {sustain} frames above "
+                f"{EPS_SAFE_M:g} m")
+    report = write_report(out, Path(figure), out / "sequences.csv", headline=headline, details=(
+        f"Box {box.to_dict()}; methods {', '.join(methods)}; detector {detector.identity().get('name', '?')}; "
+        f"sustain k = {sustain} frames; ε_safe = {EPS_SAFE_M:g} m, failure penalty {PENALTY_M:g} m."))
+    typer.echo(f"{headline}; results in {out / 'sequences.json'}, {out / 'sequences.csv'}; figure {figure}; "
+               f"report {report}")
+
+
+def write_report(out: Path, figure: Path, csv_path: Path, *, headline: str, details: str) -> Path:
+    """``out/report.html``: the figure and the per-sequence table of ``csv_path``, self-contained."""
+    from vbl_robust.constants import Verdict
+    from vbl_robust.report.html import esc, fmt_num, img, page, table
+
+    with open(csv_path, newline="", encoding="utf-8") as f:
+        reader = csv.DictReader(f)
+        fields = list(reader.fieldnames or [])
+        lines = list(reader)
+
+    def cell(v: str) -> str:
+        try:
+            return fmt_num(int(v)) if v.lstrip("-").isdigit() else fmt_num(float(v))
+        except ValueError:
+            return esc(v) if v else "–"
+
+    body = [f"<h1>vbl-robust — sequence audit</h1><p><b>{esc(headline)}</b>.</p>", f'<p class="note">{esc(details)}</p>',
+            img(figure.read_bytes(), figure.stem, "Error against the distance from the runway threshold along each "
+                "approach: the unperturbed θ (dashed) and the worst θ found (solid)."),
+            f"<h2>Per sequence ({esc(csv_path.name)})</h2>",
+            table(lines, [(k, k, cell) for k in fields], left=("sequence_id", "airport", "verdict", "method"),
+                  row_class=lambda r: "breach" if r.get("verdict") == str(Verdict.BREACH) else "")]
+    path = out / "report.html"
+    path.write_text(page("vbl-robust sequence audit", "\n".join(body)), encoding="utf-8")
+    return path
 
 
 def _write_csv(path: Path, rows: list[dict], fields: list[str]) -> None:

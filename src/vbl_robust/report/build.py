@@ -29,7 +29,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..campaigns import metrics as mx
-from ..campaigns.experiments import EXPERIMENTS
+from ..campaigns.experiments import EXPERIMENTS, range_text
 from ..campaigns.spec import FIGURES, BoxSpec, CampaignSpec
 from ..campaigns.store import JobRow, JobStatus, ResultStore
 from ..constants import FAILURE_REASONS, Verdict
@@ -243,6 +243,67 @@ def section_distance(ctx: Context) -> Section | None:
     return s
 
 
+def _level_name(p: Mapping[str, Any], level: float) -> str:
+    """``"L3 (±10°)"``: the level's index and range; "not reached" for ``inf``."""
+    if not math.isfinite(level):
+        return "not reached"
+    k = list(p["levels"]).index(level)
+    return f"L{k + 1} ({range_text(*p['bounds'][k], p['unit'])})"
+
+
+def family_lines(profile: Sequence[Mapping[str, Any]], order: Sequence[str]) -> list[dict[str, Any]]:
+    """The families table: per family (in ranking ``order``) and method (plot order, the combined series last),
+    the rank, images, survival % at each level (``L1`` … ``L5``) and the levels where it drops below 50 % and
+    10 %."""
+    lines = []
+    for rank, fam in enumerate(order, start=1):
+        series = {p["method"]: p for p in profile if p["family"] == fam}
+        for m in F.method_order(series):
+            p = series[m]
+            line: dict[str, Any] = {"rank": rank, "family": fam, "method": F.style(m)["label"],
+                                    "n": max(p["n"], default=0)}
+            line.update({f"L{k}": v for k, v in enumerate(p["survival"], start=1)})
+            for t in mx.RANK_THRESHOLDS:
+                line[f"below_{t:g}"] = _level_name(p, p[f"below_{t:g}"])
+            lines.append(line)
+    return lines
+
+
+def section_families(ctx: Context) -> Section | None:
+    rows = [r for r in ctx.main if mx.family_of(r) is not None]
+    if not rows:
+        return None
+    ref = _reference(ctx, _main_boxes(ctx))
+    profile = mx.family_profile(rows + ref, ctx.eps)
+    order = mx.rank_families(profile)
+    s = Section("Perturbation families: survival vs budget level")
+    s.html.append(ctx.figure(F.family_ranking(profile, order), "families_ranking",
+                             "Each family alone, ranked by the budget level at which survival drops below 50 % "
+                             "(circle) and below 10 % (diamond), most vulnerable first; an image survives a level "
+                             "when no method, the dense grid included, found a breach (L > ε_safe) within it. "
+                             "Hollow markers in the grey column: not reached at the largest level."))
+    s.html.append(ctx.figure(F.family_survival(profile, order), "families_survival",
+                             "Survival against the level index per family and method (levels nested, chained per "
+                             "image: a breach at a level counts at every larger one). Black dashes: the dense "
+                             "grid's true survival up to its spacing; grey dots: any method."))
+    n_levels = max(len(p["levels"]) for p in profile)
+    levels = []
+    for fam in order:
+        p = next(p for p in profile if p["family"] == fam)
+        levels.append({"family": fam, "unit": p["unit"],
+                       **{f"L{k}": range_text(lo, hi, p["unit"]) for k, (lo, hi) in enumerate(p["bounds"], start=1)}})
+    ks = [f"L{k}" for k in range(1, n_levels + 1)]
+    s.html.append("<p>Budget levels (nested, mild to extreme):</p>")
+    s.html.append(table(levels, [("family", "family", None), ("unit", "unit", None), *[(k, k, esc) for k in ks]],
+                        left=("family", "unit", *ks)))
+    cols = [("rank", "rank", None), ("family", "family", None), ("method", "method", None), ("n", "images", None),
+            *[(k, f"survival % {k}", None) for k in ks],
+            *[(f"below_{t:g}", f"survival < {t:g} % at", esc) for t in mx.RANK_THRESHOLDS]]
+    s.html.append(table(family_lines(profile, order), cols,
+                        left=("family", "method", *[f"below_{t:g}" for t in mx.RANK_THRESHOLDS])))
+    return s
+
+
 def section_convergence(ctx: Context) -> Section | None:
     conv = mx.convergence([r for r in ctx.main if r.method in DIRECT_FAMILY])
     if not conv:
@@ -449,7 +510,7 @@ def section_provenance(ctx: Context) -> Section:
 #: The section drawing each figure a campaign can declare (``CampaignSpec.figures``), in report order.
 SECTIONS: dict[str, Callable[[Context], Section | None]] = {
     "pnp": section_pnp, "survival": section_survival_level, "runtime": section_runtime, "distance": section_distance,
-    "convergence": section_convergence, "landscape": section_landscapes, "progress": section_best_vs_evals,
+    "families": section_families, "convergence": section_convergence, "landscape": section_landscapes, "progress": section_best_vs_evals,
     "per_image": section_per_image,
 }
 

@@ -18,10 +18,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import LogNorm  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 
 REFERENCE = "grid (reference)"
+#: The families' combined series (:data:`vbl_robust.campaigns.metrics.ANY_METHOD`).
+ANY_METHOD = "any method"
 STYLE: dict[str, dict[str, Any]] = {
     "georobust": {"color": "#1f77b4", "marker": "o", "label": "GeoRobust"},
     "random": {"color": "#2ca02c", "marker": "s", "label": "Random"},
@@ -31,6 +34,7 @@ STYLE: dict[str, dict[str, Any]] = {
     "direct-l": {"color": "#e377c2", "marker": "<", "label": "DIRECT-L"},
     "grid": {"color": "black", "marker": ".", "label": "grid"},
     REFERENCE: {"color": "black", "marker": "", "label": "grid (true worst case)", "linestyle": "--"},
+    ANY_METHOD: {"color": "#7f7f7f", "marker": "", "label": "any method (grid included)", "linestyle": ":"},
 }
 AXIS_LABELS = {"roll_deg": "roll φ (°)", "contrast": "contrast factor α"}
 EPS_STYLE = {"color": "#d62728", "linestyle": ":", "linewidth": 1.2}
@@ -43,9 +47,10 @@ def style(method: str) -> dict[str, Any]:
 
 
 def method_order(methods: Iterable[str]) -> list[str]:
-    """The distinct ``methods`` in plotting order (the order of :data:`STYLE`, the reference last)."""
+    """The distinct ``methods`` in plotting order (the order of :data:`STYLE`, the reference and the combined
+    series last)."""
     ms = list(dict.fromkeys(methods))
-    return sorted(ms, key=lambda m: (m == REFERENCE, list(STYLE).index(m) if m in STYLE else 99, m))
+    return sorted(ms, key=lambda m: (m in (REFERENCE, ANY_METHOD), list(STYLE).index(m) if m in STYLE else 99, m))
 
 
 def _methods(rows: Sequence[Mapping[str, Any]]) -> list[str]:
@@ -319,4 +324,101 @@ def best_vs_evals(curves: Mapping[str, tuple[np.ndarray, np.ndarray]], *, eps_sa
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
+    return fig
+
+
+def _family_text(p: Mapping[str, Any]) -> str:
+    from ..campaigns.experiments import levels_text
+
+    return levels_text(p["bounds"], p["unit"])
+
+
+def _level_pos(p: Mapping[str, Any], level: float, beyond: int) -> float:
+    """Position (1-based level index) of ``level`` among the entry's levels; ``beyond`` when not reached."""
+    return float(beyond) if not math.isfinite(level) else float(list(p["levels"]).index(level) + 1)
+
+
+def family_ranking(profile: Sequence[Mapping[str, Any]], order: Sequence[str], *, method: str = ANY_METHOD,
+                   thresholds: Sequence[float] = (50.0, 10.0),
+                   title: str = "Families ranked by the level where survival drops") -> Figure:
+    """Families ranked (``order``: most vulnerable first, at the top) by the level index (1 = mild … 5 = extreme)
+    at which the ``method`` series' survival drops below each of ``thresholds`` (one marker per threshold, joined
+    by a line); "not reached" markers (hollow) sit in the shaded column right of the last level. Left tick labels
+    name each family with its levels' ranges; right ones give its survival at its largest level."""
+    rows = {p["family"]: p for p in profile if p["method"] == method}
+    fams = [f for f in order if f in rows]
+    n_levels = max((len(rows[f]["levels"]) for f in fams), default=5)
+    beyond = n_levels + 1
+    fig, ax = _fig(size=(8.4, 0.42 * len(fams) + 1.9))
+    ax.axvspan(beyond - 0.5, beyond + 0.5, color="grey", alpha=0.15)
+    marks = (("o", "#1f77b4"), ("D", "#d62728"), ("s", "#2ca02c"), ("^", "#9467bd"))
+    offsets = np.linspace(0.12, -0.12, len(thresholds)) if len(thresholds) > 1 else np.zeros(1)
+    for i, f in enumerate(fams):
+        p, y = rows[f], len(fams) - 1 - i
+        xs = [_level_pos(p, p[f"below_{t:g}"], beyond) for t in thresholds]
+        ax.plot(xs, [y + o for o in offsets], color="grey", linewidth=1.0, zorder=2)
+        for x, o, (mk, c) in zip(xs, offsets, marks, strict=False):
+            hollow = x == beyond
+            ax.scatter([x], [y + o], marker=mk, s=46, zorder=3, facecolors="none" if hollow else c, edgecolors=c,
+                       linewidths=1.3)
+    ax.set_yticks(range(len(fams)))
+    ax.set_yticklabels([f"{f}  ({_family_text(rows[f])})" for f in reversed(fams)], fontsize=8)
+    ax.set_ylim(-0.6, len(fams) - 0.4)
+    ax.set_xticks(range(1, beyond + 1))
+    ax.set_xticklabels([f"L{k}" for k in range(1, beyond)] + ["not\nreached"])
+    ax.set_xlim(0.5, beyond + 0.5)
+    ax.set_xlabel("budget level (1 = mild … 5 = extreme; ranges per family in the labels)")
+    ax.grid(alpha=0.3, axis="x")
+    right = ax.twinx()
+    right.set_ylim(ax.get_ylim())
+    right.set_yticks(range(len(fams)))
+    right.set_yticklabels([f"{rows[f]['survival'][-1]:.0f} %" if math.isfinite(rows[f]["survival"][-1]) else "–"
+                           for f in reversed(fams)], fontsize=8)
+    right.set_ylabel("survival at the largest level", fontsize=8)
+    n = max((max(rows[f]["n"], default=0) for f in fams), default=0)
+    ax.set_title(f"{title}\n({style(method)['label']}, N = {n} images; most vulnerable at the top)", fontsize=10)
+    handles = [Line2D([], [], marker=mk, color=c, linestyle="", label=f"survival < {t:g} %")
+               for (mk, c), t in zip(marks, thresholds, strict=False)]
+    handles.append(Patch(facecolor="grey", alpha=0.15, label="not reached (hollow)"))
+    fig.legend(handles=handles, fontsize=8, loc="outside lower center", ncol=len(handles))
+    return fig
+
+
+def family_survival(profile: Sequence[Mapping[str, Any]], order: Sequence[str], *, ncols: int = 5,
+                    title: str = "Survival vs budget level, per perturbation family") -> Figure:
+    """Small multiples, one panel per family in ``order``: survival (%) against the level index, one line per
+    method, the dense-grid reference (black dashes) and the combined series (grey dots); 50 % and 10 % marked.
+    Each panel's title gives the family's levels in its unit."""
+    fams = [f for f in order if any(p["family"] == f for p in profile)]
+    ncols = max(1, min(ncols, len(fams)))
+    nrows = max(1, math.ceil(len(fams) / ncols))
+    fig, axes = _fig(nrows, ncols, size=(2.9 * ncols, 2.5 * nrows + 0.9), squeeze=False, sharey=True)
+    handles: dict[str, Any] = {}
+    for ax, f in zip(axes.flat, fams, strict=False):
+        series = [p for p in profile if p["family"] == f]
+        ms = method_order(q["method"] for q in series)
+        searches = [m for m in ms if m not in (REFERENCE, ANY_METHOD)]
+        for p in sorted(series, key=lambda p: ms.index(p["method"])):
+            st = style(p["method"])
+            # searches a little apart, so that coinciding curves stay visible
+            dx = 0.06 * (searches.index(p["method"]) - (len(searches) - 1) / 2) if p["method"] in searches else 0.0
+            x = np.arange(1, len(p["levels"]) + 1) + dx
+            (line,) = ax.plot(x, p["survival"], marker=st["marker"] or None, color=st["color"],
+                              linestyle=st["linestyle"], markersize=4, linewidth=1.4, label=st["label"])
+            handles.setdefault(st["label"], line)
+        for t in (50, 10):
+            ax.axhline(t, color="grey", linestyle=":", linewidth=0.9)
+        n = len(series[0]["levels"])
+        ax.set_xticks(range(1, n + 1))
+        ax.set_xticklabels([f"L{k}" for k in range(1, n + 1)], fontsize=8)
+        ax.set_xlim(0.7, n + 0.3)
+        ax.set_ylim(-3, 103)
+        ax.set_title(f"{f}\n{_family_text(series[0])}", fontsize=8)
+        ax.grid(alpha=0.3)
+    for ax in axes.flat[len(fams):]:
+        ax.set_visible(False)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("survival S_rate (%)", fontsize=8)
+    fig.legend(list(handles.values()), list(handles), fontsize=8, loc="outside lower center", ncol=len(handles))
+    fig.suptitle(title)
     return fig
