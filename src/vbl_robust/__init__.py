@@ -35,6 +35,7 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "detect": ("vbl_robust.detect", None),
     "campaigns": ("vbl_robust.campaigns", None),
     "report": ("vbl_robust.report", None),
+    "zones": ("vbl_robust.zones", None),
 }
 
 __all__ = ["ParameterBox", "__version__", *_LAZY]

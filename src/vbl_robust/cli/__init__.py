@@ -20,7 +20,7 @@ app = typer.Typer(
 )
 
 # Sub-command modules; each defines `register(app)`. A module that is not there yet is skipped.
-_COMMAND_MODULES = ("scenes", "audit", "reproduce", "report", "train")
+_COMMAND_MODULES = ("scenes", "audit", "reproduce", "report", "train", "zones")
 
 
 @app.callback()

@@ -300,6 +300,11 @@ def register(app: typer.Typer) -> None:
         frames: int = typer.Option(20, "--frames", min=1, help="With --sequences N: frames per sequence."),
         rate: float = typer.Option(10.0, "--rate", help="With --sequences: frame rate in Hz (generated sequences; "
                                    "LARD data without times)."),
+        refine_zones: int = typer.Option(0, "--refine-zones", min=0, help="After the search: spend this many more "
+                                         "evaluations per main DIRECT-family/grid job inside its undecided zones "
+                                         "(GeoRobust per zone, largest first) and report how the breached / "
+                                         "undecided / ruled-out fractions changed (zones_refined.json; under "
+                                         "--lipschitz, else the search's own estimate)."),
     ) -> None:
         """Find each image's worst case over a perturbation box: worst θ, worst error, verdict, survival, report."""
         from vbl_robust.campaigns import BoxSpec, Budget, audit_spec
@@ -342,7 +347,7 @@ def register(app: typer.Typer) -> None:
                 "early_stop": early_stop, "pnp": pnp, "width": width, "height": height, "perturb": list(perturb or [])},
                 unsupported={"--lard (use --sequences DIR)": lard is not None, "--lipschitz": lipschitz is not None,
                              "--executor ray": executor != "local", "--csv": csv is not None,
-                             "--parquet": parquet is not None})
+                             "--parquet": parquet is not None, "--refine-zones": refine_zones > 0})
             return
         samples, source = load(n, seed, lard, width, height)
         config = {"command": "audit", "n": n, "seed": seed, "lard": str(lard) if lard else None, "roll": roll,
@@ -353,6 +358,10 @@ def register(app: typer.Typer) -> None:
         summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
                                     config=config, quiet=quiet)
         finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
+        if refine_zones:
+            from .zones import refine_audit
+
+            refine_audit(out, samples, det, refine_zones, lipschitz=parse_lipschitz(lipschitz), quiet=quiet)
 
     @app.command()
     def demo(

@@ -26,6 +26,7 @@ from .apgd import APGD, apgd_checkpoints
 from .api import METHODS, anytime_methods, make_optimizer, maximize, method_options
 from .base import Optimizer
 from .bounds import sound_upper_bound
+from .cells import Cells
 from .direct import Direct, DirectL, GeoRobust
 from .evaluations import NON_FINITE, Evaluations
 from .po import potentially_optimal
@@ -35,6 +36,7 @@ from .sampling import GridSearch, RandomSearch, SobolSearch
 __all__ = [
     "APGD",
     "AdaptiveGeoRobust",
+    "Cells",
     "METHODS",
     "NON_FINITE",
     "Direct",

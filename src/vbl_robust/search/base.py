@@ -42,6 +42,7 @@ import numpy as np
 
 from ..space import ParameterBox
 from .bounds import check_lipschitz, sound_upper_bound
+from .cells import Cells
 from .evaluations import Evaluations, recorded_reasons, split
 from .result import PARTIAL, SearchResult, Status, TraceRow, Verdict, verdict_for
 
@@ -89,6 +90,8 @@ class Optimizer:
     needs_gradient: ClassVar[bool] = False
     #: The points asked for do not depend on the budgets (see the module docstring).
     anytime: ClassVar[bool] = True
+    #: The method keeps cells that tile the box (:meth:`cells`): the DIRECT family and the grid.
+    covers: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -291,6 +294,18 @@ class Optimizer:
             return None
         values, half_widths_unit = cover
         return sound_upper_bound(values, half_widths_unit * self.box.width, self.lipschitz, self.lipschitz_norm or "2")
+
+    def cells(self) -> Cells | None:
+        """The cells of the box this search has built so far (:class:`~vbl_robust.search.cells.Cells`: centres,
+        half-widths and bounds in real units, values, failed flags, volume fractions), or None for a method that
+        keeps no cover (random, Sobol, APGD) or before its first complete batch.
+
+        DIRECT family: the current rectangles (a batch asked but not yet told is not part of them). Grid: one cell
+        per node, half a spacing around it clipped to the box; nodes not evaluated yet are cells with
+        ``failed=True``. The cells are what :mod:`vbl_robust.zones` classifies into breached / undecided / ruled-out
+        zones.
+        """
+        return None
 
     # -- hooks ----------------------------------------------------------------------------------------------
     def _ask(self, remaining: int | None) -> np.ndarray:

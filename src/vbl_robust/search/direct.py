@@ -37,6 +37,7 @@ import numpy as np
 
 from ..space import ParameterBox
 from .base import Optimizer
+from .cells import Cells
 from .po import potentially_optimal
 from .result import Status
 
@@ -76,6 +77,7 @@ class Direct(Optimizer):
     """
 
     name: ClassVar[str] = "direct"
+    covers: ClassVar[bool] = True
     #: Per-rectangle arrays (first axis = rectangle), and those a child copies from its parent when created.
     _arrays: ClassVar[tuple[str, ...]] = ("_centers", "_levels", "_g", "_failed")
     _inherited: ClassVar[tuple[str, ...]] = ()
@@ -327,6 +329,24 @@ class Direct(Optimizer):
             return None
         values = np.where(self._failed[: self._m], np.nan, -self._g[: self._m])
         return values, 0.5 * 3.0 ** (-self._levels[: self._m].astype(np.float64))
+
+    def cells(self) -> Cells | None:
+        """The current rectangles as :class:`~vbl_robust.search.cells.Cells` (real units; see
+        :meth:`Optimizer.cells`); None before the first batch is told. ``lipschitz_estimate`` is K̂, the largest
+        observed parent-child slope (unit cube)."""
+        if self._m == 0:
+            return None
+        m = self._m
+        c = self._centers[:m]
+        h = 0.5 * 3.0 ** (-self._levels[:m].astype(np.float64))
+        box = self.box
+        return Cells(
+            box=box, centers=box.from_unit(c), half_widths=h * box.width,
+            lower=box.from_unit(np.clip(c - h, 0.0, 1.0)), upper=box.from_unit(np.clip(c + h, 0.0, 1.0)),
+            values=np.where(self._failed[:m], np.nan, -self._g[:m]), failed=self._failed[:m].copy(),
+            fractions=3.0 ** (-self._levels[:m].sum(axis=1).astype(np.float64)), method=self.name,
+            lipschitz_estimate=float(self._slope) if m > 1 else None,
+        )
 
     def rectangles(self) -> dict[str, np.ndarray]:
         """Current partition (unit cube): ``centers (m, d)``, ``levels (m, d)``, ``values (m,)``, ``failed (m,)``."""

@@ -12,6 +12,7 @@ from scipy.stats import qmc
 
 from ..space import ParameterBox
 from .base import Optimizer
+from .cells import Cells
 from .result import Status
 
 #: Points per dimension of a grid when neither counts, step nor max_evals say otherwise.
@@ -99,6 +100,7 @@ class GridSearch(Optimizer):
     """
 
     name: ClassVar[str] = "grid"
+    covers: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -164,6 +166,54 @@ class GridSearch(Optimizer):
 
     def _complete(self) -> str | None:
         return f"grid of {self.size} points complete" if self._next >= self.size else None
+
+    def _half_spacing(self) -> np.ndarray:
+        return np.array([0.5 if n == 1 else 0.5 / (n - 1) for n in self.counts])
+
+    def _node_units(self, flat: np.ndarray) -> np.ndarray:
+        idx = np.unravel_index(flat, self.counts)
+        return np.stack([ax[i] for ax, i in zip(self._axes, idx, strict=True)], axis=1).reshape(-1, self.dim)
+
+    def cells(self) -> Cells | None:
+        """One cell per node of the lattice (see :meth:`Optimizer.cells`), in evaluation order, then the nodes not
+        evaluated yet (``failed=True``, value NaN); None before the first batch is told. ``lipschitz_estimate``:
+        the largest slope between evaluated neighbouring nodes (unit cube), None when no two neighbours have
+        finite values."""
+        if self.nfev == 0:
+            return None
+        order = self._perm if self._perm is not None else np.arange(self.size)
+        u = self._node_units(order)
+        h = self._half_spacing()
+        n = min(self.nfev, self.size)
+        values = np.full(self.size, np.nan)
+        values[:n] = np.concatenate(self._fs)[:n]
+        failed = ~np.isfinite(values)
+        values[failed] = np.nan
+        lo, hi = np.clip(u - h, 0.0, 1.0), np.clip(u + h, 0.0, 1.0)
+        box = self.box
+        centers = box.from_unit(u)
+        centers[:n] = np.concatenate(self._xs)[:n]  # the told points, bit for bit
+        # the radius of a clipped cell is the distance from its node to its far side: h on every axis
+        return Cells(
+            box=box, centers=centers, half_widths=np.broadcast_to(h * box.width, (self.size, self.dim)),
+            lower=box.from_unit(lo), upper=box.from_unit(hi), values=values, failed=failed,
+            fractions=np.prod(hi - lo, axis=1), method=self.name, lipschitz_estimate=self._neighbour_slope(order, values),
+        )
+
+    def _neighbour_slope(self, order: np.ndarray, values: np.ndarray) -> float | None:
+        grid = np.full(self.size, np.nan)
+        grid[order] = values
+        grid = grid.reshape(self.counts)
+        best = None
+        for i, n in enumerate(self.counts):
+            if n < 2:
+                continue
+            with np.errstate(invalid="ignore"):
+                s = np.abs(np.diff(grid, axis=i)) * (n - 1)
+            s = s[np.isfinite(s)]
+            if s.size:
+                best = max(best or 0.0, float(s.max()))
+        return best
 
     def _cover(self) -> tuple[np.ndarray, np.ndarray] | None:
         if self._next < self.size or self.nfev < self.size:

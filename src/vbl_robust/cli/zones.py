@@ -1,0 +1,188 @@
+"""``vbl-robust zones RUN``: the vulnerability zones of a stored run; and ``audit --refine-zones``'s refinement.
+
+The zones of each search job are rebuilt by replaying its method on the stored values
+(:func:`vbl_robust.zones.replay`: nothing is evaluated) and classified breached / undecided / ruled out
+(:mod:`vbl_robust.zones`). Output: JSON (one object per job: identity, box, class fractions, zones) or CSV (one
+row per zone, with its job's identity and fractions); jobs of methods without a cover (random, Sobol, APGD) are
+listed as skipped with the reason.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from .common import fail
+
+FORMATS = ("json", "csv")
+
+
+def _lipschitz(text: str | None) -> float | tuple[float, ...] | None:
+    """``--lipschitz``: one number or one per parameter (checked against the box by :func:`vbl_robust.zones.zones`)."""
+    if text is None:
+        return None
+    try:
+        vals = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        vals = ()
+    if not vals or any(not math.isfinite(v) or v < 0 for v in vals):
+        fail(f"--lipschitz {text}: expected a finite number >= 0, or one per parameter")
+    return vals[0] if len(vals) == 1 else vals
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def zones(
+        run: Path = typer.Argument(..., help="Run directory (holding results.sqlite) or the .sqlite file."),
+        lipschitz: str | None = typer.Option(None, "--lipschitz", help="A Lipschitz constant of the error (m per "
+                                             "unit; one number with --norm, or one per parameter): sound zones "
+                                             "under that assumption. Default: the run's own --lipschitz, if any."),
+        norm: str = typer.Option("2", "--norm", help="Norm of a scalar --lipschitz: 2, inf or 1 (real units)."),
+        estimate: bool = typer.Option(False, "--estimate", help="Classify with each search's own slope estimate "
+                                      "(GeoRobust's K̂: NOT sound; labelled an estimate)."),
+        threshold: float | None = typer.Option(None, "--threshold", help="ε in metres (default: the run's ε_safe)."),
+        role: str = typer.Option("all", "--role", help="Jobs of this role only: main, reference, landscape or all."),
+        fmt: str = typer.Option("json", "--format", help="json or csv."),
+        out: Path | None = typer.Option(None, "--out", help="Write to this file (default: standard output)."),
+        plot: Path | None = typer.Option(None, "--plot", help="Also draw each 1-D/2-D job's zones to DIR/<key>.png."),
+    ) -> None:
+        """Breached / undecided / ruled-out zones of Θ for each search job of a run (replayed, not re-evaluated)."""
+        from vbl_robust.zones import ReplayError, plot_zones, zones_of_run
+
+        if fmt not in FORMATS:
+            fail(f"--format {fmt}: choose json or csv")
+        if role not in ("all", "main", "reference", "landscape"):
+            fail(f"--role {role}: choose main, reference, landscape or all")
+        if lipschitz is not None and estimate:
+            fail("--lipschitz and --estimate are exclusive (a sound constant, or the searches' own estimate)")
+        if norm not in ("2", "inf", "1"):
+            fail(f"--norm {norm}: choose 2, inf or 1")
+        lip = _lipschitz(lipschitz)
+        try:
+            jobs = zones_of_run(run, roles=None if role == "all" else (role,), threshold=threshold, lipschitz=lip,
+                                norm=norm, estimate=estimate)
+        except ReplayError as exc:
+            fail(f"replay failed: {exc}")
+        except (ValueError, FileNotFoundError) as exc:
+            fail(str(exc))
+        done = [j for j in jobs if j.zones is not None]
+        for j in jobs:
+            if j.zones is None:
+                typer.secho(f"note: skipped {j.method} on {j.sample_id} ({j.box_label}): {j.note}", err=True,
+                            fg=typer.colors.YELLOW)
+            elif j.note:
+                typer.secho(f"note: {j.method} on {j.sample_id}: {j.note}", err=True, fg=typer.colors.YELLOW)
+        text = _as_json(run, jobs) if fmt == "json" else _as_csv(done)
+        if out is None:
+            typer.echo(text, nl=False)
+        else:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(text)
+            typer.echo(f"zones of {len(done)} job(s) ({len(jobs) - len(done)} skipped): {out}", err=True)
+        if plot is not None:
+            for j in done:
+                if j.box is not None and j.box.dim <= 2:
+                    plot_zones(j.zones, plot / f"{j.key[:16]}.png",
+                               title=f"{j.method}, {j.sample_id}, {j.box_label}: {j.zones.describe()[:60]}")
+
+
+def _as_json(run: Path, jobs: list[Any]) -> str:
+    body = {"run": str(run), "jobs": [j.to_dict() for j in jobs if j.zones is not None],
+            "skipped": [{"key": j.key, "sample_id": j.sample_id, "method": j.method, "role": j.role, "note": j.note}
+                        for j in jobs if j.zones is None]}
+    return json.dumps(body, indent=1, allow_nan=False) + "\n"
+
+
+def _as_csv(jobs: list[Any]) -> str:
+    names: list[str] = []
+    for j in jobs:
+        names += [n for n in j.box.names if n not in names]
+    cols = ["key", "sample_id", "sample_index", "method", "role", "box_label", "basis", "threshold",
+            "fraction_breached", "fraction_undecided", "fraction_ruled_out", "class", "value", "bound", "fraction",
+            *(f"{n}_{k}" for n in names for k in ("lower", "upper", "center"))]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
+    w.writeheader()
+    for j in jobs:
+        zm = j.zones
+        fr = zm.fractions
+        head = {"key": j.key, "sample_id": j.sample_id, "sample_index": j.sample_index, "method": j.method,
+                "role": j.role, "box_label": j.box_label, "basis": zm.basis, "threshold": zm.threshold,
+                **{f"fraction_{c}": fr[c] for c in fr}}
+        for z in zm.zones:
+            row = {**head, "class": z.cls, "value": _cell(z.value), "bound": _cell(z.bound), "fraction": z.fraction}
+            for i, n in enumerate(zm.box.names):
+                row.update({f"{n}_lower": z.lower[i], f"{n}_upper": z.upper[i], f"{n}_center": z.center[i]})
+            w.writerow(row)
+    return buf.getvalue()
+
+
+def _cell(v: float | None) -> str | float:
+    return "" if v is None or not math.isfinite(v) else v
+
+
+# -- audit --refine-zones -----------------------------------------------------------------------------------------
+def refine_audit(out: Path, samples: list, detector: Any, budget: int, *,
+                 lipschitz: float | tuple[float, ...] | None, quiet: bool = False) -> Path:
+    """After an audit: for each main search job with a cover, spend ``budget`` more evaluations inside its
+    undecided zones (:func:`vbl_robust.zones.refine_zones`, GeoRobust per zone), under the run's ``lipschitz``
+    (sound) or else each search's own estimate; print how the fractions changed and write them, with the refined
+    zones, to ``out/zones_refined.json``. Returns that path."""
+    from vbl_robust.campaigns.spec import CampaignSpec
+    from vbl_robust.campaigns.store import ResultStore
+    from vbl_robust.campaigns.work import detector_for, search_function
+    from vbl_robust.pipeline import Objective
+    from vbl_robust.zones import ReplayError, job_zones, refine_zones
+
+    with ResultStore.open_existing(out) as store:
+        spec = CampaignSpec.from_dict(store.campaign()["spec"])
+        rows = store.jobs(kind="search", role="main", with_points=True, with_trace=False)
+    by_id = {str(s.id): s for s in samples}
+    det = detector_for(detector)
+    entries, table = [], []
+    for row in rows:
+        try:
+            jz = job_zones(row, spec, lipschitz=lipschitz, estimate=lipschitz is None)
+        except ReplayError as exc:
+            fail(f"--refine-zones: replay failed: {exc}")
+        except ValueError as exc:  # no estimate (e.g. a search that saw only failures)
+            jz = None
+            note = str(exc)
+        else:
+            note = jz.note
+        if jz is None or jz.zones is None:
+            entries.append({"key": row.key, "sample_id": row.sample_id, "method": row.method, "note": note})
+            continue
+        sample = by_id.get(str(row.sample_id))
+        if sample is None:
+            fail(f"--refine-zones: sample {row.sample_id} of the store is not among this audit's samples")
+        objective = Objective(sample, det, row.box.box, pnp=spec.pnp, conf_threshold=spec.conf_threshold,
+                              penalty_m=spec.penalty_m)
+        ref = refine_zones(search_function(objective, False), jz.zones, budget, seed=row.seed or 0)
+        entries.append({"key": row.key, "sample_id": row.sample_id, "sample_index": row.sample_index,
+                        "method": row.method, "box_label": row.box_label, "basis": ref.after.basis,
+                        "basis_description": ref.after.describe(), **ref.to_dict()})
+        table.append((row.sample_index, row.method, ref))
+    path = out / "zones_refined.json"
+    path.write_text(json.dumps({"budget_per_job": budget, "jobs": entries}, indent=1, allow_nan=False) + "\n")
+    if not quiet:
+        from rich.console import Console
+        from rich.table import Table
+
+        t = Table(title=f"zones refined with {budget} evaluations per job (volume %, before → after)")
+        for c in ("image", "method", "evals", "breached", "undecided", "ruled out", "basis"):
+            t.add_column(c, justify="left" if c in ("image", "method", "basis") else "right")
+        for index, method, ref in table:
+            b, a = ref.before.fractions, ref.after.fractions
+            t.add_row(f"#{index}", method, str(ref.evaluations),
+                      *(f"{100 * b[c]:.1f} → {100 * a[c]:.1f}" for c in ("breached", "undecided", "ruled_out")),
+                      ref.after.basis)
+        Console().print(t)
+    typer.echo(f"refined zones: {path}")
+    return path

@@ -1,0 +1,187 @@
+"""``vbl-robust zones RUN`` and ``audit --refine-zones`` on tiny runs (oracle and a detector with a known failure set)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+import vbl_robust.search.api as search_api
+from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, ResultStore, run_campaign
+from vbl_robust.campaigns.spec import roll_contrast_box
+from vbl_robust.cli import app
+from vbl_robust.zones import replay, zones_of_run
+
+runner = CliRunner()
+SMALL = ["--oracle", "--oracle-noise", "0.5", "--width", "256", "--height", "256", "--quiet"]
+GATE = 4.0  # zones_helpers.RollGate: no detection (5000 m) where roll > 4°
+
+
+@pytest.fixture(scope="module")
+def gated_run(tmp_path_factory):
+    """A two-image campaign with RollGate; the live optimizers of its searches, captured as they ran."""
+    from vbl_robust.scenes import generate
+
+    torch.set_num_threads(1)
+    out = tmp_path_factory.mktemp("gated")
+    box = roll_contrast_box(10.0, (0.8, 1.2))
+    blocks = (
+        Block(boxes=(box,), methods=("georobust", "georobust-a", "direct", "random"),
+              budgets=(Budget(max_evals=40), Budget(max_evals=40, stop_at_breach=False))),
+        Block(boxes=(box,), methods=("grid",), budgets=(Budget(max_evals=60),), role="landscape",
+              options={"grid": {"counts": [9, 5]}}),
+    )
+    spec = CampaignSpec("zones-test", blocks, seed=2)
+    live = []
+    real = search_api.make_optimizer
+
+    def capture(*args, **kwargs):
+        opt = real(*args, **kwargs)
+        live.append(opt)
+        return opt
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(search_api, "make_optimizer", capture)
+    try:
+        with ResultStore(out / "results.sqlite") as store:
+            run_campaign(spec, generate(2, seed=1, width=96, height=96), store,
+                         detector=DetectorSpec("factory", "zones_helpers:RollGate"))
+    finally:
+        mp.undo()
+    return out, live
+
+
+def test_replayed_cells_are_the_live_optimizers(gated_run):
+    out, live = gated_run
+    with ResultStore.open_existing(out) as store:
+        spec = CampaignSpec.from_dict(store.campaign()["spec"])
+        rows = store.jobs(kind="search", with_points=True)
+    assert len(rows) == 2 * (4 * 2 + 1) and all(r.status == "done" for r in rows)
+    checked = 0
+    assert len(live) == len(rows)  # the local executor runs the jobs in the store's order
+    for row, opt in zip(rows, live, strict=True):
+        assert opt.name == row.method and np.array_equal(opt.result().xs, row.points.xs)
+        assert np.array_equal(opt.result().fs, row.points.fs, equal_nan=True)
+        if not opt.covers:
+            continue
+        a, b = replay(row, spec).cells(), opt.cells()
+        for k in ("centers", "half_widths", "lower", "upper", "fractions", "failed"):
+            assert np.array_equal(getattr(a, k), getattr(b, k)), (row.method, k)
+        assert np.array_equal(a.values, b.values, equal_nan=True)
+        checked += 1
+    assert checked == 2 * (3 * 2 + 1)
+
+
+def test_zones_of_a_run_with_a_known_failure_set(gated_run):
+    out, _ = gated_run
+    jobs = zones_of_run(out, estimate=True)
+    done = [j for j in jobs if j.zones is not None]
+    assert {j.method for j in jobs if j.zones is None} == {"random"}
+    for j in done:
+        fr = j.zones.fractions
+        assert math.isclose(sum(fr.values()), 1.0, abs_tol=1e-12) and j.zones.basis == "estimate"
+        assert fr["breached"] > 0  # every search met the failure set (most of its first division lies in it)
+        for z in j.zones.of("breached"):
+            assert z.center[0] > GATE and z.value == 5000.0
+            assert z.box.names == ("roll_deg", "contrast")
+        for z in j.zones.zones:
+            if z.center[0] <= GATE:
+                assert z.cls != "breached"
+    # without a constant nothing is ruled out; the breached zones do not depend on it
+    plain = {j.key: j for j in zones_of_run(out, roles=("main",))}
+    for j in done:
+        if j.role == "main":
+            assert plain[j.key].zones.fractions["ruled_out"] == 0.0
+            assert plain[j.key].zones.fractions["breached"] == j.zones.fractions["breached"]
+
+
+def test_zones_command_json_and_csv(gated_run, tmp_path):
+    out, _ = gated_run
+    res = runner.invoke(app, ["zones", str(out), "--estimate"])
+    assert res.exit_code == 0, res.output
+    body = json.loads(res.stdout)
+    assert len(body["jobs"]) == 14 and len(body["skipped"]) == 4
+    assert all("no cover" in s["note"] for s in body["skipped"])
+    job = body["jobs"][0]
+    assert {"key", "sample_id", "method", "box", "fractions", "zones", "basis", "basis_description"} <= set(job)
+    assert "not sound" in job["basis_description"]
+    z = job["zones"][0]
+    assert set(z) == {"class", "value", "bound", "fraction", "bounds", "center"}
+    assert set(z["bounds"]) == {"roll_deg", "contrast"} and z["bounds"]["roll_deg"][0] <= z["center"]["roll_deg"]
+    assert "skipped random" in res.stderr
+
+    res = runner.invoke(app, ["zones", str(out), "--lipschitz", "1,1", "--format", "csv", "--role", "landscape",
+                              "--out", str(tmp_path / "z.csv"), "--plot", str(tmp_path / "plots")])
+    assert res.exit_code == 0, res.output
+    rows = list(csv.DictReader(io.StringIO((tmp_path / "z.csv").read_text())))
+    assert len(rows) == 2 * 45 and {r["method"] for r in rows} == {"grid"} and {r["basis"] for r in rows} == {"sound"}
+    assert {"roll_deg_lower", "roll_deg_upper", "contrast_center", "class", "bound", "fraction_breached"} <= set(rows[0])
+    for key in {r["key"] for r in rows}:
+        assert math.isclose(sum(float(r["fraction"]) for r in rows if r["key"] == key), 1.0, abs_tol=1e-12)
+    assert all(float(r["roll_deg_center"]) > GATE for r in rows if r["class"] == "breached")
+    assert len(list((tmp_path / "plots").glob("*.png"))) == 2
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--lipschitz", "3", "--estimate"], "exclusive"),
+    (["--format", "xml"], "--format"),
+    (["--role", "best"], "--role"),
+    (["--norm", "7"], "--norm"),
+    (["--lipschitz", "abc"], "--lipschitz abc"),
+    (["--lipschitz", "1,2,3"], "one per parameter"),
+])
+def test_zones_command_user_errors(gated_run, args, message):
+    res = runner.invoke(app, ["zones", str(gated_run[0]), *args])
+    assert res.exit_code == 2 and message in res.output
+
+
+def test_zones_command_on_a_missing_run(tmp_path):
+    res = runner.invoke(app, ["zones", str(tmp_path / "nothing")])
+    assert res.exit_code == 2 and "no results store" in res.output
+
+
+def test_zones_command_fails_loudly_on_a_store_that_does_not_replay(gated_run, tmp_path):
+    import shutil
+    import sqlite3
+    import zlib
+
+    out = tmp_path / "tampered"
+    shutil.copytree(gated_run[0], out)
+    con = sqlite3.connect(out / "results.sqlite")
+    key, blob = con.execute("SELECT key, points FROM jobs WHERE method = 'direct' LIMIT 1").fetchone()
+    d = json.loads(zlib.decompress(blob))
+    d["xs"][3][0] += 0.01
+    con.execute("UPDATE jobs SET points = ? WHERE key = ?", (zlib.compress(json.dumps(d).encode()), key))
+    con.commit()
+    con.close()
+    res = runner.invoke(app, ["zones", str(out)])
+    assert res.exit_code == 2 and "replay failed" in res.output and "evaluation 3" in res.output
+
+
+def test_audit_refine_zones(tmp_path):
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["audit", "--out", str(out), "--n", "1", "--roll", "10", "--contrast", "0.8,1.2",
+                              "--methods", "georobust,random", "--max-evals", "30", "--no-early-stop", "--no-landscape",
+                              "--no-report", "--refine-zones", "40", *SMALL])
+    assert res.exit_code == 0, res.output
+    body = json.loads((out / "zones_refined.json").read_text())
+    assert body["budget_per_job"] == 40
+    [job] = [j for j in body["jobs"] if j["method"] == "georobust"]
+    assert [j["note"] for j in body["jobs"] if j["method"] == "random"] == ["random: keeps no cover of the box (no zones)"]
+    assert job["basis"] == "estimate" and "not sound" in job["basis_description"]
+    assert 0 <= job["evaluations"] <= 40
+    assert math.isclose(sum(job["after"].values()), 1.0, abs_tol=1e-12)
+    assert job["after"]["undecided"] <= job["before"]["undecided"] + 1e-12 or job["evaluations"] > 0
+    assert "refined zones:" in res.output
+
+
+def test_refine_zones_is_refused_for_sequence_audits(tmp_path):
+    res = runner.invoke(app, ["audit", "--out", str(tmp_path), "--sequences", "1", "--frames", "2", "--max-evals", "3",
+                              "--refine-zones", "10", *SMALL])
+    assert res.exit_code == 2 and "--refine-zones" in res.output
