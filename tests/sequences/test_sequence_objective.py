@@ -128,7 +128,9 @@ class ProbeDetector:
         self.calls += 1
         from vbl_robust.detect.windows import letterbox_window
 
-        win = torch.tensor(letterbox_window(context.height, context.width), dtype=torch.float32)
+        # as PoseDetector.letterbox: windows are made on the context's device (every sampler must say which)
+        win = torch.tensor(letterbox_window(context.height, context.width), dtype=torch.float32,
+                           device=context.device)
         m = context.views(win, 32).mean(dim=(1, 2, 3)).to(torch.float64)
         return 0.3 + 0.5 * m, self.corners[None] + 2.0 * m[:, None, None]
 

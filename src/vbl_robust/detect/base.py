@@ -168,7 +168,7 @@ class DetectContext:
     @property
     def device(self) -> torch.device:
         """Where the views are made (the source image's device): detectors create their windows there."""
-        return self.sampler.device
+        return getattr(self.sampler, "device", torch.device("cpu"))  # a third-party sampler may not say
 
     def views(self, windows, size: int) -> torch.Tensor:
         """``(B, 3, size, size)`` views of the perturbed images (see :meth:`ViewSampler.views`)."""

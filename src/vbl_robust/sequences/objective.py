@@ -122,6 +122,10 @@ class _StackedViews:
     def width(self) -> int:
         return self.samplers[0].width
 
+    @property
+    def device(self) -> torch.device:
+        return self.samplers[0].device
+
     def frames(self) -> torch.Tensor:
         return torch.cat([s.frames() for s in self.samplers])
 
