@@ -37,3 +37,15 @@ def runway_image(size=64, seed=0):
                         [c[0] - w / 2, c[1] + h / 2], [c[0] + w / 2, c[1] + h / 2]])
     cv2.fillPoly(img, [np.round((corners + 0.0) * 16).astype(np.int32)], (220, 220, 220), cv2.LINE_AA, shift=4)
     return img, corners
+
+
+def approach_sample(size=128):
+    """A :class:`Sample` of :func:`runway_image` (seed 3) with the geometry of a 3° approach 2 km out."""
+    from vbl_robust.data.sample import Sample
+    from vbl_robust.geometry.camera import intrinsics, project, rot_y, runway_corners
+
+    img, _ = runway_image(size, seed=3)
+    K, z = intrinsics(size, size), runway_corners(3000.0, 45.0)
+    C = np.array([-2000.0, 0.0, 2000.0 * np.tan(np.radians(3.0))])
+    return Sample(id="s", K=K, corners_3d=z, corners_2d=project(z, rot_y(3.0), C, K), position=C, width=size,
+                  height=size, _image=img)

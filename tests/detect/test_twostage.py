@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from detect_helpers import runway_image
+from detect_helpers import approach_sample
 
 from vbl_robust.detect import DetectContext, DifferentiableDetector
 from vbl_robust.detect.twostage import TwoStageDetector
@@ -18,17 +18,6 @@ def two(tiny_pose_pt):
     return TwoStageDetector(UltralyticsDetector(tiny_pose_pt, trust=True), min_side=32)
 
 
-def _sample(size=128):
-    from vbl_robust.data.sample import Sample
-    from vbl_robust.geometry.camera import intrinsics, project, rot_y, runway_corners
-
-    img, _ = runway_image(size, seed=3)
-    K, z = intrinsics(size, size), runway_corners(3000.0, 45.0)
-    C = np.array([-2000.0, 0.0, 2000.0 * np.tan(np.radians(3.0))])
-    return Sample(id="s", K=K, corners_3d=z, corners_2d=project(z, rot_y(3.0), C, K), position=C, width=size,
-                  height=size, _image=img)
-
-
 def test_declared_capabilities(two):
     assert isinstance(two, DifferentiableDetector)
     assert two.input_size is None and two.uses_pixels and two.differentiable and two.second is two.first
@@ -39,7 +28,7 @@ def test_objective_views_agree_with_perturbing_the_image_first(two):
     (the whole frame rendered with OpenCV first) the detector gives nearly the same keypoints."""
     from vbl_robust.pipeline import Objective
 
-    s = _sample()
+    s = approach_sample()
     box = ParameterBox({"roll_deg": (-15, 15), "contrast": (0.6, 1.6)})
     obj = Objective(s, two, box, conf_threshold=0.0)
 
@@ -57,7 +46,7 @@ def test_objective_views_agree_with_perturbing_the_image_first(two):
 
 
 def test_plain_images_and_the_identity_context_agree(two):
-    s = _sample()
+    s = approach_sample()
     from vbl_robust.pipeline import Objective
 
     obj = Objective(s, two, ParameterBox({"roll_deg": (-5, 5)}))

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from detect_helpers import runway_image
+from detect_helpers import approach_sample
 
 from vbl_robust.detect import DetectContext
 from vbl_robust.detect.twostage import TwoStageDetector
@@ -16,17 +16,6 @@ from vbl_robust.pipeline import Objective
 from vbl_robust.space import ParameterBox
 
 ALL = ParameterBox({n: spec.levels[2] for n, spec in PERTURBATIONS.items()})
-
-
-def _sample(size=128):
-    from vbl_robust.data.sample import Sample
-    from vbl_robust.geometry.camera import intrinsics, project, rot_y, runway_corners
-
-    img, _ = runway_image(size, seed=3)
-    K, z = intrinsics(size, size), runway_corners(3000.0, 45.0)
-    C = np.array([-2000.0, 0.0, 2000.0 * np.tan(np.radians(3.0))])
-    return Sample(id="s", K=K, corners_3d=z, corners_2d=project(z, rot_y(3.0), C, K), position=C, width=size,
-                  height=size, _image=img)
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +28,7 @@ def two(tiny_pose_pt):
 def test_views_through_the_objective_agree_with_perturbing_first(two, names):
     """Crops the detector asks for equal crops of the whole perturbed frames: exactly for the optical and noise
     families (frames first), within interpolation smoothing for the others (sampled straight from the source)."""
-    s = _sample()
+    s = approach_sample()
     box = ParameterBox({n: PERTURBATIONS[n].levels[2] for n in names})
     obj = Objective(s, two, box, conf_threshold=0.0)
 
@@ -56,7 +45,7 @@ def test_views_through_the_objective_agree_with_perturbing_first(two, names):
 
 
 def test_every_family_at_once_on_both_paths(two):
-    s = _sample()
+    s = approach_sample()
     obj = Objective(s, two, ALL, conf_threshold=0.0)
     theta = ALL.from_unit(np.random.default_rng(1).random((4, ALL.dim)))
     rec = obj.evaluate(theta)

@@ -13,7 +13,7 @@ from typing import Any
 
 import typer
 
-from .common import fail, parse_range
+from .common import fail, parse_lipschitz, parse_range
 
 METHODS_DEFAULT = "georobust,random,apgd"
 
@@ -143,18 +143,6 @@ def parse_methods(text: str) -> tuple[str, ...]:
     if not methods or bad:
         raise typer.BadParameter(f"--methods: unknown method(s) {bad or text!r}; methods are {', '.join(METHODS)}")
     return methods
-
-
-def parse_lipschitz(text: str | None) -> float | tuple[float, ...] | None:
-    if text is None:
-        return None
-    try:
-        vals = tuple(float(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise typer.BadParameter(f"--lipschitz: expected a number or one number per parameter, got {text!r}") from None
-    if not vals or any(not math.isfinite(v) or v < 0 for v in vals):
-        raise typer.BadParameter(f"--lipschitz: expected finite numbers >= 0, got {text!r}")
-    return vals[0] if len(vals) == 1 else vals
 
 
 def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, executor: str, address: str | None,

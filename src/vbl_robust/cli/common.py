@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import typer
 
 
@@ -24,3 +26,16 @@ def parse_range(text: str, *, name: str, symmetric: bool = False) -> tuple[float
     if len(vals) != 2:
         raise typer.BadParameter(f"{name}: expected 'lower,upper', got {text!r}")
     return (vals[0], vals[1])
+
+
+def parse_lipschitz(text: str | None) -> float | tuple[float, ...] | None:
+    """``--lipschitz``: one number, or one per parameter (checked against the box where the box is known)."""
+    if text is None:
+        return None
+    try:
+        vals = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        vals = ()
+    if not vals or any(not math.isfinite(v) or v < 0 for v in vals):
+        fail(f"--lipschitz {text}: expected a finite number >= 0, or one per parameter")
+    return vals[0] if len(vals) == 1 else vals

@@ -18,22 +18,9 @@ from typing import Any
 
 import typer
 
-from .common import fail
+from .common import fail, parse_lipschitz
 
 FORMATS = ("json", "csv")
-
-
-def _lipschitz(text: str | None) -> float | tuple[float, ...] | None:
-    """``--lipschitz``: one number or one per parameter (checked against the box by :func:`vbl_robust.zones.zones`)."""
-    if text is None:
-        return None
-    try:
-        vals = tuple(float(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        vals = ()
-    if not vals or any(not math.isfinite(v) or v < 0 for v in vals):
-        fail(f"--lipschitz {text}: expected a finite number >= 0, or one per parameter")
-    return vals[0] if len(vals) == 1 else vals
 
 
 def register(app: typer.Typer) -> None:
@@ -63,7 +50,7 @@ def register(app: typer.Typer) -> None:
             fail("--lipschitz and --estimate are exclusive (a sound constant, or the searches' own estimate)")
         if norm not in ("2", "inf", "1"):
             fail(f"--norm {norm}: choose 2, inf or 1")
-        lip = _lipschitz(lipschitz)
+        lip = parse_lipschitz(lipschitz)
         try:
             jobs = zones_of_run(run, roles=None if role == "all" else (role,), threshold=threshold, lipschitz=lip,
                                 norm=norm, estimate=estimate)
