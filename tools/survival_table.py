@@ -1,0 +1,77 @@
+"""Survival % per method and box of a run, on the images every method completed, as Markdown (issue 17 measurement).
+
+Reads the run's main rows (:func:`vbl_robust.campaigns.metrics.main_rows`; nothing is evaluated) and keeps only
+images for which every (method, box) job is stored, so that a run still in progress, or resumed across
+sessions, compares the methods on the same images. One row per method, one column per box (by level); a cell
+is ``survival % (breaches)``. Where the run holds a dense landscape grid (``reproduce spatial-2d``: the first
+image), the found / true worst ratio of each method on that image follows.
+
+    python tools/survival_table.py runs/issue17_spatial2d
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections import defaultdict
+
+import numpy as np
+
+from vbl_robust.campaigns import metrics as mx
+from vbl_robust.campaigns.spec import CampaignSpec
+from vbl_robust.campaigns.store import ResultStore
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("run")
+    a = ap.parse_args()
+    with ResultStore.open_existing(a.run) as store:
+        spec = CampaignSpec.from_dict(store.campaign()["spec"])
+        rows = mx.main_rows(store, spec, with_trace=False)
+        land = store.jobs(kind="search", role="landscape", with_points=True, with_trace=False)
+    keys = {(r.method, r.box_label) for r in rows}
+    per_image: dict[str, set] = defaultdict(set)
+    for r in rows:
+        per_image[r.sample_id].add((r.method, r.box_label))
+    done = sorted(s for s, k in per_image.items() if k == keys)
+    rows = [r for r in rows if r.sample_id in done]
+    lines = mx.summarize(rows, spec.eps_safe_m, by=("method", "box_label"))
+    boxes = sorted({ln["box_label"]: ln["box_level"] for ln in lines}.items(), key=lambda kv: kv[1] or 0.0)
+    methods = list(dict.fromkeys(ln["method"] for ln in lines))
+    cell = {(ln["method"], ln["box_label"]): ln for ln in lines}
+    print(f"{a.run}: {len(done)} images completed by every method (of {len(per_image)} started); "
+          f"ε_safe = {spec.eps_safe_m:g} m; cell = survival % (breaches)")
+    print()
+    print("| method | " + " | ".join(b for b, _ in boxes) + " |")
+    print("|---|" + "---|" * len(boxes))
+    for m in methods:
+        vals = [f"{cell[(m, b)]['survival']:.1f} ({cell[(m, b)]['breaches']})" if (m, b) in cell else "–"
+                for b, _ in boxes]
+        print(f"| {m} | " + " | ".join(vals) + " |")
+    for g in land:
+        if g.points is None or not len(g.points) or g.sample_id not in done:
+            continue
+        xs, fs = g.points.xs, g.points.fs
+        print()
+        print(f"Landscape grid on image {g.sample_id} ({len(fs)} points over {g.box_label}): found / true worst")
+        print()
+        print("| method | " + " | ".join(b for b, _ in boxes) + " |")
+        print("|---|" + "---|" * len(boxes))
+        by_box = {r.box_label: r for r in rows if r.sample_id == g.sample_id}
+        for m in methods:
+            vals = []
+            for b, _ in boxes:
+                r = next((r for r in rows if r.sample_id == g.sample_id and r.method == m and r.box_label == b),
+                         None)
+                box = None if b not in by_box or by_box[b].box is None else by_box[b].box.box
+                if r is None or box is None or r.worst_m is None:
+                    vals.append("–")
+                    continue
+                inside = np.all((xs >= box.lower - 1e-9) & (xs <= box.upper + 1e-9), axis=1)
+                true = float(np.nanmax(fs[inside])) if inside.any() else float("nan")
+                vals.append(f"{r.worst_m / true:.3f}" if true > 0 else "–")
+            print(f"| {m} | " + " | ".join(vals) + " |")
+
+
+if __name__ == "__main__":
+    main()
