@@ -21,11 +21,11 @@ from vbl_robust.campaigns.spec import CampaignSpec
 from vbl_robust.campaigns.store import ResultStore
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("run")
-    a = ap.parse_args()
-    with ResultStore.open_existing(a.run) as store:
+def survival_markdown(run: str) -> str:
+    """The tables (Markdown) of the run directory or store ``run``."""
+    out: list[str] = []
+    emit = out.append
+    with ResultStore.open_existing(run) as store:
         spec = CampaignSpec.from_dict(store.campaign()["spec"])
         rows = mx.main_rows(store, spec, with_trace=False)
         land = store.jobs(kind="search", role="landscape", with_points=True, with_trace=False)
@@ -39,24 +39,24 @@ def main() -> None:
     boxes = sorted({ln["box_label"]: ln["box_level"] for ln in lines}.items(), key=lambda kv: kv[1] or 0.0)
     methods = list(dict.fromkeys(ln["method"] for ln in lines))
     cell = {(ln["method"], ln["box_label"]): ln for ln in lines}
-    print(f"{a.run}: {len(done)} images completed by every method (of {len(per_image)} started); "
+    emit(f"{run}: {len(done)} images completed by every method (of {len(per_image)} started); "
           f"ε_safe = {spec.eps_safe_m:g} m; cell = survival % (breaches)")
-    print()
-    print("| method | " + " | ".join(b for b, _ in boxes) + " |")
-    print("|---|" + "---|" * len(boxes))
+    emit("")
+    emit("| method | " + " | ".join(b for b, _ in boxes) + " |")
+    emit("|---|" + "---|" * len(boxes))
     for m in methods:
         vals = [f"{cell[(m, b)]['survival']:.1f} ({cell[(m, b)]['breaches']})" if (m, b) in cell else "–"
                 for b, _ in boxes]
-        print(f"| {m} | " + " | ".join(vals) + " |")
+        emit(f"| {m} | " + " | ".join(vals) + " |")
     for g in land:
         if g.points is None or not len(g.points) or g.sample_id not in done:
             continue
         xs, fs = g.points.xs, g.points.fs
-        print()
-        print(f"Landscape grid on image {g.sample_id} ({len(fs)} points over {g.box_label}): found / true worst")
-        print()
-        print("| method | " + " | ".join(b for b, _ in boxes) + " |")
-        print("|---|" + "---|" * len(boxes))
+        emit("")
+        emit(f"Landscape grid on image {g.sample_id} ({len(fs)} points over {g.box_label}): found / true worst")
+        emit("")
+        emit("| method | " + " | ".join(b for b, _ in boxes) + " |")
+        emit("|---|" + "---|" * len(boxes))
         by_box = {r.box_label: r for r in rows if r.sample_id == g.sample_id}
         for m in methods:
             vals = []
@@ -70,7 +70,17 @@ def main() -> None:
                 inside = np.all((xs >= box.lower - 1e-9) & (xs <= box.upper + 1e-9), axis=1)
                 true = float(np.nanmax(fs[inside])) if inside.any() else float("nan")
                 vals.append(f"{r.worst_m / true:.3f}" if true > 0 else "–")
-            print(f"| {m} | " + " | ".join(vals) + " |")
+            emit(f"| {m} | " + " | ".join(vals) + " |")
+    return "\n".join(out) + "\n"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("run")
+    a = ap.parse_args()
+    import sys
+
+    sys.stdout.write(survival_markdown(a.run))
 
 
 if __name__ == "__main__":
