@@ -5,6 +5,9 @@
 - ``k`` (session 7): from v7 (the shipped model); *new* data (seed 8: other airports, other poses), far drawn three
   times as often; a lower, cosine-decayed learning rate (1.5e-4 → 1.5e-5 over 3 epochs), because step J's
   validation survival swung between 84.9 % and 93.1 % from epoch to epoch at lr ≈ 3e-4.
+- ``l`` (prepared in session 8, not yet run): as ``k`` on new data (seed 9), plus the appearance jitter of
+  :mod:`vbl_robust.detect.augment` (blur, haze, contrast, brightness, gamma, sensor noise on half of the training
+  images): the families ranking puts sensor noise first by far, and the training data had none.
 
 Rerun the same command after an interruption (``resume=True`` continues ``last.pt``); one torch thread so that
 other work can run beside it. Every epoch is saved (``save_period=1``) for the validation protocol.
@@ -30,6 +33,8 @@ STEPS = {
     "j": (5, dict(seed=7, n_train=3000, lr0=3e-4, lrf=0.1,
                   generate_options={"weights": (2.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
     "k": (3, dict(seed=8, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True,
+                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+    "l": (3, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={},
                   generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
 }
 

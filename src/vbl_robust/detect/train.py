@@ -15,6 +15,8 @@ stage from its ``last.pt``; when the latest stage is finished, it starts a new s
 stage's ``best.pt`` — hours of training accumulate over several calls. Augmentation keeps corners exact: no
 vertical flip, horizontal flip with ``flip_idx``, translation only (no mosaic, scale, rotation or shear: the crop
 jitter provides position and scale diversity, and ultralytics' affine warps are not half-pixel exact).
+Optionally (``appearance``) the training images get random blur, haze, photometric and sensor-noise changes
+before their views are cut (:mod:`vbl_robust.detect.augment`: the perturbation families' own maths).
 Labelled boxes are widened to ``min_box`` view pixels (keypoints unchanged) so that far runways, a few pixels
 wide in the full view, get positive anchors; CPU training uses every core (``threads``).
 """
@@ -34,6 +36,7 @@ from ..data.sample import Sample
 from ..data.yolo import write_data_yaml, write_pose_images
 from ..perturb.views import image_to_view, resample, to_tensor
 from ..scenes.airports import DEFAULT_POOL
+from .augment import AppearanceJitter
 from .offline import import_ultralytics
 from .windows import box_window, letterbox_window
 
@@ -77,9 +80,13 @@ def corner_box_edge(corners_2d: np.ndarray) -> np.ndarray:
 
 def sample_views(
     sample: Sample, imgsz: int, *, crops: int, rng: np.random.Generator, jitter: CropJitter | None = None,
-    full: bool = True,
+    full: bool = True, appearance: AppearanceJitter | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Render the training views of one sample: ``[(image (imgsz, imgsz, 3) uint8, corners (4, 2) view px)]``."""
+    """Render the training views of one sample: ``[(image (imgsz, imgsz, 3) uint8, corners (4, 2) view px)]``.
+
+    ``appearance``: a random appearance change of the source image before the views are cut
+    (:class:`~vbl_robust.detect.augment.AppearanceJitter`; its own stream, drawn from ``rng`` after the crop
+    windows, so the windows are the same with and without it)."""
     jitter = jitter or CropJitter()
     wins = []
     if full:
@@ -94,7 +101,10 @@ def sample_views(
             wins.append((float(c[0] - side / 2), float(c[1] - side / 2), float(side)))
     if not wins:
         return []
-    img = to_tensor(sample.image).expand(len(wins), -1, -1, -1)
+    img = to_tensor(sample.image)
+    if appearance is not None:
+        img, _ = appearance.apply(img, np.random.default_rng(int(rng.integers(0, 2**63))))
+    img = img.expand(len(wins), -1, -1, -1)
     views = resample(img, torch.tensor(wins, dtype=torch.float32), imgsz)
     arr = (views.clamp(0, 1) * 255.0).round().to(torch.uint8).permute(0, 2, 3, 1).numpy()
     return [(arr[i], image_to_view(sample.corners_2d, w, imgsz)) for i, w in enumerate(wins)]
@@ -103,6 +113,7 @@ def sample_views(
 def build_dataset(
     train_samples: Sequence[Sample], val_samples: Sequence[Sample], root: str | Path, *, imgsz: int = 320,
     crops_per_sample: int = 2, seed: int = 0, jitter: CropJitter | None = None, min_box: float = 0.0,
+    appearance: AppearanceJitter | None = None,
 ) -> Path:
     """Render and write a YOLO-pose dataset; returns the path of its ``data.yaml``.
 
@@ -111,11 +122,14 @@ def build_dataset(
     (a growing prefix-stable sample list, such as ``scenes.generate(n, seed)``, only renders the new samples).
     Validation gets one full view and (if ``crops_per_sample > 0``) one jittered crop per sample. Extra files
     beyond the requested sizes are removed, so the directory always matches the arguments. ``min_box``: minimum
-    side of the labelled boxes in view pixels (:func:`~vbl_robust.data.yolo.pose_label`).
+    side of the labelled boxes in view pixels (:func:`~vbl_robust.data.yolo.pose_label`). ``appearance``:
+    random appearance changes of the training samples' images (never of validation's), recorded in the build.
     """
     root = Path(root).resolve()
     spec = dict(imgsz=imgsz, crops=crops_per_sample, seed=seed, jitter=(jitter or CropJitter()).__dict__,
                 min_box=float(min_box))
+    if appearance is not None:  # only when given: datasets built before it existed keep their marker
+        spec["appearance"] = appearance.to_dict()
     marker = root / "build.json"
     if marker.exists() and json.loads(marker.read_text()) != spec:
         raise ValueError(f"build_dataset: {root} was built with {marker.read_text()}, now {spec}; "
@@ -127,12 +141,14 @@ def build_dataset(
         nviews = 1 + crops
         img_dir, lbl_dir = root / "images" / split, root / "labels" / split
 
-        def items(samples=samples, crops=crops, nviews=nviews, img_dir=img_dir, k=k):
+        def items(samples=samples, crops=crops, nviews=nviews, img_dir=img_dir, k=k, split=split):
             for i, s in enumerate(samples):
                 if all((img_dir / f"{i:06d}_{j}.png").exists() for j in range(nviews)):
                     continue
                 rng = np.random.default_rng([seed, k, i])
-                for j, (img, c) in enumerate(sample_views(s, imgsz, crops=crops, rng=rng, jitter=jitter)):
+                app = appearance if split == "train" else None
+                for j, (img, c) in enumerate(sample_views(s, imgsz, crops=crops, rng=rng, jitter=jitter,
+                                                          appearance=app)):
                     yield f"{i:06d}_{j}", img, c
                 s.drop_pixels()
 
@@ -174,12 +190,12 @@ def _subset_yaml(data: Path, n_train: int, crops_used: int) -> Path:
     return out
 
 
-def _options_tag(options: dict) -> str:
-    """Short stable tag of generator options for a dataset directory name."""
+def _options_tag(options: dict, prefix: str = "_g") -> str:
+    """Short stable tag of generator (or other rendering) options for a dataset directory name."""
     import hashlib
 
     text = json.dumps({k: list(v) if isinstance(v, tuple) else v for k, v in sorted(options.items())})
-    return "_g" + hashlib.sha256(text.encode()).hexdigest()[:8]
+    return prefix + hashlib.sha256(text.encode()).hexdigest()[:8]
 
 
 @dataclass
@@ -207,7 +223,7 @@ def train(
     init_weights: str | Path | None = None, detector: str = "twostage", crops_per_sample: int = 2,
     workers: int = 2, lr0: float | None = None, crops_used: int | None = None, min_box: float | None = None,
     threads: int | None = None, n_airports: int = DEFAULT_POOL, generate_options: dict | None = None,
-    **overrides,
+    appearance: AppearanceJitter | dict | None = None, **overrides,
 ) -> TrainResult:
     """Train (or continue training) the runway-corner YOLOv8n-pose.
 
@@ -240,6 +256,9 @@ def train(
         generate_options: further keyword arguments of ``scenes.generate`` for the synthetic data, e.g.
             ``{"weights": (2, 1, 1), "runway_length_range_m": (1500, 4500)}`` (far approaches twice as often,
             longer runways); they name the dataset directory, so a different mix never reuses a rendered one.
+        appearance: random blur / haze / photometric / noise changes of the training images
+            (:class:`~vbl_robust.detect.augment.AppearanceJitter`, or the keyword arguments of one); they name the
+            dataset directory too.
         **overrides: further ultralytics training arguments.
 
     Returns:
@@ -272,12 +291,15 @@ def train(
         init = init_weights
         stage = out_dir / "stage00"
 
+    if isinstance(appearance, dict):
+        appearance = AppearanceJitter(**{k: tuple(v) if isinstance(v, list) else v for k, v in appearance.items()})
     crops = crops_per_sample if detector == "twostage" else 0
     if min_box is None:
         min_box = round(MIN_BOX_FRACTION * imgsz)
     data_root = out_dir / (f"dataset_{imgsz}px_{crops}crops" + (f"_box{min_box:g}" if min_box else "")
                            + (f"_ap{n_airports}" if samples is None and n_airports != DEFAULT_POOL else "")
-                           + (_options_tag(generate_options) if samples is None and generate_options else ""))
+                           + (_options_tag(generate_options) if samples is None and generate_options else "")
+                           + (_options_tag(appearance.to_dict(), "_app") if appearance is not None else ""))
     if samples is None:
         from ..scenes import generate
 
@@ -292,7 +314,8 @@ def train(
         nv = max(1, min(n_val, len(samples) // 5))
         va = [samples[i] for i in order[:nv]]
         tr = [samples[i] for i in order[nv:]]
-    data = build_dataset(tr, va, data_root, imgsz=imgsz, crops_per_sample=crops, seed=seed, min_box=min_box)
+    data = build_dataset(tr, va, data_root, imgsz=imgsz, crops_per_sample=crops, seed=seed, min_box=min_box,
+                         appearance=appearance)
     if crops_used is not None and crops_used < crops:
         data = _subset_yaml(data, len(tr), crops_used)
 
