@@ -57,16 +57,15 @@ def survival_markdown(run: str) -> str:
         emit("")
         emit("| method | " + " | ".join(b for b, _ in boxes) + " |")
         emit("|---|" + "---|" * len(boxes))
-        by_box = {r.box_label: r for r in rows if r.sample_id == g.sample_id}
+        here = {(r.method, r.box_label): r for r in rows if r.sample_id == g.sample_id}
         for m in methods:
             vals = []
             for b, _ in boxes:
-                r = next((r for r in rows if r.sample_id == g.sample_id and r.method == m and r.box_label == b),
-                         None)
-                box = None if b not in by_box or by_box[b].box is None else by_box[b].box.box
-                if r is None or box is None or r.worst_m is None:
+                r = here.get((m, b))
+                if r is None or r.box is None or r.worst_m is None:
                     vals.append("–")
                     continue
+                box = r.box.box
                 inside = np.all((xs >= box.lower - 1e-9) & (xs <= box.upper + 1e-9), axis=1)
                 true = float(np.nanmax(fs[inside])) if inside.any() else float("nan")
                 vals.append(f"{r.worst_m / true:.3f}" if true > 0 else "–")

@@ -49,3 +49,13 @@ def approach_sample(size=128):
     C = np.array([-2000.0, 0.0, 2000.0 * np.tan(np.radians(3.0))])
     return Sample(id="s", K=K, corners_3d=z, corners_2d=project(z, rot_y(3.0), C, K), position=C, width=size,
                   height=size, _image=img)
+
+
+def square_sample(seed=0, size=96):
+    """A :class:`Sample` of :func:`runway_image` with its corners as labels (geometry irrelevant: training tests)."""
+    from vbl_robust.data.sample import Sample
+    from vbl_robust.geometry.camera import intrinsics
+
+    img, c = runway_image(size, seed=seed)
+    return Sample(id=f"s{seed}", K=intrinsics(size, size), corners_3d=np.zeros((4, 3)), corners_2d=c,
+                  position=np.array([-1000.0, 0.0, 50.0]), width=size, height=size, _image=img)

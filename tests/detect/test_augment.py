@@ -7,20 +7,12 @@ import json
 import numpy as np
 import pytest
 import torch
-from detect_helpers import runway_image
+from detect_helpers import runway_image, square_sample
 
-from vbl_robust.data.sample import Sample
 from vbl_robust.detect.augment import AppearanceJitter
 from vbl_robust.detect.train import build_dataset, sample_views, train
-from vbl_robust.geometry.camera import intrinsics
 from vbl_robust.perturb.photometric import brightness
 from vbl_robust.perturb.weather import haze
-
-
-def _sample(seed=0, size=96):
-    img, c = runway_image(size, seed=seed)
-    return Sample(id=f"s{seed}", K=intrinsics(size, size), corners_3d=np.zeros((4, 3)), corners_2d=c,
-                  position=np.array([-1000.0, 0.0, 50.0]), width=size, height=size, _image=img)
 
 
 def _image(seed=0):
@@ -61,7 +53,7 @@ def test_apply_is_the_families_maths_in_registry_order():
 
 
 def test_views_keep_their_windows_and_labels_with_jitter():
-    s = _sample()
+    s = square_sample()
     strong = AppearanceJitter(p=1.0, p_family=1.0)
     plain = sample_views(s, 64, crops=2, rng=np.random.default_rng(3))
     jittered = sample_views(s, 64, crops=2, rng=np.random.default_rng(3), appearance=strong)
@@ -73,9 +65,9 @@ def test_views_keep_their_windows_and_labels_with_jitter():
 
 def test_dataset_jitters_the_train_split_only_and_records_it(tmp_path):
     jit = AppearanceJitter(p=1.0, p_family=1.0)
-    tr_s, va_s = [_sample(i) for i in range(2)], [_sample(7)]
+    tr_s, va_s = [square_sample(i) for i in range(2)], [square_sample(7)]
     build_dataset(tr_s, va_s, tmp_path / "plain", imgsz=64, crops_per_sample=1, seed=1)
-    build_dataset([_sample(i) for i in range(2)], [_sample(7)], tmp_path / "jit", imgsz=64, crops_per_sample=1,
+    build_dataset([square_sample(i) for i in range(2)], [square_sample(7)], tmp_path / "jit", imgsz=64, crops_per_sample=1,
                   seed=1, appearance=jit)
     import cv2
 
@@ -88,14 +80,14 @@ def test_dataset_jitters_the_train_split_only_and_records_it(tmp_path):
     assert "appearance" not in json.loads((tmp_path / "plain/build.json").read_text())
     assert json.loads((tmp_path / "jit/build.json").read_text())["appearance"]["p"] == 1.0
     with pytest.raises(ValueError, match="was built with"):
-        build_dataset([_sample(0)], [_sample(7)], tmp_path / "jit", imgsz=64, crops_per_sample=1, seed=1)
+        build_dataset([square_sample(0)], [square_sample(7)], tmp_path / "jit", imgsz=64, crops_per_sample=1, seed=1)
 
 
 def test_train_names_the_dataset_by_its_jitter(tmp_path, monkeypatch):
     import vbl_robust.detect.train as tr
     import vbl_robust.scenes as scenes
 
-    monkeypatch.setattr(scenes, "generate", lambda n, seed=0, **kw: [_sample(i) for i in range(n)])
+    monkeypatch.setattr(scenes, "generate", lambda n, seed=0, **kw: [square_sample(i) for i in range(n)])
     names = []
 
     def stop(tr_samples, va_samples, root, **kw):

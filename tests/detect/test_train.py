@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from detect_helpers import runway_image
+from detect_helpers import square_sample
 
 from vbl_robust.data.sample import Sample
 from vbl_robust.data.yolo import parse_pose_label
@@ -13,12 +13,7 @@ from vbl_robust.geometry.camera import intrinsics
 
 
 def _samples(n, size=96):
-    out = []
-    for i in range(n):
-        img, c = runway_image(size, seed=i)
-        out.append(Sample(id=f"s{i}", K=intrinsics(size, size), corners_3d=np.zeros((4, 3)), corners_2d=c,
-                          position=np.array([-1000.0, 0.0, 50.0]), width=size, height=size, _image=img))
-    return out
+    return [square_sample(i, size) for i in range(n)]
 
 
 def test_views_and_labels_follow_the_image(tmp_path):
