@@ -1,3 +1,5 @@
+import re
+
 import pytest
 
 from vbl_robust.campaigns import Block, Budget, CampaignSpec, experiment, roll_box, roll_contrast_box
@@ -95,3 +97,34 @@ def test_experiment_defaults_follow_the_paper():
     dp = experiment("distance-profile").build(0, Options())
     assert dp.blocks[0].chain and dp.blocks[0].boxes[-1].level == 45
     assert [e.images for e in EXPERIMENTS.values()].count(100) == 7 and EXPERIMENTS["pnp-validation"].images == 1000
+
+
+def test_method_options_reach_only_their_method_and_change_its_keys():
+    base = CampaignSpec("t", (
+        Block(boxes=(roll_contrast_box(5, (0.8, 1.2)),), methods=("georobust-a", "random"),
+              budgets=(Budget(max_evals=50),)),
+        Block(boxes=(roll_contrast_box(5, (0.8, 1.2)),), methods=("grid",), budgets=(Budget(max_evals=9),),
+              role="reference", options={"grid": {"counts": [3, 3]}}),
+    ))
+    tuned = base.with_method_options({"georobust-a": {"min_ratio": 9}, "grid": {"batch_size": 4}})
+    jobs, old = tuned.expand(SAMPLES), {j.key: j for j in base.expand(SAMPLES)}
+    by_method = {}
+    for j in jobs:
+        by_method.setdefault(j.method, []).append(j)
+    assert all(j.options == {"min_ratio": 9} and j.key not in old for j in by_method["georobust-a"])
+    assert all(j.options == {} and j.key in old for j in by_method["random"])
+    # merged over the block's own options, not replacing them
+    assert all(j.options == {"counts": [3, 3], "batch_size": 4} for j in by_method["grid"])
+    assert CampaignSpec.from_dict(tuned.to_dict()).expand(SAMPLES) == jobs
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"apgd": {"steps": 3}}, "no search runs method(s) ['apgd']"),
+    ({"georobust-a": {"min_ratio": 0.5}}, "min_ratio must be a finite number >= 1"),
+    ({"random": {"alpha": 2}}, "has no option(s) ['alpha']"),
+])
+def test_method_options_are_checked_before_anything_runs(options, message):
+    base = CampaignSpec("t", (Block(boxes=(roll_box(5),), methods=("georobust-a", "random"),
+                                    budgets=(Budget(max_evals=50),)),))
+    with pytest.raises(ValueError, match=re.escape(message)):
+        base.with_method_options(options)

@@ -1,6 +1,7 @@
 """``vbl-robust audit``, ``reproduce`` and ``report`` on tiny inputs (oracle detector, small images)."""
 
 import csv
+import json
 import sqlite3
 
 import pyarrow.parquet as pq
@@ -92,3 +93,37 @@ def test_a_refused_model_does_not_lock_the_run_directory(tmp_path):
     res = runner.invoke(app, [*base, "--oracle"])
     assert res.exit_code == 0, res.output
     assert "1 new jobs" in res.output
+
+
+def test_method_options_are_recorded_and_checked(tmp_path):
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["audit", "--out", str(out), "--n", "1", "--roll", "10", "--contrast", "0.8,1.2",
+                              "--methods", "georobust-a", "--max-evals", "12", "--method-option",
+                              "georobust-a.min_ratio=9", "--method-option", "georobust-a.alpha=3", "--no-landscape",
+                              "--no-report", *SMALL])
+    assert res.exit_code == 0, res.output
+    con = sqlite3.connect(out / "results.sqlite")
+    assert [json.loads(o) for o, in con.execute("SELECT options_json FROM jobs")] == [{"min_ratio": 9, "alpha": 3}]
+    res = runner.invoke(app, ["reproduce", "spatial-2d", "--images", "1", "--methods", "georobust-a,random",
+                              "--max-evals", "6", "--method-option", "georobust-a.min_ratio=3", "--no-landscape",
+                              "--out", str(tmp_path / "s2d"), "--no-report", *SMALL])
+    assert res.exit_code == 0, res.output
+    con = sqlite3.connect(tmp_path / "s2d" / "results.sqlite")
+    rows = con.execute("SELECT method, options_json, count(*) FROM jobs GROUP BY method, options_json").fetchall()
+    assert [(m, json.loads(o), n) for m, o, n in rows] == [("georobust-a", {"min_ratio": 3}, 6), ("random", {}, 6)]
+
+
+@pytest.mark.parametrize("command, value, message", [
+    ("audit", "georobust-a.min_ratio", "expected METHOD.OPTION=VALUE"),
+    ("audit", "magic.alpha=2", "unknown method 'magic'"),
+    ("audit", "random.alpha=2", "method 'random' has no option 'alpha'"),
+    ("audit", "georobust-a.min_ratio=0.5", "min_ratio must be a finite number >= 1, got 0.5"),
+    ("audit", "georobust-a.min_ratio=[1", "is not a number"),
+    ("audit", "apgd.n_iter=5", "no search runs method(s) ['apgd']"),
+    ("reproduce", "apgd.n_iter=5", "no experiment here runs method(s) ['apgd']"),
+])
+def test_method_option_mistakes_are_one_line_errors(tmp_path, command, value, message):
+    args = (["audit", "--n", "1", "--methods", "georobust-a"] if command == "audit"
+            else ["reproduce", "spatial-2d", "--images", "1", "--methods", "georobust-a"])
+    res = runner.invoke(app, [*args, "--out", str(tmp_path), "--method-option", value, *SMALL])
+    assert res.exit_code == 2 and message in res.output, res.output

@@ -17,7 +17,7 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from ..constants import CONF_THRESHOLD, EPS_SAFE_M, PENALTY_M
@@ -359,6 +359,36 @@ class CampaignSpec:
     def context(self, detector_id: str) -> str:
         """Digest of what every job of this campaign shares: the settings and the detector identity."""
         return digest({"settings": self.settings(), "detector": detector_id}, 24)
+
+    def with_method_options(self, options: Mapping[str, Mapping[str, Any]]) -> CampaignSpec:
+        """This campaign with ``options[method]`` merged into the options of every search block that runs
+        ``method`` (over the block's own, e.g. a grid's counts stay unless named). Raises a ValueError naming the
+        method or option when no block runs a method, or a method rejects its options (checked here, on each
+        block's first box, so that a campaign never starts with options its searches would refuse). The options
+        are part of the job keys: a run with other options never resumes one without them."""
+        from ..search import make_optimizer
+
+        blocks, used = [], set()
+        for blk in self.blocks:
+            touched = [m for m in blk.methods if m in options] if blk.kind == "search" else []
+            if not touched:
+                blocks.append(blk)
+                continue
+            merged = {m: dict(v) for m, v in blk.options.items()}
+            for m in touched:
+                merged[m] = {**merged.get(m, {}), **dict(options[m])}
+                if blk.boxes:
+                    try:
+                        make_optimizer(m, blk.boxes[0].box, **merged[m])
+                    except (TypeError, ValueError) as exc:
+                        raise ValueError(f"{self.name}: options {merged[m]} of method {m!r}: {exc}") from None
+            used.update(touched)
+            blocks.append(replace(blk, options=merged))
+        missing = sorted(set(options) - used)
+        if missing:
+            ran = sorted({m for b in self.blocks if b.kind == "search" for m in b.methods})
+            raise ValueError(f"{self.name}: no search runs method(s) {missing} (its methods: {ran})")
+        return replace(self, blocks=tuple(blocks))
 
     def expand(self, samples: Sequence[tuple[str, str]], *, detector_id: str = "") -> list[Job]:
         """All jobs for ``samples`` = ``(id, geometry fingerprint)`` pairs, ordered by sample, then block, then

@@ -145,6 +145,50 @@ def parse_methods(text: str) -> tuple[str, ...]:
     return methods
 
 
+METHOD_OPTION_HELP = ("A search method's option, METHOD.OPTION=VALUE (repeatable; VALUE read as YAML: 9, 0.5, true, "
+                      "[3, 5]), e.g. georobust-a.min_ratio=9 or georobust.alpha=3; recorded in the store and the "
+                      "job keys.")
+
+
+def parse_method_options(values: list[str] | None) -> dict[str, dict[str, Any]]:
+    """``--method-option METHOD.OPTION=VALUE`` (repeatable) → ``{method: {option: value}}``; a one-line error
+    naming the flag and the value for an unknown method or option or an unreadable value."""
+    import yaml
+
+    from vbl_robust.search import METHODS, method_options
+
+    out: dict[str, dict[str, Any]] = {}
+    for text in values or []:
+        key, sep, raw = text.partition("=")
+        method, dot, name = key.strip().rpartition(".")
+        if not sep or not dot or not method or not name or not raw.strip():
+            fail(f"--method-option {text!r}: expected METHOD.OPTION=VALUE, e.g. georobust-a.min_ratio=9")
+        if method not in METHODS:
+            fail(f"--method-option {text!r}: unknown method {method!r}; methods are {', '.join(METHODS)}")
+        allowed = method_options(method)
+        if name not in allowed:
+            fail(f"--method-option {text!r}: method {method!r} has no option {name!r}; options are "
+                 f"{', '.join(allowed)}")
+        try:
+            value = yaml.safe_load(raw)
+        except yaml.YAMLError:
+            fail(f"--method-option {text!r}: value {raw!r} is not a number, boolean, string or list")
+        if name in out.setdefault(method, {}):
+            fail(f"--method-option {text!r}: {method}.{name} is given twice")
+        out[method][name] = value
+    return out
+
+
+def with_method_options(spec: Any, options: dict[str, dict[str, Any]]) -> Any:
+    """``spec`` with the parsed ``--method-option`` values, or a one-line error."""
+    if not options:
+        return spec
+    try:
+        return spec.with_method_options(options)
+    except ValueError as exc:
+        fail(f"--method-option: {exc}")
+
+
 def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, executor: str, address: str | None,
                       source: dict, config: dict, quiet: bool = False) -> Any:
     """Run ``spec`` into ``out/results.sqlite`` with a rich progress bar; returns the run summary."""
@@ -265,6 +309,7 @@ def register(app: typer.Typer) -> None:
                                                  "range): pitch_deg, yaw_deg, blur_px, motion_blur_px, haze, "
                                                  "brightness, gamma, noise_std (roll_deg here replaces --roll)."),
         methods: str = typer.Option(METHODS_DEFAULT, "--methods", help="Comma-separated search methods."),
+        method_option: list[str] | None = typer.Option(None, "--method-option", help=METHOD_OPTION_HELP),
         max_evals: int | None = typer.Option(200, "--max-evals", help="Evaluations per image and method (0 = none)."),
         max_seconds: float | None = typer.Option(None, "--max-seconds", help="Seconds per image and method."),
         early_stop: bool = typer.Option(True, "--early-stop/--no-early-stop", help="Stop an image's search at its "
@@ -322,6 +367,8 @@ def register(app: typer.Typer) -> None:
         counts = (21, 11)[: box.dim] if landscape and box.dim <= 2 else None
         spec = audit_spec(BoxSpec(box, label, level), methods=method_list, budget=budget, seed=seed,
                           lipschitz=parse_lipschitz(lipschitz), pnp=pnp, landscape=counts)
+        method_opts = parse_method_options(method_option)
+        spec = with_method_options(spec, method_opts)
         det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
         if sequences is not None:  # sequence audits: vbl_robust.cli.sequence_audit
             from .sequence_audit import run_sequence_audit
@@ -335,7 +382,8 @@ def register(app: typer.Typer) -> None:
                 "early_stop": early_stop, "pnp": pnp, "width": width, "height": height, "perturb": list(perturb or [])},
                 unsupported={"--lard (use --sequences DIR)": lard is not None, "--lipschitz": lipschitz is not None,
                              "--executor ray": executor != "local", "--csv": csv is not None,
-                             "--parquet": parquet is not None, "--refine-zones": refine_zones > 0})
+                             "--parquet": parquet is not None, "--refine-zones": refine_zones > 0,
+                             "--method-option": bool(method_opts)})
             return
         samples, source = load(n, seed, lard, width, height)
         config = {"command": "audit", "n": n, "seed": seed, "lard": str(lard) if lard else None, "roll": roll,
@@ -343,6 +391,8 @@ def register(app: typer.Typer) -> None:
                   "early_stop": early_stop, "lipschitz": lipschitz, "pnp": pnp, "width": width, "height": height}
         if perturb:
             config["perturb"] = list(perturb)
+        if method_opts:
+            config["method_options"] = method_opts
         summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
                                     config=config, quiet=quiet)
         finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)

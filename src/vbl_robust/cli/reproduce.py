@@ -10,7 +10,18 @@ from pathlib import Path
 
 import typer
 
-from .audit import DEVICE_HELP, ENGINE_HELP, detector_spec, finish, load, parse_methods, run_with_progress
+from .audit import (
+    DEVICE_HELP,
+    ENGINE_HELP,
+    METHOD_OPTION_HELP,
+    detector_spec,
+    finish,
+    load,
+    parse_method_options,
+    parse_methods,
+    run_with_progress,
+    with_method_options,
+)
 from .common import fail
 
 
@@ -88,6 +99,13 @@ def register(app: typer.Typer) -> None:
 
     names = ", ".join(EXPERIMENTS)
 
+    def _check_method_options(options: dict, specs: list) -> None:
+        ran = {m for spec in specs for b in spec.blocks if b.kind == "search" for m in b.methods}
+        missing = sorted(set(options) - ran)
+        if missing:
+            fail(f"--method-option: no experiment here runs method(s) {missing} (they run {sorted(ran)}; see "
+                 "--methods)")
+
     @app.command()
     def reproduce(
         experiment: str = typer.Argument(..., help=f"One of: {names}; or 'all'."),
@@ -108,6 +126,10 @@ def register(app: typer.Typer) -> None:
         oracle_noise: float = typer.Option(0.0, "--oracle-noise", help="Oracle: fixed per-image corner noise (px)."),
         methods: str | None = typer.Option(None, "--methods", help="Comma-separated methods (default "
                                            "georobust,random,apgd; families: the same less apgd)."),
+        method_option: list[str] | None = typer.Option(None, "--method-option", help=METHOD_OPTION_HELP),
+        landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="spatial-2d / runtime-2d: the dense "
+                                       "61 × 36 grid on the first image (the report's heat map, about 2200 "
+                                       "evaluations)."),
         max_evals: int | None = typer.Option(None, "--max-evals", min=1, help="Per-image evaluations of the spatial "
                                              "experiments (default 200)."),
         grid_step: float | None = typer.Option(None, "--grid-step", min=0.0, help="1-D dense-grid reference step in "
@@ -143,8 +165,10 @@ def register(app: typer.Typer) -> None:
         opts = with_options(
             Options(), methods=parse_methods(methods) if methods else None, max_evals=max_evals, grid_step_deg=grid_step,
             time_budgets=_floats(time_budgets, "--time-budgets"), eval_budgets=tuple(int(v) for v in eb) if eb else None,
-            iterations=iterations, family_grid=family_grid,
+            iterations=iterations, family_grid=family_grid, landscape=None if landscape else (0, 0),
         )
+        method_opts = parse_method_options(method_option)
+        _check_method_options(method_opts, [exp.build(seed, opts) for exp in exps])
         det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
         if estimate:
             rate = probe_rate(det)
@@ -162,11 +186,15 @@ def register(app: typer.Typer) -> None:
         root = out or Path("runs") / ("paper" if experiment == "all" else exps[0].name)
         for exp in exps:
             spec = exp.build(seed, opts)
+            ran = {m for b in spec.blocks if b.kind == "search" for m in b.methods}
+            spec = with_method_options(spec, {m: v for m, v in method_opts.items() if m in ran})
             n = images or exp.images
             out_dir = root / exp.name if experiment == "all" else root
             samples, source = load(n, seed, lard, width, height)
             config = {"command": "reproduce", "experiment": exp.name, "images": n, "seed": seed,
                       "lard": str(lard) if lard else None, "options": repr(opts), "width": width, "height": height}
+            if method_opts:
+                config["method_options"] = method_opts
             summary = run_with_progress(spec, samples, out_dir, det, executor=executor, address=address,
                                         source=source, config=config, quiet=quiet)
             finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
