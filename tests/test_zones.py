@@ -201,6 +201,8 @@ def _same_cells(a, b):
     for k in ("centers", "half_widths", "lower", "upper", "fractions", "failed"):
         assert np.array_equal(getattr(a, k), getattr(b, k)), k
     assert np.array_equal(a.values, b.values, equal_nan=True) and a.lipschitz_estimate == b.lipschitz_estimate
+    assert np.array_equal(a.extra_points, b.extra_points)
+    assert np.array_equal(a.extra_values, b.extra_values, equal_nan=True)
 
 
 def gate(x):
@@ -213,7 +215,7 @@ def gate(x):
 def test_replay_rebuilds_the_live_cells(method, stop):
     box = ParameterBox({"roll_deg": (-10.0, 10.0), "contrast": (0.8, 1.2)})
     budget = Budget(max_evals=70, stop_at_breach=stop)
-    opts = {"counts": [7, 5]} if method == "grid" else {}
+    opts = {"counts": [7, 5]} if method == "grid" else {"vertices": True} if method == "georobust-a" else {}
     live, states, pts = _live(method, box, gate, budget, options=opts)
     row = _row(method, box, budget, Points.from_blob(pts.to_blob()), options=opts)  # through the store's encoding
     opt = replay(row, eps_safe_m=EPS)
@@ -273,3 +275,25 @@ def test_plot_zones_draws_1d_and_2d(tmp_path):
 
 def test_the_package_exposes_zones():
     assert vr.zones.zones is zones and "zones" in vr.__all__
+
+
+@pytest.mark.parametrize("lipschitz", [None, 1e-3])
+def test_a_breaching_vertex_marks_its_cell_breached(lipschitz):
+    box = ParameterBox({"roll_deg": (-10.0, 10.0), "contrast": (0.8, 1.2)})
+
+    def corner(x):  # breaches only at the vertex (+10°, 1.2); a constant far too small to see it
+        return np.where((x[:, 0] > 9.99) & (x[:, 1] > 1.199), 5000.0, 20.0)
+
+    opt = make_optimizer("georobust", box, max_evals=40, vertices=True)
+    while len(x := opt.ask()):
+        opt.tell(x, corner(x))
+    cells = opt.cells()
+    assert len(cells.extra_points) == 4 and cells.extra_values.max() == 5000.0
+    assert cells.values.max() == 20.0  # no centre breaches
+    zm = zones(cells, EPS, lipschitz=lipschitz)
+    hit = zm.of("breached")
+    assert len(hit) == 1 and hit[0].upper == (10.0, 1.2)  # the corner cell, never ruled out
+    with pytest.raises(ValueError, match="4 extra points but 3 extra values"):
+        Cells(box=cells.box, centers=cells.centers, half_widths=cells.half_widths, lower=cells.lower,
+              upper=cells.upper, values=cells.values, failed=cells.failed, fractions=cells.fractions,
+              extra_points=cells.extra_points, extra_values=cells.extra_values[:3])

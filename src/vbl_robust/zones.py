@@ -4,7 +4,8 @@ A search that keeps a cover of its box (the DIRECT family, the grid: :meth:`~vbl
 ends with cells that tile Θ, each with the value ``f_j`` at one evaluated point and a radius ``r_j`` around it.
 Each cell is a zone of one class, against the threshold ε (ε_safe = 1000 m by default):
 
-* **breached** — ``f_j > ε``: the cell's evaluated point breaches (an observed fact, no assumption);
+* **breached** — ``f_j > ε``: the cell's evaluated point breaches (an observed fact, no assumption), or another
+  evaluated point inside it does (a DIRECT vertex, :attr:`Cells.extra_points`);
 * **ruled out** — ``f_j + L·r_j <= ε`` (raised by a 1e-12 relative rounding margin): under the Lipschitz
   constant ``L``, no point of the cell can breach;
 * **undecided** — anything else, and every cell whose value is unknown (a NaN/±inf value, a grid node not
@@ -241,6 +242,10 @@ def zones(cells: Cells, threshold: float = EPS_SAFE_M, *, lipschitz: float | Seq
             cls[known & (bound + margin <= threshold)] = RULED_OUT
     with np.errstate(invalid="ignore"):
         cls[known & (values > threshold)] = BREACHED
+        hits = cells.extra_points[cells.extra_values > threshold]
+    for p in hits:  # an evaluated point that is no centre (a DIRECT vertex) breaches: so does its cell
+        inside = np.all((cells.lower <= p) & (p <= cells.upper), axis=1)
+        cls[inside] = BREACHED
     out = []
     for j in range(n):
         lo, hi = cells.lower[j], cells.upper[j]

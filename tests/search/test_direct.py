@@ -5,7 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vbl_robust.search import Direct, DirectL, GeoRobust, Status, Verdict, maximize, potentially_optimal
+from vbl_robust.search import (
+    Direct,
+    DirectL,
+    GeoRobust,
+    Status,
+    Verdict,
+    make_optimizer,
+    maximize,
+    potentially_optimal,
+)
 from vbl_robust.search.classic import CLASSIC, count_nlopt, count_ours, count_scipy
 from vbl_robust.space import ParameterBox
 
@@ -213,3 +222,49 @@ def test_georobust_po_set_stays_bounded_on_a_plateau(dim, method, surface):
     n_classes_bound = 2 * dim * 25  # α per size class; classes are bounded by depth levels
     assert max(counts) <= n_classes_bound
     assert r.nfev <= 3000 and len(counts) >= 3000 // (2 * dim * n_classes_bound)
+
+
+# -- vertices: the box's corners in the first batch ------------------------------------------------------------
+def _corner_peak(x):  # a worst case only at the vertex (a_max, b_max): the largest perturbation
+    return np.where((x[:, 0] > 0.98) & (x[:, 1] > 0.98), 100.0, 1.0 + 0.1 * np.sin(7 * x[:, 0]) * np.cos(5 * x[:, 1]))
+
+
+@pytest.mark.parametrize("method", ["direct", "georobust", "georobust-a"])
+def test_vertices_are_extra_points_that_leave_the_partition_alone(method):
+    runs = {}
+    for v in (False, True):
+        opt = make_optimizer(method, UNIT2, max_iters=12, vertices=v, lipschitz=3.0)
+        while len(x := opt.ask()):
+            opt.tell(x, _v2(x))
+        runs[v] = (opt.result(), opt.rectangles(), opt.upper_bound())
+    (plain, rect0, ub0), (corners, rect1, ub1) = runs[False], runs[True]
+    first = 1 + 2 * UNIT2.dim
+    np.testing.assert_array_equal(corners.xs[first:first + 4], [[0, 0], [1, 0], [0, 1], [1, 1]])
+    np.testing.assert_array_equal(np.delete(corners.xs, np.s_[first:first + 4], axis=0), plain.xs)
+    assert corners.nfev == plain.nfev + 4
+    for k in rect0:
+        np.testing.assert_array_equal(rect0[k], rect1[k])
+    assert ub0 == ub1  # the sound bound rests on the rectangles only
+    assert [r.po_count_after for r in corners.trace] == [r.po_count_after for r in plain.trace]
+
+
+def test_vertices_find_a_corner_worst_case_in_the_first_batch():
+    box = ParameterBox({"roll_deg": (-20.0, 20.0), "contrast": (0.5, 2.0)})
+    plain = maximize(_corner_peak_box(box), box, "georobust", max_evals=200, stop_above=50)
+    corners = maximize(_corner_peak_box(box), box, "georobust", max_evals=200, stop_above=50, vertices=True)
+    assert plain.fun < 50 and plain.nfev > 150  # centres never reach the face within 200 evaluations
+    assert corners.fun == 100.0 and corners.nfev == 9 and list(corners.x) == [20.0, 2.0]
+
+
+def _corner_peak_box(box):
+    lo, hi = box.lower, box.upper
+    return lambda x: _corner_peak((x - lo) / (hi - lo))
+
+
+def test_vertices_only_where_they_fit():
+    big = ParameterBox({f"p{i}": (0.0, 1.0) for i in range(5)})
+    assert len(GeoRobust(big, max_evals=100, vertices=True).ask()) == 1 + 2 * 5  # 32 vertices: too many
+    assert len(GeoRobust(UNIT2, max_evals=5, vertices=True).ask()) == 5  # the root's division, no room for them
+    assert len(GeoRobust(UNIT2, max_evals=9, vertices=True).ask()) == 9
+    with pytest.raises(ValueError, match="vertices must be true or false, got 'yes'"):
+        GeoRobust(UNIT2, vertices="yes")

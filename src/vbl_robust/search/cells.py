@@ -43,6 +43,9 @@ class Cells:
         fractions: ``(m,)`` each cell's share of the box's volume (exact unit-cube volumes).
         method: name of the method that made them.
         lipschitz_estimate: the method's slope estimate in unit-cube coordinates (None when none was observed).
+        extra_points, extra_values: ``(k, d)`` / ``(k,)`` evaluated points that are no cell's centre (DIRECT's
+            ``vertices=True``: the box's corners) and their values (NaN where not finite); empty by default. A
+            zone map counts a cell that holds such a point above the threshold as breached (an observed fact).
     """
 
     box: ParameterBox
@@ -55,10 +58,18 @@ class Cells:
     fractions: np.ndarray
     method: str = ""
     lipschitz_estimate: float | None = None
+    extra_points: np.ndarray | None = None
+    extra_values: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         d = self.box.dim
         m = len(np.asarray(self.values).reshape(-1))
+        xp = np.zeros((0, d)) if self.extra_points is None else np.asarray(self.extra_points, dtype=np.float64)
+        xv = np.zeros(0) if self.extra_values is None else np.asarray(self.extra_values, dtype=np.float64)
+        object.__setattr__(self, "extra_points", xp.reshape(-1, d))
+        object.__setattr__(self, "extra_values", xv.reshape(-1))
+        if len(self.extra_points) != len(self.extra_values):
+            raise ValueError(f"Cells: {len(self.extra_points)} extra points but {len(self.extra_values)} extra values")
         for name in ("centers", "half_widths", "lower", "upper"):
             arr = np.asarray(getattr(self, name), dtype=np.float64).reshape(m, d)
             object.__setattr__(self, name, arr)
