@@ -6,12 +6,18 @@ sessions, compares the methods on the same images. One row per method, one colum
 is ``survival % (breaches)``. Where the run holds a dense landscape grid (``reproduce spatial-2d``: the first
 image), the found / true worst ratio of each method on that image follows.
 
-    python tools/survival_table.py runs/issue17_spatial2d
+``--with RUN2`` (repeatable) adds the main rows of other runs of the same experiment and seed (the same images:
+checked by sample id) as more methods, labelled with their options where they have any (e.g. a variant run with
+``--method-option georobust-a.vertices=true`` shows as ``georobust-a [vertices=True]``); only images completed in
+every run count.
+
+    python tools/survival_table.py runs/issue17_spatial2d [--with runs/issue17_vertices]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from collections import defaultdict
 
 import numpy as np
@@ -21,14 +27,30 @@ from vbl_robust.campaigns.spec import CampaignSpec
 from vbl_robust.campaigns.store import ResultStore
 
 
-def survival_markdown(run: str) -> str:
-    """The tables (Markdown) of the run directory or store ``run``."""
+def _label(r) -> str:
+    opts = ", ".join(f"{k}={v}" for k, v in sorted(dict(r.options).items()))
+    return f"{r.method} [{opts}]" if opts else r.method
+
+
+def survival_markdown(run: str, others: tuple[str, ...] = ()) -> str:
+    """The tables (Markdown) of the run directory or store ``run`` (with the main rows of ``others``)."""
     out: list[str] = []
     emit = out.append
     with ResultStore.open_existing(run) as store:
         spec = CampaignSpec.from_dict(store.campaign()["spec"])
         rows = mx.main_rows(store, spec, with_trace=False)
         land = store.jobs(kind="search", role="landscape", with_points=True, with_trace=False)
+    for other in others:
+        with ResultStore.open_existing(other) as store:
+            ospec = CampaignSpec.from_dict(store.campaign()["spec"])
+            more = mx.main_rows(store, ospec, with_trace=False)
+        if (ospec.name, ospec.seed) != (spec.name, spec.seed):
+            raise SystemExit(f"{other}: experiment {ospec.name} seed {ospec.seed}, not {spec.name} seed {spec.seed}")
+        index = {r.sample_index: r.sample_id for r in rows}
+        clash = sorted({r.sample_index for r in more if index.get(r.sample_index, r.sample_id) != r.sample_id})
+        if clash:
+            raise SystemExit(f"{other}: images {clash[:5]} differ from {run}'s (another image set)")
+        rows += [dataclasses.replace(r, method=_label(r)) for r in more]
     keys = {(r.method, r.box_label) for r in rows}
     per_image: dict[str, set] = defaultdict(set)
     for r in rows:
@@ -76,10 +98,11 @@ def survival_markdown(run: str) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("run")
+    ap.add_argument("--with", dest="others", action="append", default=[], help="another run of the same experiment")
     a = ap.parse_args()
     import sys
 
-    sys.stdout.write(survival_markdown(a.run))
+    sys.stdout.write(survival_markdown(a.run, tuple(a.others)))
 
 
 if __name__ == "__main__":
