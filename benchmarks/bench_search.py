@@ -26,7 +26,7 @@ from vbl_robust.search.classic import (
 from vbl_robust.space import ParameterBox
 
 OURS = [("direct", {}), ("direct-l", {}), ("georobust α=1", {"alpha": 1}), ("georobust α=2", {"alpha": 2}),
-        ("georobust α=3", {"alpha": 3}), ("georobust-a", {})]
+        ("georobust α=3", {"alpha": 3}), ("georobust-a", {}), ("georobust-av", {})]
 NLOPT = ["GN_DIRECT", "GN_DIRECT_L", "GN_ORIG_DIRECT", "GN_ORIG_DIRECT_L"]
 
 
@@ -41,8 +41,7 @@ def classic_table(max_evals: int) -> str:
     rows, firsts, versus = [], [], []
     for fname, t in CLASSIC.items():
         ours = [count_ours(t, m.split(" ")[0], max_evals=max_evals, **kw) for m, kw in OURS]
-        classic, adaptive = ours[3].nfev, ours[5].nfev
-        versus.append((fname, classic, adaptive))
+        versus.append((fname, ours[3].nfev, ours[5].nfev, ours[6].nfev))
         sp = [count_scipy(t, locally_biased=lb, max_evals=max_evals) for lb in (False, True)]
         nl = [count_nlopt(t, a, max_evals=max_evals) for a in NLOPT]
         rows.append(f"| {fname} | " + " | ".join([_cell(c) for c in ours + sp] + [_cell(c, False) for c in nl]) + " |")
@@ -62,25 +61,27 @@ def classic_table(max_evals: int) -> str:
         "|---" * (len(OURS) + 1) + "|",
         *firsts,
         "",
-        _versus(versus),
+        _versus([(f, c, a) for f, c, a, _ in versus], "georobust-a"),
+        "",
+        _versus([(f, c, v) for f, c, _, v in versus], "georobust-av"),
     ]
     return "\n".join(out)
 
 
-def _versus(rows: list[tuple[str, int | None, int | None]]) -> str:
-    """georobust-a against classic GeoRobust (α = 2, its defaults) on the classic counts."""
+def _versus(rows: list[tuple[str, int | None, int | None]], name: str) -> str:
+    """``name`` against classic GeoRobust (α = 2, its defaults) on the classic counts."""
     ratios = [a / c for _, c, a in rows if a is not None and c is not None]
     worst = max(ratios) if ratios else float("nan")
     unsolved = [f for f, c, a in rows if a is None and c is not None]
     cells = ", ".join(f"{f} {c} → {a}" for f, c, a in rows)
-    return (f"georobust-a vs georobust (α = 2), evaluations: {cells}. Largest ratio {worst:.3f} "
+    return (f"{name} vs georobust (α = 2), evaluations: {cells}. Largest ratio {worst:.3f} "
             f"({'no regression beyond 10 %' if worst <= 1.1 and not unsolved else 'REGRESSION beyond 10 %'}"
             f"{'; not reached: ' + ', '.join(unsolved) if unsolved else ''}).")
 
 
 # -- anisotropic functions: a rough 1-D function embedded in more dimensions ----------------------------------
-ANISO_METHODS = [("georobust", "georobust", {}), ("georobust-a", "georobust-a", {}), ("random", "random", {}),
-                 ("sobol", "sobol", {})]
+ANISO_METHODS = [("georobust", "georobust", {}), ("georobust-a", "georobust-a", {}),
+                 ("georobust-av", "georobust-av", {}), ("random", "random", {}), ("sobol", "sobol", {})]
 ANISO_DIMS = (1, 2, 4, 8)
 
 

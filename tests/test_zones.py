@@ -19,7 +19,7 @@ from vbl_robust.zones import CLASSES, ReplayError, job_zones, plot_zones, refine
 EPS = 1000.0
 BOX1 = ParameterBox({"roll_deg": (-10.0, 10.0)})
 L1 = 500.0
-COVERS = ("georobust", "georobust-a", "direct", "direct-l", "grid")
+COVERS = ("georobust", "georobust-a", "georobust-av", "direct", "direct-l", "grid")
 
 
 def tent(x):

@@ -22,7 +22,7 @@ def run(method, box, f, **kw):
 
 
 def test_which_methods_keep_a_cover():
-    assert COVERS == ["direct", "direct-l", "georobust", "georobust-a", "grid"]
+    assert COVERS == ["direct", "direct-l", "georobust", "georobust-a", "georobust-av", "grid"]
 
 
 @pytest.mark.parametrize("method", ["random", "sobol", "apgd"])

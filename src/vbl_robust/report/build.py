@@ -49,7 +49,7 @@ from .html import esc, figure_png, fmt_num, img, page, table
 logger = logging.getLogger(__name__)
 
 #: Search methods whose traces hold |PO_k| and RA(k).
-DIRECT_FAMILY = ("georobust", "direct", "direct-l")
+DIRECT_FAMILY = ("georobust", "georobust-a", "georobust-av", "direct", "direct-l")
 
 
 @dataclass

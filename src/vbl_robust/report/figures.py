@@ -27,6 +27,8 @@ REFERENCE = "grid (reference)"
 ANY_METHOD = "any method"
 STYLE: dict[str, dict[str, Any]] = {
     "georobust": {"color": "#1f77b4", "marker": "o", "label": "GeoRobust"},
+    "georobust-a": {"color": "#17becf", "marker": "P", "label": "GeoRobust-A (adaptive metric)"},
+    "georobust-av": {"color": "#ff7f0e", "marker": "X", "label": "GeoRobust-AV (adaptive + vertices)"},
     "random": {"color": "#2ca02c", "marker": "s", "label": "Random"},
     "apgd": {"color": "#d62728", "marker": "^", "label": "APGD"},
     "sobol": {"color": "#9467bd", "marker": "D", "label": "Sobol"},

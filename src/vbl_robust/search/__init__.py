@@ -5,7 +5,8 @@ They know nothing of images: ``f`` maps ``(n, d)`` real-unit points to ``(n,)`` 
 per reason in :attr:`SearchResult.failures`). Every method has the
 same ask/tell interface (:class:`Optimizer`) and is registered by name in :data:`METHODS`:
 ``"georobust"``, ``"direct"``, ``"direct-l"`` (the DIRECT family), ``"georobust-a"`` (GeoRobust whose division
-follows where the objective varies, :mod:`~vbl_robust.search.adaptive`), ``"random"``, ``"sobol"``, ``"apgd"``
+follows where the objective varies, :mod:`~vbl_robust.search.adaptive`), ``"georobust-av"`` (the same, plus the
+box's vertices in its first batch), ``"random"``, ``"sobol"``, ``"apgd"``
 (needs a torch-differentiable ``f``) and ``"grid"`` (ground truth in low dimension).
 
 Every evaluation is stamped with its completion time; :func:`at_budget` reads a result at any smaller time or
@@ -20,7 +21,7 @@ evaluation budget off those stamps (one run of an *anytime* method answers every
 ('budget_exhausted', True, True)
 """
 
-from .adaptive import AdaptiveGeoRobust
+from .adaptive import AdaptiveGeoRobust, AdaptiveGeoRobustV
 from .anytime import at_budget, prefix_length
 from .apgd import APGD, apgd_checkpoints
 from .api import METHODS, anytime_methods, make_optimizer, maximize, method_options
@@ -36,6 +37,7 @@ from .sampling import GridSearch, RandomSearch, SobolSearch
 __all__ = [
     "APGD",
     "AdaptiveGeoRobust",
+    "AdaptiveGeoRobustV",
     "Cells",
     "METHODS",
     "NON_FINITE",

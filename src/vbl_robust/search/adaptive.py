@@ -176,3 +176,14 @@ class AdaptiveGeoRobust(GeoRobust):
         extras = super()._tell(u, values, failed, grad)
         extras["extra"] = {"metric_offsets": self._global_offsets.tolist()}
         return extras
+
+
+class AdaptiveGeoRobustV(AdaptiveGeoRobust):
+    """``"georobust-av"``: :class:`AdaptiveGeoRobust` that also evaluates the box's ``2**d`` vertices in its first
+    batch (``vertices=True``, up to :data:`~vbl_robust.search.direct.VERTEX_DIM_CAP` dimensions; see
+    :meth:`~vbl_robust.search.direct.Direct._vertices`). The partition, PO sets, RA(k) and bounds are georobust-a's;
+    only the best value and the evaluated points differ. A name of its own, so that stores written by
+    ``georobust-a`` stay what they are (a resumed store never mixes the two)."""
+
+    name: ClassVar[str] = "georobust-av"
+    defaults: ClassVar[dict[str, Any]] = {**AdaptiveGeoRobust.defaults, "vertices": True}

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..space import ParameterBox
-from .adaptive import AdaptiveGeoRobust
+from .adaptive import AdaptiveGeoRobust, AdaptiveGeoRobustV
 from .anytime import at_budget
 from .apgd import APGD
 from .base import Optimizer
@@ -35,6 +35,7 @@ from .sampling import GridSearch, RandomSearch, SobolSearch
 METHODS: dict[str, type[Optimizer]] = {
     "georobust": GeoRobust,
     "georobust-a": AdaptiveGeoRobust,
+    "georobust-av": AdaptiveGeoRobustV,
     "direct": Direct,
     "direct-l": DirectL,
     "random": RandomSearch,

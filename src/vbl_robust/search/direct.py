@@ -75,7 +75,8 @@ class Direct(Optimizer):
         max_depth: maximum number of trisections of a rectangle's longest side (None: 25, the float limit).
         vertices: also evaluate the box's ``2**d`` vertices in the first batch (up to :data:`VERTEX_DIM_CAP`
             dimensions; ignored above, and when the first batch would not fit the budget with them); see
-            :meth:`_vertices`. Off by default: the classic methods sample centres only.
+            :meth:`_vertices`. Off by default (None = the class default): the classic methods sample centres only;
+            on for ``georobust-av``.
 
     Trace rows carry ``po_count_before/after``, ``remaining_area(_after)``, ``lipschitz_estimate`` and
     ``bound_estimate`` (see :class:`~vbl_robust.search.result.TraceRow`).
@@ -98,7 +99,7 @@ class Direct(Optimizer):
         eps: float = 1e-4,
         f_scale: float | str | None = None,
         max_depth: int | None = None,
-        vertices: bool = False,
+        vertices: bool | None = None,
         **budget: Any,
     ):
         super().__init__(box, **budget)
@@ -118,6 +119,7 @@ class Direct(Optimizer):
             raise ValueError(f"f_scale must be a finite number >= 0 or 'auto', got {f_scale!r}")
         if max_depth is not None and (not isinstance(max_depth, int | np.integer) or isinstance(max_depth, bool) or max_depth < 1):
             raise ValueError(f"max_depth must be an integer >= 1 or None, got {max_depth!r}")
+        vertices = self.defaults.get("vertices", False) if vertices is None else vertices
         if not isinstance(vertices, bool | np.bool_):
             raise ValueError(f"vertices must be true or false, got {vertices!r}")
         self.size, self.ties, self.alpha, self.eps, self.f_scale = size, ties, int(alpha), float(eps), f_scale
