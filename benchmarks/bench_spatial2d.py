@@ -17,6 +17,15 @@ BUNDLE = ROOT / "results" / "issue17_spatial2d"
 COMMAND = ("mkdir -p runs/issue17_spatial2d && cp results/issue17_spatial2d/results.sqlite runs/issue17_spatial2d/ && "
            "vbl-robust reproduce spatial-2d --images 30 --seed 0 --methods georobust,georobust-a,random,apgd "
            "--out runs/issue17_spatial2d")
+#: Runs of the same images added as more rows (bundle, what it is, the command that made it).
+OTHERS = (
+    ("issue17_spatial2d_av", "georobust-av (georobust-a plus the box's four vertices in its first batch)",
+     "vbl-robust reproduce spatial-2d --images 30 --seed 0 --methods georobust-av --no-landscape "
+     "--out runs/issue17_spatial2d_av"),
+    ("issue17_corners", "the four vertices alone (`grid [counts=[2, 2]]`: a probe, not a search)",
+     "vbl-robust reproduce spatial-2d --images 30 --seed 0 --methods grid --method-option 'grid.counts=[2,2]' "
+     "--max-evals 4 --no-landscape --out runs/corners"),
+)
 
 
 def _tool():
@@ -27,11 +36,17 @@ def _tool():
 
 
 def main(quick: bool = False) -> str:
-    head = ("## Real pipeline in 2-D: GeoRobust, georobust-a, random, APGD (spatial-2d)\n\n"
+    head = ("## Real pipeline in 2-D: the GeoRobusts, random, APGD (spatial-2d)\n\n"
             "Shipped detector (two-stage, `auto` engine), synthetic approaches of `reproduce spatial-2d --seed 0`, "
             "200 evaluations per image and box, early stop at the first breach. Read from the committed store "
             f"`results/issue17_spatial2d/results.sqlite` (`python tools/survival_table.py results/issue17_spatial2d`); "
             f"produced, and resumed or extended, by `{COMMAND}`.\n\n")
     if not (BUNDLE / "results.sqlite").exists():
         return head + "_No committed store: run the command above._\n"
-    return head + _tool().survival_markdown(str(BUNDLE)).replace(str(BUNDLE), "results/issue17_spatial2d")
+    others = [(ROOT / "results" / name, what, cmd) for name, what, cmd in OTHERS
+              if (ROOT / "results" / name / "results.sqlite").exists()]
+    if others:
+        head += "More rows, from runs of the same images: " + "; ".join(
+            f"{what}, `results/{p.name}` (`{cmd}`)" for p, what, cmd in others) + ".\n\n"
+    body = _tool().survival_markdown(str(BUNDLE), tuple(str(p) for p, _, _ in others))
+    return head + body.replace(str(BUNDLE), "results/issue17_spatial2d")

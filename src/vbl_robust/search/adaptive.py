@@ -16,6 +16,10 @@ The DIRECT literature, and what was taken from it:
   per iteration — kept unchanged (this class is a :class:`~vbl_robust.search.direct.GeoRobust`).
 * Aggressive DIRECT / pDIRECT divide more rectangles per iteration for parallel machines: more evaluations per
   iteration, no better placement; not taken (filling batches up to a target size is left open).
+* Sergeyev & Kvasov's diagonal DIRECT variants and BIRECT evaluate vertices / points on the main diagonal, which
+  centre-sampling DIRECT never reaches (as recalled here, not re-checked) — taken in the smallest form as
+  ``"georobust-av"`` (:class:`AdaptiveGeoRobustV`): the box's ``2**d`` vertices once, in the first batch, as
+  ordinary evaluations (the pipeline's worst case is often the largest perturbation; measured on spatial-2d).
 * What was taken: **DIRECT in a rescaled box**. DIRECT is not invariant to the scaling of the variables; with
   per-dimension Lipschitz constants ``K_i`` (the vector form of :mod:`~vbl_robust.search.bounds`) a rectangle's
   uncertainty is ``sum_i K_i h_i``, and trisecting the side with the largest ``K_i h_i`` shrinks it most. So the
