@@ -58,7 +58,7 @@ def test_experiment_end_to_end(name, tmp_path, small_samples, oracle, full):
     assert html.count("data:image/png;base64,") == len(made)
     assert "<table>" in html and "Provenance" in html and "failed to build" not in html
     if name.startswith("runtime"):  # anytime methods ran once; the report says which results were read off
-        assert "read off the run" in html and "Read off a trace: georobust, random" in html
+        assert "read off the run" in html and "Read off a trace: georobust, georobust-av, random" in html
         assert "Run once per budget: apgd" in html
 
 

@@ -23,7 +23,7 @@ from vbl_robust.perturb import PERTURBATIONS
 from vbl_robust.report import build_report
 from vbl_robust.report.html import fmt_num
 
-TINY = Options(max_evals=6, family_grid=21)
+TINY = Options(methods=("georobust", "random"), max_evals=6, family_grid=21)
 
 
 def _blocks(spec):
@@ -41,7 +41,7 @@ def test_every_family_has_five_nested_chained_levels_and_a_grid():
     assert len(set(labels)) == len(labels) == 5 * len(PERTURBATIONS)  # objectives and seeds are keyed by label
     for name, blk in main.items():
         p = PERTURBATIONS[name]
-        assert blk.chain and blk.methods == ("georobust", "random")
+        assert blk.chain and blk.methods == ("georobust", "georobust-av", "random")
         assert blk.budgets == (Budget(max_evals=200, stop_at_breach=True),)
         assert [b.level for b in blk.boxes] == [1.0, 2.0, 3.0, 4.0, 5.0]
         bounds = [(float(b.box.lower[0]), float(b.box.upper[0])) for b in blk.boxes]
@@ -103,16 +103,16 @@ def test_estimate_and_planned_work():
     from vbl_robust.cli.reproduce import planned_work
 
     spec = experiment("families").build(0, Options(max_evals=10, family_grid=0))
-    assert planned_work(spec, 3) == (3 * len(PERTURBATIONS) * 5 * 2 * 10, 0.0)
+    assert planned_work(spec, 3) == (3 * len(PERTURBATIONS) * 5 * 3 * 10, 0.0)  # georobust, georobust-av, random
     evals, _ = planned_work(experiment("families").build(0, Options(max_evals=10)), 1)
     grids = sum(b.budgets[0].max_evals for b in experiment("families").build(0, Options()).blocks
                 if b.role == "reference")
-    assert evals == len(PERTURBATIONS) * 5 * 2 * 10 + grids
-    # 2 images x 10 families x 5 levels x 2 methods x 200 evaluations
+    assert evals == len(PERTURBATIONS) * 5 * 3 * 10 + grids
+    # 2 images x 10 families x 5 levels x 3 methods (georobust, georobust-av, random) x 200 evaluations
     res = CliRunner().invoke(app, ["reproduce", "families", "--estimate", "--oracle", "--images", "2",
                                    "--family-grid", "0"])
     assert res.exit_code == 0, res.output
-    assert re.search(r"families\s+2 images\s+≤\s+40000 evaluations", res.output), res.output
+    assert re.search(r"families\s+2 images\s+≤\s+60000 evaluations", res.output), res.output
 
 
 def _cells(html: str) -> list[list[str]]:

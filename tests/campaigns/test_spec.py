@@ -72,7 +72,7 @@ def test_experiment_defaults_follow_the_paper():
     s1 = experiment("spatial-1d").build(0, Options())
     main = s1.blocks[0]
     assert [b.level for b in main.boxes] == [2, 5, 10, 15, 20, 30]
-    assert main.methods == ("georobust", "random", "apgd")
+    assert main.methods == ("georobust", "georobust-av", "random", "apgd")  # the paper's GeoRobust and ours
     assert main.budgets == (Budget(max_evals=200, stop_at_breach=True),)
     ref = s1.blocks[1]
     assert ref.role == "reference" and ref.options["grid"]["counts"] == [1201]  # 0.05° over ±30°
@@ -84,7 +84,7 @@ def test_experiment_defaults_follow_the_paper():
     rt = experiment("runtime-1d").build(0, Options())
     # anytime methods: one run at the largest budget, every budget read off its trace
     (once,) = rt.blocks[0].budgets
-    assert rt.blocks[0].methods == ("georobust", "random")
+    assert rt.blocks[0].methods == ("georobust", "georobust-av", "random")
     assert once.max_seconds == 5.0 and once.min_evals == 200 and not once.stop_at_breach
     assert once.read_seconds == (0.1, 0.5, 1.0, 2.0, 5.0) and once.read_evals == (10, 25, 50, 100, 200)
     assert [b.label for b in once.read_budgets()] == [f"{t:g} s, no early stop" for t in once.read_seconds] + [

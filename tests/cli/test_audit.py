@@ -76,7 +76,7 @@ def test_demo_audits_the_shipped_model_by_default(tmp_path):
     assert res.exit_code == 0, res.output
     con = sqlite3.connect(out / "results.sqlite")
     methods = sorted(m for (m,) in con.execute("SELECT method FROM jobs WHERE status = 'done'"))
-    assert methods == ["apgd", "georobust", "random"]
+    assert methods == ["apgd", "georobust-av", "random"]
     report = (out / "report.html").read_text()
     assert "shipped model (runway_yolov8n_pose.pt) v" in report and "oracle detector returns" not in report
 

@@ -34,7 +34,7 @@ def test_estimate_prints_an_upper_bound_per_experiment():
 def test_planned_work_counts_budgets_and_grids():
     exp = EXPERIMENTS["spatial-1d"]
     evals, seconds = planned_work(exp.build(0, Options(grid_step_deg=0.0)), 3)
-    # 6 boxes x 3 methods x 200 evaluations per image (no reference grid), no time budgets
-    assert evals == 3 * 6 * 3 * 200 and seconds == 0.0
+    # 6 boxes x 4 methods (both GeoRobusts, random, APGD) x 200 evaluations per image (no reference grid)
+    assert evals == 3 * 6 * 4 * 200 and seconds == 0.0
     _, seconds = planned_work(EXPERIMENTS["runtime-1d"].build(0, Options(time_budgets=(0.5,), eval_budgets=(10,))), 2)
     assert seconds > 0

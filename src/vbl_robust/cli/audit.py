@@ -15,7 +15,7 @@ import typer
 
 from .common import fail, parse_lipschitz, parse_range
 
-METHODS_DEFAULT = "georobust,random,apgd"
+METHODS_DEFAULT = "georobust-av,random,apgd"  # = vbl_robust.campaigns.experiments.AUDIT_METHODS
 
 
 # -- shared by audit / demo / reproduce ---------------------------------------------------------------------------
@@ -414,7 +414,7 @@ def register(app: typer.Typer) -> None:
                                        "image for the report's landscape figure."),
         quiet: bool = typer.Option(False, "--quiet", "-q"),
     ) -> None:
-        """A small audit on the defaults (10 synthetic images, GeoRobust / random / APGD, roll ±15° and contrast
+        """A small audit on the defaults (10 synthetic images, georobust-av / random / APGD, roll ±15° and contrast
         [0.7, 1.4], early stop at a breach) with its HTML report — a few minutes on a laptop CPU."""
         import torch
 

@@ -125,7 +125,7 @@ def register(app: typer.Typer) -> None:
         oracle: bool = typer.Option(False, "--oracle", help="Use the oracle detector (exact projected corners)."),
         oracle_noise: float = typer.Option(0.0, "--oracle-noise", help="Oracle: fixed per-image corner noise (px)."),
         methods: str | None = typer.Option(None, "--methods", help="Comma-separated methods (default "
-                                           "georobust,random,apgd; families: the same less apgd)."),
+                                           "georobust,georobust-av,random,apgd; families: the same less apgd)."),
         method_option: list[str] | None = typer.Option(None, "--method-option", help=METHOD_OPTION_HELP),
         landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="spatial-2d / runtime-2d: the dense "
                                        "61 × 36 grid on the first image (the report's heat map, about 2200 "
