@@ -32,6 +32,11 @@ def _label(r) -> str:
     return f"{r.method} [{opts}]" if opts else r.method
 
 
+def _mean(values: list) -> float:
+    vals = [v for v in values if v is not None]
+    return float(np.mean(vals)) if vals else float("nan")
+
+
 def survival_markdown(run: str, others: tuple[str, ...] = ()) -> str:
     """The tables (Markdown) of the run directory or store ``run`` (with the main rows of ``others``)."""
     out: list[str] = []
@@ -70,6 +75,19 @@ def survival_markdown(run: str, others: tuple[str, ...] = ()) -> str:
         vals = [f"{cell[(m, b)]['survival']:.1f} ({cell[(m, b)]['breaches']})" if (m, b) in cell else "–"
                 for b, _ in boxes]
         emit(f"| {m} | " + " | ".join(vals) + " |")
+    if len(methods) > 1:  # the union: an image breaches a box when any method found a breach there
+        hit = defaultdict(set)
+        for r in rows:
+            if r.worst_m is not None and r.worst_m > spec.eps_safe_m:
+                hit[r.box_label].add(r.sample_id)
+        emit("| any of them | " + " | ".join(
+            f"{100.0 * (len(done) - len(hit[b])) / len(done):.1f} ({len(hit[b])})" for b, _ in boxes) + " |")
+        emit("")
+        emit("Evaluations spent per job, mean over all jobs / over the jobs that found a breach (early stop after "
+             "the batch that found it): " + "; ".join(
+                 f"{m} {_mean([r.nfev for r in rows if r.method == m]):.0f} / "
+                 f"{_mean([r.nfev for r in rows if r.method == m and (r.worst_m or 0) > spec.eps_safe_m]):.1f}"
+                 for m in methods) + ".")
     for g in land:
         if g.points is None or not len(g.points) or g.sample_id not in done:
             continue
