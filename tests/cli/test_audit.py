@@ -127,3 +127,11 @@ def test_method_option_mistakes_are_one_line_errors(tmp_path, command, value, me
             else ["reproduce", "spatial-2d", "--images", "1", "--methods", "georobust-a"])
     res = runner.invoke(app, [*args, "--out", str(tmp_path), "--method-option", value, *SMALL])
     assert res.exit_code == 2 and message in res.output, res.output
+
+
+def test_the_summary_table_never_cuts_a_method_name(tmp_path):
+    res = runner.invoke(app, ["audit", "--out", str(tmp_path), "--n", "1", "--roll", "5", "--methods",
+                              "georobust,georobust-av", "--max-evals", "9", "--no-landscape", "--no-report",
+                              "--oracle", "--width", "128", "--height", "128"])
+    assert res.exit_code == 0, res.output
+    assert "│ georobust-av " in res.output and "│ georobust " in res.output

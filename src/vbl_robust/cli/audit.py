@@ -251,8 +251,9 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
         fixed = ", ".join(f"{lines[0][c]}" for c in ("box_label", "budget_label") if c not in cols)
         table = Table(title=f"{spec.name}: survival (worst error ≤ {spec.eps_safe_m:g} m)" + (f" — {fixed}" if fixed else ""))
         heads = {"method": "method", "box_label": "box", "budget_label": "budget"}
-        for c in cols:
-            table.add_column(heads[c])
+        for c in cols:  # a method's name is never cut (georobust and georobust-av must stay apart)
+            table.add_column(heads[c], no_wrap=c == "method", min_width=max(len(str(ln[c])) for ln in lines)
+                             if c == "method" else None)
         for col in ("images", "survival %", "median worst (m)", "breaches", "failed jobs", "failed evals"):
             table.add_column(col, justify="right")
         for line in lines:
