@@ -244,8 +244,9 @@ class Direct(Optimizer):
                 "po_count_before": 1, "po_count_after": 1 if fits else 0,
                 "remaining_area": 1.0, "remaining_area_after": self._volumes(root) if fits else 0.0,
             }
-            corners = self._vertices() if fits and (remaining is None or remaining >= 1 + 2 * d + 2**d) else []
-            return np.vstack([np.full((1, d), 0.5), self._children(), *corners])
+            room = fits and (remaining is None or remaining >= 1 + 2 * d + 2**d)
+            corners = self._vertices() if room else np.zeros((0, d))
+            return np.vstack([np.full((1, d), 0.5), self._children(), corners])
         po = self.select()
         if len(po) == 0:
             self._finish(Status.CONVERGED, f"every rectangle is at max_depth={self.max_depth}")
@@ -263,8 +264,9 @@ class Direct(Optimizer):
             self._plan.append((int(p), self._division_dims(int(p))))
         return self._children()
 
-    def _vertices(self) -> list[np.ndarray]:
-        """The box's ``2**d`` vertices when ``vertices`` is on (after the root's children, in the first batch).
+    def _vertices(self) -> np.ndarray:
+        """The box's ``2**d`` vertices ``(2**d, d)`` when ``vertices`` is on, else none ``(0, d)`` (after the
+        root's children, in the first batch).
 
         Why: DIRECT samples only centres, so after ``k`` trisections its nearest point is still ``3**-k / 2`` of
         the box from every face, and a worst case on the boundary — the largest perturbation, where APGD's projected
@@ -275,11 +277,10 @@ class Direct(Optimizer):
         evaluations — best value, ``xs``/``fs`` — and no rectangle's centre, so the partition, PO sets, RA(k),
         the Lipschitz estimate and the sound bound are those of the run without them.
         """
-        if not self.vertices:
-            return []
         d = self.dim
-        bits = (np.arange(2**d)[:, None] >> np.arange(d)[None, :]) & 1
-        return [bits.astype(np.float64)]
+        if not self.vertices:
+            return np.zeros((0, d))
+        return ((np.arange(2**d)[:, None] >> np.arange(d)[None, :]) & 1).astype(np.float64)
 
     def _children(self) -> np.ndarray:
         pts = []
