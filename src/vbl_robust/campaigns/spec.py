@@ -360,10 +360,15 @@ class CampaignSpec:
         """Digest of what every job of this campaign shares: the settings and the detector identity."""
         return digest({"settings": self.settings(), "detector": detector_id}, 24)
 
-    def with_method_options(self, options: Mapping[str, Mapping[str, Any]]) -> CampaignSpec:
+    def search_methods(self) -> set[str]:
+        """The methods its search blocks run."""
+        return {m for b in self.blocks if b.kind == "search" for m in b.methods}
+
+    def with_method_options(self, options: Mapping[str, Mapping[str, Any]], *, strict: bool = True) -> CampaignSpec:
         """This campaign with ``options[method]`` merged into the options of every search block that runs
         ``method`` (over the block's own, e.g. a grid's counts stay unless named). Raises a ValueError naming the
-        method or option when no block runs a method, or a method rejects its options (checked here, on each
+        method or option when no block runs a method (unless not ``strict``: such methods are then ignored, as
+        when one option set serves several experiments), or a method rejects its options (checked here, on each
         block's first box, so that a campaign never starts with options its searches would refuse). The options
         are part of the job keys: a run with other options never resumes one without them."""
         from ..search import make_optimizer
@@ -385,9 +390,9 @@ class CampaignSpec:
             used.update(touched)
             blocks.append(replace(blk, options=merged))
         missing = sorted(set(options) - used)
-        if missing:
-            ran = sorted({m for b in self.blocks if b.kind == "search" for m in b.methods})
-            raise ValueError(f"{self.name}: no search runs method(s) {missing} (its methods: {ran})")
+        if missing and strict:
+            raise ValueError(f"{self.name}: no search runs method(s) {missing} (its methods: "
+                             f"{sorted(self.search_methods())})")
         return replace(self, blocks=tuple(blocks))
 
     def expand(self, samples: Sequence[tuple[str, str]], *, detector_id: str = "") -> list[Job]:

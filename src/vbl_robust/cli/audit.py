@@ -179,12 +179,12 @@ def parse_method_options(values: list[str] | None) -> dict[str, dict[str, Any]]:
     return out
 
 
-def with_method_options(spec: Any, options: dict[str, dict[str, Any]]) -> Any:
+def with_method_options(spec: Any, options: dict[str, dict[str, Any]], strict: bool = True) -> Any:
     """``spec`` with the parsed ``--method-option`` values, or a one-line error."""
     if not options:
         return spec
     try:
-        return spec.with_method_options(options)
+        return spec.with_method_options(options, strict=strict)
     except ValueError as exc:
         fail(f"--method-option: {exc}")
 

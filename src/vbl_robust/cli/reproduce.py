@@ -100,7 +100,7 @@ def register(app: typer.Typer) -> None:
     names = ", ".join(EXPERIMENTS)
 
     def _check_method_options(options: dict, specs: list) -> None:
-        ran = {m for spec in specs for b in spec.blocks if b.kind == "search" for m in b.methods}
+        ran = set().union(*(spec.search_methods() for spec in specs))
         missing = sorted(set(options) - ran)
         if missing:
             fail(f"--method-option: no experiment here runs method(s) {missing} (they run {sorted(ran)}; see "
@@ -186,8 +186,7 @@ def register(app: typer.Typer) -> None:
         root = out or Path("runs") / ("paper" if experiment == "all" else exps[0].name)
         for exp in exps:
             spec = exp.build(seed, opts)
-            ran = {m for b in spec.blocks if b.kind == "search" for m in b.methods}
-            spec = with_method_options(spec, {m: v for m, v in method_opts.items() if m in ran})
+            spec = with_method_options(spec, method_opts, strict=False)  # checked over all experiments above
             n = images or exp.images
             out_dir = root / exp.name if experiment == "all" else root
             samples, source = load(n, seed, lard, width, height)
