@@ -9,7 +9,8 @@
 
 Each set: the shipped design (two-stage 320 + 320, ``ippe_lm`` and ``iterative`` PnP), no perturbation;
 detection at τ_conf = 0.25, nominal survival (position error ≤ 1000 m), median position error in % of the slant
-distance, per envelope. Gates (every test seed): detection ≥ 97 %, survival ≥ 90 %; goals: detection ≥ 98 %,
+distance, the edge-tilt slope (predicted on true threshold-edge angle; 1 = reads the roll,
+:func:`vbl_robust.detect.evaluate.edge_tilt_slope`), per envelope. Gates (every test seed): detection ≥ 97 %, survival ≥ 90 %; goals: detection ≥ 98 %,
 survival ≥ 95 % (far ≥ 90 %), median error ≤ 5 % of slant.
 
     python benchmarks/detector_protocol.py [--model PATH.pt] [--split validation|test|all] [--n 510]
@@ -51,13 +52,13 @@ def evaluate(det, seed: int, n: int) -> list[dict]:
 
 def table(results: dict[int, list[dict]]) -> str:
     lines = ["| seed | envelope | n | detection | survival ippe_lm | survival iterative | pos. err % slant ippe_lm "
-             "| pos. err % slant iterative | corner median (px) |", "|---|---|---|---|---|---|---|---|---|"]
+             "| pos. err % slant iterative | corner median (px) | edge tilt |", "|---|---|---|---|---|---|---|---|---|---|"]
     for seed, rows in results.items():
         for r in rows:
             lines.append(f"| {seed} | {r['envelope']} | {r['n']} | {100 * r['detection_rate']:.1f} % | "
                          f"{100 * r['survival_ippe_lm']:.1f} % | {100 * r['survival_iterative']:.1f} % | "
                          f"{r['pos_err_pct_ippe_lm']:.2f} | {r['pos_err_pct_iterative']:.2f} | "
-                         f"{r['corner_median_px']:.2f} |")
+                         f"{r['corner_median_px']:.2f} | {r.get('edge_tilt_slope', float('nan')):.2f} |")
     return "\n".join(lines)
 
 

@@ -160,3 +160,42 @@ def test_new_stage_starts_from_previous_weights(tmp_path):
     a, b = conv_weights(r0.best), conv_weights(r1.best)
     assert len(a) == len(b) > 10
     assert all(torch.equal(x, y) for x, y in zip(a, b, strict=True))
+
+
+class _Levelled(_ShiftedTruth):
+    """Fake detector: true corners with each threshold edge turned level about its midpoint (a roll-blind model)."""
+
+    def detect(self, context):
+        from vbl_robust.detect.base import Detections
+
+        out = []
+        for _ in range(len(context)):
+            c = self.samples[self.i].corners_2d.copy()
+            self.i += 1
+            for a, b in ((0, 1), (3, 2)):
+                mid, half = (c[a] + c[b]) / 2, np.linalg.norm(c[a] - c[b]) / 2
+                c[a], c[b] = mid + [half, 0.0], mid - [half, 0.0]
+            out.append(Detections(np.zeros((1, 4)), np.array([0.9]), c[None]))
+        return out
+
+
+def test_edge_tilt_slope_tells_a_roll_blind_detector_from_an_exact_one():
+    from vbl_robust.detect.evaluate import edge_angles_deg, edge_tilt_slope, evaluate_detector, summarize
+    from vbl_robust.geometry.camera import project, rot_x, rot_y, runway_corners
+
+    samples = []
+    z = runway_corners(3000.0, 45.0)
+    for i, roll in enumerate([-20.0, -8.0, 0.0, 5.0, 15.0, 25.0]):
+        R = rot_y(3.0) @ rot_x(roll)
+        C = np.array([-1500.0, 0.0, 1500.0 * np.tan(np.radians(3.0))])
+        K = intrinsics(512, 512)
+        samples.append(Sample(id=str(i), K=K, corners_3d=z, corners_2d=project(z, R, C, K), position=C, width=512,
+                              height=512, _image=np.zeros((512, 512, 3), np.uint8), meta={"envelope": "close"}))
+    true_angles = edge_angles_deg(np.array([s.corners_2d for s in samples]))
+    assert np.ptp(true_angles) > 20.0  # the roll really tilts the edges
+    exact = evaluate_detector(_ShiftedTruth(samples, [0.0, 0.0]), samples, pnp_methods=())
+    level = evaluate_detector(_Levelled(samples, [0.0, 0.0]), samples, pnp_methods=())
+    assert edge_tilt_slope(exact) == pytest.approx(1.0)
+    assert abs(edge_tilt_slope(level)) < 1e-6
+    assert summarize(level)[-1]["edge_tilt_slope"] == pytest.approx(edge_tilt_slope(level))
+    assert np.isnan(edge_tilt_slope(exact, np.zeros(len(samples), bool)))  # nothing to fit

@@ -9,6 +9,11 @@ infinite position error, so medians and survival rates are over *all* samples.
 runway; *correct* detection adds a localisation criterion in the spirit of PCK: the mean corner error is at most
 ``PCK_FRACTION`` × the diagonal of the true corner box (so a far runway of 10 px must be hit within 2.5 px, a
 close one within tens of pixels).
+
+*Edge tilt* (:func:`edge_tilt_slope`): the slope of the predicted on the true angle of the runway's two
+threshold edges (TL→TR, BL→BR) over correct detections. 1 is a detector that reads the edges' orientation; 0 one
+that draws them level whatever the camera roll. Up to v7 every model had 0.2–0.35 (session 10): under roll the
+corners come out as a sheared quadrilateral, the main far-range position error.
 """
 
 from __future__ import annotations
@@ -37,7 +42,7 @@ class EvalResult:
     envelope (N,) str; detected (N,) bool; conf (N,); corner_err (N, 4) 1024-px units (NaN if not detected);
     corner_delta (N, 4, 2) signed errors (predicted − true), 1024-px units; slant_m (N,);
     pos_err_m: solver → (N,) metres (inf on failure); box_diag (N,) diagonal of the true corner box,
-    1024-px units.
+    1024-px units; corners (N, 4, 2) true corners TR, TL, BL, BR, 1024-px units (None: not recorded).
     """
 
     envelope: np.ndarray
@@ -48,6 +53,7 @@ class EvalResult:
     slant_m: np.ndarray
     pos_err_m: dict[str, np.ndarray]
     box_diag: np.ndarray
+    corners: np.ndarray | None = None
 
     @property
     def correct(self) -> np.ndarray:
@@ -99,7 +105,35 @@ def evaluate_detector(
         detected=ok, conf=conf, corner_err=np.linalg.norm(delta, axis=-1), corner_delta=delta,
         slant_m=np.array([s.slant_distance_m for s in samples]), pos_err_m=pos,
         box_diag=np.array([np.linalg.norm(np.ptp(s.corners_2d, axis=0)) * 1024.0 / s.width for s in samples]),
+        corners=np.array([s.corners_2d * 1024.0 / s.width for s in samples]).reshape(n, 4, 2),
     )
+
+
+def edge_angles_deg(corners: np.ndarray) -> np.ndarray:
+    """(..., 4, 2) corners TR, TL, BL, BR → (...) mean angle (degrees) of the edges TL→TR and BL→BR."""
+    c = np.asarray(corners, float)
+    top, bottom = c[..., 0, :] - c[..., 1, :], c[..., 3, :] - c[..., 2, :]
+    return np.degrees((np.arctan2(top[..., 1], top[..., 0]) + np.arctan2(bottom[..., 1], bottom[..., 0])) / 2)
+
+
+def edge_tilt_slope(r: EvalResult, mask: np.ndarray | None = None) -> float:
+    """Least-squares slope of predicted on true threshold-edge angle over the correct detections in ``mask``.
+
+    NaN when fewer than 3 such detections, when their true angles do not vary, or when ``r`` has no corners.
+    """
+    if r.corners is None:
+        return float("nan")
+    m = r.correct & (np.ones(len(r.envelope), bool) if mask is None else mask)
+    if m.sum() < 3:
+        return float("nan")
+    t = edge_angles_deg(r.corners[m])
+    p = edge_angles_deg(r.corners[m] + r.corner_delta[m])
+    ok = np.isfinite(t) & np.isfinite(p)
+    t, p = t[ok], p[ok]
+    if t.size < 3 or np.ptp(t) == 0:
+        return float("nan")
+    tc = t - t.mean()
+    return float(np.dot(tc, p - p.mean()) / np.dot(tc, tc))
 
 
 def summarize(r: EvalResult, groups: Sequence[str] = ("far", "medium", "close")) -> list[dict]:
@@ -115,7 +149,8 @@ def summarize(r: EvalResult, groups: Sequence[str] = ("far", "medium", "close"))
                    corner_median_px=float(np.median(ce)) if ce.size else np.nan,
                    corner_p95_px=float(np.percentile(ce, 95)) if ce.size else np.nan,
                    bias_u_px=float(dl[:, 0].mean()) if dl.size else np.nan,
-                   bias_v_px=float(dl[:, 1].mean()) if dl.size else np.nan)
+                   bias_v_px=float(dl[:, 1].mean()) if dl.size else np.nan,
+                   edge_tilt_slope=edge_tilt_slope(r, m))
         for meth, e in r.pos_err_m.items():
             em = e[m]
             row[f"survival_{meth}"] = float(np.mean(em <= SURVIVAL_M)) if m.any() else np.nan
