@@ -14,7 +14,7 @@ distance, the edge-tilt slope (predicted on true threshold-edge angle; 1 = reads
 survival ≥ 95 % (far ≥ 90 %), median error ≤ 5 % of slant.
 
     python benchmarks/detector_protocol.py [--model PATH.pt] [--split validation|test|all] [--n 510]
-                                           [--json OUT.json]
+                                           [--json OUT.json] [--min-side PX] [--margin M]
 
 Rendered pixels are cached in ``.cache/bench_detector/seed<S>`` (shared with ``bench_detector.py``).
 """
@@ -34,13 +34,17 @@ GATES = {"detection_rate": 0.97, "survival_ippe_lm": 0.90}
 GOALS = {"detection_rate": 0.98, "survival_ippe_lm": 0.95, "far_survival_ippe_lm": 0.90, "pos_err_pct_ippe_lm": 5.0}
 
 
-def detector(model: str | None):
+def detector(model: str | None, **window):
+    """The shipped two-stage detector, or ``model`` (a trusted .pt) as one with crop ``window`` (``min_side``,
+    ``margin``: what its training crops used)."""
     from vbl_robust.detect.shipped import default_detector, with_design
     from vbl_robust.detect.ultralytics import UltralyticsDetector
 
     if model is None:
+        if window:
+            raise ValueError("detector_protocol: --min-side/--margin apply to --model, not to the shipped model")
         return default_detector(design="twostage")
-    return with_design(UltralyticsDetector(model, trust=True, imgsz=320), "twostage")
+    return with_design(UltralyticsDetector(model, trust=True, imgsz=320), "twostage", **window)
 
 
 def evaluate(det, seed: int, n: int) -> list[dict]:
@@ -87,12 +91,15 @@ def main() -> None:
     ap.add_argument("--split", choices=("validation", "test", "all"), default="all")
     ap.add_argument("--n", type=int, default=510)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--min-side", type=float, default=None, help="crop window of --model (its training crops')")
+    ap.add_argument("--margin", type=float, default=None, help="crop margin of --model (its training crops')")
     args = ap.parse_args()
     from vbl_robust.detect.offline import setup_offline
 
     setup_offline()
     torch.set_num_threads(int(os.environ.get("VBL_BENCH_THREADS", "1")))
-    det = detector(args.model)
+    window = {k: v for k, v in (("min_side", args.min_side), ("margin", args.margin)) if v is not None}
+    det = detector(args.model, **window)
     seeds = {"validation": (VALIDATION_SEED,), "test": TEST_SEEDS,
              "all": (VALIDATION_SEED, *TEST_SEEDS)}[args.split]
     out: dict[str, dict] = {}
@@ -103,7 +110,7 @@ def main() -> None:
             continue
         res = {s: evaluate(det, s, args.n) for s in group}
         out[split] = {str(s): rows for s, rows in res.items()}
-        print(f"### {split} ({args.model or 'shipped model'}, two-stage 320 + 320, {args.n} approaches per seed)\n")
+        print(f"### {split} ({args.model or 'shipped model'}, {det!r}, {args.n} approaches per seed)\n")
         print(table(res) + "\n")
         if split == "test":
             print(spread(res) + "\n")

@@ -199,3 +199,22 @@ def test_edge_tilt_slope_tells_a_roll_blind_detector_from_an_exact_one():
     assert abs(edge_tilt_slope(level)) < 1e-6
     assert summarize(level)[-1]["edge_tilt_slope"] == pytest.approx(edge_tilt_slope(level))
     assert np.isnan(edge_tilt_slope(exact, np.zeros(len(samples), bool)))  # nothing to fit
+
+
+def test_crop_window_reaches_the_dataset_and_names_it(tmp_path, monkeypatch):
+    """A non-default ``crop_jitter`` is the build's jitter and tags the directory; the default one changes nothing."""
+    import vbl_robust.detect.train as tr
+
+    seen = []
+
+    def stop(tr_samples, va_samples, root, **kw):
+        seen.append((root.name, kw.get("jitter")))
+        raise RuntimeError("stop")
+
+    monkeypatch.setattr(tr, "build_dataset", stop)
+    for jitter in (None, {"min_side": 64.0}, {"min_side": 40.0}):
+        with pytest.raises(RuntimeError, match="stop"):
+            train(tmp_path / "run", samples=_samples(6), imgsz=32, crops_per_sample=1, min_box=2, crop_jitter=jitter)
+    (n0, j0), (n1, j1), (n2, j2) = seen
+    assert n0 == n1 == "dataset_32px_1crops_box2" and j0 is None and j1 is None
+    assert n2.startswith("dataset_32px_1crops_box2_crop") and j2 == tr.CropJitter(min_side=40.0)

@@ -152,6 +152,31 @@ def test_ship_and_default_detector(tiny_pose_pt, tmp_path, monkeypatch):
         ship(tiny_pose_pt, detector="double", imgsz=64, models_dir=tmp_path)
 
 
+def test_shipped_crop_window_follows_the_training_crops(tiny_pose_pt, tmp_path, monkeypatch):
+    """Weights trained on magnified crops ship with their window; a user's model takes it as options."""
+    import vbl_robust.detect.shipped as shipped
+    from vbl_robust.detect.train import CropJitter, ship
+
+    out = ship(tiny_pose_pt, detector="twostage", imgsz=64, models_dir=tmp_path,
+               crop_jitter=CropJitter(min_side=40.0))
+    monkeypatch.setattr(shipped, "MODELS_DIR", tmp_path.resolve())
+    monkeypatch.setattr(shipped, "DEFAULT_MODEL", out)
+    assert shipped.default_model_info()["twostage"] == {"margin": 1.5, "min_side": 40.0}
+    d = shipped.default_detector()
+    assert isinstance(d, TwoStageDetector) and (d.min_side, d.margin) == (40.0, 1.5)
+    assert not isinstance(shipped.default_detector(design="single"), TwoStageDetector)
+    # the default window writes no "twostage" entry: older default.json files read the same
+    ship(tiny_pose_pt, detector="twostage", imgsz=64, models_dir=tmp_path, crop_jitter=CropJitter())
+    assert "twostage" not in shipped.default_model_info() and shipped.default_detector().min_side == 64.0
+    spec = shipped.DetectorSpec("ultralytics", str(tiny_pose_pt), trust=True,
+                                options={"design": "twostage", "min_side": 48})
+    assert spec.build().min_side == 48.0
+    with pytest.raises(ValueError, match="twostage"):
+        shipped.DetectorSpec("ultralytics", str(tiny_pose_pt), trust=True, options={"min_side": 48}).build()
+    with pytest.raises(ValueError, match="needs detector='twostage'"):
+        ship(tiny_pose_pt, detector="single", imgsz=64, models_dir=tmp_path, crop_jitter=CropJitter(min_side=40.0))
+
+
 @pytest.mark.skipif(not __import__("vbl_robust.detect.shipped", fromlist=["x"]).DEFAULT_MODEL.exists(),
                     reason="no shipped model")
 def test_shipped_model_loads_and_runs():

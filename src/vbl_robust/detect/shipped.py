@@ -35,6 +35,8 @@ DEFAULT_MODEL = MODELS_DIR / "runway_yolov8n_pose.pt"
 #: Designs of a pose-model detector: one pass on the letterboxed image, or a pass on it and one on a crop.
 DESIGNS = ("single", "twostage")
 DETECTOR_KINDS = ("oracle", "default", "ultralytics", "onnx", "factory")
+#: options of a two-stage detector's crop window (``TwoStageDetector(margin=..., min_side=...)``)
+CROP_WINDOW_KEYS = ("margin", "min_side")
 
 
 # -- the shipped model ------------------------------------------------------------------------------------------
@@ -72,22 +74,29 @@ def default_model_caveats(info: dict[str, Any] | None = None) -> list[str]:
     return [str(g) for g in goals] if isinstance(goals, list) else [str(goals)]
 
 
-def with_design(detector: PoseDetector, design: str):
-    """``detector`` as a single pass, or as both passes of a :class:`~vbl_robust.detect.TwoStageDetector`."""
+def with_design(detector: PoseDetector, design: str, **window):
+    """``detector`` as a single pass, or as both passes of a :class:`~vbl_robust.detect.TwoStageDetector`;
+    ``window``: its crop window (``margin``, ``min_side``: what the weights were trained on), two-stage only."""
     if design not in DESIGNS:
         raise ValueError(f"detector design must be one of {DESIGNS}, got {design!r}")
+    unknown = set(window) - set(CROP_WINDOW_KEYS)
+    if unknown:
+        raise ValueError(f"detector crop window: unknown option(s) {sorted(unknown)}; known: {list(CROP_WINDOW_KEYS)}")
     if design == "twostage":
         from .twostage import TwoStageDetector
 
-        return TwoStageDetector(detector)
+        return TwoStageDetector(detector, **{k: float(v) for k, v in window.items()})
+    if window:
+        raise ValueError(f"detector crop window {window} needs design 'twostage', got {design!r}")
     return detector
 
 
 def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str | None = None,
                      engine: str = "torch", device: str = "cpu"):
     """The detector shipped with the package; ``design`` ``"twostage"`` / ``"single"`` (the paper's one pass),
-    None → the shipped default (``default.json``); ``engine`` of the black-box path (:mod:`.engines`); ``device``
-    ``auto``/``cpu``/``cuda[:N]`` (:mod:`.device`)."""
+    None → the shipped default (``default.json``, with its crop window ``"twostage": {"min_side": …}`` when the
+    weights were trained on another than :class:`~vbl_robust.detect.TwoStageDetector`'s default); ``engine`` of
+    the black-box path (:mod:`.engines`); ``device`` ``auto``/``cpu``/``cuda[:N]`` (:mod:`.device`)."""
     from .engines import with_engine
     from .ultralytics import UltralyticsDetector
 
@@ -97,7 +106,9 @@ def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str |
     # the shipped file is part of the installed package: trusted as its code is
     det = UltralyticsDetector(DEFAULT_MODEL, trust=True, imgsz=imgsz or info.get("imgsz"), chunk=chunk,
                               device=device)
-    return with_design(with_engine(det, engine, trust=True), design or info.get("detector", "single"))
+    design = design or info.get("detector", "single")
+    window = dict(info.get("twostage") or {}) if design == "twostage" else {}
+    return with_design(with_engine(det, engine, trust=True), design, **window)
 
 
 # -- naming and building detectors ------------------------------------------------------------------------------
@@ -109,7 +120,8 @@ class DetectorSpec:
     ``"ultralytics"`` (a user's ``.pt``; ``trust=True`` required for files outside the package), ``"onnx"``,
     ``"factory"`` (``path`` = ``"module:callable"`` returning a detector; for tests and plug-ins).
     ``options["design"]`` (model kinds): ``"single"`` or ``"twostage"`` (:func:`with_design`); the shipped model
-    defaults to its ``default.json``, a user's model to a single pass. ``options["engine"]``: what runs the
+    defaults to its ``default.json``, a user's model to a single pass; ``options["min_side"]``,
+    ``options["margin"]``: a user's two-stage crop window (what the weights were trained on). ``options["engine"]``: what runs the
     black-box forwards (``torch`` default, ``onnxruntime``, ``openvino``, ``auto``; :mod:`.engines`) — it changes
     speed, not outputs (≤ 1e-3 px), so it is recorded in the identity but is not part of the key: a run may resume
     on another engine. ``options["device"]`` (``auto``, ``cpu``, ``cuda[:N]``; :mod:`.device`) likewise: recorded,
@@ -225,6 +237,7 @@ class DetectorSpec:
         if self.kind in ("ultralytics", "onnx"):
             opts = dict(self.options)
             design = opts.pop("design", "single")
+            window = {k: opts.pop(k) for k in CROP_WINDOW_KEYS if k in opts}
             engine = opts.pop("engine", "onnxruntime" if self.kind == "onnx" else "torch")
             if self.kind == "onnx":
                 from .engines import resolve_engine
@@ -232,17 +245,17 @@ class DetectorSpec:
                 if resolve_engine(engine) == "openvino":
                     from .openvino import OpenVinoDetector
 
-                    return with_design(OpenVinoDetector(self.path, **opts), design)
+                    return with_design(OpenVinoDetector(self.path, **opts), design, **window)
                 if resolve_engine(engine) == "torch":
                     raise ValueError(f"{self.path}: an ONNX model runs on onnxruntime or openvino, not torch")
                 from .onnx import OnnxDetector
 
-                return with_design(OnnxDetector(self.path, **opts), design)
+                return with_design(OnnxDetector(self.path, **opts), design, **window)
             from .engines import with_engine
             from .ultralytics import UltralyticsDetector
 
             model = UltralyticsDetector(self.path, trust=self.trust, **opts)
-            return with_design(with_engine(model, engine, trust=self.trust), design)
+            return with_design(with_engine(model, engine, trust=self.trust), design, **window)
         module, _, attr = self.path.partition(":")
         return getattr(importlib.import_module(module), attr)(**self.options)
 

@@ -223,7 +223,7 @@ def train(
     init_weights: str | Path | None = None, detector: str = "twostage", crops_per_sample: int = 2,
     workers: int = 2, lr0: float | None = None, crops_used: int | None = None, min_box: float | None = None,
     threads: int | None = None, n_airports: int = DEFAULT_POOL, generate_options: dict | None = None,
-    appearance: AppearanceJitter | dict | None = None, **overrides,
+    appearance: AppearanceJitter | dict | None = None, crop_jitter: CropJitter | dict | None = None, **overrides,
 ) -> TrainResult:
     """Train (or continue training) the runway-corner YOLOv8n-pose.
 
@@ -259,6 +259,10 @@ def train(
         appearance: random blur / haze / photometric / noise changes of the training images
             (:class:`~vbl_robust.detect.augment.AppearanceJitter`, or the keyword arguments of one); they name the
             dataset directory too.
+        crop_jitter: how the training crops are drawn (:class:`CropJitter`, or the keyword arguments of one;
+            None → the default, which matches ``TwoStageDetector()``). A non-default window (e.g. ``min_side=40``:
+            far runways magnified 1.6× more) names the dataset directory, and the detector that uses the weights
+            must crop alike (``TwoStageDetector(min_side=...)``; ``ship(twostage=...)`` records it).
         **overrides: further ultralytics training arguments.
 
     Returns:
@@ -291,6 +295,10 @@ def train(
         init = init_weights
         stage = out_dir / "stage00"
 
+    if isinstance(crop_jitter, dict):
+        crop_jitter = CropJitter(**crop_jitter)
+    if crop_jitter == CropJitter():
+        crop_jitter = None  # the default window: same directory as before the option existed
     if isinstance(appearance, dict):
         appearance = AppearanceJitter(**{k: tuple(v) if isinstance(v, list) else v for k, v in appearance.items()})
     crops = crops_per_sample if detector == "twostage" else 0
@@ -299,7 +307,8 @@ def train(
     data_root = out_dir / (f"dataset_{imgsz}px_{crops}crops" + (f"_box{min_box:g}" if min_box else "")
                            + (f"_ap{n_airports}" if samples is None and n_airports != DEFAULT_POOL else "")
                            + (_options_tag(generate_options) if samples is None and generate_options else "")
-                           + (_options_tag(appearance.to_dict(), "_app") if appearance is not None else ""))
+                           + (_options_tag(appearance.to_dict(), "_app") if appearance is not None else "")
+                           + (_options_tag(crop_jitter.__dict__, "_crop") if crop_jitter is not None else ""))
     if samples is None:
         from ..scenes import generate
 
@@ -315,7 +324,7 @@ def train(
         va = [samples[i] for i in order[:nv]]
         tr = [samples[i] for i in order[nv:]]
     data = build_dataset(tr, va, data_root, imgsz=imgsz, crops_per_sample=crops, seed=seed, min_box=min_box,
-                         appearance=appearance)
+                         appearance=appearance, jitter=crop_jitter)
     if crops_used is not None and crops_used < crops:
         data = _subset_yaml(data, len(tr), crops_used)
 
@@ -334,14 +343,21 @@ def train(
 
 
 def ship(weights: str | Path, *, detector: str, imgsz: int, models_dir: str | Path | None = None,
-         info: dict | None = None) -> Path:
+         info: dict | None = None, crop_jitter: CropJitter | None = None) -> Path:
     """Copy trained weights into the package as the default model (optimizer stripped, fp16: a few MB).
 
     Writes ``runway_yolov8n_pose.pt`` and ``default.json`` (``detector``, ``imgsz`` and ``info``) to
-    ``models_dir`` (default: ``vbl_robust/models``). Returns the weights path.
+    ``models_dir`` (default: ``vbl_robust/models``). ``crop_jitter``: the training crops' window when it is not
+    the default; ``default.json`` then records it (``"twostage": {"margin": …, "min_side": …}``) and the shipped
+    two-stage detector crops alike. Returns the weights path.
     """
     if detector not in ("single", "twostage"):
         raise ValueError(f"ship: detector must be 'single' or 'twostage', got {detector!r}")
+    info = dict(info or {})
+    if crop_jitter is not None and crop_jitter != CropJitter():
+        if detector != "twostage":
+            raise ValueError("ship: a crop window (crop_jitter) needs detector='twostage'")
+        info["twostage"] = {"margin": crop_jitter.margin, "min_side": crop_jitter.min_side}
     import_ultralytics()
     from ultralytics.utils.torch_utils import strip_optimizer
 
@@ -351,6 +367,6 @@ def ship(weights: str | Path, *, detector: str, imgsz: int, models_dir: str | Pa
     d.mkdir(parents=True, exist_ok=True)
     out = d / DEFAULT_MODEL.name
     strip_optimizer(str(weights), s=str(out))
-    (d / "default.json").write_text(json.dumps(dict(detector=detector, imgsz=int(imgsz), **(info or {})),
+    (d / "default.json").write_text(json.dumps(dict(detector=detector, imgsz=int(imgsz), **info),
                                                indent=1) + "\n")
     return out
