@@ -21,8 +21,8 @@
   error of ≈ 9 % at far range, where a 64-px window holds a runway of 15–25 px), and the near threshold's width
   decides far survival (with its true width, far survival on the validation set would be 96.8 % instead of 87.1 %).
 
-Rerun the same command after an interruption (``resume=True`` continues ``last.pt``); one torch thread so that
-other work can run beside it. Every epoch is saved (``save_period=1``) for the validation protocol.
+Rerun the same command after an interruption (``resume=True`` continues ``last.pt``); one torch thread by default
+so that other work can run beside it (``--threads 2`` when nothing else runs). Every epoch is saved (``save_period=1``) for the validation protocol.
 
     OMP_NUM_THREADS=1 python tools/train_step.py k [--epochs 3]
 """
@@ -60,12 +60,13 @@ def main() -> None:
     ap.add_argument("step", choices=sorted(STEPS))
     ap.add_argument("--out", default=None, help="working directory (default train_runs/step_<step>)")
     ap.add_argument("--epochs", type=int, default=None)
+    ap.add_argument("--threads", type=int, default=1, help="torch threads (1: leave a core for other work)")
     args = ap.parse_args()
     epochs, kwargs = STEPS[args.step]
-    torch.set_num_threads(1)
+    torch.set_num_threads(args.threads)
     logging.basicConfig(level=logging.INFO)
     res = train(args.out or f"train_runs/step_{args.step}", epochs=args.epochs or epochs,
-                init_weights=DEFAULT_MODEL, **{**COMMON, **kwargs})
+                init_weights=DEFAULT_MODEL, **{**COMMON, **kwargs, "threads": args.threads})
     print(f"stage {res.stage_dir}: last {res.last}")
 
 
