@@ -9,12 +9,16 @@ detector once and reports, for the chosen envelope:
 - the survival if one part of the predicted corners were replaced by the truth — per threshold edge (TL–TR far,
   BL–BR near) its width, its angle, its midpoint — everything else as predicted;
 - per airport: survival and the mean relative width error of each threshold edge (systematic errors show up as
-  a bias of one sign across an airport's approaches).
+  a bias of one sign across an airport's approaches);
+- for every envelope, the near threshold's width error (median over correct detections) in image pixels, in
+  pass-2 crop pixels (window from the *true* corner box, as ``TwoStageDetector`` would cut it around exact
+  pass-1 corners) and relative to the width.
 
     python tools/far_error_budget.py [--model PT [--min-side PX]] [--seed S] [--envelope far] [--n 510]
 
 Session 10 (v7, validation seed, far): true near-edge width → far survival 96.8 % instead of 87.1 %; true
-far-edge width 89.8 %; true edge angles 86.0 %; true midpoints 87.1 %.
+far-edge width 89.8 %; true edge angles 86.0 %; true midpoints 87.1 %; near-edge width error far / medium /
+close 0.60 / 0.98 / 1.73 image px = 3.0 / 4.9 / 6.4 crop px = 7.5 / 8.2 / 5.8 % of the width.
 """
 
 from __future__ import annotations
@@ -73,6 +77,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=VALIDATION_SEED)
     ap.add_argument("--envelope", default="far")
     ap.add_argument("--n", type=int, default=510)
+    ap.add_argument("--crop-px", type=int, default=320, help="pass-2 input size")
     args = ap.parse_args()
     from bench_detector import held_out
     from vbl_robust.detect.evaluate import SURVIVAL_M, evaluate_detector
@@ -122,6 +127,22 @@ def main() -> None:
     for name in sorted(per_airport):
         m, ok, fw, nw = per_airport[name]
         print(f"| {name} | {m} | {100 * ok / m:.1f} % | {_bias(fw)} | {_bias(nw)} |")
+    min_side = args.min_side if args.min_side is not None else 64.0
+    print("\n| envelope | near-edge width error: image px | crop px | relative | near edge in the crop (px) |")
+    print("|---|---|---|---|---|")
+    for name in dict.fromkeys(r.envelope):
+        img, crop, rel, size = [], [], [], []
+        for i in np.flatnonzero((r.envelope == name) & r.correct):
+            s = samples[i]
+            pred = s.corners_2d + r.corner_delta[i] * (s.width / 1024.0)
+            zoom = args.crop_px / max(1.5 * float(np.ptp(s.corners_2d, axis=0).max()), min_side)
+            true_w, pred_w = edge_parts(s.corners_2d)["near"][1] * 2, edge_parts(pred)["near"][1] * 2
+            img.append(abs(pred_w - true_w))
+            crop.append(abs(pred_w - true_w) * zoom)
+            rel.append(abs(pred_w / true_w - 1))
+            size.append(true_w * zoom)
+        print(f"| {name} | {np.median(img):.2f} | {np.median(crop):.2f} | {100 * np.median(rel):.1f} % | "
+              f"{np.median(size):.0f} |")
 
 
 if __name__ == "__main__":
