@@ -98,12 +98,13 @@ def main() -> None:
           f"{fail.sum()} failures — missed {np.sum(fail & ~r.detected)}, wrong {np.sum(fail & r.detected & ~r.correct)}, "
           f"correct but off {np.sum(fail & r.correct)}")
     alive = dict.fromkeys(VARIANTS, 0)
-    per_airport = defaultdict(lambda: [0, 0, [], []])
+    per_airport = defaultdict(lambda: [0, 0, [], [], float("nan")])
     for i in np.flatnonzero(env):
         s = samples[i]
         a = per_airport[str(s.meta.get("airport", "?"))]
         a[0] += 1
         a[1] += bool(e[i] <= SURVIVAL_M)
+        a[4] = float(s.meta.get("runway_length_m", float("nan")))
         if not r.detected[i]:
             continue
         pred = s.corners_2d + r.corner_delta[i] * (s.width / 1024.0)
@@ -122,11 +123,12 @@ def main() -> None:
     print("\n| corners | survival |\n|---|---|")
     for name, k in alive.items():
         print(f"| {name} | {100 * k / n:.1f} % |")
-    print("\n| airport | approaches | survival | far-edge width error (mean ± sd) | near-edge width error (mean ± sd) |")
-    print("|---|---|---|---|---|")
+    print("\n| airport | runway length (m) | approaches | survival | far-edge width error (mean ± sd) "
+          "| near-edge width error (mean ± sd) |")
+    print("|---|---|---|---|---|---|")
     for name in sorted(per_airport):
-        m, ok, fw, nw = per_airport[name]
-        print(f"| {name} | {m} | {100 * ok / m:.1f} % | {_bias(fw)} | {_bias(nw)} |")
+        m, ok, fw, nw, length = per_airport[name]
+        print(f"| {name} | {length:.0f} | {m} | {100 * ok / m:.1f} % | {_bias(fw)} | {_bias(nw)} |")
     min_side = args.min_side if args.min_side is not None else 64.0
     print("\n| envelope | near-edge width error: image px | crop px | relative | near edge in the crop (px) |")
     print("|---|---|---|---|---|")

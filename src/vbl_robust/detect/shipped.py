@@ -121,8 +121,8 @@ class DetectorSpec:
     ``"factory"`` (``path`` = ``"module:callable"`` returning a detector; for tests and plug-ins).
     ``options["design"]`` (model kinds): ``"single"`` or ``"twostage"`` (:func:`with_design`); the shipped model
     defaults to its ``default.json``, a user's model to a single pass; ``options["min_side"]``,
-    ``options["margin"]``: a user's two-stage crop window (what the weights were trained on). ``options["engine"]``: what runs the
-    black-box forwards (``torch`` default, ``onnxruntime``, ``openvino``, ``auto``; :mod:`.engines`) — it changes
+    ``options["margin"]``: a user's two-stage crop window (what the weights were trained on).
+    ``options["engine"]``: what runs the black-box forwards (``torch`` default, ``onnxruntime``, ``openvino``, ``auto``; :mod:`.engines`) — it changes
     speed, not outputs (≤ 1e-3 px), so it is recorded in the identity but is not part of the key: a run may resume
     on another engine. ``options["device"]`` (``auto``, ``cpu``, ``cuda[:N]``; :mod:`.device`) likewise: recorded,
     not keyed (a GPU's convolutions differ from the CPU's by ~1e-3 px, far below any error that matters here).

@@ -262,7 +262,7 @@ def train(
         crop_jitter: how the training crops are drawn (:class:`CropJitter`, or the keyword arguments of one;
             None → the default, which matches ``TwoStageDetector()``). A non-default window (e.g. ``min_side=40``:
             far runways magnified 1.6× more) names the dataset directory, and the detector that uses the weights
-            must crop alike (``TwoStageDetector(min_side=...)``; ``ship(twostage=...)`` records it).
+            must crop alike (``TwoStageDetector(min_side=...)``; ``ship(crop_jitter=...)`` records it).
         **overrides: further ultralytics training arguments.
 
     Returns:
