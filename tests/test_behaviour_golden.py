@@ -3,7 +3,15 @@
 The rows were written by the code before the perturbation / detector / objective redesign (on the shipped model
 v6; the redesign, commit 2eb3dbf, reproduced them) and rewritten once for the shipped model v7 by the same tool
 on the redesigned code (the oracle rows stayed identical). Any later change of the worst error, the worst θ, the
-evaluation count or the verdict of these searches is a change of behaviour and fails here. Floating-point tolerance: 1e-6 relative on errors, 1e-6 absolute on θ.
+evaluation count or the verdict of these searches is a change of behaviour and fails here.
+
+Tolerances. The evaluation counts, iterations, verdicts and statuses must match exactly, θ to 1e-6 absolute. The
+worst errors are compared to 1e-3 relative (1 m at 1 km): the forward pass of the network runs on CPU kernels
+that torch picks by instruction set, and a CI machine of another CPU model gave the two-stage APGD row
+1071.2269 m against 1071.2960 m recorded here (6.5e-5 relative, same θ, same counts); on this machine,
+``ATEN_CPU_CAPABILITY=default ONEDNN_MAX_CPU_ISA=SSE41`` moves the errors by up to 1.6e-5 relative, θ unchanged.
+A change of behaviour moves a search's path, hence its θ or counts, or its errors by metres. All mismatches of a
+configuration are reported together.
 """
 
 from __future__ import annotations
@@ -15,6 +23,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+ERROR_REL = 1e-3
+THETA_ABS = 1e-6
 
 
 def _tool():
@@ -30,11 +40,18 @@ def test_audit_rows_unchanged(config):
     golden = json.loads(tool.GOLDEN.read_text())[config]
     rows = tool.audit_rows(config)
     assert [(r["sample_id"], r["method"]) for r in rows] == [(g["sample_id"], g["method"]) for g in golden]
+    bad = []
     for r, g in zip(rows, golden, strict=True):
         where = f"{config} {r['sample_id']} {r['method']}"
-        assert (r["nfev"], r["nit"], r["verdict"], r["search_status"]) == (
-            g["nfev"], g["nit"], g["verdict"], g["search_status"]), where
-        assert r["worst_m"] == pytest.approx(g["worst_m"], rel=1e-6), where
-        assert r["worst_x"].keys() == g["worst_x"].keys(), where
+        got, want = ((x["nfev"], x["nit"], x["verdict"], x["search_status"]) for x in (r, g))
+        if got != want:
+            bad.append(f"{where}: (nfev, nit, verdict, status) {got} != {want}")
+        if r["worst_m"] != pytest.approx(g["worst_m"], rel=ERROR_REL):
+            bad.append(f"{where}: worst error {r['worst_m']!r} m != {g['worst_m']!r} m")
+        if r["worst_x"].keys() != g["worst_x"].keys():
+            bad.append(f"{where}: θ keys {sorted(r['worst_x'])} != {sorted(g['worst_x'])}")
+            continue
         for k, v in g["worst_x"].items():
-            assert r["worst_x"][k] == pytest.approx(v, abs=1e-6), f"{where} {k}"
+            if r["worst_x"][k] != pytest.approx(v, abs=THETA_ABS):
+                bad.append(f"{where}: {k} {r['worst_x'][k]!r} != {v!r}")
+    assert not bad, "\n".join(bad)

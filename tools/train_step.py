@@ -24,6 +24,11 @@
   gain (``pose`` 36 → 108). Why: ultralytics' keypoint loss is an OKS divided by the box area, so it tolerates
   errors in proportion to the runway's size in the view — and the near-threshold width error is about constant
   *relative* to it (5.8–8.2 % at every range, ``tools/far_error_budget.py``).
+- ``p`` (session 11): as ``l`` (same samples and crops: ``l`` is its control; ``o`` the control of its 2-epoch
+  schedule) plus the threshold-width loss term of :mod:`vbl_robust.detect.losses` with gain 0.5 (L1 on the log
+  ratio of predicted to true threshold-edge widths, edges ≥ 8 px in the view). Why: the widths decide far survival
+  (above), ultralytics' per-corner OKS does not see them, and raising its gain (``o``) helped little. At gain 0.5
+  the term starts at ≈ 3× the OKS term (width errors ≈ 8 %, OKS term ≈ 0.014 before the ``pose`` gain).
 
 Rerun the same command after an interruption (``resume=True`` continues ``last.pt``); one torch thread by default
 so that other work can run beside it (``--threads 2`` when nothing else runs). Every epoch is saved (``save_period=1``) for the validation protocol.
@@ -55,6 +60,8 @@ STEPS = {
     "n": (3, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, crop_jitter={"min_side": 40.0},
                   generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
     "o": (2, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, pose=108.0,
+                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+    "p": (2, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, width_loss=0.5,
                   generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
     "m": (2, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, degrees=30.0, pose=72.0,
                   generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),

@@ -37,6 +37,7 @@ from ..data.yolo import write_data_yaml, write_pose_images
 from ..perturb.views import image_to_view, resample, to_tensor
 from ..scenes.airports import DEFAULT_POOL
 from .augment import AppearanceJitter
+from .losses import threshold_width_loss
 from .offline import import_ultralytics
 from .windows import box_window, letterbox_window
 
@@ -223,7 +224,8 @@ def train(
     init_weights: str | Path | None = None, detector: str = "twostage", crops_per_sample: int = 2,
     workers: int = 2, lr0: float | None = None, crops_used: int | None = None, min_box: float | None = None,
     threads: int | None = None, n_airports: int = DEFAULT_POOL, generate_options: dict | None = None,
-    appearance: AppearanceJitter | dict | None = None, crop_jitter: CropJitter | dict | None = None, **overrides,
+    appearance: AppearanceJitter | dict | None = None, crop_jitter: CropJitter | dict | None = None,
+    width_loss: float = 0.0, width_loss_min_px: float = 8.0, **overrides,
 ) -> TrainResult:
     """Train (or continue training) the runway-corner YOLOv8n-pose.
 
@@ -263,6 +265,10 @@ def train(
             None → the default, which matches ``TwoStageDetector()``). A non-default window (e.g. ``min_side=40``:
             far runways magnified 1.6× more) names the dataset directory, and the detector that uses the weights
             must crop alike (``TwoStageDetector(min_side=...)``; ``ship(crop_jitter=...)`` records it).
+        width_loss: gain of the threshold-width loss term (:mod:`~vbl_robust.detect.losses`: L1 on the log ratio
+            of predicted to true threshold-edge widths, added to ultralytics' keypoint loss); 0 → ultralytics' loss
+            alone. Pass the same value again when resuming an interrupted stage.
+        width_loss_min_px: edges narrower than this in the training view (pixels) are left out of that term.
         **overrides: further ultralytics training arguments.
 
     Returns:
@@ -285,7 +291,8 @@ def train(
         if last.exists() and not _finished(last):
             logger.info("resuming %s", last)
             _use_threads(threads)
-            YOLO(str(last)).train(resume=True)
+            with threshold_width_loss(width_loss, width_loss_min_px):
+                YOLO(str(last)).train(resume=True)
             w = stages[-1] / "weights"
             return TrainResult(stages[-1], w / "best.pt", w / "last.pt", True)
         prev = stages[-1] / "weights" / "best.pt"
@@ -336,8 +343,10 @@ def train(
     if lr0 is not None:
         args["lr0"] = lr0
     args.update(overrides)
-    logger.info("training %s from %s", stage, init or "yolov8n-pose.yaml")
-    model.train(**args)
+    logger.info("training %s from %s%s", stage, init or "yolov8n-pose.yaml",
+                f" with threshold-width loss {width_loss:g}" if width_loss else "")
+    with threshold_width_loss(width_loss, width_loss_min_px):
+        model.train(**args)
     w = stage / "weights"
     return TrainResult(stage, w / "best.pt", w / "last.pt", False)
 
