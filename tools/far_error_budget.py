@@ -9,7 +9,9 @@ detector once and reports, for the chosen envelope:
 - the survival if one part of the predicted corners were replaced by the truth — per threshold edge (TL–TR far,
   BL–BR near) its width, its angle, its midpoint — everything else as predicted;
 - per airport: survival and the mean relative width error of each threshold edge (systematic errors show up as
-  a bias of one sign across an airport's approaches);
+  a bias of one sign across an airport's approaches), with what the generator painted there: the luminance
+  contrast of the runway surface against the grass around it, and the paved shoulders' width and contrast
+  against the runway (:func:`surfaces`);
 - for every envelope, the near threshold's width error (median over correct detections) in image pixels, in
   pass-2 crop pixels (window from the *true* corner box, as ``TwoStageDetector`` would cut it around exact
   pass-1 corners) and relative to the width.
@@ -68,6 +70,32 @@ def _bias(log_ratios: list[float]) -> str:
     return f"{100 * np.mean(log_ratios):+.1f} ± {100 * np.std(log_ratios):.1f} %" if log_ratios else "—"
 
 
+def _lum(rgb) -> float:
+    return float(0.299 * rgb[0] + 0.587 * rgb[1] + 0.114 * rgb[2])
+
+
+def surfaces(seed: int, n_airports: int | None = None) -> dict[str, dict]:
+    """Per airport of ``generate(seed=seed)``'s pool: runway − grass luminance contrast, shoulder width (m, 0 if
+    none) and shoulder − runway contrast, read off the painted layout (:func:`vbl_robust.scenes.layout.airport_layout`:
+    row 0 is the grass; the target runway's surface is the rectangle [0, L] × [−W/2, W/2], its shoulders the one
+    [0, L] × [−W/2 − s, W/2 + s] painted before it)."""
+    from vbl_robust.scenes.airports import DEFAULT_POOL, make_airports
+    from vbl_robust.scenes.layout import airport_layout
+
+    out = {}
+    for a in make_airports(n_airports or DEFAULT_POOL, seed):
+        rows = airport_layout(a)
+        h, L = a.width_m / 2, a.length_m
+        spans = [(i, r) for i, r in enumerate(rows) if abs(r[0]) < 1e-9 and abs(r[1] - L) < 1e-6
+                 and abs(r[4] + r[5]) < 1e-6 and r[2] == r[3] == r[6] == r[7] == 0.0]
+        i_surf, surf = next((i, r) for i, r in spans if abs(r[5] - h) < 1e-6)
+        sh = [r for i, r in spans if i < i_surf and 2.9 < r[5] - h < 10.1]
+        out[a.icao] = {"contrast": _lum(surf[8:11]) - _lum(rows[0][8:11]),
+                       "shoulder_m": float(sh[-1][5] - h) if sh else 0.0,
+                       "shoulder_contrast": _lum(sh[-1][8:11]) - _lum(surf[8:11]) if sh else float("nan")}
+    return out
+
+
 def main() -> None:
     from detector_protocol import VALIDATION_SEED, detector
 
@@ -123,12 +151,16 @@ def main() -> None:
     print("\n| corners | survival |\n|---|---|")
     for name, k in alive.items():
         print(f"| {name} | {100 * k / n:.1f} % |")
-    print("\n| airport | runway length (m) | approaches | survival | far-edge width error (mean ± sd) "
-          "| near-edge width error (mean ± sd) |")
-    print("|---|---|---|---|---|---|")
+    paint = surfaces(args.seed)
+    print("\n| airport | runway length (m) | runway − grass contrast | shoulders (m, contrast) | approaches | survival "
+          "| far-edge width error (mean ± sd) | near-edge width error (mean ± sd) |")
+    print("|---|---|---|---|---|---|---|---|")
     for name in sorted(per_airport):
         m, ok, fw, nw, length = per_airport[name]
-        print(f"| {name} | {length:.0f} | {m} | {100 * ok / m:.1f} % | {_bias(fw)} | {_bias(nw)} |")
+        c = paint.get(name, {"contrast": float("nan"), "shoulder_m": 0.0})
+        shoulder = f"{c['shoulder_m']:.1f}, {c['shoulder_contrast']:+.2f}" if c["shoulder_m"] else "none"
+        print(f"| {name} | {length:.0f} | {c['contrast']:+.2f} | {shoulder} | {m} | {100 * ok / m:.1f} % | "
+              f"{_bias(fw)} | {_bias(nw)} |")
     min_side = args.min_side if args.min_side is not None else 64.0
     print("\n| envelope | near-edge width error: image px | crop px | relative | near edge in the crop (px) |")
     print("|---|---|---|---|---|")

@@ -1,0 +1,38 @@
+"""``tools/contrast_counterfactual.py`` recolours only the grass, to the asked runway − grass contrast."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _tool():
+    sys.path.insert(0, str(ROOT / "tools"))
+    spec = importlib.util.spec_from_file_location("contrast_counterfactual", ROOT / "tools" / "contrast_counterfactual.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_only_the_grass_changes_and_the_runway_stands_off_it():
+    from vbl_robust.scenes.airports import make_airports
+    from vbl_robust.scenes.layout import airport_layout
+
+    tool = _tool()
+    fn = tool.recoloured_layout(airport_layout, 0.25)
+    before = tool.surfaces(3, n_airports=20)
+    exact = 0
+    for a in make_airports(20, 3):
+        old, new = airport_layout(a), fn(a)
+        assert np.array_equal(old[1:], new[1:]) and np.array_equal(old[0][:8], new[0][:8])
+        grass_before, grass_after = tool._lum(old[0][8:11]), tool._lum(new[0][8:11])
+        runway = grass_before + before[a.icao]["contrast"]
+        if np.all((new[0][8:11] > 0.0) & (new[0][8:11] < 1.0)):  # no channel clipped: the step is exact
+            assert abs(abs(runway - grass_after) - 0.25) < 1e-9
+            exact += 1
+    assert exact >= 15
