@@ -6,9 +6,14 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
+import sys
+from pathlib import Path
 
 import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
 
 # Never let ultralytics or any library reach the network from the tests.
 os.environ.setdefault("YOLO_OFFLINE", "1")
@@ -23,3 +28,18 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def full(request: pytest.FixtureRequest) -> bool:
     """True under ``--full``: slow tests use their full-size parameters."""
     return bool(request.config.getoption("--full"))
+
+
+@pytest.fixture(scope="session")
+def script():
+    """Load a repository script (``benchmarks/…`` or ``tools/…``) as a module: ``script("tools/x.py")``. Its own
+    folder goes on ``sys.path`` first, as when it runs."""
+    def load(rel: str):
+        path = ROOT / rel
+        if str(path.parent) not in sys.path:
+            sys.path.insert(0, str(path.parent))
+        spec = importlib.util.spec_from_file_location(path.stem, path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod
+    return load

@@ -16,27 +16,17 @@ configuration are reported together.
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
 ERROR_REL = 1e-3
 THETA_ABS = 1e-6
 
 
-def _tool():
-    spec = importlib.util.spec_from_file_location("behaviour_rows", ROOT / "tools" / "behaviour_rows.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 @pytest.mark.parametrize("config", ["twostage", "single", "oracle"])
-def test_audit_rows_unchanged(config):
-    tool = _tool()
+def test_audit_rows_unchanged(config, script):
+    tool = script("tools/behaviour_rows.py")
     golden = json.loads(tool.GOLDEN.read_text())[config]
     rows = tool.audit_rows(config)
     assert [(r["sample_id"], r["method"]) for r in rows] == [(g["sample_id"], g["method"]) for g in golden]

@@ -13,7 +13,6 @@ edge is visible and falls back on other cues (the markings) where it is faint.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -24,7 +23,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 
-from far_error_budget import _bias, _lum, edge_parts, surfaces  # noqa: E402
+from far_error_budget import _bias, _lum, edge_parts, protocol_args, surfaces  # noqa: E402
 
 
 def recoloured_layout(layout_fn, contrast: float):
@@ -71,13 +70,9 @@ def per_airport(samples, r) -> dict[str, list]:
 
 
 def main() -> None:
-    from detector_protocol import VALIDATION_SEED, detector
+    from detector_protocol import detector
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--model", default=None)
-    ap.add_argument("--min-side", type=float, default=None)
-    ap.add_argument("--seed", type=int, default=VALIDATION_SEED)
-    ap.add_argument("--n", type=int, default=510)
+    ap = protocol_args(__doc__)
     ap.add_argument("--contrast", type=float, default=0.25, help="runway − grass luminance step of the re-rendering")
     args = ap.parse_args()
     from vbl_robust.detect.offline import setup_offline

@@ -96,15 +96,23 @@ def surfaces(seed: int, n_airports: int | None = None) -> dict[str, dict]:
     return out
 
 
-def main() -> None:
-    from detector_protocol import VALIDATION_SEED, detector
+def protocol_args(doc: str) -> argparse.ArgumentParser:
+    """The arguments these diagnostics share: ``--model``, ``--min-side``, ``--seed`` (a protocol seed), ``--n``."""
+    from detector_protocol import VALIDATION_SEED
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--model", default=None)
-    ap.add_argument("--min-side", type=float, default=None)
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--model", default=None, help="a trusted .pt (default: the shipped model)")
+    ap.add_argument("--min-side", type=float, default=None, help="crop window of --model (its training crops')")
     ap.add_argument("--seed", type=int, default=VALIDATION_SEED)
-    ap.add_argument("--envelope", default="far")
     ap.add_argument("--n", type=int, default=510)
+    return ap
+
+
+def main() -> None:
+    from detector_protocol import detector
+
+    ap = protocol_args(__doc__)
+    ap.add_argument("--envelope", default="far")
     ap.add_argument("--crop-px", type=int, default=320, help="pass-2 input size")
     args = ap.parse_args()
     from bench_detector import held_out

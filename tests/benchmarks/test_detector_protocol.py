@@ -2,19 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import pytest
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _protocol():
-    spec = importlib.util.spec_from_file_location("detector_protocol", ROOT / "benchmarks" / "detector_protocol.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def _rows(n_far, far, n_all, all_, det=1.0):
@@ -24,24 +12,24 @@ def _rows(n_far, far, n_all, all_, det=1.0):
             {"envelope": "all", "n": n_all, "survival_ippe_lm": all_, "detection_rate": det}]
 
 
-def test_pooled_row_weights_seeds_by_their_approaches():
-    p = _protocol()
+def test_pooled_row_weights_seeds_by_their_approaches(script):
+    p = script("benchmarks/detector_protocol.py")
     text = p.pooled({1: _rows(100, 0.80, 300, 0.90), 2: _rows(300, 0.60, 100, 0.50, det=0.5)})
     # all: (0.90·300 + 0.50·100) / 400 = 80.0 %; far: (0.80·100 + 0.60·300) / 400 = 65.0 %; detection 87.5 %
     assert "400 approaches" in text and "survival 80.0 %" in text and "far 65.0 %" in text
     assert "detection 87.5 %" in text
 
 
-def test_seed_sets_are_disjoint_and_fixed():
-    p = _protocol()
+def test_seed_sets_are_disjoint_and_fixed(script):
+    p = script("benchmarks/detector_protocol.py")
     assert p.VALIDATION_SEED == p.VALIDATION_SEEDS[0] == 20_261_122
     assert not set(p.VALIDATION_SEEDS) & set(p.TEST_SEEDS)
     assert len(p.TEST_SEEDS) >= 3 and len(set(p.VALIDATION_SEEDS)) == len(p.VALIDATION_SEEDS) == 2
 
 
 @pytest.mark.parametrize("bad", [[777_001], [5]])
-def test_seeds_outside_the_split_are_refused(bad, monkeypatch, capsys):
-    p = _protocol()
+def test_seeds_outside_the_split_are_refused(script, bad, monkeypatch, capsys):
+    p = script("benchmarks/detector_protocol.py")
     monkeypatch.setattr("sys.argv", ["detector_protocol.py", "--split", "validation", "--seeds", *map(str, bad)])
     monkeypatch.setattr(p, "detector", lambda model, **w: None)
     with pytest.raises(SystemExit, match="not in the validation split"):

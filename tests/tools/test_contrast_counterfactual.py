@@ -2,28 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
 
-
-def _tool():
-    sys.path.insert(0, str(ROOT / "tools"))
-    spec = importlib.util.spec_from_file_location("contrast_counterfactual", ROOT / "tools" / "contrast_counterfactual.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def test_only_the_grass_changes_and_the_runway_stands_off_it():
+def test_only_the_grass_changes_and_the_runway_stands_off_it(script):
     from vbl_robust.scenes.airports import make_airports
     from vbl_robust.scenes.layout import airport_layout
 
-    tool = _tool()
+    tool = script("tools/contrast_counterfactual.py")
     fn = tool.recoloured_layout(airport_layout, 0.25)
     before = tool.surfaces(3, n_airports=20)
     exact = 0

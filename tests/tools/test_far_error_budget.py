@@ -2,25 +2,13 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
 
-
-def _tool():
-    spec = importlib.util.spec_from_file_location("far_error_budget", ROOT / "tools" / "far_error_budget.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def test_surfaces_find_every_runway_and_the_generators_shoulders():
+def test_surfaces_find_every_runway_and_the_generators_shoulders(script):
     from vbl_robust.scenes.airports import make_airports
 
-    out = _tool().surfaces(5, n_airports=200)
+    out = script("tools/far_error_budget.py").surfaces(5, n_airports=200)
     assert sorted(out) == sorted(a.icao for a in make_airports(200, 5))
     contrast = np.array([v["contrast"] for v in out.values()])
     shoulder = np.array([v["shoulder_m"] for v in out.values()])
