@@ -1,14 +1,17 @@
-"""Does the runway's contrast against the grass decide the far width error? A counterfactual re-rendering.
+"""What in the scene decides the far width error? Counterfactual re-renderings of the runway's surroundings.
 
-For the far approaches of one protocol seed it renders every approach twice — as generated, and with only the
-airport's grass recoloured so that the runway surface stands ``--contrast`` in luminance off it (brighter grass
-around a dark runway, darker around a light one; same pose, lighting, textures, markings, noise) — runs the
-two-stage detector on both and prints, per airport: the runway − grass contrast before and after, the near- and
-far-threshold width error (mean over PCK-correct detections) and the survival. If the width bias of the
-low-contrast airports goes away when only their contrast rises, the detector reads the runway's edge where the
-edge is visible and falls back on other cues (the markings) where it is faint.
+For the far approaches of one protocol seed it renders every approach twice — as generated, and with one change
+of the airport's painted layout (same pose, lighting, textures, markings, noise) — runs the two-stage detector on
+both and prints, per airport: the runway − grass contrast, the shoulders, the near- and far-threshold width error
+(mean over PCK-correct detections) and the survival, before and after. Changes (``--change``):
 
-    python tools/contrast_counterfactual.py [--model PT [--min-side PX]] [--seed S] [--contrast 0.25]
+- ``grass`` — only the grass recoloured so that the runway surface stands ``--contrast`` in luminance off it
+  (brighter grass around a dark runway, darker around a light one): does a faint runway edge cause the bias?
+- ``no-shoulders`` — the paved shoulders removed (grass where they were): does the detector, unable to tell the
+  runway's edge from the shoulder's, hedge between the two?
+
+    python tools/contrast_counterfactual.py [--model PT [--min-side PX]] [--seed S] [--change grass|no-shoulders]
+                                            [--contrast 0.25]
 """
 
 from __future__ import annotations
@@ -40,13 +43,26 @@ def recoloured_layout(layout_fn, contrast: float):
     return layout
 
 
-def run(det, samples, seed: int, contrast: float | None):
+def shoulderless_layout(layout_fn):
+    """``layout_fn(airport)`` without the target runway's shoulders (the rows :func:`surfaces` reads as such)."""
+    def layout(airport):
+        rows = np.asarray(layout_fn(airport))
+        h, L = airport.width_m / 2, airport.length_m
+        keep = [not (abs(r[0]) < 1e-9 and abs(r[1] - L) < 1e-6 and abs(r[4] + r[5]) < 1e-6 and 2.9 < r[5] - h < 10.1
+                     and r[2] == r[3] == r[6] == r[7] == 0.0) for r in rows]
+        return rows[np.array(keep)]
+    return layout
+
+
+def run(det, samples, change: str | None, contrast: float):
     from vbl_robust.detect.evaluate import evaluate_detector
     from vbl_robust.scenes import generate as gen
 
     before = gen._layout
-    if contrast is not None:
+    if change == "grass":
         gen._layout = recoloured_layout(gen.airport_layout, contrast)
+    elif change == "no-shoulders":
+        gen._layout = shoulderless_layout(gen.airport_layout)
     try:
         for s in samples:  # render now, under the chosen layout (pixels are lazy)
             _ = s.image
@@ -73,7 +89,8 @@ def main() -> None:
     from detector_protocol import detector
 
     ap = protocol_args(__doc__)
-    ap.add_argument("--contrast", type=float, default=0.25, help="runway − grass luminance step of the re-rendering")
+    ap.add_argument("--change", choices=("grass", "no-shoulders"), default="grass")
+    ap.add_argument("--contrast", type=float, default=0.25, help="runway − grass luminance step of --change grass")
     args = ap.parse_args()
     from vbl_robust.detect.offline import setup_offline
     from vbl_robust.scenes import generate
@@ -83,18 +100,19 @@ def main() -> None:
     det = detector(args.model, **({"min_side": args.min_side} if args.min_side is not None else {}))
     paint = surfaces(args.seed)
     res = {}
-    for name, c in (("as generated", None), (f"contrast {args.contrast:g}", args.contrast)):
+    after = f"grass at contrast {args.contrast:g}" if args.change == "grass" else "no shoulders"
+    for name, change in (("as generated", None), (after, args.change)):
         samples = [s for s in generate(args.n, seed=args.seed) if s.meta["envelope"] == "far"]
-        r = run(det, samples, args.seed, c)
+        r = run(det, samples, change, args.contrast)
         res[name] = per_airport(samples, r)
         n_ok = sum(v[1] for v in res[name].values())
         print(f"{name}: far survival {100 * n_ok / len(samples):.1f} % ({len(samples)} approaches)")
     (a_name, a), (b_name, b) = res.items()
-    print(f"\n| airport | runway − grass contrast as generated (after: ±{args.contrast:g}) | near-edge width error: {a_name} | {b_name} | far-edge: {a_name} "
-          f"| {b_name} | survival: {a_name} | {b_name} |\n|---|---|---|---|---|---|---|---|")
+    print(f"\n| airport | runway − grass contrast | shoulders (m) | near-edge width error: {a_name} | {b_name} "
+          f"| far-edge: {a_name} | {b_name} | survival: {a_name} | {b_name} |\n|---|---|---|---|---|---|---|---|---|")
     for k in sorted(a):
-        c = paint[k]["contrast"]
-        print(f"| {k} | {c:+.2f} | {_bias(a[k][2])} | {_bias(b[k][2])} | "
+        c, sw = paint[k]["contrast"], paint[k]["shoulder_m"]
+        print(f"| {k} | {c:+.2f} | {f'{sw:.1f}' if sw else 'none'} | {_bias(a[k][2])} | {_bias(b[k][2])} | "
               f"{_bias(a[k][3])} | {_bias(b[k][3])} | {100 * a[k][1] / a[k][0]:.0f} % | {100 * b[k][1] / b[k][0]:.0f} % |")
 
 

@@ -22,3 +22,20 @@ def test_only_the_grass_changes_and_the_runway_stands_off_it(script):
             assert abs(abs(runway - grass_after) - 0.25) < 1e-9
             exact += 1
     assert exact >= 15
+
+
+def test_no_shoulders_removes_exactly_the_shoulder_rows(script):
+    from vbl_robust.scenes.airports import make_airports
+    from vbl_robust.scenes.layout import airport_layout
+
+    tool = script("tools/contrast_counterfactual.py")
+    fn = tool.shoulderless_layout(airport_layout)
+    paint = tool.surfaces(4, n_airports=30)
+    with_shoulders = 0
+    for a in make_airports(30, 4):
+        old, new = airport_layout(a), fn(a)
+        has = paint[a.icao]["shoulder_m"] > 0
+        with_shoulders += has
+        assert len(old) - len(new) == int(has)
+        assert all(any(np.array_equal(r, q) for q in old) for r in new)  # nothing else altered
+    assert 5 <= with_shoulders <= 25
