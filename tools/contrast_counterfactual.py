@@ -55,8 +55,11 @@ def shoulderless_layout(layout_fn):
 
 
 def run(det, samples, change: str | None, contrast: float):
+    import importlib
+
     from vbl_robust.detect.evaluate import evaluate_detector
-    from vbl_robust.scenes import generate as gen
+
+    gen = importlib.import_module("vbl_robust.scenes.generate")  # the module (the package exports the function)
 
     before = gen._layout
     if change == "grass":

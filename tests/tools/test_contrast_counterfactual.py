@@ -39,3 +39,26 @@ def test_no_shoulders_removes_exactly_the_shoulder_rows(script):
         assert len(old) - len(new) == int(has)
         assert all(any(np.array_equal(r, q) for q in old) for r in new)  # nothing else altered
     assert 5 <= with_shoulders <= 25
+
+
+def test_run_renders_under_the_changed_layout_and_restores_it(script, monkeypatch):
+    import importlib
+
+    import vbl_robust.detect.evaluate as ev
+
+    tool = script("tools/contrast_counterfactual.py")
+    gen = importlib.import_module("vbl_robust.scenes.generate")
+    original, seen = gen._layout, []
+
+    class Lazy:
+        @property
+        def image(self):
+            seen.append(gen._layout)
+            return None
+
+    monkeypatch.setattr(ev, "evaluate_detector", lambda det, samples: ("evaluated", len(samples)))
+    assert tool.run(None, [Lazy(), Lazy()], "no-shoulders", 0.25) == ("evaluated", 2)
+    assert len(seen) == 2 and all(f is not original for f in seen)
+    assert gen._layout is original
+    tool.run(None, [Lazy()], None, 0.25)
+    assert seen[-1] is original
