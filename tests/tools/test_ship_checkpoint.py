@@ -1,0 +1,23 @@
+"""``tools/ship_checkpoint.py``: default.json's note, gate and open goals from a protocol JSON."""
+
+from __future__ import annotations
+
+
+def _rows(det, surv, far, err, n=510):
+    return [{"envelope": "far", "n": n // 3, "survival_ippe_lm": far, "detection_rate": det,
+             "pos_err_pct_ippe_lm": err},
+            {"envelope": "all", "n": n, "survival_ippe_lm": surv, "detection_rate": det, "pos_err_pct_ippe_lm": err}]
+
+
+def test_validation_pools_its_seeds_and_test_misses_become_open_goals(script):
+    tool = script("tools/ship_checkpoint.py")
+    p = {"validation": {"1": _rows(0.99, 0.93, 0.87, 7.0), "2": _rows(0.97, 0.86, 0.70, 7.5, n=1020)},
+         "test": {"7": _rows(0.99, 0.88, 0.64, 7.4), "8": _rows(0.995, 0.92, 0.80, 6.9)}}
+    info = tool.info_from_protocol(p, version=8, epochs=46)
+    # pooled: survival (0.93·510 + 0.86·1020) / 1530 = 88.3 % < 90 %: the validation gate fails
+    assert info["validated"] is False
+    assert "seeds 1, 2, 1530 approaches" in info["note"] and "survival 88.3 %" in info["note"]
+    assert any("below the 90 % gate on seed 7 (far approaches 64.0 %)" in g for g in info["open_goals"])
+    assert any("goal 5 %" in g for g in info["open_goals"])
+    p["validation"]["2"] = _rows(0.98, 0.92, 0.80, 7.0)
+    assert tool.info_from_protocol(p, version=8, epochs=46)["validated"] is True
