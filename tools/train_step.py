@@ -24,7 +24,7 @@
   gain (``pose`` 36 → 108). Why: ultralytics' keypoint loss is an OKS divided by the box area, so it tolerates
   errors in proportion to the runway's size in the view — and the near-threshold width error is about constant
   *relative* to it (5.8–8.2 % at every range, ``tools/far_error_budget.py``).
-- ``p`` (session 11): as ``l`` (same samples and crops: ``l`` is its control; ``o`` the control of its 2-epoch
+- ``p`` (session 11 → v8, epoch 2): as ``l`` (same samples and crops: ``l`` is its control; ``o`` the control of its 2-epoch
   schedule) plus the threshold-width loss term of :mod:`vbl_robust.detect.losses` with gain 0.5 (L1 on the log
   ratio of predicted to true threshold-edge widths, edges ≥ 8 px in the view). Why: the widths decide far survival
   (above), ultralytics' per-corner OKS does not see them, and raising its gain (``o``) helped little. At gain 0.5
