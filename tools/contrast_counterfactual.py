@@ -26,16 +26,14 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 
-from far_error_budget import _bias, _lum, edge_parts, protocol_args, surfaces  # noqa: E402
+from far_error_budget import _bias, _lum, edge_parts, protocol_args, runway_rows, surfaces  # noqa: E402
 
 
 def recoloured_layout(layout_fn, contrast: float):
     """``layout_fn(airport)`` with row 0 (the grass) rescaled to luminance runway ± ``contrast``."""
     def layout(airport):
         rows = np.array(layout_fn(airport), copy=True)
-        h, L = airport.width_m / 2, airport.length_m
-        surf = next(r for r in rows if abs(r[0]) < 1e-9 and abs(r[1] - L) < 1e-6 and abs(r[4] + h) < 1e-6
-                    and abs(r[5] - h) < 1e-6)
+        surf = rows[runway_rows(rows, airport)[0]]
         lr, lg = _lum(surf[8:11]), _lum(rows[0][8:11])
         target = lr + contrast if lr + contrast <= 0.95 else lr - contrast
         rows[0][8:11] = np.clip(rows[0][8:11] * (target / max(lg, 1e-3)), 0.0, 1.0)
@@ -44,13 +42,10 @@ def recoloured_layout(layout_fn, contrast: float):
 
 
 def shoulderless_layout(layout_fn):
-    """``layout_fn(airport)`` without the target runway's shoulders (the rows :func:`surfaces` reads as such)."""
+    """``layout_fn(airport)`` without the target runway's shoulders (:func:`runway_rows`)."""
     def layout(airport):
         rows = np.asarray(layout_fn(airport))
-        h, L = airport.width_m / 2, airport.length_m
-        keep = [not (abs(r[0]) < 1e-9 and abs(r[1] - L) < 1e-6 and abs(r[4] + r[5]) < 1e-6 and 2.9 < r[5] - h < 10.1
-                     and r[2] == r[3] == r[6] == r[7] == 0.0) for r in rows]
-        return rows[np.array(keep)]
+        return np.delete(rows, runway_rows(rows, airport)[1], axis=0)
     return layout
 
 

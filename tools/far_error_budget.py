@@ -74,25 +74,31 @@ def _lum(rgb) -> float:
     return float(0.299 * rgb[0] + 0.587 * rgb[1] + 0.114 * rgb[2])
 
 
+def runway_rows(rows: np.ndarray, airport) -> tuple[int, list[int]]:
+    """Indices, in a painted layout (:func:`vbl_robust.scenes.layout.airport_layout`), of the target runway's surface
+    (the rectangle [0, L] × [−W/2, W/2]) and of its shoulders (the rectangles [0, L] × [−W/2 − s, W/2 + s],
+    3 ≤ s ≤ 10 m, painted before it)."""
+    h, L = airport.width_m / 2, airport.length_m
+    spans = [i for i, r in enumerate(rows) if abs(r[0]) < 1e-9 and abs(r[1] - L) < 1e-6
+             and abs(r[4] + r[5]) < 1e-6 and r[2] == r[3] == r[6] == r[7] == 0.0]
+    i_surf = next(i for i in spans if abs(rows[i][5] - h) < 1e-6)
+    return i_surf, [i for i in spans if i < i_surf and 2.9 < rows[i][5] - h < 10.1]
+
+
 def surfaces(seed: int, n_airports: int | None = None) -> dict[str, dict]:
-    """Per airport of ``generate(seed=seed)``'s pool: runway − grass luminance contrast, shoulder width (m, 0 if
-    none) and shoulder − runway contrast, read off the painted layout (:func:`vbl_robust.scenes.layout.airport_layout`:
-    row 0 is the grass; the target runway's surface is the rectangle [0, L] × [−W/2, W/2], its shoulders the one
-    [0, L] × [−W/2 − s, W/2 + s] painted before it)."""
+    """Per airport of ``generate(seed=seed)``'s pool: runway − grass luminance contrast (row 0 of the layout is the
+    grass), shoulder width (m, 0 if none) and shoulder − runway contrast (:func:`runway_rows`)."""
     from vbl_robust.scenes.airports import DEFAULT_POOL, make_airports
     from vbl_robust.scenes.layout import airport_layout
 
     out = {}
     for a in make_airports(n_airports or DEFAULT_POOL, seed):
         rows = airport_layout(a)
-        h, L = a.width_m / 2, a.length_m
-        spans = [(i, r) for i, r in enumerate(rows) if abs(r[0]) < 1e-9 and abs(r[1] - L) < 1e-6
-                 and abs(r[4] + r[5]) < 1e-6 and r[2] == r[3] == r[6] == r[7] == 0.0]
-        i_surf, surf = next((i, r) for i, r in spans if abs(r[5] - h) < 1e-6)
-        sh = [r for i, r in spans if i < i_surf and 2.9 < r[5] - h < 10.1]
+        i_surf, i_sh = runway_rows(rows, a)
+        surf, sh = rows[i_surf], (rows[i_sh[-1]] if i_sh else None)
         out[a.icao] = {"contrast": _lum(surf[8:11]) - _lum(rows[0][8:11]),
-                       "shoulder_m": float(sh[-1][5] - h) if sh else 0.0,
-                       "shoulder_contrast": _lum(sh[-1][8:11]) - _lum(surf[8:11]) if sh else float("nan")}
+                       "shoulder_m": float(sh[5] - a.width_m / 2) if sh is not None else 0.0,
+                       "shoulder_contrast": _lum(sh[8:11]) - _lum(surf[8:11]) if sh is not None else float("nan")}
     return out
 
 
