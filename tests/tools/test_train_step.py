@@ -1,0 +1,34 @@
+"""``tools/train_step.py``: every step's arguments are ``train()``'s or ultralytics' (its ``**overrides``), and a chained
+step finds (or names) its start."""
+
+from __future__ import annotations
+
+import inspect
+
+import pytest
+
+from vbl_robust.detect.shipped import DEFAULT_MODEL
+from vbl_robust.detect.train import train
+
+
+def test_every_step_passes_only_train_or_ultralytics_arguments(script):
+    tool = script("tools/train_step.py")
+    from ultralytics.cfg import DEFAULT_CFG_DICT
+
+    accepted = (set(inspect.signature(train).parameters) - {"overrides"}) | set(DEFAULT_CFG_DICT)
+    for step, (epochs, kwargs) in tool.STEPS.items():
+        assert epochs >= 1, step
+        assert not set({**tool.COMMON, **kwargs}) - accepted, step
+    assert set(tool.INIT) <= set(tool.STEPS) and all(src in tool.STEPS for src, _ in tool.INIT.values())
+
+
+def test_a_chained_step_starts_from_its_source_epoch_or_says_which_to_run(script, tmp_path, monkeypatch):
+    tool = script("tools/train_step.py")
+    monkeypatch.chdir(tmp_path)
+    assert tool.init_weights("q") == DEFAULT_MODEL
+    with pytest.raises(SystemExit, match=r"step_q/stage00/weights/epoch0\.pt .*run step q first"):
+        tool.init_weights("r")
+    ckpt = tmp_path / "train_runs/step_q/stage00/weights/epoch0.pt"
+    ckpt.parent.mkdir(parents=True)
+    ckpt.write_bytes(b"")
+    assert tool.init_weights("r").resolve() == ckpt.resolve()
