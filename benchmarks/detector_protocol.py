@@ -17,6 +17,7 @@ survival ≥ 95 % (far ≥ 90 %), median error ≤ 5 % of slant.
 
     python benchmarks/detector_protocol.py [--model PATH.pt] [--split validation|test|all] [--n 510]
                                            [--seeds S ...] [--json OUT.json] [--min-side PX] [--margin M]
+                                           [--second PASS2.pt]
 
 Rendered pixels are cached in ``.cache/bench_detector/seed<S>`` (shared with ``bench_detector.py``).
 """
@@ -37,17 +38,22 @@ GATES = {"detection_rate": 0.97, "survival_ippe_lm": 0.90}
 GOALS = {"detection_rate": 0.98, "survival_ippe_lm": 0.95, "far_survival_ippe_lm": 0.90, "pos_err_pct_ippe_lm": 5.0}
 
 
-def detector(model: str | None, **window):
+def detector(model: str | None, second: str | None = None, **window):
     """The shipped two-stage detector, or ``model`` (a trusted .pt) as one with crop ``window`` (``min_side``,
-    ``margin``: what its training crops used)."""
-    from vbl_robust.detect.shipped import default_detector, with_design
+    ``margin``: what its training crops used); ``second``: a trusted .pt for pass 2 (a crop network of its own,
+    ``train(full_views=False)``), pass 1 staying ``model`` (or the shipped weights)."""
+    from vbl_robust.detect.shipped import DEFAULT_MODEL, default_detector, with_design
+    from vbl_robust.detect.twostage import TwoStageDetector
     from vbl_robust.detect.ultralytics import UltralyticsDetector
 
-    if model is None:
+    if model is None and second is None:
         if window:
             raise ValueError("detector_protocol: --min-side/--margin apply to --model, not to the shipped model")
         return default_detector(design="twostage")
-    return with_design(UltralyticsDetector(model, trust=True, imgsz=320), "twostage", **window)
+    first = UltralyticsDetector(model or DEFAULT_MODEL, trust=True, imgsz=320)
+    if second is None:
+        return with_design(first, "twostage", **window)
+    return TwoStageDetector(first, UltralyticsDetector(second, trust=True, imgsz=320), **window)
 
 
 def evaluate(det, seed: int, n: int) -> list[dict]:
@@ -112,13 +118,14 @@ def main() -> None:
     ap.add_argument("--json", default=None)
     ap.add_argument("--min-side", type=float, default=None, help="crop window of --model (its training crops')")
     ap.add_argument("--margin", type=float, default=None, help="crop margin of --model (its training crops')")
+    ap.add_argument("--second", default=None, help="a trusted .pt for pass 2 (crop network; pass 1: --model)")
     args = ap.parse_args()
     from vbl_robust.detect.offline import setup_offline
 
     setup_offline()
     torch.set_num_threads(int(os.environ.get("VBL_BENCH_THREADS", "1")))
     window = {k: v for k, v in (("min_side", args.min_side), ("margin", args.margin)) if v is not None}
-    det = detector(args.model, **window)
+    det = detector(args.model, args.second, **window)
     seeds = {"validation": VALIDATION_SEEDS, "test": TEST_SEEDS,
              "all": (*VALIDATION_SEEDS, *TEST_SEEDS)}[args.split]
     if args.seeds:
@@ -134,7 +141,7 @@ def main() -> None:
             continue
         res = {s: evaluate(det, s, args.n) for s in group}
         out[split] = {str(s): rows for s, rows in res.items()}
-        print(f"### {split} ({args.model or 'shipped model'}, {det!r}, {args.n} approaches per seed)\n")
+        print(f"### {split} ({args.model or 'shipped model'}{f' + pass 2 {args.second}' if args.second else ''}, {det!r}, {args.n} approaches per seed)\n")
         print(table(res) + "\n")
         print(pooled(res) + "\n")
         if split == "test":
@@ -142,7 +149,7 @@ def main() -> None:
     print(f"({time.perf_counter() - t0:.0f} s, {torch.get_num_threads()} torch thread(s))")
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"model": args.model or "shipped", "n": args.n, **out}, f, indent=1)
+            json.dump({"model": args.model or "shipped", "second": args.second, "n": args.n, **out}, f, indent=1)
 
 
 if __name__ == "__main__":

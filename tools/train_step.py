@@ -42,6 +42,12 @@
 - ``s`` (session 13): from v9 (step R epoch 1), R's recipe on new data again (seed 12). Why: each fresh pool of
   2000 airports has raised pooled validation survival at its first epoch (P → Q: 92.3 → 93.6 %, Q → R: 93.6 →
   93.8 %), by less each time; a third pool tells whether the trend has run out.
+- ``t`` (session 13): a **pass-2 network of its own**: from v9, trained on the *crops only* (``full_views=False``) of
+  step S's samples (seed 12; its rendered dataset is reused when ``train_runs/step_t/<dataset>`` links to it),
+  threshold-width loss 0.5, lr 1e-4 → 1e-5 cosine over 3 epochs; evaluated as pass 2 behind the shipped pass 1
+  (``detector_protocol.py --second``). Why: the one network serves both passes, and it underfits the corners'
+  shape on its own training crops (edge-tilt slope 0.31, near-edge width error 8.1 % there, as held out): a
+  network whose whole capacity goes to the crop costs nothing at inference (two n-size passes as before).
 
 Rerun the same command after an interruption (``resume=True`` continues ``last.pt``); one torch thread by default
 so that other work can run beside it (``--threads 2`` when nothing else runs). Every epoch is saved (``save_period=1``) for the validation protocol.
@@ -83,6 +89,9 @@ STEPS = {
     "r": (2, dict(seed=11, n_train=3000, lr0=1e-4, lrf=0.1, cos_lr=True, appearance={}, width_loss=0.5,
                   generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
     "s": (2, dict(seed=12, n_train=3000, lr0=1e-4, lrf=0.1, cos_lr=True, appearance={}, width_loss=0.5,
+                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+    "t": (3, dict(seed=12, n_train=3000, lr0=1e-4, lrf=0.1, cos_lr=True, appearance={}, width_loss=0.5,
+                  full_views=False,
                   generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
     "m": (2, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, degrees=30.0, pose=72.0,
                   generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),

@@ -31,6 +31,20 @@ def test_seed_sets_are_disjoint_and_fixed(script):
 def test_seeds_outside_the_split_are_refused(script, bad, monkeypatch, capsys):
     p = script("benchmarks/detector_protocol.py")
     monkeypatch.setattr("sys.argv", ["detector_protocol.py", "--split", "validation", "--seeds", *map(str, bad)])
-    monkeypatch.setattr(p, "detector", lambda model, **w: None)
+    monkeypatch.setattr(p, "detector", lambda model, second=None, **w: None)
     with pytest.raises(SystemExit, match="not in the validation split"):
         p.main()
+
+
+def test_second_names_a_pass_2_network_of_its_own(script):
+    """``--second``: pass 1 is ``--model`` (default: the shipped weights), pass 2 the given network; without it
+    both passes are one network."""
+    from vbl_robust.detect.shipped import DEFAULT_MODEL
+    from vbl_robust.detect.twostage import TwoStageDetector
+
+    p = script("benchmarks/detector_protocol.py")
+    one = p.detector(str(DEFAULT_MODEL), min_side=40.0)
+    assert isinstance(one, TwoStageDetector) and one.second is one.first and one.min_side == 40.0
+    two = p.detector(None, str(DEFAULT_MODEL))
+    assert isinstance(two, TwoStageDetector) and two.second is not two.first and "second=" in repr(two)
+    assert two.first.path == two.second.path == DEFAULT_MODEL

@@ -218,3 +218,42 @@ def test_crop_window_reaches_the_dataset_and_names_it(tmp_path, monkeypatch):
     (n0, j0), (n1, j1), (n2, j2) = seen
     assert n0 == n1 == "dataset_32px_1crops_box2" and j0 is None and j1 is None
     assert n2.startswith("dataset_32px_1crops_box2_crop") and j2 == tr.CropJitter(min_side=40.0)
+
+
+def test_crops_only_training_lists_only_the_crop_views(tmp_path, monkeypatch):
+    """``full_views=False`` trains a pass-2 network on the crops alone (the same rendered dataset; validation keeps
+    its full views); ``crops_used`` still picks the first crops; the default trains on every view."""
+    from pathlib import Path
+
+    import ultralytics
+    import yaml
+
+    seen = []
+
+    class FakeYOLO:
+        def __init__(self, weights):
+            pass
+
+        def train(self, **kw):
+            seen.append(Path(kw["data"]))
+
+    monkeypatch.setattr(ultralytics, "YOLO", FakeYOLO)
+    common = dict(samples=_samples(6), n_val=2, imgsz=32, crops_per_sample=2, min_box=2, epochs=1, workers=0)
+    for run, kw in (("a", dict(full_views=False)), ("b", dict(full_views=False, crops_used=1)),
+                    ("c", dict(crops_used=1)), ("d", {})):
+        train(tmp_path / run, **common, **kw)
+
+    def views(data: Path, split: str) -> list[str]:
+        """View indices (file stem suffix) of one split of a data YAML, sorted."""
+        src = data.parent / yaml.safe_load(data.read_text())[split]
+        names = src.glob("*.png") if src.is_dir() else map(Path, src.read_text().split())
+        return sorted(p.stem.rsplit("_", 1)[1] for p in names)
+
+    n = len(list(seen[0].parent.glob("images/train/*_0.png")))  # training samples
+    assert n >= 4
+    assert [views(d, "train") for d in seen] == [sorted(["1", "2"] * n), ["1"] * n, sorted(["0", "1"] * n),
+                                                 sorted(["0", "1", "2"] * n)]
+    assert "0" in views(seen[0], "val")
+    for bad in (dict(detector="single"), dict(crops_used=0)):
+        with pytest.raises(ValueError, match="crops only"):
+            train(tmp_path / "e", **{**common, "full_views": False, **bad})

@@ -179,14 +179,15 @@ def _pretrained_arg(init: str | Path | None) -> str | bool:
     return str(Path(init).resolve()) if init is not None else False
 
 
-def _subset_yaml(data: Path, n_train: int, crops_used: int) -> Path:
-    """A data YAML whose train split lists only views ``0 … crops_used`` of each sample (no re-rendering)."""
+def _subset_yaml(data: Path, n_train: int, views: Sequence[int]) -> Path:
+    """A data YAML whose train split lists only views ``views`` (0: the full view, 1…: the crops) of each sample
+    (no re-rendering)."""
     root = data.parent
-    files = [str(root / "images" / "train" / f"{i:06d}_{j}.png") for i in range(n_train)
-             for j in range(crops_used + 1)]
-    lst = root / f"train_views{crops_used + 1}_{n_train}.txt"
+    files = [str(root / "images" / "train" / f"{i:06d}_{j}.png") for i in range(n_train) for j in views]
+    tag = "".join(str(j) for j in views)
+    lst = root / f"train_views{tag}_{n_train}.txt"
     lst.write_text("\n".join(files) + "\n")
-    out = root / f"data_views{crops_used + 1}_{n_train}.yaml"
+    out = root / f"data_views{tag}_{n_train}.yaml"
     out.write_text(data.read_text().replace("train: images/train", f"train: {lst.name}"))
     return out
 
@@ -225,7 +226,7 @@ def train(
     workers: int = 2, lr0: float | None = None, crops_used: int | None = None, min_box: float | None = None,
     threads: int | None = None, n_airports: int = DEFAULT_POOL, generate_options: dict | None = None,
     appearance: AppearanceJitter | dict | None = None, crop_jitter: CropJitter | dict | None = None,
-    width_loss: float = 0.0, width_loss_min_px: float = 8.0, **overrides,
+    width_loss: float = 0.0, width_loss_min_px: float = 8.0, full_views: bool = True, **overrides,
 ) -> TrainResult:
     """Train (or continue training) the runway-corner YOLOv8n-pose.
 
@@ -269,6 +270,9 @@ def train(
             of predicted to true threshold-edge widths, added to ultralytics' keypoint loss); 0 → ultralytics' loss
             alone. Pass the same value again when resuming an interrupted stage.
         width_loss_min_px: edges narrower than this in the training view (pixels) are left out of that term.
+        full_views: train on the full views too (default); False → on the crops only, for a pass-2 network of
+            its own (``TwoStageDetector(first, second)``). The full views are rendered all the same (the
+            dataset is the one a two-stage training uses) and validation keeps them.
         **overrides: further ultralytics training arguments.
 
     Returns:
@@ -276,6 +280,8 @@ def train(
     """
     if detector not in ("single", "twostage"):
         raise ValueError(f"train: detector must be 'single' or 'twostage', got {detector!r}")
+    if not full_views and (detector != "twostage" or crops_per_sample < 1 or crops_used == 0):
+        raise ValueError("train: full_views=False (crops only) needs detector='twostage' and at least one crop")
     if imgsz % 32:
         raise ValueError(f"train: imgsz must be a multiple of 32, got {imgsz}")
     out_dir = Path(out_dir).resolve()
@@ -332,8 +338,9 @@ def train(
         tr = [samples[i] for i in order[nv:]]
     data = build_dataset(tr, va, data_root, imgsz=imgsz, crops_per_sample=crops, seed=seed, min_box=min_box,
                          appearance=appearance, jitter=crop_jitter)
-    if crops_used is not None and crops_used < crops:
-        data = _subset_yaml(data, len(tr), crops_used)
+    used = crops if crops_used is None else min(crops_used, crops)
+    if used < crops or not full_views:
+        data = _subset_yaml(data, len(tr), ([0] if full_views else []) + list(range(1, used + 1)))
 
     _use_threads(threads)
     model = YOLO(str(init)) if init is not None else YOLO("yolov8n-pose.yaml")

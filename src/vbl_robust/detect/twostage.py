@@ -53,7 +53,8 @@ class TwoStageDetector:
         self.differentiable = bool(self.first.differentiable and self.second.differentiable)
 
     def __repr__(self) -> str:
-        return f"TwoStageDetector({self.first!r}, margin={self.margin}, min_side={self.min_side})"
+        second = "" if self.second is self.first else f", second={self.second!r}"
+        return f"TwoStageDetector({self.first!r}{second}, margin={self.margin}, min_side={self.min_side})"
 
     @property
     def device(self):
