@@ -188,3 +188,49 @@ def test_shipped_model_loads_and_runs():
     x = torch.rand(2, 3, 256, 256)
     conf, kp = d.detect_top(x)
     assert conf.shape == (2,) and kp.shape == (2, 4, 2) and torch.isfinite(kp).all()
+
+
+def test_shipped_pass_2_network(tiny_pose_pt, tmp_path, monkeypatch):
+    """A pass-2 network shipped beside the default model runs pass 2 of the two-stage design, enters the
+    detector's key, and goes away when a model is shipped without one; a ``second`` that points outside the
+    models directory, or a missing file, is named, never loaded."""
+    import json
+
+    import vbl_robust.detect.shipped as shipped
+    from vbl_robust.detect.train import ship
+
+    out = ship(tiny_pose_pt, detector="twostage", imgsz=64, models_dir=tmp_path, second=tiny_pose_pt)
+    monkeypatch.setattr(shipped, "MODELS_DIR", tmp_path.resolve())
+    monkeypatch.setattr(shipped, "DEFAULT_MODEL", out)
+    info = shipped.default_model_info()
+    assert info["second"] == shipped.SECOND_NAME and (tmp_path / shipped.SECOND_NAME).is_file()
+    d = shipped.default_detector()
+    assert isinstance(d, TwoStageDetector) and d.second is not d.first
+    assert d.second.path == tmp_path.resolve() / shipped.SECOND_NAME and d.first.path == out
+    img, _ = runway_image(64)
+    assert len(d.detect(torch.as_tensor(img).permute(2, 0, 1)[None] / 255.0)[0]) == 1
+    assert not isinstance(shipped.default_detector(design="single"), TwoStageDetector)
+
+    spec = shipped.DetectorSpec("default")
+    assert spec.identity()["second_sha256"] is not None
+    assert "second_sha256" not in shipped.DetectorSpec("default", options={"design": "single"}).identity()
+    key = spec.key()
+    (tmp_path / shipped.SECOND_NAME).write_bytes(b"other weights")
+    assert spec.key() != key  # results of two pass-2 networks never mix in one store
+
+    (tmp_path / shipped.SECOND_NAME).unlink()
+    assert "pass-2 model" in shipped.default_model_status()
+    with pytest.raises(FileNotFoundError, match="pass-2"):
+        shipped.default_detector()
+    (tmp_path / "default.json").write_text(json.dumps({**info, "second": "../elsewhere.pt"}))
+    assert "field 'second'" in shipped.default_model_status()
+    with pytest.raises(ValueError, match="field 'second'"):
+        shipped.default_detector()
+
+    ship(tiny_pose_pt, detector="twostage", imgsz=64, models_dir=tmp_path, second=tiny_pose_pt)
+    ship(tiny_pose_pt, detector="twostage", imgsz=64, models_dir=tmp_path)
+    assert "second" not in shipped.default_model_info() and not (tmp_path / shipped.SECOND_NAME).exists()
+    d = shipped.default_detector()
+    assert d.second is d.first
+    with pytest.raises(ValueError, match="second"):
+        ship(tiny_pose_pt, detector="single", imgsz=64, models_dir=tmp_path, second=tiny_pose_pt)
