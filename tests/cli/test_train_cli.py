@@ -41,4 +41,7 @@ def test_train_passes_the_training_levers(tmp_path, monkeypatch):
     assert res.exit_code == 0, res.output
     assert seen["crops_per_sample"] == 3 and seen["crops_used"] == 1 and seen["min_box"] == 16
     assert seen["lr0"] == 0.001 and seen["optimizer"] == "AdamW" and seen["workers"] == 0 and seen["imgsz"] == 480
-    assert seen["threads"] is None
+    assert seen["threads"] is None and seen["full_views"] is True
+    res = runner.invoke(app, ["train", "--out", str(tmp_path), "--crops-only"])
+    assert res.exit_code == 0, res.output
+    assert seen["full_views"] is False

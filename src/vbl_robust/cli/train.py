@@ -33,6 +33,7 @@ def register(app: typer.Typer) -> None:
         optimizer: str = typer.Option("auto", "--optimizer", help="Ultralytics optimizer: auto, SGD, AdamW, ..."),
         workers: int = typer.Option(2, "--workers", min=0, help="Data-loader worker processes."),
         threads: int = typer.Option(None, "--threads", min=1, help="Torch threads for CPU training (default: all cores)."),
+        crops_only: bool = typer.Option(False, "--crops-only", help="Train on the crops alone (a pass-2 network of its own; full views still rendered and validated)."),
         appearance: bool = typer.Option(False, "--appearance", help="Random blur, haze, contrast, brightness, gamma and sensor noise on half of the training images (vbl_robust.detect.augment; validation untouched)."),
     ) -> None:
         """Train the default detector from our synthetic scenes (or your LARD V2 data); every call adds a stage."""
@@ -65,7 +66,7 @@ def register(app: typer.Typer) -> None:
                            crops_per_sample=crops, crops_used=crops_used, min_box=min_box, lr0=lr0,
                            optimizer=optimizer, workers=workers, threads=threads,
                            n_airports=airports or DEFAULT_POOL,
-                           appearance=tr.AppearanceJitter() if appearance else None)
+                           appearance=tr.AppearanceJitter() if appearance else None, full_views=not crops_only)
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         typer.echo(f"stage {res.stage_dir.name}: best weights {res.best}")
