@@ -17,7 +17,7 @@ survival ≥ 95 % (far ≥ 90 %), median error ≤ 5 % of slant.
 
     python benchmarks/detector_protocol.py [--model PATH.pt] [--split validation|test|all] [--n 510]
                                            [--seeds S ...] [--json OUT.json] [--min-side PX] [--margin M]
-                                           [--second PASS2.pt]
+                                           [--second PASS2.pt] [--compare OTHER.json]
 
 Rendered pixels are cached in ``.cache/bench_detector/seed<S>`` (shared with ``bench_detector.py``).
 """
@@ -56,11 +56,36 @@ def detector(model: str | None, second: str | None = None, **window):
     return TwoStageDetector(first, UltralyticsDetector(second, trust=True, imgsz=320), **window)
 
 
-def evaluate(det, seed: int, n: int) -> list[dict]:
+def evaluate(det, seed: int, n: int) -> tuple[list[dict], list[bool]]:
+    """The summary rows of one seed and, per approach, whether it survived (ippe_lm) for paired comparisons."""
     from bench_detector import held_out
-    from vbl_robust.detect.evaluate import evaluate_detector, summarize
+    from vbl_robust.detect.evaluate import SURVIVAL_M, evaluate_detector, summarize
 
-    return summarize(evaluate_detector(det, held_out(n, seed)))
+    r = evaluate_detector(det, held_out(n, seed))
+    return summarize(r), [bool(e <= SURVIVAL_M) for e in r.pos_err_m["ippe_lm"]]
+
+
+def compare(new: dict, old: dict, split: str = "validation") -> str:
+    """Paired comparison of two protocol JSONs (``--json``) on the approaches of ``split`` both evaluated:
+    per seed and pooled, the approaches only one model survives and the exact McNemar p-value
+    (:func:`vbl_robust.detect.evaluate.paired_survival`)."""
+    from vbl_robust.detect.evaluate import paired_survival
+
+    seeds = [s for s in new.get(split, {}) if s in old.get(split, {})]
+    if not seeds:
+        raise SystemExit(f"detector_protocol: no {split} seed in both protocol files")
+    for name, p in (("new", new), ("old", old)):
+        if any(s not in p.get("survived", {}) for s in seeds):
+            raise SystemExit(f"detector_protocol: the {name} protocol file has no per-approach results "
+                             "(written before they were recorded: rerun it)")
+    lines = ["| seed | n | both survive | only new | only old | neither | new − old | p (exact McNemar) |",
+             "|---|---|---|---|---|---|---|---|"]
+    rows = [(s, paired_survival(new["survived"][s], old["survived"][s])) for s in seeds]
+    pooled = paired_survival(sum((new["survived"][s] for s in seeds), []), sum((old["survived"][s] for s in seeds), []))
+    for s, c in rows + [("pooled", pooled)]:
+        lines.append(f"| {s} | {c['n']} | {c['both']} | {c['only_a']} | {c['only_b']} | {c['neither']} | "
+                     f"{c['gain']:+d} | {c['p_value']:.3f} |")
+    return "\n".join(lines)
 
 
 def table(results: dict[int, list[dict]]) -> str:
@@ -118,6 +143,9 @@ def main() -> None:
     ap.add_argument("--json", default=None)
     ap.add_argument("--min-side", type=float, default=None, help="crop window of --model (its training crops')")
     ap.add_argument("--margin", type=float, default=None, help="crop margin of --model (its training crops')")
+    ap.add_argument("--compare", default=None,
+                    help="a previous --json of another model: paired comparison (approaches only one survives, "
+                         "exact McNemar p) on the seeds both evaluated")
     ap.add_argument("--second", default=None, help="a trusted .pt for pass 2 (crop network; pass 1: --model)")
     args = ap.parse_args()
     from vbl_robust.detect.offline import setup_offline
@@ -134,22 +162,34 @@ def main() -> None:
             raise SystemExit(f"detector_protocol: --seeds {unknown} not in the {args.split} split {list(seeds)}")
         seeds = tuple(args.seeds)
     out: dict[str, dict] = {}
+    survived: dict[str, list[bool]] = {}
     t0 = time.perf_counter()
     for split, group in (("validation", [s for s in seeds if s in VALIDATION_SEEDS]),
                          ("test", [s for s in seeds if s in TEST_SEEDS])):
         if not group:
             continue
-        res = {s: evaluate(det, s, args.n) for s in group}
+        both = {s: evaluate(det, s, args.n) for s in group}
+        res = {s: rows for s, (rows, _) in both.items()}
         out[split] = {str(s): rows for s, rows in res.items()}
+        survived.update({str(s): alive for s, (_, alive) in both.items()})
         print(f"### {split} ({args.model or 'shipped model'}{f' + pass 2 {args.second}' if args.second else ''}, {det!r}, {args.n} approaches per seed)\n")
         print(table(res) + "\n")
         print(pooled(res) + "\n")
         if split == "test":
             print(spread(res) + "\n")
     print(f"({time.perf_counter() - t0:.0f} s, {torch.get_num_threads()} torch thread(s))")
+    result = {"model": args.model or "shipped", "second": args.second, "n": args.n, **out, "survived": survived}
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"model": args.model or "shipped", "second": args.second, "n": args.n, **out}, f, indent=1)
+            json.dump(result, f, indent=1)
+    if args.compare:
+        with open(args.compare) as f:
+            old = json.load(f)
+        for split in ("validation", "test"):
+            if split in out and split in old:
+                print(f"\n### paired: this model (new) against {old.get('model')}"
+                      f"{' + ' + old['second'] if old.get('second') else ''} (old), {split}\n")
+                print(compare(result, old, split))
 
 
 if __name__ == "__main__":
