@@ -1,6 +1,6 @@
 """Ship a trained checkpoint as the default detector, with ``default.json`` written from its protocol results.
 
-    python tools/ship_checkpoint.py CKPT.pt --version 7 --epochs 44 --protocol runs/protocol.json [--second PASS2.pt]
+    python tools/ship_checkpoint.py CKPT.pt --version 7 --epochs 44 --protocol runs/protocol.json
 
 ``--protocol`` is the ``--json`` output of ``benchmarks/detector_protocol.py --split all`` for CKPT (stripped
 checkpoints give the same outputs as the shipped file, since ``ship`` strips the same way). The note and the
@@ -58,7 +58,6 @@ def main() -> None:
     ap.add_argument("--version", type=int, required=True)
     ap.add_argument("--epochs", type=int, required=True)
     ap.add_argument("--protocol", required=True)
-    ap.add_argument("--second", default=None, help="pass-2 network of its own (crops-only training), shipped beside")
     args = ap.parse_args()
     from vbl_robust.detect.offline import setup_offline
     from vbl_robust.detect.train import ship
@@ -67,7 +66,7 @@ def main() -> None:
     with open(args.protocol) as f:
         info = info_from_protocol(json.load(f), args.version, args.epochs)
     print(json.dumps(info, indent=1))
-    print(ship(args.checkpoint, detector="twostage", imgsz=320, info=info, second=args.second))
+    print(ship(args.checkpoint, detector="twostage", imgsz=320, info=info))
 
 
 if __name__ == "__main__":

@@ -4,9 +4,7 @@ The shipped model is ``vbl_robust/models/runway_yolov8n_pose.pt`` with ``default
 (``"twostage"`` or ``"single"``), input size, version, and whether it passed its validation gates
 (``"validated": true`` — detection ≥ 97 % and nominal survival ≥ 90 % on the held-out protocol of
 ``benchmarks/bench_detector.py``; below them a robustness figure mostly measures the detector's nominal failures)
-and its ``"open_goals"``, printed by every run and shown in the report. See ``models/MODEL_CARD.md``. A two-stage
-model may have a pass-2 network of its own (trained on crops only), shipped beside it and named by ``default.json``'s
-``"second"`` (a file name in the models directory).
+and its ``"open_goals"``, printed by every run and shown in the report. See ``models/MODEL_CARD.md``.
 
 A :class:`DetectorSpec` names a detector by *how to build it* (kind + path), not by an object, so the same
 spec rebuilds the detector once per process — in the local runner and in every Ray worker — and its identity
@@ -28,14 +26,12 @@ from .pose import PoseDetector
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_MODEL", "DESIGNS", "DETECTOR_KINDS", "MODELS_DIR", "SECOND_NAME", "DetectorSpec",
-           "default_detector", "default_model_caveats", "default_model_info", "default_model_path",
-           "default_model_status", "default_second_path", "with_design"]
+__all__ = ["DEFAULT_MODEL", "DESIGNS", "DETECTOR_KINDS", "MODELS_DIR", "DetectorSpec", "default_detector",
+           "default_model_caveats", "default_model_info", "default_model_path", "default_model_status",
+           "with_design"]
 
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 DEFAULT_MODEL = MODELS_DIR / "runway_yolov8n_pose.pt"
-#: file name of the shipped pass-2 network, when the default model has one (``default.json``: ``"second"``)
-SECOND_NAME = "runway_yolov8n_pose_crop.pt"
 #: Designs of a pose-model detector: one pass on the letterboxed image, or a pass on it and one on a crop.
 DESIGNS = ("single", "twostage")
 DETECTOR_KINDS = ("oracle", "default", "ultralytics", "onnx", "factory")
@@ -60,29 +56,11 @@ def default_model_info() -> dict[str, Any]:
     return info if isinstance(info, dict) else {}
 
 
-def default_second_path(info: dict[str, Any] | None = None) -> Path | None:
-    """The shipped pass-2 network named by ``default.json`` (or ``info``), None when one network serves both
-    passes. The name must be a plain file name: the models directory is the only place it may point to."""
-    name = (default_model_info() if info is None else info).get("second")
-    if not name:
-        return None
-    if not isinstance(name, str) or Path(name).name != name or name in (".", ".."):
-        raise ValueError(f"{MODELS_DIR / 'default.json'}: field 'second' must be a file name in {MODELS_DIR}, "
-                         f"got {name!r}")
-    return MODELS_DIR / name
-
-
 def default_model_status() -> str:
     """``""`` when the shipped model is installed and validated (see the module docstring), else why not."""
     path = default_model_path()
     if path is None:
         return "the shipped detector model is not installed"
-    try:
-        second = default_second_path()
-    except ValueError as exc:
-        return str(exc)
-    if second is not None and not second.is_file():
-        return f"the shipped detector's pass-2 model {second} is not installed"
     if default_model_info().get("validated") is not True:
         return (f"the shipped detector model ({path.name}) does not meet its validation gates yet "
                 f"(see {path.parent / 'MODEL_CARD.md'})")
@@ -96,10 +74,9 @@ def default_model_caveats(info: dict[str, Any] | None = None) -> list[str]:
     return [str(g) for g in goals] if isinstance(goals, list) else [str(goals)]
 
 
-def with_design(detector: PoseDetector, design: str, *, second: PoseDetector | None = None, **window):
-    """``detector`` as a single pass, or as both passes of a :class:`~vbl_robust.detect.TwoStageDetector`
-    (pass 2: ``second`` when given); ``window``: its crop window (``margin``, ``min_side``: what the weights were
-    trained on), two-stage only."""
+def with_design(detector: PoseDetector, design: str, **window):
+    """``detector`` as a single pass, or as both passes of a :class:`~vbl_robust.detect.TwoStageDetector`;
+    ``window``: its crop window (``margin``, ``min_side``: what the weights were trained on), two-stage only."""
     if design not in DESIGNS:
         raise ValueError(f"detector design must be one of {DESIGNS}, got {design!r}")
     unknown = set(window) - set(CROP_WINDOW_KEYS)
@@ -108,11 +85,9 @@ def with_design(detector: PoseDetector, design: str, *, second: PoseDetector | N
     if design == "twostage":
         from .twostage import TwoStageDetector
 
-        return TwoStageDetector(detector, second, **{k: float(v) for k, v in window.items()})
+        return TwoStageDetector(detector, **{k: float(v) for k, v in window.items()})
     if window:
         raise ValueError(f"detector crop window {window} needs design 'twostage', got {design!r}")
-    if second is not None:
-        raise ValueError(f"a pass-2 model needs design 'twostage', got {design!r}")
     return detector
 
 
@@ -121,25 +96,19 @@ def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str |
     """The detector shipped with the package; ``design`` ``"twostage"`` / ``"single"`` (the paper's one pass),
     None → the shipped default (``default.json``, with its crop window ``"twostage": {"min_side": …}`` when the
     weights were trained on another than :class:`~vbl_robust.detect.TwoStageDetector`'s default); ``engine`` of
-    the black-box path (:mod:`.engines`); ``device`` ``auto``/``cpu``/``cuda[:N]`` (:mod:`.device`). A two-stage
-    design runs pass 2 on the shipped pass-2 network when ``default.json`` names one (:func:`default_second_path`)."""
+    the black-box path (:mod:`.engines`); ``device`` ``auto``/``cpu``/``cuda[:N]`` (:mod:`.device`)."""
     from .engines import with_engine
     from .ultralytics import UltralyticsDetector
 
     if default_model_path() is None:
         raise FileNotFoundError(f"{DEFAULT_MODEL}: the shipped model is missing (reinstall vbl-robust)")
     info = default_model_info()
+    # the shipped file is part of the installed package: trusted as its code is
+    det = UltralyticsDetector(DEFAULT_MODEL, trust=True, imgsz=imgsz or info.get("imgsz"), chunk=chunk,
+                              device=device)
     design = design or info.get("detector", "single")
-    paths = [DEFAULT_MODEL]
-    if design == "twostage" and (second := default_second_path(info)) is not None:
-        if not second.is_file():
-            raise FileNotFoundError(f"{second}: the shipped pass-2 model is missing (reinstall vbl-robust)")
-        paths.append(second)
-    # the shipped files are part of the installed package: trusted as its code is
-    nets = [with_engine(UltralyticsDetector(p, trust=True, imgsz=imgsz or info.get("imgsz"), chunk=chunk,
-                                            device=device), engine, trust=True) for p in paths]
     window = dict(info.get("twostage") or {}) if design == "twostage" else {}
-    return with_design(nets[0], design, second=nets[1] if len(nets) > 1 else None, **window)
+    return with_design(with_engine(det, engine, trust=True), design, **window)
 
 
 # -- naming and building detectors ------------------------------------------------------------------------------
@@ -244,9 +213,6 @@ class DetectorSpec:
         if self.kind == "default" and f is not None and (f.parent / "default.json").is_file():
             ident["config_sha256"] = file_sha256(f.parent / "default.json")
             info = default_model_info()
-            second = default_second_path(info)
-            if (self.options.get("design") or info.get("detector")) == "twostage" and second is not None:
-                ident["second_sha256"] = file_sha256(second) if second.is_file() else None
             if "version" in info:
                 ident["name"] += f" v{info['version']}"
             if goals := default_model_caveats(info):

@@ -359,15 +359,13 @@ def train(
 
 
 def ship(weights: str | Path, *, detector: str, imgsz: int, models_dir: str | Path | None = None,
-         info: dict | None = None, crop_jitter: CropJitter | None = None, second: str | Path | None = None) -> Path:
+         info: dict | None = None, crop_jitter: CropJitter | None = None) -> Path:
     """Copy trained weights into the package as the default model (optimizer stripped, fp16: a few MB).
 
     Writes ``runway_yolov8n_pose.pt`` and ``default.json`` (``detector``, ``imgsz`` and ``info``) to
     ``models_dir`` (default: ``vbl_robust/models``). ``crop_jitter``: the training crops' window when it is not
     the default; ``default.json`` then records it (``"twostage": {"margin": …, "min_side": …}``) and the shipped
-    two-stage detector crops alike. ``second``: weights of a pass-2 network of its own (``train(full_views=False)``),
-    shipped beside as ``SECOND_NAME`` and named in ``default.json`` (``"second"``); without it a pass-2 file left
-    by an earlier ship is removed. Returns the weights path.
+    two-stage detector crops alike. Returns the weights path.
     """
     if detector not in ("single", "twostage"):
         raise ValueError(f"ship: detector must be 'single' or 'twostage', got {detector!r}")
@@ -376,22 +374,15 @@ def ship(weights: str | Path, *, detector: str, imgsz: int, models_dir: str | Pa
         if detector != "twostage":
             raise ValueError("ship: a crop window (crop_jitter) needs detector='twostage'")
         info["twostage"] = {"margin": crop_jitter.margin, "min_side": crop_jitter.min_side}
-    if second is not None and detector != "twostage":
-        raise ValueError("ship: a pass-2 network (second) needs detector='twostage'")
     import_ultralytics()
     from ultralytics.utils.torch_utils import strip_optimizer
 
-    from .shipped import DEFAULT_MODEL, SECOND_NAME
+    from .shipped import DEFAULT_MODEL
 
     d = Path(models_dir) if models_dir is not None else DEFAULT_MODEL.parent
     d.mkdir(parents=True, exist_ok=True)
     out = d / DEFAULT_MODEL.name
     strip_optimizer(str(weights), s=str(out))
-    if second is not None:
-        strip_optimizer(str(second), s=str(d / SECOND_NAME))
-        info["second"] = SECOND_NAME
-    else:
-        (d / SECOND_NAME).unlink(missing_ok=True)
     (d / "default.json").write_text(json.dumps(dict(detector=detector, imgsz=int(imgsz), **info),
                                                indent=1) + "\n")
     return out
