@@ -1,11 +1,18 @@
 """Ship a trained checkpoint as the default detector, with ``default.json`` written from its protocol results.
 
-    python tools/ship_checkpoint.py CKPT.pt --version 7 --epochs 44 --protocol runs/protocol.json
+    python tools/ship_checkpoint.py CKPT.pt --version 10 --epochs 50 --protocol runs/protocol.json \
+        --against runs/shipped_validation.json
 
 ``--protocol`` is the ``--json`` output of ``benchmarks/detector_protocol.py --split all`` for CKPT (stripped
 checkpoints give the same outputs as the shipped file, since ``ship`` strips the same way). The note and the
 open goals are computed from it; ``validated`` is the gate on the validation seeds pooled (detection ≥ 97 %,
 nominal survival ≥ 90 %), and a miss of the gates on any test seed is listed among the open goals.
+
+``--against`` is the shipped model's protocol JSON (``--split validation`` at least, with per-approach results):
+the replacement rule of the model card (session 13) — the candidate survives more of the pooled validation
+approaches *and* the exact paired (McNemar) test of the difference gives p < 0.05 — is checked before anything is
+written. ``--force`` ships anyway and says so (e.g. a first model, or a rule deliberately set aside: write why in
+the model card).
 """
 
 from __future__ import annotations
@@ -24,6 +31,26 @@ def pooled_validation(p: dict) -> dict:
     n = sum(r["n"] for r in rows)
     return {"seeds": list(p["validation"]), "n": n,
             **{k: sum(r[k] * r["n"] for r in rows) / n for k in ("detection_rate", "survival_ippe_lm")}}
+
+
+#: the replacement rule's significance level (paired exact McNemar test on the pooled validation approaches)
+REPLACE_P = 0.05
+
+
+def replacement_verdict(new: dict, old: dict) -> tuple[bool, str]:
+    """Whether protocol JSON ``new`` may replace the model of ``old`` (pooled validation: more approaches survive
+    and the paired test gives p < ``REPLACE_P``), and the one-line reason."""
+    from vbl_robust.detect.evaluate import paired_survival
+
+    seeds = sorted(s for s in new.get("validation", {}) if s in old.get("validation", {}))
+    if not seeds or any(s not in p.get("survived", {}) for p in (new, old) for s in seeds):
+        return False, ("no validation seed with per-approach results in both protocol files "
+                       "(rerun benchmarks/detector_protocol.py --json for both)")
+    c = paired_survival(sum((new["survived"][s] for s in seeds), []), sum((old["survived"][s] for s in seeds), []))
+    text = (f"pooled validation (seeds {', '.join(seeds)}, {c['n']} approaches): {c['gain']:+d} survive "
+            f"({c['only_a']} only with the candidate, {c['only_b']} only with the shipped model), exact McNemar "
+            f"p = {c['p_value']:.3f}")
+    return c["gain"] > 0 and c["p_value"] < REPLACE_P, text
 
 
 def info_from_protocol(p: dict, version: int, epochs: int) -> dict:
@@ -58,13 +85,25 @@ def main() -> None:
     ap.add_argument("--version", type=int, required=True)
     ap.add_argument("--epochs", type=int, required=True)
     ap.add_argument("--protocol", required=True)
+    ap.add_argument("--against", default=None, help="the shipped model's protocol JSON (the replacement rule)")
+    ap.add_argument("--force", action="store_true", help="ship even if the replacement rule is not met")
     args = ap.parse_args()
     from vbl_robust.detect.offline import setup_offline
     from vbl_robust.detect.train import ship
 
     setup_offline()
     with open(args.protocol) as f:
-        info = info_from_protocol(json.load(f), args.version, args.epochs)
+        protocol = json.load(f)
+    if args.against is None and not args.force:
+        raise SystemExit("ship_checkpoint: --against SHIPPED.json is required (the replacement rule); --force skips it")
+    if args.against is not None:
+        with open(args.against) as f:
+            ok, why = replacement_verdict(protocol, json.load(f))
+        print(f"replacement rule {'met' if ok else 'NOT met'}: {why}")
+        if not ok and not args.force:
+            raise SystemExit("ship_checkpoint: not shipped (the candidate cannot be told from the shipped model; "
+                             "--force ships anyway)")
+    info = info_from_protocol(protocol, args.version, args.epochs)
     print(json.dumps(info, indent=1))
     print(ship(args.checkpoint, detector="twostage", imgsz=320, info=info))
 

@@ -21,3 +21,23 @@ def test_validation_pools_its_seeds_and_test_misses_become_open_goals(script):
     assert any("goal 5 %" in g for g in info["open_goals"])
     p["validation"]["2"] = _rows(0.98, 0.92, 0.80, 7.0)
     assert tool.info_from_protocol(p, version=8, epochs=46)["validated"] is True
+
+
+def test_replacement_needs_a_significant_paired_gain(script):
+    """The replacement rule: more pooled validation approaches survive and the paired exact test gives p < 0.05."""
+    tool = script("tools/ship_checkpoint.py")
+    old = {"validation": {"1": [], "2": []}, "survived": {"1": [True] * 90 + [False] * 10,
+                                                          "2": [True] * 90 + [False] * 10}}
+    # seed 1: 10 approaches gained, 3 lost (+7 of 13 discordant): p ≈ 0.09, not significant
+    small = {"validation": {"1": [], "2": []},
+             "survived": {"1": [True] * 87 + [False] * 3 + [True] * 10, "2": [True] * 90 + [False] * 10}}
+    # 20 approaches gained, none lost: p = 2 · 0.5^20
+    big = {"validation": {"1": [], "2": []},
+           "survived": {"1": [True] * 100, "2": [True] * 100}}
+    ok, why = tool.replacement_verdict(small, old)
+    assert not ok and "only with the candidate" in why and "+7" in why
+    ok, why = tool.replacement_verdict(big, old)
+    assert ok and "+20" in why and "p = 0.000" in why
+    assert tool.replacement_verdict(old, big)[0] is False  # a significant loss is no replacement
+    ok, why = tool.replacement_verdict(big, {"validation": {"1": []}})
+    assert not ok and "per-approach" in why
