@@ -4,7 +4,9 @@
   schedules, data mixes — compared on their pooled rows. Seed 20261122 is the former benchmark set on which v5,
   v6 and v7 were chosen (v7 as the best of many checkpoints on it), so its figures carry that selection bias and
   are never quoted as a model's accuracy. Seed 20261202 was added on 2026-12-02, before any model was evaluated
-  on it: one seed is only 10 airports, and checkpoints of the same recipe moved by ±4 points on it.
+  on it: one seed is only 10 airports, and checkpoints of the same recipe moved by ±4 points on it. Seeds
+  20261203 and 20261204 were added on 2026-12-03 (session 13), before any model was evaluated on them, because
+  the paired test on two seeds could not separate candidates 8–16 approaches apart (MODEL_CARD).
 - **Test** (``TEST_SEEDS``, fixed on 2026-12-01 before step J's training ended; 510 approaches each, each seed its
   own pool of 10 airports): the figures of the model card and BENCHMARKS.md, reported per seed and per envelope
   with the spread over seeds. No choice is ever made on them.
@@ -31,7 +33,7 @@ import time
 
 import torch
 
-VALIDATION_SEEDS = (20_261_122, 20_261_202)
+VALIDATION_SEEDS = (20_261_122, 20_261_202, 20_261_203, 20_261_204)
 VALIDATION_SEED = VALIDATION_SEEDS[0]  # the first validation seed (older tools' default)
 TEST_SEEDS = (777_001, 31_337, 4_242)
 GATES = {"detection_rate": 0.97, "survival_ippe_lm": 0.90}

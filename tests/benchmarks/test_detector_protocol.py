@@ -24,7 +24,7 @@ def test_seed_sets_are_disjoint_and_fixed(script):
     p = script("benchmarks/detector_protocol.py")
     assert p.VALIDATION_SEED == p.VALIDATION_SEEDS[0] == 20_261_122
     assert not set(p.VALIDATION_SEEDS) & set(p.TEST_SEEDS)
-    assert len(p.TEST_SEEDS) >= 3 and len(set(p.VALIDATION_SEEDS)) == len(p.VALIDATION_SEEDS) == 2
+    assert len(p.TEST_SEEDS) >= 3 and len(set(p.VALIDATION_SEEDS)) == len(p.VALIDATION_SEEDS) == 4
 
 
 @pytest.mark.parametrize("bad", [[777_001], [5]])
