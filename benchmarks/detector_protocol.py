@@ -71,19 +71,14 @@ def compare(new: dict, old: dict, split: str = "validation") -> str:
     """Paired comparison of two protocol JSONs (``--json``) on the approaches of ``split`` both evaluated:
     per seed and pooled, the approaches only one model survives and the exact McNemar p-value
     (:func:`vbl_robust.detect.evaluate.paired_survival`)."""
-    from vbl_robust.detect.evaluate import paired_survival
+    from vbl_robust.detect.evaluate import paired_seeds
 
-    seeds = [s for s in new.get(split, {}) if s in old.get(split, {})]
-    if not seeds:
-        raise SystemExit(f"detector_protocol: no {split} seed in both protocol files")
-    for name, p in (("new", new), ("old", old)):
-        if any(s not in p.get("survived", {}) for s in seeds):
-            raise SystemExit(f"detector_protocol: the {name} protocol file has no per-approach results "
-                             "(written before they were recorded: rerun it)")
+    try:
+        rows, pooled = paired_seeds(new, old, split)
+    except ValueError as exc:
+        raise SystemExit(f"detector_protocol: {exc}") from None
     lines = ["| seed | n | both survive | only new | only old | neither | new − old | p (exact McNemar) |",
              "|---|---|---|---|---|---|---|---|"]
-    rows = [(s, paired_survival(new["survived"][s], old["survived"][s])) for s in seeds]
-    pooled = paired_survival(sum((new["survived"][s] for s in seeds), []), sum((old["survived"][s] for s in seeds), []))
     for s, c in rows + [("pooled", pooled)]:
         lines.append(f"| {s} | {c['n']} | {c['both']} | {c['only_a']} | {c['only_b']} | {c['neither']} | "
                      f"{c['gain']:+d} | {c['p_value']:.3f} |")

@@ -40,16 +40,16 @@ REPLACE_P = 0.05
 def replacement_verdict(new: dict, old: dict) -> tuple[bool, str]:
     """Whether protocol JSON ``new`` may replace the model of ``old`` (pooled validation: more approaches survive
     and the paired test gives p < ``REPLACE_P``), and the one-line reason."""
-    from vbl_robust.detect.evaluate import paired_survival
+    from vbl_robust.detect.evaluate import paired_seeds
 
-    seeds = sorted(s for s in new.get("validation", {}) if s in old.get("validation", {}))
-    if not seeds or any(s not in p.get("survived", {}) for p in (new, old) for s in seeds):
-        return False, ("no validation seed with per-approach results in both protocol files "
-                       "(rerun benchmarks/detector_protocol.py --json for both)")
-    c = paired_survival(sum((new["survived"][s] for s in seeds), []), sum((old["survived"][s] for s in seeds), []))
+    try:
+        rows, c = paired_seeds(new, old, "validation")
+    except ValueError as exc:
+        return False, str(exc)
+    seeds = [s for s, _ in rows]
     text = (f"pooled validation (seeds {', '.join(seeds)}, {c['n']} approaches): {c['gain']:+d} survive "
             f"({c['only_a']} only with the candidate, {c['only_b']} only with the shipped model), exact McNemar "
-            f"p = {c['p_value']:.3f}")
+            f"p = {c['p_value']:.4f}")
     return c["gain"] > 0 and c["p_value"] < REPLACE_P, text
 
 

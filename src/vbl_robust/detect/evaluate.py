@@ -184,3 +184,19 @@ def paired_survival(a: Sequence[bool], b: Sequence[bool]) -> dict:
     p = binomtest(only_a, only_a + only_b, 0.5).pvalue if only_a + only_b else 1.0
     return dict(n=int(a.size), both=int(np.sum(a & b)), only_a=only_a, only_b=only_b, neither=int(np.sum(~a & ~b)),
                 gain=only_a - only_b, p_value=float(p))
+
+
+def paired_seeds(new: dict, old: dict, split: str = "validation") -> tuple[list[tuple[str, dict]], dict]:
+    """Per seed and pooled :func:`paired_survival` of two protocol results (``benchmarks/detector_protocol.py
+    --json``: ``split`` → seed → summary rows, ``survived`` → seed → each approach's survival) on the seeds of
+    ``split`` that both hold. Raises ValueError saying what is missing."""
+    seeds = [s for s in new.get(split, {}) if s in old.get(split, {})]
+    if not seeds:
+        raise ValueError(f"no {split} seed in both protocol results")
+    for name, p in (("new", new), ("old", old)):
+        if any(s not in p.get("survived", {}) for s in seeds):
+            raise ValueError(f"the {name} protocol results have no per-approach results (written before they were "
+                             "recorded: rerun benchmarks/detector_protocol.py --json)")
+    rows = [(s, paired_survival(new["survived"][s], old["survived"][s])) for s in seeds]
+    pooled = paired_survival(sum((new["survived"][s] for s in seeds), []), sum((old["survived"][s] for s in seeds), []))
+    return rows, pooled
