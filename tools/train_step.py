@@ -43,7 +43,7 @@
   2000 airports has raised pooled validation survival at its first epoch (P → Q: 92.3 → 93.6 %, Q → R: 93.6 →
   93.8 %), by less each time; a third pool tells whether the trend has run out.
 - ``t`` (session 13): a **pass-2 network of its own**: from v9, trained on the *crops only* (``full_views=False``) of
-  step S's samples (seed 12; its rendered dataset is reused when ``train_runs/step_t/<dataset>`` links to it),
+  step S's samples (seed 12; S's rendered dataset is linked into ``train_runs/step_t``, see ``DATA``: run ``s`` first),
   threshold-width loss 0.5, lr 1e-4 → 1e-5 cosine over 3 epochs; evaluated as pass 2 behind the shipped pass 1
   (``detector_protocol.py --second``). Why: the one network serves both passes, and it underfits the corners'
   shape on its own training crops (edge-tilt slope 0.31, near-edge width error 8.1 % there, as held out): a
@@ -101,6 +101,23 @@ STEPS = {
 INIT = {"r": ("q", 0)}
 
 
+#: step → the step whose rendered dataset it trains on (linked into its working directory, never re-rendered).
+DATA = {"t": "s"}
+
+
+def share_dataset(step: str, out: Path) -> None:
+    """Link the rendered dataset(s) of ``DATA[step]`` into ``out`` (which must then name the same dataset)."""
+    if step not in DATA:
+        return
+    src = sorted(Path(f"train_runs/step_{DATA[step]}").glob("dataset_*"))
+    if not src:
+        raise SystemExit(f"step {step} trains on step {DATA[step]}'s rendered dataset: run step {DATA[step]} first")
+    out.mkdir(parents=True, exist_ok=True)
+    for d in src:
+        if not (out / d.name).exists():
+            (out / d.name).symlink_to(d.resolve(), target_is_directory=True)
+
+
 def init_weights(step: str) -> Path | str:
     """The weights ``step`` starts from: the shipped model, or another step's saved epoch (which must exist)."""
     if step not in INIT:
@@ -122,7 +139,9 @@ def main() -> None:
     epochs, kwargs = STEPS[args.step]
     torch.set_num_threads(args.threads)
     logging.basicConfig(level=logging.INFO)
-    res = train(args.out or f"train_runs/step_{args.step}", epochs=args.epochs or epochs,
+    out = Path(args.out or f"train_runs/step_{args.step}")
+    share_dataset(args.step, out)
+    res = train(out, epochs=args.epochs or epochs,
                 init_weights=init_weights(args.step), **{**COMMON, **kwargs, "threads": args.threads})
     print(f"stage {res.stage_dir}: last {res.last}")
 

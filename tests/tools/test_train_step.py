@@ -32,3 +32,19 @@ def test_a_chained_step_starts_from_its_source_epoch_or_says_which_to_run(script
     ckpt.parent.mkdir(parents=True)
     ckpt.write_bytes(b"")
     assert tool.init_weights("r").resolve() == ckpt.resolve()
+
+
+def test_a_step_on_another_steps_data_links_its_rendered_dataset(script, tmp_path, monkeypatch):
+    tool = script("tools/train_step.py")
+    monkeypatch.chdir(tmp_path)
+    assert set(tool.DATA) <= set(tool.STEPS) and set(tool.DATA.values()) <= set(tool.STEPS)
+    with pytest.raises(SystemExit, match="run step s first"):
+        tool.share_dataset("t", tmp_path / "train_runs/step_t")
+    data = tmp_path / "train_runs/step_s/dataset_320px_x"
+    (data / "images").mkdir(parents=True)
+    tool.share_dataset("t", tmp_path / "train_runs/step_t")
+    tool.share_dataset("t", tmp_path / "train_runs/step_t")  # again (a resumed step): nothing to do
+    linked = tmp_path / "train_runs/step_t/dataset_320px_x"
+    assert linked.is_symlink() and (linked / "images").is_dir()
+    tool.share_dataset("q", tmp_path / "train_runs/step_q")  # a step on its own data: nothing linked
+    assert not (tmp_path / "train_runs/step_q").exists()
