@@ -81,7 +81,7 @@ def compare(new: dict, old: dict, split: str = "validation") -> str:
              "|---|---|---|---|---|---|---|---|"]
     for s, c in rows + [("pooled", pooled)]:
         lines.append(f"| {s} | {c['n']} | {c['both']} | {c['only_a']} | {c['only_b']} | {c['neither']} | "
-                     f"{c['gain']:+d} | {c['p_value']:.3f} |")
+                     f"{c['gain']:+d} | {c['p_value']:.4f} |")
     return "\n".join(lines)
 
 

@@ -75,7 +75,7 @@ def test_compare_pairs_the_approaches_of_the_seeds_both_files_hold(script):
     new = {"validation": {"1": [], "2": []}, "survived": {"1": [True, True, False], "2": [True, False]}}
     old = {"validation": {"1": []}, "survived": {"1": [False, True, False]}}
     text = p.compare(new, old)
-    assert "| 1 | 3 | 1 | 1 | 0 | 1 | +1 | 1.000 |" in text and "| pooled | 3 |" in text and "| 2 |" not in text
+    assert "| 1 | 3 | 1 | 1 | 0 | 1 | +1 | 1.0000 |" in text and "| pooled | 3 |" in text and "| 2 |" not in text
     with pytest.raises(SystemExit, match="no per-approach results"):
         p.compare(new, {"validation": {"1": []}})
     with pytest.raises(SystemExit, match="no validation seed in both"):
