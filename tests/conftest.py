@@ -18,6 +18,8 @@ ROOT = Path(__file__).resolve().parents[1]
 # Never let ultralytics or any library reach the network from the tests.
 os.environ.setdefault("YOLO_OFFLINE", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
+# CLI runs stay in the test process (worker processes are tested where asked for: --workers 2).
+os.environ.setdefault("VBL_ROBUST_WORKERS", "1")
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -123,3 +123,24 @@ def test_a_run_that_fails_before_its_first_job_does_not_bind_the_store(tmp_path,
         assert st.campaign()["detector"]["kind"] == "oracle"
         with pytest.raises(ValueError, match="holds results of detector"):  # now bound: a job row was computed
             run_campaign(small_spec(methods=("random",)), small_samples[:1], st, detector=refused)
+
+
+def test_worker_processes_give_the_rows_of_one_process(tmp_path, small_samples, oracle):
+    """workers=2 (two spawned processes, this process the only writer) stores the same results as workers=1,
+    and the worker count is in the run's provenance."""
+    samples = small_samples[:3]
+    spec = small_spec(methods=("georobust", "random", "apgd"))
+    got = {}
+    for workers in (1, 2):
+        with ResultStore(tmp_path / str(workers) / "r.sqlite") as st:
+            s = run_campaign(spec, samples, st, detector=oracle, workers=workers)
+            assert (s.total, s.done, s.status) == (9, 9, "finished")
+            got[workers] = {r.key: (r.nfev, r.nit, r.verdict, r.worst_x, r.worst_m, tuple(r.points.fs))
+                            for r in st.jobs(with_points=True)}
+            assert st.runs()[0]["config"]["workers"] == workers
+    assert got[1] == got[2]
+
+
+def test_bad_worker_count_is_refused(tmp_path, small_samples, oracle):
+    with ResultStore(tmp_path / "r.sqlite") as st, pytest.raises(ValueError, match="workers must be an integer >= 1"):
+        run_campaign(small_spec(), small_samples[:1], st, detector=oracle, workers=0)

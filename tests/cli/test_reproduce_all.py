@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns.experiments import EXPERIMENTS, Options
+from vbl_robust.campaigns.experiments import EXPERIMENTS, PAPER, Options
 from vbl_robust.cli import app
 from vbl_robust.cli.reproduce import planned_work
 
@@ -29,6 +29,29 @@ def test_estimate_prints_an_upper_bound_per_experiment():
     res = runner.invoke(app, ["reproduce", "all", "--estimate", "--oracle", "--images", "2"])
     assert res.exit_code == 0, res.output
     assert "evaluations/s" in res.output and all(name in res.output for name in EXPERIMENTS)
+    paper = runner.invoke(app, ["reproduce", "paper", "--estimate", "--oracle", "--images", "2"])
+    assert paper.exit_code == 0, paper.output
+    assert all(name in paper.output for name in PAPER) and "families" not in paper.output and len(PAPER) == 7
+
+
+def test_bad_clock_and_workers_are_refused_before_any_work(tmp_path):
+    for args, message in ((["--clock", "gpu"], "--clock must be auto, process or wall, got 'gpu'"),
+                          (["--workers", "-1"], "--workers must be >= 0")):
+        res = runner.invoke(app, ["reproduce", "spatial-1d", "--out", str(tmp_path / "r"), *SMALL, *args])
+        assert res.exit_code == 2 and message in res.output
+        assert not (tmp_path / "r" / "results.sqlite").exists()
+
+
+def test_two_workers_and_the_process_clock_are_recorded(tmp_path):
+    from vbl_robust.campaigns import ResultStore
+
+    out = tmp_path / "r"
+    res = runner.invoke(app, ["reproduce", "runtime-1d", "--out", str(out), *SMALL, "--workers", "2", "--no-report"])
+    assert res.exit_code == 0, res.output
+    with ResultStore.open_existing(out) as store:
+        run = store.runs()[0]
+        assert run["config"]["workers"] == 2 and run["config"]["clock"] == "process"
+        assert store.campaign()["spec"]["clock"] == "process"
 
 
 def test_planned_work_counts_budgets_and_grids():

@@ -71,18 +71,25 @@ def test_replayed_cells_are_the_live_optimizers(gated_run):
         if not opt.covers:
             continue
         a, b = replay(row, spec).cells(), opt.cells()
+        if b is None:  # breached inside its first batch (the record ends there, the method never saw a batch)
+            assert a is None and row.verdict == "breach" and row.trace[0].extra.get("partial")
+            continue
         for k in ("centers", "half_widths", "lower", "upper", "fractions", "failed"):
             assert np.array_equal(getattr(a, k), getattr(b, k)), (row.method, k)
         assert np.array_equal(a.values, b.values, equal_nan=True)
         checked += 1
-    assert checked == 2 * (3 * 2 + 1)
+    assert checked >= 2 * (3 + 1)  # every search without early stop, and the landscape grids
 
 
 def test_zones_of_a_run_with_a_known_failure_set(gated_run):
     out, _ = gated_run
     jobs = zones_of_run(out, estimate=True)
     done = [j for j in jobs if j.zones is not None]
-    assert {j.method for j in jobs if j.zones is None} == {"random"}
+    # no zones: random (no cover), or a search that breached inside its first batch (its record ends at the breach
+    # and the method never completed a batch: no cells)
+    assert {j.method for j in jobs if j.zones is None and "no cover" in j.note} == {"random"}
+    assert all(j.note == "no complete batch: no cells" for j in jobs if j.zones is None and j.method != "random")
+    assert sum(j.role == "main" for j in done) >= 2 * 3  # every DIRECT-family search without early stop
     for j in done:
         fr = j.zones.fractions
         assert math.isclose(sum(fr.values()), 1.0, abs_tol=1e-12) and j.zones.basis == "estimate"
@@ -106,8 +113,9 @@ def test_zones_command_json_and_csv(gated_run, tmp_path):
     res = runner.invoke(app, ["zones", str(out), "--estimate"])
     assert res.exit_code == 0, res.output
     body = json.loads(res.stdout)
-    assert len(body["jobs"]) == 14 and len(body["skipped"]) == 4
-    assert all("no cover" in s["note"] for s in body["skipped"])
+    assert len(body["jobs"]) + len(body["skipped"]) == 18 and len(body["jobs"]) >= 2 * (3 + 1)
+    assert sum("no cover" in s["note"] for s in body["skipped"]) == 4
+    assert all("no cover" in s["note"] or "no complete batch" in s["note"] for s in body["skipped"])
     job = body["jobs"][0]
     assert {"key", "sample_id", "method", "box", "fractions", "zones", "basis", "basis_description"} <= set(job)
     assert "not sound" in job["basis_description"]
@@ -154,8 +162,8 @@ def test_zones_command_fails_loudly_on_a_store_that_does_not_replay(gated_run, t
     out = tmp_path / "tampered"
     shutil.copytree(gated_run[0], out)
     con = sqlite3.connect(out / "results.sqlite")
-    key, blob = con.execute("SELECT key, points FROM jobs WHERE method = 'direct' LIMIT 1").fetchone()
-    d = json.loads(zlib.decompress(blob))
+    key, d = next((k, d) for k, b in con.execute("SELECT key, points FROM jobs WHERE method = 'direct'")
+                  if len((d := json.loads(zlib.decompress(b)))["xs"]) > 3)
     d["xs"][3][0] += 0.01
     con.execute("UPDATE jobs SET points = ? WHERE key = ?", (zlib.compress(json.dumps(d).encode()), key))
     con.commit()

@@ -159,12 +159,43 @@ def test_all_failed_gives_no_best(method, box2):
 
 
 @pytest.mark.parametrize("method", ALL)
-def test_stop_above_stops_at_the_batch_of_the_first_breach(method, box2):
+def test_stop_above_record_ends_at_the_first_breach_whatever_the_chunk(method, box2):
     threshold = 1.2
-    r = maximize(bumpy, box2, method, max_evals=3000, stop_above=threshold)
-    assert r.status is Status.TARGET_REACHED and r.fun > threshold
-    last = r.trace[-1].batch_size
-    assert np.all(r.fs[:-last] <= threshold) and np.any(r.fs[-last:] > threshold)
+    runs = {}
+    for chunk in (1, 3, 32, 10_000):
+        evaluated = []
+
+        def f(x, evaluated=evaluated):
+            evaluated.append(len(x))
+            return bumpy(x)
+
+        r = maximize(f, box2, method, max_evals=3000, stop_above=threshold, chunk_size=chunk)
+        assert r.status is Status.TARGET_REACHED and r.fun == r.fs[-1] > threshold
+        assert np.all(r.fs[:-1] <= threshold)  # the record ends at the first breach
+        # evaluated beyond the breach: at most the rest of the chunk holding it (the method's gradient steps and
+        # the batches before are whole, so everything before the breach was needed)
+        assert r.nfev <= sum(evaluated) <= r.nfev + chunk - 1
+        assert max(evaluated) <= chunk
+        runs[chunk] = r
+    first = runs[1]
+    for r in runs.values():  # the chunk size changes what is computed, never the result
+        assert np.array_equal(r.xs, first.xs) and np.array_equal(r.fs, first.fs) and r.nit == first.nit
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_a_breach_inside_a_told_batch_cuts_the_record_there(method, box2):
+    opt = METHODS[method](box2, max_evals=500, stop_above=0.5)
+    x = opt.ask()
+    while len(x) < 3:  # a batch of at least 3 points
+        opt.tell(x, np.zeros(len(x)), grad=np.zeros_like(x))
+        x = opt.ask()
+    values = np.zeros(len(x))
+    values[1], values[2] = 0.7, 0.9  # the first breach is the second point
+    opt.tell(x, values, grad=np.zeros_like(x))
+    r = opt.result()
+    assert r.status is Status.TARGET_REACHED and r.fun == 0.7 and np.array_equal(r.x, x[1])
+    assert np.array_equal(r.xs[-2:], x[:2]) and r.trace[-1].batch_size == 2 and r.trace[-1].extra["partial"]
+    assert len(opt.ask()) == 0
 
 
 @pytest.mark.parametrize("method", ALL)

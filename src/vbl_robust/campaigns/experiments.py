@@ -376,6 +376,10 @@ EXPERIMENTS: dict[str, Experiment] = {
 }
 
 
+#: The paper's seven experiments (``reproduce paper``); ``all`` adds ours (``families``).
+PAPER = tuple(name for name in EXPERIMENTS if name != "families")
+
+
 def audit_spec(box: BoxSpec, *, methods: Sequence[str] = AUDIT_METHODS, budget: Budget, seed: int = 0,
                lipschitz: float | tuple[float, ...] | None = None, pnp: str = "ippe_lm",
                landscape: tuple[int, ...] | None = None) -> CampaignSpec:

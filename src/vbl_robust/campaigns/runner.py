@@ -2,7 +2,10 @@
 
 Executors:
 
-- ``"local"`` (default): the jobs run in this process, sample after sample, the detector built once.
+- ``"local"`` (default): with ``workers=1`` the jobs run in this process, sample after sample, the detector built
+  once; with ``workers=N > 1`` in N worker processes (one torch thread each, one sample at a time each, the
+  detector built once per worker; :func:`_pool_rows`), whose rows this process alone writes into the store.
+  :func:`default_workers` = the machine's cores (``VBL_ROBUST_WORKERS`` overrides it).
 - ``"ray"``: one Ray task per sample (a streaming generator: each finished job's rows come back as soon as they
   are ready); workers build the detector once each; this process writes every row into the same store.
   ``address`` = an existing cluster (``"auto"``, ``"ray://host:10001"``), else a local Ray instance is started.
@@ -13,6 +16,7 @@ Progress goes through a callback receiving :class:`Progress` after every committ
 from __future__ import annotations
 
 import logging
+import os
 import platform
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -28,6 +32,19 @@ from .work import SampleTask, Settings, detector_for, run_sample_task
 logger = logging.getLogger(__name__)
 
 EXECUTORS = ("local", "ray")
+#: Environment variable that sets :func:`default_workers` (e.g. 1 on a machine shared with other work).
+WORKERS_ENV = "VBL_ROBUST_WORKERS"
+
+
+def default_workers() -> int:
+    """Worker processes of a local campaign by default: ``$VBL_ROBUST_WORKERS`` if set, else the cores this
+    process may use."""
+    env = os.environ.get(WORKERS_ENV, "").strip()
+    if env:
+        if not env.isdigit() or int(env) < 1:
+            raise ValueError(f"{WORKERS_ENV} must be an integer >= 1, got {env!r}")
+        return int(env)
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 @dataclass(frozen=True)
@@ -77,6 +94,7 @@ def run_campaign(
     *,
     detector: DetectorSpec,
     executor: str = "local",
+    workers: int = 1,
     address: str | None = None,
     ray_num_cpus: int | None = None,
     progress: Callable[[Progress], None] | None = None,
@@ -92,12 +110,16 @@ def run_campaign(
             another one; a store with no job row yet, e.g. after a run that failed on its detector, is re-bound).
         detector: how to build the detector (its identity is part of every job key).
         executor: "local" or "ray"; ``address``/``ray_num_cpus`` for Ray.
+        workers: local executor: worker processes (1 = this process; the worker count is in the run's
+            provenance).
         progress: called after every committed job.
         dataset_source: where the samples came from (provenance), e.g. ``{"kind": "synthetic", "n": 10, "seed": 0}``.
         config: the full user configuration (provenance; e.g. the CLI options).
     """
     if executor not in EXECUTORS:
         raise ValueError(f"executor must be one of {EXECUTORS}, got {executor!r}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     t0 = time.perf_counter()
     det_identity = detector.identity()
     store.bind_campaign(spec.name, spec.to_dict(), det_identity)
@@ -110,7 +132,8 @@ def run_campaign(
     run_id = store.begin_run({
         "code_version": code_version(), "model_sha256": det_identity["sha256"], "detector": det_identity,
         "dataset_id": dataset["sha256"], "dataset": dataset, "seed": spec.seed, "executor": executor,
-        "config": {"campaign": spec.to_dict(), "user": config or {}, "executor": executor, "address": address},
+        "config": {"campaign": spec.to_dict(), "user": config or {}, "executor": executor, "address": address,
+                   "workers": workers if executor == "local" else None, "clock": spec.clock},
         "host": platform.node(), "jobs_total": len(jobs), "jobs_skipped": skipped,
     })
     logger.info("campaign %s: %d jobs, %d already done, %d to run (%s executor)", spec.name, len(jobs), skipped,
@@ -138,11 +161,14 @@ def run_campaign(
         progress(Progress(skipped, len(jobs), skipped, state["breaches"], 0, 0.0, None))
     status = "finished"
     try:
-        if executor == "local":
+        if executor == "local" and (workers == 1 or len(tasks) <= 1):
             det = detector_for(detector) if tasks else None
             for task in tasks:
                 for rows in run_sample_task(task, det, settings, run_id):
                     on_rows(rows)
+        elif executor == "local":
+            for rows in _pool_rows(tasks, detector, settings, run_id, min(workers, len(tasks))):
+                on_rows(rows)
         else:
             for rows in _ray_rows(tasks, detector, settings, run_id, address, ray_num_cpus):
                 on_rows(rows)
@@ -159,6 +185,68 @@ def run_campaign(
 
 def _stored_breaches(store: ResultStore) -> int:
     return sum(r.verdict is Verdict.BREACH for r in store.jobs(role="main", with_trace=False))
+
+
+# -- worker processes ---------------------------------------------------------------------------------------------
+def _pool_worker(tasks: Any, results: Any, detector: DetectorSpec, settings: Settings, run_id: int) -> None:
+    """A worker process: one torch thread; runs sample tasks from ``tasks`` until ``None`` and sends each job's
+    rows (``("rows", rows)``), then ``("done", None)`` per task; dies with its parent (Linux)."""
+    try:  # PR_SET_PDEATHSIG: a campaign killed with -9 takes its workers with it
+        import ctypes
+        import signal
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)
+    except (OSError, AttributeError):  # pragma: no cover - not Linux
+        pass
+    import torch
+
+    torch.set_num_threads(1)
+    det = detector_for(detector)
+    while (task := tasks.get()) is not None:
+        for rows in run_sample_task(task, det, settings, run_id):
+            results.put(("rows", rows))
+        results.put(("done", None))
+
+
+def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Settings, run_id: int,
+               workers: int) -> Iterator[list[JobRow]]:
+    """Run the sample tasks in ``workers`` processes (spawned: a fresh interpreter each) and yield their rows in
+    completion order. A worker that dies leaves its sample's unfinished jobs pending (a rerun resumes them)."""
+    import multiprocessing as mp
+    import queue
+
+    ctx = mp.get_context("spawn")
+    task_q, result_q = ctx.Queue(), ctx.Queue()
+    for t in tasks:
+        if hasattr(t.sample, "drop_pixels"):
+            t.sample.drop_pixels()  # ship geometry and the loader, not megabytes of pixels
+        task_q.put(t)
+    for _ in range(workers):
+        task_q.put(None)
+    procs = [ctx.Process(target=_pool_worker, args=(task_q, result_q, detector, settings, run_id), daemon=True)
+             for _ in range(workers)]
+    for p in procs:
+        p.start()
+    left = len(tasks)
+    try:
+        while left:
+            try:
+                kind, rows = result_q.get(timeout=1.0)
+            except queue.Empty:
+                if not any(p.is_alive() for p in procs):
+                    logger.error("every worker process ended with %d sample(s) unfinished; their jobs stay pending "
+                                 "(rerun to resume)", left)
+                    return
+                continue
+            if kind == "done":
+                left -= 1
+            else:
+                yield rows
+    finally:
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+            p.join(timeout=5)
 
 
 # -- Ray -------------------------------------------------------------------------------------------------------

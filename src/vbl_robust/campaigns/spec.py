@@ -302,6 +302,9 @@ class CampaignSpec:
         notes: free text for the report (budgets chosen, deviations from the paper).
         figures: the report's figures (names from :data:`FIGURES`; the report draws them in that order);
             empty: :func:`default_figures` of the blocks. Presentation only: not part of any job key.
+        clock: what time budgets are measured on (:data:`vbl_robust.search.CLOCKS`): ``"wall"``, or
+            ``"process"`` (CPU seconds of the evaluating process, which other work on the machine does not move).
+            Part of the job context when not ``"wall"`` (so the keys of wall-clock campaigns stay as they were).
     """
 
     name: str
@@ -314,8 +317,13 @@ class CampaignSpec:
     lipschitz: float | tuple[float, ...] | None = None
     notes: str = ""
     figures: tuple[str, ...] = ()
+    clock: str = "wall"
 
     def __post_init__(self) -> None:
+        from ..search import CLOCKS
+
+        if self.clock not in CLOCKS:
+            raise ValueError(f"CampaignSpec: clock must be one of {sorted(CLOCKS)}, got {self.clock!r}")
         unknown = [f for f in self.figures if f not in FIGURES]
         if unknown:
             raise ValueError(f"CampaignSpec: unknown figure(s) {unknown}; figures are {FIGURES}")
@@ -328,8 +336,11 @@ class CampaignSpec:
 
     def settings(self) -> dict[str, Any]:
         """The settings that change results (part of the job context)."""
-        return {"eps_safe_m": self.eps_safe_m, "penalty_m": self.penalty_m, "conf_threshold": self.conf_threshold,
-                "pnp": self.pnp, "lipschitz": self.lipschitz}
+        out = {"eps_safe_m": self.eps_safe_m, "penalty_m": self.penalty_m, "conf_threshold": self.conf_threshold,
+               "pnp": self.pnp, "lipschitz": self.lipschitz}
+        if self.clock != "wall":
+            out["clock"] = self.clock
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -354,7 +365,7 @@ class CampaignSpec:
         return cls(name=d["name"], blocks=blocks, seed=int(d["seed"]), eps_safe_m=float(d["eps_safe_m"]),
                    penalty_m=float(d["penalty_m"]), conf_threshold=float(d["conf_threshold"]), pnp=d["pnp"],
                    lipschitz=tuple(lip) if isinstance(lip, list) else lip, notes=d.get("notes", ""),
-                   figures=tuple(d.get("figures", ())))
+                   figures=tuple(d.get("figures", ())), clock=d.get("clock", "wall"))
 
     def context(self, detector_id: str) -> str:
         """Digest of what every job of this campaign shares: the settings and the detector identity."""

@@ -36,6 +36,8 @@ from .store import JobRow, JobStatus, Points, now_iso
 logger = logging.getLogger(__name__)
 
 _DETECTORS: dict[str, Any] = {}
+#: Points per objective call of a breach-stopped search on a CPU (:func:`breach_chunk`).
+CPU_BREACH_CHUNK = 4
 
 
 def detector_for(spec: DetectorSpec) -> Any:
@@ -55,10 +57,11 @@ class Settings:
     conf_threshold: float
     pnp: str
     lipschitz: float | tuple[float, ...] | None = None
+    clock: str = "wall"
 
     @classmethod
     def from_spec(cls, spec: Any) -> Settings:
-        return cls(spec.eps_safe_m, spec.penalty_m, spec.conf_threshold, spec.pnp, spec.lipschitz)
+        return cls(spec.eps_safe_m, spec.penalty_m, spec.conf_threshold, spec.pnp, spec.lipschitz, spec.clock)
 
 
 @dataclass
@@ -160,7 +163,7 @@ def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
     search evaluates in chunks of the objective's detector batch (``batch_size``) and stops between chunks. A
     budget that reads smaller budgets off the run (``Budget.reads``) passes them on: the run goes on until
     ``max(read_evals)`` evaluations are done and sizes its chunks against each of ``read_seconds``."""
-    from ..search import METHODS, maximize
+    from ..search import METHODS, maximize, use_clock
     from ..search.api import DEFAULT_CHUNK
 
     b = job.budget
@@ -169,15 +172,28 @@ def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
     opts = dict(job.options)
     if settings.lipschitz is not None and "lipschitz" not in opts:
         opts["lipschitz"] = settings.lipschitz
-    timing: dict[str, Any] = {}
+    timing: dict[str, Any] = {"chunk_size": breach_chunk(objective)}
     if b.max_seconds is not None:
         _warm_up(f, job.box.box, needs_gradient)
         timing = {"min_evals": b.min_evals, "time_marks": b.read_seconds,
                   "chunk_size": int(getattr(objective, "batch_size", DEFAULT_CHUNK))}
-    return maximize(
-        f, job.box.box, job.method, max_evals=b.max_evals, max_iters=b.max_iters, max_seconds=b.max_seconds,
-        stop_above=settings.eps_safe_m if b.stop_at_breach else None, seed=job.seed, **timing, **opts,
-    )
+    with use_clock(settings.clock):
+        return maximize(
+            f, job.box.box, job.method, max_evals=b.max_evals, max_iters=b.max_iters, max_seconds=b.max_seconds,
+            stop_above=settings.eps_safe_m if b.stop_at_breach else None, seed=job.seed, **timing, **opts,
+        )
+
+
+def breach_chunk(objective: Any) -> int:
+    """Points per objective call of a search that stops at its first breach: the whole detector batch on a GPU
+    (a batch costs about as much as one point there), :data:`CPU_BREACH_CHUNK` on a CPU (a point costs about the
+    same in any chunk, so a small chunk wastes little after the breach). The search's record does not depend on
+    it (:func:`~vbl_robust.search.maximize`)."""
+    from ..search.api import DEFAULT_CHUNK
+
+    batch = int(getattr(objective, "batch_size", DEFAULT_CHUNK))
+    device = getattr(getattr(objective, "device", None), "type", "cpu")
+    return batch if device != "cpu" else min(batch, CPU_BREACH_CHUNK)
 
 
 def _warm_up(f: Callable[[Any], Any], box: Any, needs_gradient: bool) -> None:

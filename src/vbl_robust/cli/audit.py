@@ -26,6 +26,10 @@ DEMO_ORACLE_NOISE_PX = 1.0
 
 ENGINE_HELP = ("Inference engine of the black-box path: auto (ONNX Runtime when installed), torch, onnxruntime or "
                "openvino — always fp32; the outputs stay within 1e-3 px of torch's, APGD stays on torch.")
+WORKERS_HELP = ("Worker processes of a local run, one torch thread each (default 0: one per core, or "
+                "$VBL_ROBUST_WORKERS); 1 runs in this process.")
+CLOCK_HELP = ("Clock of time budgets: process (CPU seconds of the evaluating process, which other work on the machine "
+              "does not move), wall, or auto (process on a CPU, wall on a GPU). Recorded with the results.")
 DEVICE_HELP = ("Where the pipeline runs: cpu (default), cuda, cuda:N, or auto (CUDA when available). On a GPU the "
                "perturbation, views, detector and differentiable PnP run there; --engine auto then means torch.")
 
@@ -189,9 +193,31 @@ def with_method_options(spec: Any, options: dict[str, dict[str, Any]], strict: b
         fail(f"--method-option: {exc}")
 
 
+def run_settings(spec: Any, clock: str, device: str, workers: int) -> tuple[Any, int]:
+    """``spec`` on the clock the user chose (``auto``: process time on a CPU, wall time on a GPU) and the worker
+    count (0: :func:`~vbl_robust.campaigns.runner.default_workers`); a bad value fails with one line."""
+    from dataclasses import replace
+
+    from vbl_robust.campaigns.runner import default_workers
+    from vbl_robust.search import CLOCKS
+
+    if clock == "auto":
+        clock = "process" if device == "cpu" else "wall"
+    if clock not in CLOCKS:
+        fail(f"--clock must be auto, {' or '.join(sorted(CLOCKS))}, got {clock!r}")
+    if workers < 0:
+        fail(f"--workers must be >= 0 (0 = one per core), got {workers}")
+    try:
+        return replace(spec, clock=clock), workers or default_workers()
+    except ValueError as exc:
+        fail(str(exc))
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
 def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, executor: str, address: str | None,
-                      source: dict, config: dict, quiet: bool = False) -> Any:
-    """Run ``spec`` into ``out/results.sqlite`` with a rich progress bar; returns the run summary."""
+                      source: dict, config: dict, quiet: bool = False, workers: int = 1) -> Any:
+    """Run ``spec`` into ``out/results.sqlite`` with a rich progress bar (``workers`` processes for the local
+    executor); returns the run summary."""
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -215,8 +241,8 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
                        + (f" ({p.skipped} resumed)" if p.skipped else ""))
 
         try:
-            summary = run_campaign(spec, samples, store, detector=detector, executor=executor, address=address,
-                                   progress=on_progress, dataset_source=source, config=config)
+            summary = run_campaign(spec, samples, store, detector=detector, executor=executor, workers=workers,
+                                   address=address, progress=on_progress, dataset_source=source, config=config)
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         except KeyboardInterrupt:
@@ -321,6 +347,8 @@ def register(app: typer.Typer) -> None:
         landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="Dense grid on the first image for the "
                                        "report's landscape figure."),
         executor: str = typer.Option("local", "--executor", help="local or ray."),
+        workers: int = typer.Option(0, "--workers", help=WORKERS_HELP),
+        clock: str = typer.Option("auto", "--clock", help=CLOCK_HELP),
         address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: start a local Ray)."),
         csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to this CSV file."),
         parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to this Parquet file."),
@@ -370,6 +398,7 @@ def register(app: typer.Typer) -> None:
                           lipschitz=parse_lipschitz(lipschitz), pnp=pnp, landscape=counts)
         method_opts = parse_method_options(method_option)
         spec = with_method_options(spec, method_opts)
+        spec, workers = run_settings(spec, clock, device, workers)
         det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
         if sequences is not None:  # sequence audits: vbl_robust.cli.sequence_audit
             from .sequence_audit import run_sequence_audit
@@ -395,7 +424,7 @@ def register(app: typer.Typer) -> None:
         if method_opts:
             config["method_options"] = method_opts
         summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
-                                    config=config, quiet=quiet)
+                                    config=config, quiet=quiet, workers=workers)
         finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
         if refine_zones:
             from .zones import refine_audit
@@ -413,6 +442,7 @@ def register(app: typer.Typer) -> None:
         device: str = typer.Option("cpu", "--device", help=DEVICE_HELP),
         landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="Dense 21 × 11 grid on the first "
                                        "image for the report's landscape figure."),
+        workers: int = typer.Option(0, "--workers", help=WORKERS_HELP),
         quiet: bool = typer.Option(False, "--quiet", "-q"),
     ) -> None:
         """A small audit on the defaults (10 synthetic images, georobust-av / random / APGD, roll ±15° and contrast
@@ -425,9 +455,10 @@ def register(app: typer.Typer) -> None:
             torch.set_num_threads(max(1, min(4, os.cpu_count() or 1)))
         spec = audit_spec(roll_contrast_box(15.0, (0.7, 1.4)), budget=Budget(max_evals=max_evals), seed=seed,
                           landscape=(21, 11) if landscape else None)
+        spec, workers = run_settings(spec, "auto", device, workers)
         det = detector_spec(None, False, oracle, DEMO_ORACLE_NOISE_PX, engine=engine, device=device)
         samples, source = load(n, seed, None, 1024, 1024)
         config = {"command": "demo", "n": n, "seed": seed, "max_evals": max_evals, "landscape": landscape}
         summary = run_with_progress(spec, samples, out, det, executor="local", address=None, source=source,
-                                    config=config, quiet=quiet)
+                                    config=config, quiet=quiet, workers=workers)
         finish(out, summary, csv=out / "jobs.csv", parquet=None, report=True, quiet=quiet)

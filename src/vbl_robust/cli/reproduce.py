@@ -1,6 +1,6 @@
-"""``vbl-robust reproduce EXPERIMENT|all``: run one of the paper's experiments, or all of them (defaults are the
-paper's). ``all`` gives each experiment its own run directory under ``--out`` (each resumable on its own) and an
-``index.html`` linking their reports; ``--estimate`` prints, from a short measured probe of the detector on this
+"""``vbl-robust reproduce EXPERIMENT|paper|all``: run one of the paper's experiments, the paper's seven, or all of
+them with ours (defaults are the paper's). ``paper`` and ``all`` give each experiment its own run directory under
+``--out`` (each resumable on its own) and an ``index.html`` linking their reports; ``--estimate`` prints, from a short measured probe of the detector on this
 machine, an upper bound of each experiment's duration (every evaluation budget spent, no early stop) and exits.
 """
 
@@ -11,14 +11,17 @@ from pathlib import Path
 import typer
 
 from .audit import (
+    CLOCK_HELP,
     DEVICE_HELP,
     ENGINE_HELP,
     METHOD_OPTION_HELP,
+    WORKERS_HELP,
     detector_spec,
     finish,
     load,
     parse_method_options,
     parse_methods,
+    run_settings,
     run_with_progress,
     with_method_options,
 )
@@ -95,7 +98,7 @@ def write_index(out: Path, names: list[str]) -> Path:
 
 
 def register(app: typer.Typer) -> None:
-    from vbl_robust.campaigns.experiments import EXPERIMENTS
+    from vbl_robust.campaigns.experiments import EXPERIMENTS, PAPER
 
     names = ", ".join(EXPERIMENTS)
 
@@ -108,7 +111,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def reproduce(
-        experiment: str = typer.Argument(..., help=f"One of: {names}; or 'all'."),
+        experiment: str = typer.Argument(..., help=f"One of: {names}; 'paper' (the paper's seven) or 'all'."),
         out: Path | None = typer.Option(None, "--out", help="Run directory (default runs/<experiment>)."),
         images: int | None = typer.Option(None, "--images", min=1, help="Number of images (default: the paper's, "
                                           "100; 1000 for pnp-validation)."),
@@ -143,6 +146,8 @@ def register(app: typer.Typer) -> None:
                                                "family's dense-grid reference over its largest level (default 201; "
                                                "0 = none)."),
         executor: str = typer.Option("local", "--executor", help="local or ray."),
+        workers: int = typer.Option(0, "--workers", help=WORKERS_HELP),
+        clock: str = typer.Option("auto", "--clock", help=CLOCK_HELP),
         address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray)."),
         csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to CSV."),
         parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to Parquet."),
@@ -158,7 +163,8 @@ def register(app: typer.Typer) -> None:
         if executor not in ("local", "ray"):
             fail(f"--executor must be 'local' or 'ray', got {executor!r}")
         try:
-            exps = list(EXPERIMENTS.values()) if experiment == "all" else [get_experiment(experiment)]
+            group = {"all": tuple(EXPERIMENTS), "paper": PAPER}.get(experiment)
+            exps = [EXPERIMENTS[n] for n in group] if group else [get_experiment(experiment)]
         except ValueError as exc:
             fail(str(exc))
         eb = _floats(eval_budgets, "--eval-budgets")
@@ -180,22 +186,23 @@ def register(app: typer.Typer) -> None:
                 t = evals / rate + secs
                 total += t
                 typer.echo(f"{exp.name:18s} {n:5d} images  ≤ {evals:9d} evaluations  ≤ {t / 3600:6.2f} h")
-            typer.echo(f"{'all' if len(exps) > 1 else exps[0].name:18s} ≤ {total / 3600:.2f} h (upper bound: every "
+            typer.echo(f"{experiment if group else exps[0].name:18s} ≤ {total / 3600:.2f} h (upper bound: every "
                        "budget spent, no early stop)")
             return
-        root = out or Path("runs") / ("paper" if experiment == "all" else exps[0].name)
+        root = out or Path("runs") / (experiment if group else exps[0].name)
         for exp in exps:
             spec = exp.build(seed, opts)
             spec = with_method_options(spec, method_opts, strict=False)  # checked over all experiments above
+            spec, n_workers = run_settings(spec, clock, device, workers)
             n = images or exp.images
-            out_dir = root / exp.name if experiment == "all" else root
+            out_dir = root / exp.name if group else root
             samples, source = load(n, seed, lard, width, height)
             config = {"command": "reproduce", "experiment": exp.name, "images": n, "seed": seed,
                       "lard": str(lard) if lard else None, "options": repr(opts), "width": width, "height": height}
             if method_opts:
                 config["method_options"] = method_opts
             summary = run_with_progress(spec, samples, out_dir, det, executor=executor, address=address,
-                                        source=source, config=config, quiet=quiet)
+                                        source=source, config=config, quiet=quiet, workers=n_workers)
             finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
-        if experiment == "all":
+        if group:
             typer.echo(f"index: {write_index(root, [e.name for e in exps])}")

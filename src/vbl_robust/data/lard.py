@@ -176,6 +176,11 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split())
 
 
+def truncated_labels(corners_2d: np.ndarray) -> np.ndarray:
+    """Corner pixels as the LARD labeller stores them: truncated towards zero (``int()``), as float."""
+    return np.trunc(np.asarray(corners_2d, dtype=np.float64))
+
+
 def approach_metrics(position: np.ndarray, corners_3d: np.ndarray) -> dict[str, float]:
     """LARD V2 derived quantities of a camera position, in LARD units, computed as the V2 labeller does.
 

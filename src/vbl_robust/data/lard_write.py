@@ -39,6 +39,7 @@ from .lard import (
     SEQUENCE_COLUMNS,
     approach_metrics,
     normalize_runway,
+    truncated_labels,
 )
 from .sample import Sample
 
@@ -203,7 +204,7 @@ def _row(sample: Sample, frame: RunwayFrame, airport: str, runway: str, image: s
     })
     row.update({k: f"{v:.6f}" for k, v in approach_metrics(sample.position, sample.corners_3d).items()})
     flat = uv.reshape(-1)  # TR(u, v), TL(u, v), BL(u, v), BR(u, v) = the column order
-    row.update({c: str(int(v)) for c, v in zip(CORNER_COLUMNS, flat, strict=True)})
+    row.update({c: str(int(v)) for c, v in zip(CORNER_COLUMNS, truncated_labels(flat), strict=True)})
     row.update({c: repr(float(v)) for c, v in zip(EXACT_CORNER_COLUMNS, flat, strict=True)})
     if "sequence_id" in meta:
         row.update(_sequence_fields(sample, meta))

@@ -25,7 +25,7 @@ from .adaptive import AdaptiveGeoRobust, AdaptiveGeoRobustV
 from .anytime import at_budget, prefix_length
 from .apgd import APGD, apgd_checkpoints
 from .api import METHODS, anytime_methods, make_optimizer, maximize, method_options
-from .base import Optimizer
+from .base import CLOCKS, Optimizer, use_clock
 from .bounds import sound_upper_bound
 from .cells import Cells
 from .direct import Direct, DirectL, GeoRobust
@@ -36,6 +36,7 @@ from .sampling import GridSearch, RandomSearch, SobolSearch
 
 __all__ = [
     "APGD",
+    "CLOCKS",
     "AdaptiveGeoRobust",
     "AdaptiveGeoRobustV",
     "Cells",
@@ -58,6 +59,7 @@ __all__ = [
     "at_budget",
     "make_optimizer",
     "maximize",
+    "use_clock",
     "method_options",
     "potentially_optimal",
     "prefix_length",

@@ -9,7 +9,13 @@ least 1 point, at most ``chunk_size``), so chunks shrink towards a deadline and 
 bounded. The deadlines are ``max_seconds`` and the ``time_marks`` (smaller time budgets to be read off the run):
 sized against the same deadlines, the run's prefix at a mark is exactly the run a search stopped there (with the
 marks below it) would have made, and one run answers every time budget.
-Without a time budget a batch is one objective call, as before.
+Breaches: with ``stop_above`` (and no time budget) a batch is evaluated in chunks of ``chunk_size`` points in
+the order the method asks for them, and the search stops after the chunk holding its first breach; only the
+points up to that breach are recorded (:meth:`~vbl_robust.search.Optimizer.tell`), so the result does not depend
+on the chunk size — the chunk size only bounds the evaluations computed beyond the breach (on a CPU a point costs
+about as much in a small chunk as in a large one: small chunks; on a GPU a whole batch costs about as much as one
+point: one chunk per batch).
+Otherwise a batch is one objective call.
 """
 
 from __future__ import annotations
@@ -118,8 +124,9 @@ def maximize(
         min_evals: with ``max_seconds``, keep going until this many evaluations are done too (a run from which
             every smaller time and evaluation budget is read; its result is not cut at ``max_seconds``).
         time_marks: smaller time budgets to be read off this run (chunks are sized against each in turn).
-        chunk_size: most points per objective call while a time budget runs.
-        stop_above: stop after the first batch containing a value ``> stop_above`` (status TARGET_REACHED).
+        chunk_size: most points per objective call while a time budget runs or ``stop_above`` may stop the search
+            inside a batch (see the module docstring).
+        stop_above: stop at the first value ``> stop_above`` (status TARGET_REACHED); the record ends there.
         seed: seed of the method's random choices (same seed → same run).
         callback: called with each iteration's :class:`TraceRow`; returning True stops (status STOPPED).
         **method_options: options of the method's class (e.g. ``alpha=2`` for GeoRobust, ``counts=`` for grid,
@@ -143,13 +150,13 @@ def maximize(
         evaluate = _with_gradient(getattr(f, "torch", None) if callable(getattr(f, "torch", None)) else f, method)
     else:
         evaluate = _values_only(f)
-    chunks = _Chunks(opt, int(chunk_size), marks) if max_seconds is not None else None
+    chunks = _Chunks(opt, int(chunk_size), marks) if max_seconds is not None or stop_above is not None else None
     while len(x := opt.ask()):
-        if chunks is None:
+        if chunks is None or (max_seconds is None and len(x) <= chunk_size):
             values, grad = evaluate(x)
             opt.tell(x, values, grad=grad)
         elif not chunks.run(x, evaluate):
-            break  # cut by the time budget (recorded by tell_partial)
+            break  # cut by the time budget or at a breach (recorded by tell_partial)
         if callback is not None and callback(opt.trace[-1]) is True and not opt.done:
             opt.stop("stopped by callback")
     result = opt.result()
@@ -169,14 +176,17 @@ def _check_marks(time_marks: Sequence[float], max_seconds: float | None) -> tupl
 
 
 class _Chunks:
-    """Evaluates a batch in chunks while a time budget runs (sizes: see the module docstring)."""
+    """Evaluates a batch in chunks while a time budget runs or a breach may stop the search (sizes: see the module
+    docstring)."""
 
     def __init__(self, opt: Optimizer, cap: int, marks: tuple[float, ...]):
         self.opt, self.cap = opt, cap
-        self.deadlines = sorted({*marks, float(opt.max_seconds)})
+        self.deadlines = sorted({*marks, float(opt.max_seconds)}) if opt.max_seconds is not None else []
         self.points, self.seconds = 0, 0.0  # evaluated so far, and the seconds their objective calls took
 
     def size(self, left: int) -> int:
+        if not self.deadlines:  # no time budget: fixed chunks
+            return min(left, self.cap)
         now = self.opt.elapsed()
         nxt = next((d for d in self.deadlines if d > now), None)
         if nxt is None:  # past every deadline (min_evals keeps it going): full chunks
@@ -186,12 +196,17 @@ class _Chunks:
         rate = self.points / max(self.seconds, 1e-12)
         return max(1, min(left, self.cap, int(CHUNK_TIME_FRACTION * rate * (nxt - now))))
 
+    def _breached(self, values: np.ndarray) -> bool:
+        above = self.opt.stop_above
+        return above is not None and bool(np.any(np.isfinite(values) & (values > above)))
+
     def run(self, x: np.ndarray, evaluate: Callable[[np.ndarray], tuple[Any, Any]]) -> bool:
-        """Evaluate and tell the batch ``x``; False when the time budget cut it (told with ``tell_partial``)."""
+        """Evaluate and tell the batch ``x``; False when the time budget or a breach cut it (told with
+        ``tell_partial``)."""
         opt, n, done = self.opt, len(x), 0
         parts: list[tuple[np.ndarray, tuple[str, ...] | None, Any, np.ndarray]] = []
         while done < n:
-            if done and opt.time_up(done):
+            if done and (opt.time_up(done) or self._breached(parts[-1][0])):
                 break
             k = self.size(n - done)
             t0 = opt.elapsed()

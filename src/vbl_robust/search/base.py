@@ -33,9 +33,11 @@ APGD (its step schedule is fitted to ``max_evals``).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import time
+from collections.abc import Iterator
 from typing import Any, ClassVar
 
 import numpy as np
@@ -47,7 +49,23 @@ from .evaluations import Evaluations, recorded_reasons, split
 from .result import PARTIAL, SearchResult, Status, TraceRow, Verdict, verdict_for
 
 logger = logging.getLogger(__name__)
-_clock = time.perf_counter  # module-level so tests can drive the clock
+#: The clocks a search can run on: wall time, or the CPU seconds of this process (all its threads), which other
+#: work on the machine does not move — the clock to use for time budgets on a shared CPU.
+CLOCKS = {"wall": time.perf_counter, "process": time.process_time}
+_clock = time.perf_counter  # module-level so tests can drive the clock (see use_clock)
+
+
+@contextlib.contextmanager
+def use_clock(name: str) -> Iterator[None]:
+    """Run the searches of this process on the clock ``name`` (a key of :data:`CLOCKS`) inside the block."""
+    global _clock
+    if name not in CLOCKS:
+        raise ValueError(f"clock must be one of {sorted(CLOCKS)}, got {name!r}")
+    before, _clock = _clock, CLOCKS[name]
+    try:
+        yield
+    finally:
+        _clock = before
 
 
 def _check_budget(name: str, value: float | None, *, integer: bool) -> None:
@@ -68,11 +86,13 @@ class Optimizer:
         box: the search space (real units).
         max_evals: evaluation budget (exact: never exceeded), or None.
         max_iters: batch budget, or None.
-        max_seconds: wall-clock budget checked before every batch (and by :func:`maximize` between the chunks of
+        max_seconds: time budget (on the clock of :func:`use_clock`: wall time by default) checked before every batch (and by :func:`maximize` between the chunks of
             a batch), or None.
         min_evals: with ``max_seconds``: the time budget stops the search only once this many evaluations are
             done (a run that covers both a time and an evaluation budget), or None.
-        stop_above: stop after the batch containing the first finite value ``> stop_above`` (a breach).
+        stop_above: stop at the first finite value ``> stop_above`` (a breach): the points after it in its batch
+            are not recorded (and, with :func:`~vbl_robust.search.maximize`, evaluated only as far as the chunk
+            holding it), so a search's record ends at its first breach whatever the batch or chunk sizes.
         seed: seed of every random choice of the method.
         lipschitz, lipschitz_norm: optional Lipschitz constant of the objective in real units (see
             :mod:`vbl_robust.search.bounds`); methods that keep a cover of the box then report a sound
@@ -204,6 +224,10 @@ class Optimizer:
                 raise ValueError(f"tell: grad must have shape {xr.shape}, got {grad.shape}")
         elif self.needs_gradient:
             raise ValueError(f"tell: method {self.name!r} needs grad= (gradient of the values w.r.t. x, shape {xr.shape})")
+        i = self._first_breach(v)
+        if i is not None and i < len(v) - 1:  # a breach before the batch's end: record up to it, untold to the method
+            self._cut(i + 1, v, reasons, ts, Status.TARGET_REACHED, "")
+            return
         self._pending = None
         failed = self._record(xr, v, reasons, ts)
         extras = self._tell(u, v, failed, grad) or {}
@@ -214,7 +238,8 @@ class Optimizer:
     def tell_partial(self, x: np.ndarray, values: np.ndarray | Evaluations, *, times: np.ndarray | None = None,
                      message: str | None = None) -> None:
         """Record the evaluated first ``k`` points of the pending batch (``x`` = its first ``k`` rows, ``k`` may be
-        0) when the time budget ran out between chunks, and stop (status TIME_OUT).
+        0) and stop: status TARGET_REACHED when they hold a breach (``stop_above``; the record then ends at the
+        first one), else TIME_OUT (the time budget ran out between chunks).
 
         The points count like any other (``nfev``, best, trace row with ``extra["partial"]``); the method never
         sees the cut batch, so its state stays that of the last complete batch.
@@ -229,13 +254,33 @@ class Optimizer:
                              f"got shape {x.shape}")
         v, reasons = self._values(values, k)
         ts = self._times(times, k)
+        i = self._first_breach(v)
+        if i is not None:
+            self._cut(i + 1, v, reasons, ts, Status.TARGET_REACHED, "")
+            return
+        self._cut(k, v, reasons, ts, Status.TIME_OUT, message or f"max_seconds={self.max_seconds:g} reached after "
+                  f"{self.nfev + k} evaluations (a batch of {len(xr)} cut after {k})")
+
+    def _first_breach(self, v: np.ndarray) -> int | None:
+        """Index of the first breach (a finite value ``> stop_above``) in a batch's values ``v``, or None."""
+        if self.stop_above is None:
+            return None
+        hit = np.flatnonzero(np.isfinite(v) & (v > self.stop_above))
+        return int(hit[0]) if len(hit) else None
+
+    def _cut(self, k: int, v: np.ndarray, reasons: tuple[str, ...], ts: np.ndarray, status: Status,
+             message: str) -> None:
+        """Record the first ``k`` points of the pending batch (of values ``v``, reasons, times ``ts``) without telling
+        the method, and stop with ``status`` (TARGET_REACHED: the message names the breach)."""
+        xr, _ = self._pending
         self._pending = None
         if k:
-            self._record(xr[:k], v, reasons, ts)
-            self._t_last = float(ts[-1])
+            self._record(xr[:k], v[:k], tuple(reasons[:k]), ts[:k])
+            self._t_last = float(ts[k - 1])
             self.trace.append(self._row(k, {"extra": {PARTIAL: True}}))
-        self._finish(Status.TIME_OUT, message or f"max_seconds={self.max_seconds:g} reached after {self.nfev} "
-                                                  f"evaluations (a batch of {len(xr)} cut after {k})")
+        if status is Status.TARGET_REACHED:
+            message = f"value {self._best_value:g} > stop_above={self.stop_above:g}"
+        self._finish(status, message)
 
     def time_up(self, pending: int = 0) -> bool:
         """True when the time budget is spent (and ``min_evals``, counting ``pending`` evaluations of the batch
