@@ -21,8 +21,46 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
         assert (out / name / "results.sqlite").exists() and (out / name / "report.html").exists(), name
     index = (out / "index.html").read_text()
     assert all(f'href="{name}/report.html"' in index for name in EXPERIMENTS)
+    assert "The paper&#x27;s claims, checked" in index or "The paper's claims, checked" in index
+    assert (out / "claims.md").read_text().count("\n| ") == 9  # one table row per claim (header aside)
     again = runner.invoke(app, ["reproduce", "all", "--out", str(out), *SMALL])
     assert again.exit_code == 0 and "0 new jobs" in again.output
+
+    # the committable bundle: per experiment its job table, report and provenance; no store, no loose figures
+    import json
+
+    import pyarrow.parquet as pq
+
+    from vbl_robust.campaigns import ResultStore
+
+    bundle = tmp_path / "bundle"
+    repro = tmp_path / "REPRODUCTION.md"
+    repro.write_text("# prose before\n<!-- bundle:begin -->\nold table\n<!-- bundle:end -->\nprose after\n")
+    res = runner.invoke(app, ["bundle", str(out), "--out", str(bundle), "--reproduction", str(repro)])
+    assert res.exit_code == 0, res.output
+    text = repro.read_text()
+    assert text.startswith("# prose before\n") and text.endswith("prose after\n") and "old table" not in text
+    assert (bundle / "claims.md").read_text() in text and (bundle / "status.md").read_text() in text
+    status = (bundle / "status.md").read_text()
+    for name in EXPERIMENTS:
+        with ResultStore.open_existing(out / name) as store:
+            n_jobs = store.count()
+        prov = json.loads((bundle / name / "provenance.json").read_text())
+        assert prov["totals"]["jobs_done"] == n_jobs == prov["totals"]["jobs_planned"]
+        assert prov["runs"][0]["code_version"] and prov["runs"][0]["detector"]["name"].startswith("oracle")
+        assert prov["campaign"]["spec"]["name"] == name
+        assert pq.read_table(bundle / name / "jobs.parquet").num_rows >= n_jobs
+        page = (bundle / name / "report.html").read_text()
+        assert f"<title>vbl-robust {name}</title>" in page
+        assert name != "spatial-1d" or "data:image/png;base64," in page  # figures are embedded
+        assert not (bundle / name / "figures").exists() and not (bundle / name / "results.sqlite").exists()
+        assert f"| {name} | {n_jobs} / {n_jobs} |" in status
+    missing = runner.invoke(app, ["bundle", str(tmp_path / "nothing"), "--out", str(bundle)])
+    assert missing.exit_code == 2 and "no experiment run directory" in missing.output
+    repro.write_text("no markers\n")
+    unmarked = runner.invoke(app, ["bundle", str(out), "--out", str(tmp_path / "b2"), "--reproduction", str(repro)])
+    assert unmarked.exit_code == 2 and "needs one <!-- bundle:begin -->" in unmarked.output
+    assert not (tmp_path / "b2").exists()  # refused before any work
 
 
 def test_estimate_prints_an_upper_bound_per_experiment():

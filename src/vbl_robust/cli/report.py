@@ -1,4 +1,6 @@
-"""``vbl-robust report RUN``: rebuild the HTML report (and exports) of a run directory from its results store."""
+"""``vbl-robust report RUN``: rebuild the HTML report (and exports) of a run directory from its results store;
+``vbl-robust bundle ROOT --out DIR``: the committable bundle of a set of experiment runs
+(:mod:`vbl_robust.campaigns.bundle`)."""
 
 from __future__ import annotations
 
@@ -31,3 +33,24 @@ def register(app: typer.Typer) -> None:
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         typer.echo(f"report: {path}")
+
+    @app.command()
+    def bundle(
+        root: Path = typer.Argument(..., help="Directory of experiment run directories (the --out of reproduce "
+                                    "paper|all)."),
+        out: Path = typer.Option(..., "--out", help="Bundle directory (e.g. results/paper)."),
+        reproduction: Path | None = typer.Option(None, "--reproduction", help="A Markdown file (REPRODUCTION.md) "
+                                                 "whose part between '<!-- bundle:begin -->' and "
+                                                 "'<!-- bundle:end -->' is replaced by the claims and status tables."),
+    ) -> None:
+        """Write a results bundle: per experiment the job table (Parquet), the report and the provenance, and a
+        status table; runs still in progress are bundled as they stand (rerun to refresh)."""
+        from vbl_robust.campaigns.bundle import write_bundle
+
+        try:
+            totals = write_bundle(root, out, reproduction=reproduction)
+        except (ValueError, FileNotFoundError) as exc:
+            fail(str(exc))
+        for name, t in totals.items():
+            typer.echo(f"{name}: {t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} images")
+        typer.echo(f"bundle: {out}")

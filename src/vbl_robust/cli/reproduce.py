@@ -84,15 +84,15 @@ def probe_rate(det, seconds: float = 5.0) -> float:
     return n / (time.perf_counter() - t0)
 
 
-def write_index(out: Path, names: list[str]) -> Path:
-    """``out/index.html``: one link per experiment report (those that exist)."""
+def write_index(out: Path, names: list[str], extra: str = "") -> Path:
+    """``out/index.html``: one link per experiment report (those that exist), then ``extra`` HTML (the claims)."""
     import html
 
     items = "".join(
         f'<li><a href="{html.escape(n)}/report.html">{html.escape(n)}</a></li>' if (out / n / "report.html").exists()
         else f"<li>{html.escape(n)} (no report yet: rerun to resume)</li>" for n in names)
     page = (f"<!doctype html><meta charset='utf-8'><title>vbl-robust: the paper's experiments</title>"
-            f"<h1>vbl-robust: the paper's experiments</h1><ul>{items}</ul>")
+            f"<h1>vbl-robust: the paper's experiments</h1><ul>{items}</ul>{extra}")
     (out / "index.html").write_text(page)
     return out / "index.html"
 
@@ -205,4 +205,7 @@ def register(app: typer.Typer) -> None:
                                         source=source, config=config, quiet=quiet, workers=n_workers)
             finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
         if group:
-            typer.echo(f"index: {write_index(root, [e.name for e in exps])}")
+            from vbl_robust.report.claims import claims_html, claims_of, write_claims
+
+            typer.echo(f"claims: {write_claims(root)}")
+            typer.echo(f"index: {write_index(root, [e.name for e in exps], claims_html(claims_of(root), str(root)))}")

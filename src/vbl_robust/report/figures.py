@@ -158,7 +158,11 @@ def pnp_comparison(summary: Sequence[Mapping[str, Any]]) -> Figure:
         ax.bar(x + 0.2, [r["mae_rel_pct"] for r in rs], 0.4, label="mean (MAE)", color="#ff7f0e")
         ax.set_xticks(x)
         ax.set_xticklabels([f"{r['solver']}\n{r['failures']}/{r['n']} failed" for r in rs], fontsize=8)
-        ax.set_yscale("log")
+        vals = np.asarray([r[k] for r in rs for k in ("median_rel_pct", "mae_rel_pct")], dtype=float)
+        if np.any(np.isfinite(vals) & (vals > 0)):  # a log axis needs a positive value (every solve may fail)
+            ax.set_yscale("log")
+        else:
+            ax.text(0.5, 0.5, "no successful solve", ha="center", va="center", transform=ax.transAxes)
         ax.set_ylabel("position error (% of slant distance)")
         ax.set_title(f"{src} keypoints")
         ax.grid(alpha=0.3, axis="y")

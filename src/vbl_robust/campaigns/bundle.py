@@ -1,0 +1,132 @@
+"""A results bundle: what a reader of a set of experiment runs needs, small enough to commit.
+
+``write_bundle(root, out)`` reads every run directory ``root/<experiment>/results.sqlite`` (as ``reproduce paper``
+or ``all`` writes them; a run still in progress is read as it stands) and writes, per experiment, into
+``out/<experiment>/``:
+
+- ``jobs.parquet``: the job table (:func:`~vbl_robust.campaigns.export.export`: one line per job and per read-off
+  budget; traces and evaluated points stay in the store);
+- ``report.html``: the self-contained report (figures embedded);
+- ``provenance.json``: the campaign spec and every run of the store (code version, model SHA-256, detector,
+  dataset, options, seed, executor, workers, clock, started / finished, wall seconds), and the totals: jobs done
+  of planned, images, worker seconds (the sum of the jobs' own seconds: CPU seconds when each worker has one
+  thread) and search seconds;
+
+and ``out/status.md``: one line per experiment (jobs done / planned, images, wall and worker hours), and
+``out/claims.md``: the paper's claims checked on those stores (:mod:`vbl_robust.report.claims`). With
+``reproduction=PATH`` the part of that Markdown file between :data:`BEGIN` and :data:`END` is replaced by the
+claims and status tables (the rest of it is prose kept as written). The SQLite stores themselves are not copied
+(tens of MB); rerunning the command that made them regenerates them.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from .store import ResultStore
+
+STORE = "results.sqlite"
+#: Markers of the generated part of a REPRODUCTION.md (:func:`write_bundle`).
+BEGIN, END = "<!-- bundle:begin -->", "<!-- bundle:end -->"
+
+
+def run_dirs(root: Path, names: Sequence[str] | None = None) -> list[Path]:
+    """The experiment run directories under ``root`` that hold a store, in ``names`` order (default: sorted)."""
+    root = Path(root)
+    if names is None:
+        return sorted(p.parent for p in root.glob(f"*/{STORE}"))
+    return [root / n for n in names if (root / n / STORE).is_file()]
+
+
+def _wall_seconds(run: dict[str, Any]) -> float:
+    """A run's wall seconds; for a run still going (no ``seconds`` yet), the time since it started."""
+    if run.get("seconds") is not None:
+        return float(run["seconds"])
+    started = dt.datetime.fromisoformat(run["started_at"])
+    return max(0.0, (dt.datetime.now(dt.UTC) - started).total_seconds())
+
+
+def provenance(store: ResultStore) -> dict[str, Any]:
+    """The store's campaign spec, runs and totals (see the module docstring)."""
+    runs = store.runs()
+    jobs = store.jobs(with_trace=False)
+    planned = max((int(r["jobs_total"] or 0) for r in runs), default=0)
+    return {
+        "campaign": store.campaign(),
+        "runs": runs,
+        "totals": {
+            "jobs_done": len(jobs),
+            "jobs_planned": planned,
+            "images": len(store.samples()),
+            "images_with_jobs": len({r.sample_id for r in jobs}),
+            "wall_s": sum(_wall_seconds(r) for r in runs),
+            "worker_s": sum(float(r.job_s or 0.0) for r in jobs),
+            "search_s": sum(float(r.search_s or 0.0) for r in jobs),
+            "clock": (store.campaign() or {}).get("spec", {}).get("clock", "wall"),
+            "workers": sorted({r["config"].get("workers") for r in runs if r.get("config")} - {None}),
+        },
+    }
+
+
+def write_experiment(run: Path, out: Path) -> dict[str, Any]:
+    """Bundle one run directory into ``out`` (created); returns its provenance totals."""
+    from ..report import build_report
+    from .export import export
+
+    out.mkdir(parents=True, exist_ok=True)
+    with ResultStore.open_existing(run) as store:
+        prov = provenance(store)
+        export(store, out / "jobs.parquet")
+    (out / "provenance.json").write_text(json.dumps(prov, indent=1, sort_keys=True, default=str) + "\n")
+    build_report(run, out)
+    shutil.rmtree(out / "figures", ignore_errors=True)  # embedded in report.html
+    return prov["totals"]
+
+
+def status_markdown(totals: dict[str, dict[str, Any]]) -> str:
+    """The per-experiment status table of a bundle (Markdown)."""
+    lines = ["| experiment | jobs done / planned | images | wall (h) | worker (h) | clock | workers |",
+             "|---|---|---|---|---|---|---|"]
+    for name, t in totals.items():
+        lines.append(f"| {name} | {t['jobs_done']} / {t['jobs_planned']} | {t['images_with_jobs']} of "
+                     f"{t['images']} | {t['wall_s'] / 3600:.2f} | {t['worker_s'] / 3600:.2f} | {t['clock']} | "
+                     f"{', '.join(map(str, t['workers'])) or '–'} |")
+    wall = sum(t["wall_s"] for t in totals.values()) / 3600
+    worker = sum(t["worker_s"] for t in totals.values()) / 3600
+    lines.append(f"| **all** | {sum(t['jobs_done'] for t in totals.values())} / "
+                 f"{sum(t['jobs_planned'] for t in totals.values())} | | {wall:.2f} | {worker:.2f} | | |")
+    return "\n".join(lines) + "\n"
+
+
+def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
+                 reproduction: Path | None = None) -> dict[str, dict[str, Any]]:
+    """Bundle every experiment run under ``root`` (those of ``names`` that exist) into ``out``; writes
+    ``out/status.md`` and ``out/claims.md`` (and the generated part of ``reproduction``) and returns the totals per
+    experiment. ``FileNotFoundError`` when there is no run; ``ValueError`` when ``reproduction`` lacks the
+    markers (checked before any work)."""
+    from ..report.claims import claims_markdown, claims_of
+
+    runs = run_dirs(root, names)
+    if not runs:
+        raise FileNotFoundError(f"{root}: no experiment run directory (<experiment>/{STORE}) found")
+    text = None
+    if reproduction is not None:
+        text = Path(reproduction).read_text()
+        if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
+            raise ValueError(f"{reproduction}: needs one {BEGIN} line followed by one {END} line")
+    totals = {run.name: write_experiment(run, Path(out) / run.name) for run in runs}
+    status = status_markdown(totals)
+    claims = claims_markdown(claims_of(root), str(root))
+    (Path(out) / "status.md").write_text(status)
+    (Path(out) / "claims.md").write_text(claims)
+    if text is not None:
+        head, rest = text.split(BEGIN)
+        tail = rest.split(END)[1]
+        Path(reproduction).write_text(f"{head}{BEGIN}\n## The paper's claims, checked\n\n{claims}\n"
+                                      f"## Status of the runs\n\n{status}{END}{tail}")
+    return totals

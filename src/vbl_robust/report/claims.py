@@ -1,0 +1,510 @@
+"""The paper's claims, each checked on the results stores of ``vbl-robust reproduce paper --out ROOT``.
+
+Every number comes from ``ROOT/<experiment>/results.sqlite`` through the report's own metrics
+(:mod:`vbl_robust.campaigns.metrics`; :mod:`.build`'s ``Context``, ``_reference``, ``_main_boxes``,
+``DIRECT_FAMILY``): nothing is typed by hand. A missing store gives "not run yet"; a store where only some images
+have every planned job is used on those ("partial: n of N images").
+
+Verdicts (:data:`VERDICTS`): a claim is made of parts, each judged by a pure rule below (None: not measurable);
+every part holds → "holds", some → "partly", none → "does not hold", none measurable → "not run yet"
+(:func:`combine`). The rules, fixed before any result, tolerances from the paper's own wording and numbers:
+
+1. PnP: per source (truncated ground truth, detector) ippe_lm's median relative error ≤ 1.25 × iterative's
+   (:data:`ABOUT_AS_ACCURATE`; the paper calls BPnP's 6.8 % vs 5.9 %, 1.15×, "close").
+2. spatial-1d: GeoRobust's survival ≤ random's and APGD's at every budget; APGD's ≥ random's at every budget.
+3. runtime-1d: median time to the first breach per method (its run at the largest time budget, images where it
+   breaches; ∞ if none): the slowest and the fastest differ by ≥ 2× (:data:`TIME_FACTOR`).
+4. spatial-2d: APGD's survival ≥ random's at every box, > at some; GeoRobust's ≤ 5 % at the largest box.
+5. runtime-2d: APGD's median worst error at its last two time budgets within ×2 of 500 m and changing ≤ 20 %;
+   GeoRobust's > ε_safe at some time budget ≤ 2 s.
+6. distance-profile: GeoRobust's φ_crit within 5° of 15° in each quartile whose distance range has its middle
+   below 2600 m, of 30° in each other; APGD's φ_crit ≥ the largest budget (45°) in each.
+7. convergence: mean RA(k) < 20 % at some k ≤ 10; mean |PO_k| rises above its first value and, over the second
+   half of the iterations, varies by ≤ 25 % of that rise.
+8. (ours) georobust-av's survival ≤ GeoRobust's at every box, spatial-1d and spatial-2d; its mean evaluations to
+   a breach ≤ GeoRobust's over the (image, box) pairs both breach.
+9. (ours) per complete dense grid of runtime-1d, the largest |ΔL| between neighbouring points: "holds" when at
+   least half the images jump by > ε_safe, "partly" when some do, else "does not hold".
+"""
+
+from __future__ import annotations
+
+import html
+import logging
+import math
+import sqlite3
+from collections import Counter, defaultdict
+from collections.abc import Callable, Mapping, Sequence
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..campaigns import metrics as mx
+from ..campaigns.experiments import METHODS, PAPER
+from ..campaigns.pnpcheck import TRUNCATED
+from ..campaigns.spec import CampaignSpec
+from ..campaigns.store import JobRow, JobStatus, ResultStore
+from ..constants import Verdict
+from .build import DIRECT_FAMILY, Context, _main_boxes, _reference
+from .html import fmt_num
+
+__all__ = ["CLAIMS", "VERDICTS", "Claim", "at_most", "behind", "claims_html", "claims_markdown", "claims_of", "combine",
+           "crosses_by", "first_breach_s", "largest_jump", "phi_near", "plateaus_near", "ra_below",
+           "rises_then_plateaus", "rough_verdict", "times_differ", "write_claims"]
+
+logger = logging.getLogger(__name__)
+
+VERDICTS = ("holds", "partly", "does not hold", "not run yet")
+HOLDS, PARTLY, FAILS, NOT_RUN = VERDICTS
+ABOUT_AS_ACCURATE = 1.25
+TIME_FACTOR = 2.0
+NEAR_ZERO_PCT = 5.0
+PLATEAU_M, PLATEAU_FACTOR, PLATEAU_CHANGE, CROSS_BY_S = 500.0, 2.0, 0.2, 2.0
+NEAR_M, PHI_TOL_DEG = 2600.0, 5.0
+RA_PCT, RA_BY_ITER, PO_SPREAD = 20.0, 10, 0.25
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One row of the claims table: the paper's statement, our and the dense grid's numbers, the verdict (one of
+    :data:`VERDICTS`), why, and the number of images it is computed on."""
+
+    experiment: str
+    claim: str
+    ours: str
+    truth: str
+    verdict: str
+    reason: str
+    images: int
+
+
+# -- verdict rules: pure functions of numbers (None = not measurable) ------------------------------------------
+def combine(parts: Sequence[bool | None]) -> str:
+    """The verdict of a claim from its parts' outcomes (see the module docstring)."""
+    known = [p for p in parts if p is not None]
+    if not known:
+        return NOT_RUN
+    if len(known) == len(parts) and all(known):
+        return HOLDS
+    return PARTLY if any(known) else FAILS
+
+
+def at_most(a: Sequence[float], b: Sequence[float]) -> bool | None:
+    """True when ``a[i] ≤ b[i]`` at every i where both are known (NaN: unknown); None when none is. Claims 1 (``a``
+    = ippe_lm's median, ``b`` = 1.25 × iterative's), 2, 4, 6 and 8 are made of such comparisons."""
+    p = [(x, y) for x, y in zip(a, b, strict=True) if not (math.isnan(x) or math.isnan(y))]
+    return all(x <= y for x, y in p) if p else None
+
+
+def behind(a: Sequence[float], b: Sequence[float]) -> bool | None:
+    """True when survival ``a`` ≥ ``b`` at every known budget and > at some (None when none is known)."""
+    ok = at_most(b, a)
+    return ok and not at_most(a, b)
+
+
+def times_differ(medians: Mapping[str, float], factor: float = TIME_FACTOR) -> bool | None:
+    """True when the slowest and fastest methods' median times to a breach (∞: never) differ by ≥ ``factor``×;
+    False when no method breaches; None for fewer than two methods."""
+    if len(medians) < 2:
+        return None
+    finite = [v for v in medians.values() if math.isfinite(v)]
+    if not finite:
+        return False
+    return len(finite) < len(medians) or (max(finite) > 0 and max(finite) >= factor * min(finite))
+
+
+def plateaus_near(values: Sequence[float], level: float = PLATEAU_M) -> bool | None:
+    """True when the last two known values (ascending budgets) lie in [level / f, level · f]
+    (f = :data:`PLATEAU_FACTOR`) and differ by ≤ :data:`PLATEAU_CHANGE` × the larger (None for < 2 values)."""
+    v = [x for x in values if math.isfinite(x)][-2:]
+    if len(v) < 2:
+        return None
+    near = all(level / PLATEAU_FACTOR <= x <= level * PLATEAU_FACTOR for x in v)
+    return near and abs(v[1] - v[0]) <= PLATEAU_CHANGE * max(v)
+
+
+def crosses_by(budgets: Sequence[float], values: Sequence[float], threshold: float,
+               by: float = CROSS_BY_S) -> bool | None:
+    """True when some value at a budget ≤ ``by`` is > ``threshold`` (None when no such budget has a value)."""
+    v = [x for b, x in zip(budgets, values, strict=True) if b <= by and math.isfinite(x)]
+    return any(x > threshold for x in v) if v else None
+
+
+def phi_near(phis: Sequence[float], target: float, tol: float = PHI_TOL_DEG) -> bool | None:
+    """True when every φ_crit is within ``tol`` of ``target`` (∞ never is; None for no quartile)."""
+    return all(abs(p - target) <= tol for p in phis) if phis else None
+
+
+def ra_below(ra: Mapping[int, float], pct: float = RA_PCT, by: int = RA_BY_ITER) -> bool | None:
+    """True when RA(k) (%, per iteration k) is < ``pct`` at some k ≤ ``by``; None when it is not and fewer than
+    ``by`` iterations ran."""
+    early = [v for k, v in ra.items() if k <= by and math.isfinite(v)]
+    if early and min(early) < pct:
+        return True
+    return None if max(ra, default=0) < by else False
+
+
+def rises_then_plateaus(po: Sequence[float]) -> bool | None:
+    """True when |PO_k| (k = 1, 2, …) rises above its first value and, over the second half of the iterations,
+    varies by ≤ :data:`PO_SPREAD` × that rise (max − first); None for fewer than 4 iterations."""
+    if len(po) < 4:
+        return None
+    rise, tail = max(po) - po[0], po[len(po) // 2:]
+    return rise > 0 and max(tail) - min(tail) <= PO_SPREAD * rise
+
+
+def rough_verdict(jumps: Sequence[float], eps_safe_m: float) -> str:
+    """Claim 9: "holds" when at least half the images' largest jumps are > ``eps_safe_m``, "partly" when some
+    are, "does not hold" when none is, "not run yet" without images."""
+    if not jumps:
+        return NOT_RUN
+    share = float(np.mean(np.asarray(jumps) > eps_safe_m))
+    return HOLDS if share >= 0.5 else PARTLY if share > 0 else FAILS
+
+
+def _judge(parts: Sequence[tuple[bool | None, str]]) -> tuple[str, str]:
+    """(verdict, reason) of a claim's parts ``(outcome, what was compared)``."""
+    mark = {True: "yes", False: "no", None: "not measured"}
+    held = sum(ok is True for ok, _ in parts)
+    return combine([ok for ok, _ in parts]), (f"{held} of {len(parts)} parts hold: "
+                                              + "; ".join(f"{t} — {mark[ok]}" for ok, t in parts) + ".")
+
+
+# -- reading the stores ------------------------------------------------------------------------------------
+@dataclass
+class _Exp:
+    """One experiment's store, restricted to its complete images (``ids``: every planned job stored)."""
+
+    ctx: Context
+    ids: frozenset[str]
+    total: int
+
+    @property
+    def eps(self) -> float:
+        return self.ctx.eps
+
+    def jobs(self, **kw: object) -> list[JobRow]:
+        return [r for r in self.ctx.store.jobs(**kw) if r.sample_id in self.ids]
+
+    def reference(self) -> list[JobRow]:
+        return [r for r in _reference(self.ctx, _main_boxes(self.ctx)) if r.sample_id in self.ids]
+
+
+def _open(root: Path, name: str, stack: ExitStack) -> _Exp | str:
+    """The experiment ``name`` under ``root``, or why there is none."""
+    path = root / name / "results.sqlite"
+    if not path.is_file():
+        return f"no results store at {path}"
+    try:
+        store = stack.enter_context(ResultStore.open_existing(path))
+    except (ValueError, sqlite3.Error) as exc:  # e.g. a store of a newer vbl-robust: say so, read the others
+        return f"{path}: {exc}"
+    camp = store.campaign()
+    if camp is None or camp["name"] != name:
+        return f"{path} holds {'no campaign' if camp is None else 'campaign ' + repr(camp['name'])}"
+    spec = CampaignSpec.from_dict(camp["spec"])
+    samples = store.samples()
+    planned = Counter(j.sample_id for j in spec.expand([(s, d["fingerprint"] or "") for s, d in samples.items()]))
+    stored = Counter(r.sample_id for r in store.jobs(with_trace=False))
+    ids = frozenset(s for s, n in planned.items() if stored[s] >= n)
+    main = [r for r in mx.main_rows(store, spec) if r.sample_id in ids]
+    return _Exp(Context(store, spec, root / name, main, samples), ids, len(samples))
+
+
+def _survival(rows: Sequence[JobRow], eps: float) -> tuple[list[str], dict[str, list[float]]]:
+    """(box labels by level, per method the survival % at each box, NaN where it has no row): the report's survival
+    table (:func:`~vbl_robust.campaigns.metrics.summarize` by method and box); absent methods read all NaN."""
+    lines = mx.summarize(rows, eps, by=("method", "box_label"))
+    labels = [lab for _, lab in sorted({(ln["box_level"], ln["box_label"]) for ln in lines})]
+    got = {(ln["method"], ln["box_label"]): ln["survival"] for ln in lines}
+    return labels, defaultdict(lambda: [math.nan] * len(labels),
+                               {m: [got.get((m, b), math.nan) for b in labels] for m, _ in got})
+
+
+def _slash(values: Sequence[float]) -> str:
+    return "/".join(fmt_num(v) for v in values)
+
+
+def _text(s: Mapping[str, Sequence[float]], labels: Sequence[str], *methods: str) -> str:
+    """``"survival % at ±2° … ±30°: georobust 100/50; random 100/100"`` (the ``methods`` present)."""
+    head = f"survival % at {labels[0]} … {labels[-1]}: " if labels else ""
+    return head + "; ".join(f"{m} {_slash(s[m])}" for m in methods if m in s)
+
+
+def first_breach_s(row: JobRow, eps_safe_m: float, penalty_m: float) -> float:
+    """Seconds on the search's clock to the row's first evaluation above ``eps_safe_m`` (non-finite values count
+    as ``penalty_m``); ∞ when none; NaN without stamped times (``row`` needs its points)."""
+    p = row.points
+    if p is None or p.times is None:
+        return math.nan
+    hit = np.flatnonzero(np.where(np.isfinite(p.fs), p.fs, penalty_m) > eps_safe_m)
+    return float(p.times[hit[0]]) if hit.size else math.inf
+
+
+def largest_jump(xs: np.ndarray, fs: np.ndarray, penalty_m: float) -> tuple[float, float]:
+    """(largest |ΔL| between neighbouring points of a 1-D grid (m), the slope it implies (m per unit of x))."""
+    order = np.argsort(xs[:, 0])
+    x, f = xs[order, 0], np.where(np.isfinite(fs), fs, penalty_m)[order]
+    d, dx = np.abs(np.diff(f)), np.diff(x)
+    i = int(np.argmax(d))
+    return float(d[i]), float(d[i] / dx[i]) if dx[i] > 0 else math.inf
+
+
+# -- one function per claim, each returning a Row ------------------------------------------------------------
+#: What a claim's function returns: (ours, truth, verdict, reason, images it is computed on).
+Row = tuple[str, str, str, str, int]
+
+
+def _pnp(e: _Exp) -> Row:
+    summary = mx.pnp_summary(e.jobs(kind="pnp", with_trace=False))
+    med = {(s["source"], s["solver"]): s["median_rel_pct"] for s in summary}
+    parts, ours = [], []
+    for src in (TRUNCATED, "detector"):
+        a, b = med.get((src, "ippe_lm"), math.nan), med.get((src, "iterative"), math.nan)
+        ours.append(f"{src}: ippe_lm {fmt_num(a)} % vs iterative {fmt_num(b)} %")
+        fail = {s["solver"]: s["failures"] for s in summary if s["source"] == src and s["failures"]}
+        ours[-1] += f" (failed solves: {', '.join(f'{k} {v}' for k, v in fail.items())})" if fail else ""
+        parts.append((at_most([a], [ABOUT_AS_ACCURATE * b]), f"{src}: {fmt_num(a)} % ≤ {ABOUT_AS_ACCURATE:g} × "
+                                                            f"{fmt_num(b)} %"))
+    n = max((s["n"] for s in summary), default=0)
+    return ("; ".join(ours), "", *_judge(parts), n)
+
+
+def _spatial_1d(e: _Exp) -> Row:
+    labels, s = _survival([r for r in e.ctx.main if r.chain is None] + e.reference(), e.eps)
+    geo, rnd, apgd = s["georobust"], s["random"], s["apgd"]
+    truth = _text(s, labels, mx.REFERENCE_METHOD) if mx.REFERENCE_METHOD in s else ""
+    return (_text(s, labels, *METHODS), truth,
+            *_judge([(at_most(geo + geo, rnd + apgd), f"georobust {_slash(geo)} ≤ random's and apgd's everywhere"),
+                     (at_most(rnd, apgd), f"apgd {_slash(apgd)} ≥ random {_slash(rnd)} everywhere")]), len(e.ids))
+
+
+def _runtime_1d(e: _Exp) -> Row:
+    timed = [r for r in e.ctx.runs if r.sample_id in e.ids and r.budget and r.budget.max_seconds is not None]
+    medians, ours = {}, []
+    for m in dict.fromkeys(r.method for r in timed):
+        rows = [r for r in timed if r.method == m]
+        top = max(r.budget.max_seconds for r in rows)
+        t = [first_breach_s(r, e.eps, e.ctx.spec.penalty_m) for r in rows if r.budget.max_seconds == top]
+        t = [v for v in t if not math.isnan(v)]  # rows stored before evaluations were stamped tell nothing
+        if not t:
+            continue
+        hit = [v for v in t if math.isfinite(v)]
+        medians[m] = float(np.median(hit)) if hit else math.inf
+        ours.append(f"{m} {fmt_num(medians[m])} s ({len(hit)} of {len(t)} images, run at {top:g} s)")
+    ref = e.reference()
+    truth = (f"grid: a breach on {sum(r.worst_m > e.eps for r in ref)} of {len(ref)} images" if ref else "")
+    ok = times_differ(medians)
+    fin = [v for v in medians.values() if math.isfinite(v)]
+    spread = f"slowest/fastest = {fmt_num(max(medians.values()) / min(fin))}" if fin and min(fin) > 0 else "no breach"
+    return ("median time to first breach: " + "; ".join(ours), truth,
+            *_judge([(ok, f"{spread} (≥ {TIME_FACTOR:g} needed)")]), len(e.ids))
+
+
+def _spatial_2d(e: _Exp) -> Row:
+    labels, s = _survival([r for r in e.ctx.main if r.chain is None], e.eps)
+    rnd, apgd, last = s["random"], s["apgd"], s["georobust"][-1:] or [math.nan]
+    return (_text(s, labels, *METHODS), "",
+            *_judge([(behind(apgd, rnd), f"apgd {_slash(apgd)} ≥ random {_slash(rnd)} everywhere, > somewhere"),
+                     (at_most(last, [NEAR_ZERO_PCT]), f"georobust {_slash(last)} % ≤ {NEAR_ZERO_PCT:g} % at the "
+                                                      "largest box")]), len(e.ids))
+
+
+def _runtime_2d(e: _Exp) -> Row:
+    rows = [r for r in e.ctx.main if r.budget is not None and r.budget.max_seconds is not None]
+    by: dict[str, list[tuple[float, float]]] = {}
+    for ln in mx.summarize(rows, e.eps, by=("method", "budget_label")):
+        by.setdefault(ln["method"], []).append((ln["max_seconds"], ln["median_worst_m"]))
+    curve = {m: sorted(v) for m, v in by.items()}
+    ours = "; ".join(f"{m} " + ", ".join(f"{t:g} s: {fmt_num(w)} m" for t, w in v) for m, v in curve.items())
+    apgd, geo = curve.get("apgd", []), curve.get("georobust", [])
+    last = [fmt_num(w) for _, w in apgd if math.isfinite(w)][-2:]
+    early = [fmt_num(w) for t, w in geo if t <= CROSS_BY_S and math.isfinite(w)]
+    return ("median worst error: " + ours, "",
+            *_judge([(plateaus_near([w for _, w in apgd]), f"apgd's last two medians ({', '.join(last) or '–'} m) "
+                      f"within ×{PLATEAU_FACTOR:g} of {PLATEAU_M:g} m, changing ≤ {100 * PLATEAU_CHANGE:g} %"),
+                     (crosses_by([t for t, _ in geo], [w for _, w in geo], e.eps),
+                      f"georobust's medians at budgets ≤ {CROSS_BY_S:g} s ({', '.join(early) or '–'} m) exceed "
+                      f"{e.eps:g} m somewhere")]), len(e.ids))
+
+
+def _phi(v: float, limit: float) -> str:
+    return f"≥ {limit:g}°" if not math.isfinite(v) else f"{v:g}°"
+
+
+def _distance(e: _Exp) -> Row:
+    rows = [r for r in e.ctx.main if r.chain is not None]
+    budgets = sorted({r.box_level for r in rows})
+    limit = max(budgets, default=math.nan)
+    dist = {sid: s["slant_distance_m"] for sid, s in e.ctx.samples.items() if sid in e.ids}
+    prof = [p for p in mx.distance_profile(rows + e.reference(), dist, budgets) if p["n"]]
+
+    def of(m: str) -> list[dict]:
+        return [p for p in prof if p["method"] == m]
+
+    def text(m: str) -> str:
+        return f"{m} " + ", ".join(f"Q{p['quartile']} {p['d_min_m']:.0f}–{p['d_max_m']:.0f} m: "
+                                   f"{_phi(p['phi_crit'], limit)}" for p in of(m))
+
+    mid = {id(p): (p["d_min_m"] + p["d_max_m"]) / 2 for p in prof}
+    near = [p["phi_crit"] for p in of("georobust") if mid[id(p)] < NEAR_M]
+    far = [p["phi_crit"] for p in of("georobust") if mid[id(p)] >= NEAR_M]
+    apgd = [p["phi_crit"] for p in of("apgd")]
+    return ("φ_crit: " + "; ".join(text(m) for m in ("georobust", "apgd") if of(m)),
+            text(mx.REFERENCE_METHOD) if of(mx.REFERENCE_METHOD) else "",
+            *_judge([(phi_near(near, 15.0), f"georobust within {PHI_TOL_DEG:g}° of 15° below {NEAR_M:g} m "
+                      f"({', '.join(_phi(v, limit) for v in near) or 'no quartile'})"),
+                     (phi_near(far, 30.0), f"within {PHI_TOL_DEG:g}° of 30° beyond "
+                      f"({', '.join(_phi(v, limit) for v in far) or 'no quartile'})"),
+                     (at_most([limit] * len(apgd), apgd), f"apgd ≥ {limit:g}° "
+                                                          f"({', '.join(_phi(v, limit) for v in apgd) or '–'})")]),
+            len(dist))
+
+
+def _convergence(e: _Exp) -> Row:
+    conv = mx.convergence([r for r in e.ctx.main if r.method in DIRECT_FAMILY])
+    ra = {c["iteration"]: c["ra_mean"] for c in conv}
+    po = [c["po_mean"] for c in conv]
+    early = {k: v for k, v in ra.items() if k <= RA_BY_ITER and math.isfinite(v)}
+    k = min(early, key=early.__getitem__, default=None)
+    low = f"lowest mean RA(k ≤ {RA_BY_ITER}) {fmt_num(early[k])} % at k = {k}" if k else "no RA(k)"
+    tail = po[len(po) // 2:]
+    pos = (f"mean |PO_k| {fmt_num(po[0])} → max {fmt_num(max(po))}, {fmt_num(min(tail))}–{fmt_num(max(tail))} over "
+           f"k = {len(po) - len(tail) + 1}…{len(po)}" if po else "no |PO_k|")
+    return (f"{low}; {pos}", "",
+            *_judge([(ra_below(ra), f"{low} < {RA_PCT:g} % ({len(ra)} iterations ran)"),
+                     (rises_then_plateaus(po), f"{pos}: rises, then varies ≤ {100 * PO_SPREAD:g} % of the rise")]),
+            len(e.ids))
+
+
+def _av(s1: _Exp | None, s2: _Exp | None) -> Row:
+    parts, ours, rows, ids = [], [], [], set()
+    for tag, e in (("1-D", s1), ("2-D", s2)):
+        if e is None:
+            parts.append((None, f"{tag}: not run yet"))
+            continue
+        main = [r for r in e.ctx.main if r.chain is None]
+        labels, s = _survival(main, e.eps)
+        ours.append(f"{tag}: {_text(s, labels, 'georobust', 'georobust-av')}")
+        parts.append((at_most(s["georobust-av"], s["georobust"]), f"{tag}: georobust-av ≤ georobust at every box"))
+        rows += main
+        ids |= e.ids
+    hit = {(r.sample_id, r.box_label, r.method): r.nfev for r in rows
+           if r.verdict is Verdict.BREACH and r.status is JobStatus.DONE}
+    both = [(v, hit[(s, b, "georobust-av")]) for (s, b, m), v in hit.items()
+            if m == "georobust" and (s, b, "georobust-av") in hit]
+    g, a = (float(np.mean([p[i] for p in both])) if both else math.nan for i in (0, 1))
+    ours.append(f"mean evals to a breach: georobust {fmt_num(g)}, georobust-av {fmt_num(a)} ({len(both)} shared)")
+    parts.append((at_most([a], [g]), f"georobust-av {fmt_num(a)} ≤ georobust {fmt_num(g)} evals to a breach"))
+    return ("; ".join(ours), "", *_judge(parts), len(ids))
+
+
+def _rough(e: _Exp) -> Row:
+    grids = [r for r in e.jobs(kind="search", role="reference", with_points=True, with_trace=False)
+             if r.status is JobStatus.DONE and r.points is not None and len(r.points) > 1 and mx.grid_complete(r)]
+    got = [largest_jump(r.points.xs, r.points.fs, e.ctx.spec.penalty_m) for r in grids]
+    jumps, slopes = [j for j, _ in got], [s for _, s in got]
+    verdict = rough_verdict(jumps, e.eps)
+    share = 100.0 * float(np.mean(np.asarray(jumps) > e.eps)) if jumps else math.nan
+    med = (fmt_num(float(np.median(jumps))), fmt_num(float(np.median(slopes)))) if got else ("–", "–")
+    ours = (f"median largest jump {med[0]} m (slope {med[1]} m/°); {fmt_num(share)} % of images jump > "
+            f"{e.eps:g} m")
+    why = (f"{fmt_num(share)} % of {len(jumps)} complete grids jump by > {e.eps:g} m between neighbours (holds from "
+           "50 %, partly above 0 %)" if jumps else "no complete dense grid in the store (run with --grid-step > 0)")
+    return ours, "", verdict, why + ".", len(grids)
+
+
+#: (experiments, the paper's claim, its computation), in table order.
+CLAIMS: tuple[tuple[tuple[str, ...], str, Callable[..., Row]], ...] = (
+    (("pnp-validation",), "The differentiable PnP (BPnP; ours: the ippe_lm forward pass) is about as accurate as "
+     "OpenCV's iterative PnP: median relative error 2.2 % vs 2.2 % on ground-truth corners, 6.8 % vs 5.9 % on the "
+     "detector's.", _pnp),
+    (("spatial-1d",), "GeoRobust has the lowest survival at every roll budget (±2…±30°); APGD is no better than "
+     "random search.", _spatial_1d),
+    (("runtime-1d",), "Time to failure differs by method (roll ±15°, 0.1–5 s per image).", _runtime_1d),
+    (("spatial-2d",), "APGD falls behind random search (higher survival); GeoRobust drives survival to ≈0 % at "
+     "the largest box (±30°, contrast [0.4, 2.5]).", _spatial_2d),
+    (("runtime-2d",), "APGD's median worst error plateaus around 500 m; GeoRobust's crosses 1000 m within 2 s "
+     "(±10°, contrast [0.7, 1.4]).", _runtime_2d),
+    (("distance-profile",), "φ_crit ≈ 15° for approaches closer than ≈2600 m and ≈30° beyond; APGD stays at the "
+     "45° limit.", _distance),
+    (("convergence",), "RA(k) < 20 % within 10 iterations (over 80 % of Θ pruned); |PO_k| rises, then "
+     "plateaus.", _convergence),
+    (("spatial-1d", "spatial-2d"), "(ours) georobust-av finds at least as many breaches as the paper's GeoRobust "
+     "(survival ≤ at every box, 1-D and 2-D) in no more evaluations to a breach.", _av),
+    (("runtime-1d",), "(ours) L(θ) is not Lipschitz-smooth (the paper's Property 1 assumes it is): on the ±15° "
+     "dense grid it jumps by more than ε_safe = 1000 m between neighbouring roll angles.", _rough),
+)
+
+
+def _row(names: tuple[str, ...], text: str, fn: Callable[..., Row], exps: Mapping[str, _Exp | str]) -> Claim:
+    """The claim ``text`` on the experiments ``names`` (``exps``: :func:`_open` of each): ``fn``'s row on their
+    complete images, or "not run yet" (why) when none has one."""
+    got = [exps[n] for n in names]
+    ready = [e if isinstance(e, _Exp) and e.ids else None for e in got]
+    why = [e if isinstance(e, str) else f"partial: 0 of {e.total} images" for e, r in zip(got, ready, strict=True)
+           if r is None]
+    partial = [f"{n} partial: {len(e.ids)} of {e.total} images" for n, e in zip(names, ready, strict=True)
+               if e is not None and len(e.ids) < e.total]
+    exp = " + ".join(names)
+    if not any(ready):
+        short = "not run yet" if all(isinstance(e, str) for e in got) else "; ".join(why)
+        return Claim(exp, text, short, "", NOT_RUN, "; ".join(why) + ".", 0)
+    try:
+        ours, truth, verdict, reason, n = fn(*ready)
+    except Exception as exc:  # one broken claim must not hide the others
+        logger.exception("claim on %s failed", exp)
+        return Claim(exp, text, "–", "", NOT_RUN, f"failed to compute ({type(exc).__name__}: {exc}); see the log.",
+                     0)
+    if partial:
+        reason = "; ".join(partial) + f" (computed on those) — {reason}"
+    return Claim(exp, text, ours, truth, verdict, reason, n)
+
+
+def claims_of(root: str | Path) -> list[Claim]:
+    """One :class:`Claim` per entry of :data:`CLAIMS`, computed from the stores ``root/<experiment>/`` that exist
+    (missing: "not run yet"; partial: on the images whose jobs are all stored)."""
+    root = Path(root)
+    with ExitStack() as stack:
+        exps = {name: _open(root, name, stack) for name in PAPER}
+        return [_row(names, text, fn, exps) for names, text, fn in CLAIMS]
+
+
+_COLUMNS = ("experiment", "claim", "ours", "truth", "verdict", "reason", "images")
+_HEADERS = ("experiment", "the paper's claim", "ours", "dense grid (truth)", "verdict", "why", "images")
+
+
+#: How the table was generated (the line under it); ``{}``: the root of the stores.
+GENERATED = ("Generated by `vbl_robust.report.claims.write_claims` from the results stores under {} (rules in that "
+             "module's docstring); rerun it after a run, never edit by hand.")
+
+
+def claims_markdown(claims: Sequence[Claim], source: str = "ROOT") -> str:
+    """A Markdown table, one row per claim, then the line saying how it was generated (``source``: the root)."""
+    def cell(v: object) -> str:
+        return str(v).replace("|", "\\|").replace("\n", " ") or " "
+
+    lines = ["| " + " | ".join(_HEADERS) + " |", "|" + "---|" * len(_HEADERS)]
+    lines += ["| " + " | ".join(cell(getattr(c, k)) for k in _COLUMNS) + " |" for c in claims]
+    return "\n".join([*lines, "", GENERATED.format(f"`{source}`"), ""])
+
+
+def claims_html(claims: Sequence[Claim], source: str = "ROOT") -> str:
+    """An HTML ``<section>`` with the claims table (every text escaped) and how it was generated."""
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in _HEADERS)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(getattr(c, k)))}</td>" for k in _COLUMNS) + "</tr>"
+                   for c in claims)
+    return (f'<section class="claims"><h2>The paper\'s claims, checked</h2><table><thead><tr>{head}</tr></thead>'
+            f"<tbody>{body}</tbody></table><p>{html.escape(GENERATED.format(source))}</p></section>")
+
+
+def write_claims(root: str | Path, out: str | Path | None = None) -> Path:
+    """Write ``claims.md`` (:func:`claims_markdown` of :func:`claims_of` ``root``) into ``out`` (default ``root``);
+    returns its path."""
+    root = Path(root)
+    path = Path(out if out is not None else root) / "claims.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(claims_markdown(claims_of(root), str(root)))
+    return path
