@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import pytest
 from typer.testing import CliRunner
 
+from vbl_robust.campaigns.estimate import Probe, expected_evals, expected_seconds, planned_work
 from vbl_robust.campaigns.experiments import EXPERIMENTS, PAPER, Options
 from vbl_robust.cli import app
-from vbl_robust.cli.reproduce import planned_work
 
 runner = CliRunner()
 SMALL = ["--oracle", "--oracle-noise", "0.5", "--width", "128", "--height", "128", "--quiet", "--images", "1",
@@ -64,10 +65,12 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
 
 
 def test_estimate_prints_an_upper_bound_per_experiment():
-    res = runner.invoke(app, ["reproduce", "all", "--estimate", "--oracle", "--images", "2"])
+    res = runner.invoke(app, ["reproduce", "all", "--estimate", "--oracle", "--images", "2", "--probe-seconds", "0.2"])
     assert res.exit_code == 0, res.output
     assert "evaluations/s" in res.output and all(name in res.output for name in EXPERIMENTS)
-    paper = runner.invoke(app, ["reproduce", "paper", "--estimate", "--oracle", "--images", "2"])
+    assert "h expected" in res.output and "upper bound" in res.output
+    paper = runner.invoke(app, ["reproduce", "paper", "--estimate", "--oracle", "--images", "2",
+                                   "--probe-seconds", "0.2"])
     assert paper.exit_code == 0, paper.output
     assert all(name in paper.output for name in PAPER) and "families" not in paper.output and len(PAPER) == 7
 
@@ -90,6 +93,22 @@ def test_two_workers_and_the_process_clock_are_recorded(tmp_path):
         run = store.runs()[0]
         assert run["config"]["workers"] == 2 and run["config"]["clock"] == "process"
         assert store.campaign()["spec"]["clock"] == "process"
+
+
+def test_expected_duration_follows_the_breach_shares():
+    assert expected_evals(0.0, 200) == 200 and expected_evals(1.0, 200) == 1
+    assert expected_evals(0.5, 200) == pytest.approx(2.0)
+    spec = EXPERIMENTS["spatial-1d"].build(0, Options(grid_step_deg=0.0, methods=("random", "apgd")))
+    never = Probe(rate=10.0, grad_rate=5.0)
+    # no breach anywhere: every budget spent; APGD's evaluations at the gradient path's rate
+    assert expected_seconds(spec, 2, never) == pytest.approx(2 * 6 * (200 / 10.0 + 200 / 5.0))
+    labels = [b.label for b in spec.blocks[0].boxes]
+    always = Probe(10.0, 5.0, {label: [1.0, 1.0] for label in labels})
+    assert expected_seconds(spec, 2, always, workers=2) == pytest.approx(6 * (1 / 10.0 + 1 / 5.0))
+    # nested boxes of a chain (distance profile): a breach at the smallest box ends the chain
+    chain = EXPERIMENTS["distance-profile"].build(0, Options(grid_step_deg=0.0, methods=("random",)))
+    first = chain.blocks[0].boxes[0].label
+    assert expected_seconds(chain, 1, Probe(10.0, 5.0, {first: [1.0]})) == pytest.approx(1 / 10.0)
 
 
 def test_planned_work_counts_budgets_and_grids():

@@ -1,12 +1,15 @@
 """``vbl-robust reproduce EXPERIMENT|paper|all``: run one of the paper's experiments, the paper's seven, or all of
 them with ours (defaults are the paper's). ``paper`` and ``all`` give each experiment its own run directory under
-``--out`` (each resumable on its own) and an ``index.html`` linking their reports; ``--estimate`` prints, from a short measured probe of the detector on this
-machine, an upper bound of each experiment's duration (every evaluation budget spent, no early stop) and exits.
+``--out`` (each resumable on its own) and an ``index.html`` linking their reports; ``--estimate`` prints
+(:mod:`vbl_robust.campaigns.estimate`), from a short measured probe of the detector on this
+machine and the breach rates of its first images, each experiment's expected duration and an upper bound (every
+evaluation budget spent, no early stop), and exits.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -40,48 +43,27 @@ def _floats(text: str | None, name: str) -> tuple[float, ...] | None:
     return vals
 
 
-def planned_work(spec, n_images: int) -> tuple[int, float]:
-    """``(evaluations, seconds)`` an experiment can spend on ``n_images``: the evaluation budgets (grids: their
-    points) of every job, and the time budgets of the time-bounded ones — an upper bound (early stops and chains
-    cut it)."""
-    import math
+def _estimate(exps: list, opts: Any, seed: int, images: int | None, det: Any, probe_samples: list, workers: int,
+              group: str, probe_seconds: float) -> None:
+    """Print each experiment's expected duration and its upper bound (:mod:`vbl_robust.campaigns.estimate`)."""
+    from vbl_robust.campaigns.estimate import Probe, expected_seconds, planned_work, probe
 
-    jobs = spec.expand([(f"probe{i}", "") for i in range(n_images)])
-    evals, seconds = 0, 0.0
-    for j in jobs:
-        if j.kind == "pnp":
-            evals += 1
-            continue
-        counts = (j.options or {}).get("counts")
-        if counts:
-            evals += math.prod(int(c) for c in counts)
-        elif j.budget.max_evals is not None:
-            evals += j.budget.max_evals
-        if j.budget.max_seconds is not None and j.budget.max_evals is None:
-            seconds += j.budget.max_seconds
-    return evals, seconds
-
-
-def probe_rate(det, seconds: float = 5.0) -> float:
-    """Evaluations per second of the audit objective (roll ± 15°, contrast) on one synthetic image, measured."""
-    import time
-
-    import numpy as np
-
-    from vbl_robust.campaigns.work import detector_for
-    from vbl_robust.pipeline import Objective
-    from vbl_robust.scenes import generate
-    from vbl_robust.space import ParameterBox
-
-    box = ParameterBox({"roll_deg": (-15, 15), "contrast": (0.7, 1.4)})
-    obj = Objective(generate(1, seed=0)[0], detector_for(det), box)
-    rng = np.random.default_rng(0)
-    obj(box.from_unit(rng.random((8, 2))))  # warm-up: model, pixels
-    n, t0 = 0, time.perf_counter()
-    while time.perf_counter() - t0 < seconds:
-        obj(box.from_unit(rng.random((32, 2))))
-        n += 32
-    return n / (time.perf_counter() - t0)
+    specs = [exp.build(seed, opts) for exp in exps]
+    pr = probe(det, specs, probe_samples, seconds=probe_seconds)
+    typer.echo(f"probe: {pr.rate:.1f} evaluations/s black box, {pr.grad_rate:.1f} with a gradient ({det.name}, one "
+               f"thread); breach shares of {len(pr.breach)} early-stopping boxes on {len(probe_samples)} probe "
+               f"images; {workers} worker(s)")
+    total = bound = 0.0
+    for exp, spec in zip(exps, specs, strict=True):
+        n = images or exp.images
+        evals, _ = planned_work(spec, n)
+        t = expected_seconds(spec, n, pr, workers)
+        ub = expected_seconds(spec, n, Probe(pr.rate, pr.grad_rate), workers)
+        total, bound = total + t, bound + ub
+        typer.echo(f"{exp.name:18s} {n:5d} images  ≤ {evals:9d} evaluations  ≈ {t / 3600:6.2f} h expected  "
+                   f"≤ {ub / 3600:6.2f} h")
+    typer.echo(f"{group or exps[0].name:18s} ≈ {total / 3600:.2f} h expected, ≤ {bound / 3600:.2f} h (upper bound: "
+               "every budget spent, no early stop)")
 
 
 def write_index(out: Path, names: list[str], extra: str = "") -> Path:
@@ -152,8 +134,11 @@ def register(app: typer.Typer) -> None:
         csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to CSV."),
         parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to Parquet."),
         report: bool = typer.Option(True, "--report/--no-report", help="Write report.html into --out."),
-        estimate: bool = typer.Option(False, "--estimate", help="Print each experiment's expected duration (upper "
-                                      "bound, from a measured probe of the detector here) and exit."),
+        estimate: bool = typer.Option(False, "--estimate", help="Print each experiment's expected duration "
+                                      "(from a measured probe of the detector here and the breach rates of the first "
+                                      "images) and its upper bound, and exit."),
+        probe_seconds: float = typer.Option(5.0, "--probe-seconds", min=0.01, help="--estimate: seconds each "
+                                            "evaluation-rate probe runs (black box, gradient)."),
         quiet: bool = typer.Option(False, "--quiet", "-q"),
     ) -> None:
         """Run one of the paper's experiments, or all; rerunning the same command resumes it."""
@@ -177,17 +162,11 @@ def register(app: typer.Typer) -> None:
         _check_method_options(method_opts, [exp.build(seed, opts) for exp in exps])
         det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
         if estimate:
-            rate = probe_rate(det)
-            typer.echo(f"probe: {rate:.1f} evaluations/s ({det.name}, roll + contrast, one image, this machine)")
-            total = 0.0
-            for exp in exps:
-                n = images or exp.images
-                evals, secs = planned_work(exp.build(seed, opts), n)
-                t = evals / rate + secs
-                total += t
-                typer.echo(f"{exp.name:18s} {n:5d} images  ≤ {evals:9d} evaluations  ≤ {t / 3600:6.2f} h")
-            typer.echo(f"{experiment if group else exps[0].name:18s} ≤ {total / 3600:.2f} h (upper bound: every "
-                       "budget spent, no early stop)")
+            from vbl_robust.campaigns.estimate import PROBE_IMAGES
+
+            _estimate(exps, opts, seed, images, det, load(PROBE_IMAGES, seed, lard, width, height)[0],
+                      run_settings(exps[0].build(seed, opts), clock, device, workers)[1], experiment if group else "",
+                      probe_seconds)
             return
         root = out or Path("runs") / (experiment if group else exps[0].name)
         for exp in exps:
