@@ -76,6 +76,17 @@ def test_unreadable_image_is_a_recorded_failure_and_the_campaign_goes_on(tmp_pat
     assert all(r.worst_m == 5000.0 and "nope.png" in r.reason for r in failed)
     assert {r.status for r in rows if r.sample_id != "missing"} == {"done"}
 
+    # the image comes back: a plain rerun skips the failed jobs, --retry-failed runs them (and only them) again
+    from PIL import Image
+
+    Image.fromarray(good.image).save(tmp_path / "nope.png")
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        assert run_campaign(small_spec(), [bad, good], st, detector=oracle).done == 0
+        again = run_campaign(small_spec(), [bad, good], st, detector=oracle, retry_failed=True)
+        rows = st.jobs()
+    assert again.done == 2 and again.failed == 0 and again.skipped == 2
+    assert {r.status for r in rows} == {"done"} and len(rows) == 4
+
 
 def test_pipeline_exception_is_recorded_with_its_reason(tmp_path, small_samples):
     det = DetectorSpec("factory", "campaign_helpers:BrokenDetector")
@@ -144,3 +155,18 @@ def test_worker_processes_give_the_rows_of_one_process(tmp_path, small_samples, 
 def test_bad_worker_count_is_refused(tmp_path, small_samples, oracle):
     with ResultStore(tmp_path / "r.sqlite") as st, pytest.raises(ValueError, match="workers must be an integer >= 1"):
         run_campaign(small_spec(), small_samples[:1], st, detector=oracle, workers=0)
+
+
+def test_one_writer_per_store(tmp_path, small_samples, oracle):
+    """A second run on a store that another process is writing is refused with the writer's PID, not mixed in."""
+    import os
+
+    from vbl_robust.campaigns.store import WriterLock
+
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        with WriterLock(st.path):  # another writer (a lock taken on its own file descriptor)
+            with pytest.raises(ValueError, match=f"in use by PID {os.getpid()}"):
+                run_campaign(small_spec(), small_samples[:1], st, detector=oracle)
+            assert st.count() == 0 and st.runs() == []
+        s = run_campaign(small_spec(), small_samples[:1], st, detector=oracle)  # free again
+        assert s.status == "finished" and st.count() == 2

@@ -135,3 +135,57 @@ def test_the_summary_table_never_cuts_a_method_name(tmp_path):
                               "--oracle", "--width", "128", "--height", "128"])
     assert res.exit_code == 0, res.output
     assert "│ georobust-av " in res.output and "│ georobust " in res.output
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--contrast", "-1,2"], "lower bound of 'contrast' must be >= 0"),
+    (["--pnp", "foo"], "pnp: unknown solver 'foo'"),
+    (["--contrast", "0.8,1.2", "--lipschitz", "1,2,3"], "lipschitz must be a number or 2 finite numbers"),
+    (["--methods", "random,random"], "random given more than once"),
+    (["--engine", "openvino"], "--engine openvino applies to a model, not to --oracle"),
+    (["--device", "tpu"], "--device tpu applies to a model, not to --oracle"),
+    (["--roll", "-5"], "--roll -5: a half-width must be > 0"),
+    (["--contrast", "1.4,0.7"], "--contrast 1.4,0.7: expected lower < upper"),
+    (["--parquet", "x.csv"], "--parquet x.csv: the file name must end in .parquet"),
+])
+def test_a_configuration_error_is_refused_before_any_work(tmp_path, args, message):
+    """Not "every image unsafe" with exit 0: one line naming the setting and value, exit 2, nothing stored."""
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["audit", "--out", str(out), "--n", "1", "--max-evals", "5", *SMALL, *args])
+    assert res.exit_code == 2 and message in res.output, res.output
+    assert "Traceback" not in res.output and not (out / "results.sqlite").exists()
+
+
+def test_the_api_refuses_the_same_configuration_errors(tmp_path):
+    from vbl_robust.campaigns import (
+        Block,
+        BoxSpec,
+        Budget,
+        CampaignSpec,
+        DetectorSpec,
+        ResultStore,
+        run_campaign,
+    )
+    from vbl_robust.space import ParameterBox
+
+    box = BoxSpec(ParameterBox({"contrast": (-1.0, 2.0)}), "contrast [-1, 2]", 1.0)
+    spec = CampaignSpec("t", (Block(boxes=(box,), methods=("random",), budgets=(Budget(max_evals=4),)),))
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        with pytest.raises(ValueError, match="box contrast \\[-1, 2\\]: .*lower bound of 'contrast'"):
+            run_campaign(spec, [], st, detector=DetectorSpec.oracle(0.5))
+        assert st.count() == 0 and st.runs() == []
+
+
+def test_oracle_noise_without_the_oracle_is_refused(tmp_path):
+    res = runner.invoke(app, ["audit", "--out", str(tmp_path / "r"), "--n", "1", "--oracle-noise", "2", "--quiet"])
+    assert res.exit_code == 2 and "--oracle-noise 2 applies to --oracle only" in res.output
+
+
+def test_an_out_or_export_path_that_cannot_be_written_is_refused_before_the_run(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    res = runner.invoke(app, ["audit", "--out", str(blocker), "--n", "1", *SMALL])
+    assert res.exit_code == 2 and "is a file, not a run directory" in res.output and blocker.read_text() == "x"
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["audit", "--out", str(out), "--n", "1", "--csv", str(blocker / "x.csv"), *SMALL])
+    assert res.exit_code == 2 and "cannot write there" in res.output and not out.exists()

@@ -26,7 +26,7 @@ from typing import Any
 from ..constants import Verdict
 from .provenance import DetectorSpec, code_version, dataset_identity, sample_fingerprint
 from .spec import CampaignSpec, Job
-from .store import JobRow, JobStatus, ResultStore
+from .store import JobRow, JobStatus, ResultStore, WriterLock
 from .work import SampleTask, Settings, detector_for, run_sample_task
 
 logger = logging.getLogger(__name__)
@@ -100,6 +100,8 @@ def run_campaign(
     progress: Callable[[Progress], None] | None = None,
     dataset_source: dict[str, Any] | None = None,
     config: dict[str, Any] | None = None,
+    wait: bool = False,
+    retry_failed: bool = False,
 ) -> RunSummary:
     """Run every job of ``spec`` on ``samples`` that ``store`` does not hold yet.
 
@@ -115,11 +117,29 @@ def run_campaign(
         progress: called after every committed job.
         dataset_source: where the samples came from (provenance), e.g. ``{"kind": "synthetic", "n": 10, "seed": 0}``.
         config: the full user configuration (provenance; e.g. the CLI options).
+        retry_failed: run the jobs stored as failed again (e.g. after a missing image was restored); by default
+            a rerun skips them like every stored job.
+        wait: when another process is writing ``store`` (:class:`~vbl_robust.campaigns.store.WriterLock`), wait
+            for it instead of refusing (``ValueError`` naming its PID).
     """
     if executor not in EXECUTORS:
         raise ValueError(f"executor must be one of {EXECUTORS}, got {executor!r}")
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+    spec.check()
+    lock = WriterLock(store.path).acquire(wait=wait)
+    try:
+        if retry_failed:
+            logger.info("%d failed job(s) forgotten, to be run again", store.forget_failed())
+        return _run(spec, samples, store, detector, executor, workers, address, ray_num_cpus, progress,
+                    dataset_source, config)
+    finally:
+        lock.release()
+
+
+def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detector: DetectorSpec, executor: str,
+         workers: int, address: str | None, ray_num_cpus: int | None, progress: Callable[[Progress], None] | None,
+         dataset_source: dict[str, Any] | None, config: dict[str, Any] | None) -> RunSummary:
     t0 = time.perf_counter()
     det_identity = detector.identity()
     store.bind_campaign(spec.name, spec.to_dict(), det_identity)

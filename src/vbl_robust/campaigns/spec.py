@@ -329,6 +329,34 @@ class CampaignSpec:
             raise ValueError(f"CampaignSpec: unknown figure(s) {unknown}; figures are {FIGURES}")
         object.__setattr__(self, "figures", tuple(self.figures))
 
+    def check(self) -> None:
+        """Refuse, before any work, a campaign the pipeline cannot run as asked: ``ValueError``, one line naming
+        the setting and its value (a box outside a perturbation family's domain, an unknown PnP solver or search
+        method, a method given twice in a block, a Lipschitz constant of the wrong length). Without this such a
+        campaign would run and record every job as failed — "every image unsafe" from a typing error."""
+        from ..perturb import Perturbation
+        from ..pnp import SOLVERS
+        from ..search import METHODS
+        from ..search.bounds import check_lipschitz
+
+        if self.pnp not in SOLVERS:
+            raise ValueError(f"pnp: unknown solver {self.pnp!r}; solvers are {', '.join(SOLVERS)}")
+        for blk in self.blocks:
+            if blk.kind != "search":
+                continue
+            unknown = [m for m in blk.methods if m not in METHODS]
+            if unknown:
+                raise ValueError(f"methods: unknown method(s) {unknown}; methods are {', '.join(METHODS)}")
+            twice = sorted({m for m in blk.methods if blk.methods.count(m) > 1})
+            if twice:
+                raise ValueError(f"methods: {', '.join(twice)} given more than once")
+            for box in blk.boxes:
+                try:
+                    Perturbation(box.box)
+                    check_lipschitz(self.lipschitz, "2", box.box.dim)
+                except ValueError as exc:
+                    raise ValueError(f"box {box.label}: {exc}") from None
+
     @property
     def report_figures(self) -> tuple[str, ...]:
         """The figures the report draws: the declared ones, else :func:`default_figures` of the blocks."""

@@ -13,7 +13,9 @@ Layout (one file, ``results.sqlite``; schema version :data:`SCHEMA_VERSION` in `
 
 Crash safety: WAL journal, one transaction per finished job (``INSERT OR IGNORE`` on the key). A process
 killed at any moment (``kill -9``) loses only the job in progress; committed rows stay and a rerun inserts no
-duplicates. Only the driver process writes (Ray workers send their rows back to it).
+duplicates. Only the driver process writes (Ray workers send their rows back to it), and one driver at a time:
+a campaign holds :class:`WriterLock` on its store for its whole run (an OS file lock, released when the process
+ends, however it ends), so two runs never mix in one store.
 
 Schema versions: 0/1 = before failures were recorded (no ``n_failed``, ``failures_json``, ``worst_reason``
 columns: they are added on open, old rows read them as unknown); 2 = failures recorded; 3 = now: every evaluated
@@ -125,6 +127,48 @@ JOB_COLUMNS = (
 #: Keys of a campaign spec that only change how results are shown (the report's figures): they never make a
 #: store refuse a run, and the newer value is recorded.
 PRESENTATION_KEYS = ("figures",)
+
+
+class WriterLock:
+    """The one-writer lock of a store: an exclusive ``flock`` on ``<store>.lock`` (which holds the writer's PID),
+    held from :meth:`acquire` to :meth:`release` or the end of the process. A second writer gets a ``ValueError``
+    naming the PID that holds it, or waits for it with ``wait=True``."""
+
+    def __init__(self, store_path: str | Path):
+        self.path = Path(f"{store_path}.lock")
+        self._fd: int | None = None
+
+    def acquire(self, wait: bool = False) -> WriterLock:
+        import fcntl
+        import os
+
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except BlockingIOError:
+            holder = os.read(fd, 64).decode(errors="replace").strip() or "another process"
+            os.close(fd)
+            raise ValueError(f"{self.path.parent}: in use by PID {holder} (another run is writing this store); wait "
+                             "for it to end or write to another --out") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        self._fd = fd
+        return self
+
+    def release(self) -> None:
+        import fcntl
+        import os
+
+        if self._fd is not None:
+            fcntl.flock(self._fd, fcntl.LOCK_UN)
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self) -> WriterLock:
+        return self.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
 
 
 def now_iso() -> str:
@@ -489,6 +533,14 @@ class ResultStore:
 
     def count(self) -> int:
         return int(self._con.execute("SELECT COUNT(*) FROM jobs").fetchone()[0])
+
+    def forget_failed(self) -> int:
+        """Delete the rows of failed jobs (status "failed": the pipeline could not run them), so that a rerun runs
+        them again; returns how many were deleted."""
+        with self._tx():
+            before = self._con.total_changes
+            self._con.execute("DELETE FROM jobs WHERE status = ?", (JobStatus.FAILED.value,))
+            return self._con.total_changes - before
 
     def commit(self, rows: Sequence[JobRow]) -> int:
         """Insert the rows of finished jobs in one transaction; returns how many were new (duplicates ignored)."""

@@ -17,14 +17,25 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
 )
+
+
+def _version(value: bool) -> None:
+    if value:
+        from importlib.metadata import version
+
+        typer.echo(f"vbl-robust {version('vbl-robust')}")
+        raise typer.Exit()
 
 # Sub-command modules; each defines `register(app)`. A module that is not there yet is skipped.
 _COMMAND_MODULES = ("scenes", "audit", "reproduce", "report", "train", "zones")
 
 
 @app.callback()
-def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log progress details (INFO).")) -> None:
+def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log progress details (INFO)."),
+          version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="Print the version and exit.")) -> None:
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     # torch 2.14 warns about its own use of torch.jit.script when torch.func first loads its decompositions
     # (the gradient methods); nothing the user can act on.

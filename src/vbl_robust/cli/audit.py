@@ -26,6 +26,9 @@ DEMO_ORACLE_NOISE_PX = 1.0
 
 ENGINE_HELP = ("Inference engine of the black-box path: auto (ONNX Runtime when installed), torch, onnxruntime or "
                "openvino — always fp32; the outputs stay within 1e-3 px of torch's, APGD stays on torch.")
+WAIT_HELP = "When another run is writing the same --out, wait for it to end instead of refusing."
+RETRY_HELP = ("Run the jobs stored as failed again (e.g. after a missing image was restored); a plain rerun skips "
+              "them.")
 WORKERS_HELP = ("Worker processes of a local run, one torch thread each (default 0: one per core, or "
                 "$VBL_ROBUST_WORKERS); 1 runs in this process.")
 CLOCK_HELP = ("Clock of time budgets: process (CPU seconds of the evaluating process, which other work on the machine "
@@ -35,11 +38,14 @@ DEVICE_HELP = ("Where the pipeline runs: cpu (default), cuda, cuda:N, or auto (C
 
 
 def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_noise: float,
-                  design: str = "auto", engine: str = "torch", device: str = "cpu") -> Any:
+                  design: str = "auto", engine: str = "torch", device: str = "cpu", *,
+                  noise_needs_oracle: bool = True) -> Any:
     """The detector the user asked for: --oracle, --model PATH, else the shipped model (oracle if not installed).
 
     ``design`` (``--detector``): ``auto`` (the shipped model's own design; a user's model as a single pass),
-    ``single`` or ``twostage``. ``device`` (``--device``): ``auto``, ``cpu``, ``cuda[:N]``.
+    ``single`` or ``twostage``. ``device`` (``--device``): ``auto``, ``cpu``, ``cuda[:N]``. A corner noise without
+    ``oracle`` is refused (the user's ``--oracle-noise`` would be ignored) unless ``noise_needs_oracle`` is False
+    (the demo's noise of its fallback oracle).
     """
     import dataclasses
 
@@ -49,6 +55,12 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
         fail(f"--detector {design}: choose auto, {' or '.join(DESIGNS)}")
     if oracle and design != "auto":
         fail("--detector applies to a model, not to --oracle")
+    if oracle and engine not in ("auto", "torch"):
+        fail(f"--engine {engine} applies to a model, not to --oracle")
+    if oracle and device != "cpu":
+        fail(f"--device {device} applies to a model, not to --oracle (the oracle needs no device)")
+    if oracle_noise and not oracle and noise_needs_oracle:
+        fail(f"--oracle-noise {oracle_noise:g} applies to --oracle only")
     opts = {} if design == "auto" else {"design": design}
     if not oracle:
         from vbl_robust.detect.device import resolve_device
@@ -146,6 +158,9 @@ def parse_methods(text: str) -> tuple[str, ...]:
     bad = [m for m in methods if m not in METHODS]
     if not methods or bad:
         raise typer.BadParameter(f"--methods: unknown method(s) {bad or text!r}; methods are {', '.join(METHODS)}")
+    twice = sorted({m for m in methods if methods.count(m) > 1})
+    if twice:
+        raise typer.BadParameter(f"--methods {text}: {', '.join(twice)} given more than once")
     return methods
 
 
@@ -215,9 +230,11 @@ def run_settings(spec: Any, clock: str, device: str, workers: int) -> tuple[Any,
 
 
 def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, executor: str, address: str | None,
-                      source: dict, config: dict, quiet: bool = False, workers: int = 1) -> Any:
+                      source: dict, config: dict, quiet: bool = False, workers: int = 1, wait: bool = False,
+                      retry_failed: bool = False) -> Any:
     """Run ``spec`` into ``out/results.sqlite`` with a rich progress bar (``workers`` processes for the local
-    executor); returns the run summary."""
+    executor; ``wait``: wait for another run writing the same store instead of refusing); returns the run
+    summary."""
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -229,6 +246,10 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
 
     from vbl_robust.campaigns import ResultStore, run_campaign
 
+    try:
+        spec.check()  # before anything is created or run
+    except ValueError as exc:
+        fail(str(exc))
     out.mkdir(parents=True, exist_ok=True)
     columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("jobs"),
                TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), TextColumn("{task.fields[status]}"))
@@ -242,7 +263,8 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
 
         try:
             summary = run_campaign(spec, samples, store, detector=detector, executor=executor, workers=workers,
-                                   address=address, progress=on_progress, dataset_source=source, config=config)
+                                   address=address, progress=on_progress, dataset_source=source, config=config,
+                                   wait=wait, retry_failed=retry_failed)
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         except KeyboardInterrupt:
@@ -250,6 +272,25 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
             fail(f"interrupted; finished jobs are saved in {out / 'results.sqlite'}: rerun the same command to resume",
                  code=130)
     return summary
+
+
+def check_exports(csv: Path | None, parquet: Path | None, out: Path | None = None) -> None:
+    """Refuse, before a run, an export the run could not write at its end: a ``--csv`` / ``--parquet`` name with
+    another suffix, a directory, or a place that cannot be created or written; also an ``--out`` that is a file."""
+    import os
+
+    if out is not None and out.exists() and not out.is_dir():
+        fail(f"--out {out}: is a file, not a run directory")
+    for flag, path, suffix in (("--csv", csv, ".csv"), ("--parquet", parquet, ".parquet")):
+        if path is None:
+            continue
+        if path.suffix.lower() != suffix:
+            fail(f"{flag} {path}: the file name must end in {suffix}")
+        if path.is_dir():
+            fail(f"{flag} {path}: is a directory")
+        parent = next((p for p in (path.parent, *path.parent.parents) if p.exists()), Path("."))
+        if not parent.is_dir() or not os.access(parent, os.W_OK):
+            fail(f"{flag} {path}: cannot write there ({parent} is not a writable directory)")
 
 
 def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, report: bool, quiet: bool = False) -> None:
@@ -349,6 +390,8 @@ def register(app: typer.Typer) -> None:
         executor: str = typer.Option("local", "--executor", help="local or ray."),
         workers: int = typer.Option(0, "--workers", help=WORKERS_HELP),
         clock: str = typer.Option("auto", "--clock", help=CLOCK_HELP),
+        wait: bool = typer.Option(False, "--wait", help=WAIT_HELP),
+        retry_failed: bool = typer.Option(False, "--retry-failed", help=RETRY_HELP),
         address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: start a local Ray)."),
         csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to this CSV file."),
         parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to this Parquet file."),
@@ -399,6 +442,7 @@ def register(app: typer.Typer) -> None:
         method_opts = parse_method_options(method_option)
         spec = with_method_options(spec, method_opts)
         spec, workers = run_settings(spec, clock, device, workers)
+        check_exports(csv, parquet, out)
         det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
         if sequences is not None:  # sequence audits: vbl_robust.cli.sequence_audit
             from .sequence_audit import run_sequence_audit
@@ -424,7 +468,8 @@ def register(app: typer.Typer) -> None:
         if method_opts:
             config["method_options"] = method_opts
         summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
-                                    config=config, quiet=quiet, workers=workers)
+                                    config=config, quiet=quiet, workers=workers, wait=wait,
+                                    retry_failed=retry_failed)
         finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
         if refine_zones:
             from .zones import refine_audit
@@ -456,7 +501,8 @@ def register(app: typer.Typer) -> None:
         spec = audit_spec(roll_contrast_box(15.0, (0.7, 1.4)), budget=Budget(max_evals=max_evals), seed=seed,
                           landscape=(21, 11) if landscape else None)
         spec, workers = run_settings(spec, "auto", device, workers)
-        det = detector_spec(None, False, oracle, DEMO_ORACLE_NOISE_PX, engine=engine, device=device)
+        det = detector_spec(None, False, oracle, DEMO_ORACLE_NOISE_PX, engine=engine, device=device,
+                            noise_needs_oracle=False)
         samples, source = load(n, seed, None, 1024, 1024)
         config = {"command": "demo", "n": n, "seed": seed, "max_evals": max_evals, "landscape": landscape}
         summary = run_with_progress(spec, samples, out, det, executor="local", address=None, source=source,

@@ -20,11 +20,16 @@ def parse_range(text: str, *, name: str, symmetric: bool = False) -> tuple[float
         vals = [float(p) for p in parts]
     except ValueError:
         raise typer.BadParameter(f"{name}: expected a number or 'lower,upper', got {text!r}") from None
+    if not all(math.isfinite(v) for v in vals):
+        raise typer.BadParameter(f"{name}: expected finite numbers, got {text!r}")
     if len(vals) == 1 and symmetric:
-        a = abs(vals[0])
-        return (-a, a)
+        if vals[0] <= 0:  # "-5" would silently mean ±5
+            raise typer.BadParameter(f"{name} {text}: a half-width must be > 0 (or give 'lower,upper')")
+        return (-vals[0], vals[0])
     if len(vals) != 2:
         raise typer.BadParameter(f"{name}: expected 'lower,upper', got {text!r}")
+    if not vals[0] < vals[1]:
+        raise typer.BadParameter(f"{name} {text}: expected lower < upper")
     return (vals[0], vals[1])
 
 

@@ -18,7 +18,10 @@ from .audit import (
     DEVICE_HELP,
     ENGINE_HELP,
     METHOD_OPTION_HELP,
+    RETRY_HELP,
+    WAIT_HELP,
     WORKERS_HELP,
+    check_exports,
     detector_spec,
     finish,
     load,
@@ -130,6 +133,8 @@ def register(app: typer.Typer) -> None:
         executor: str = typer.Option("local", "--executor", help="local or ray."),
         workers: int = typer.Option(0, "--workers", help=WORKERS_HELP),
         clock: str = typer.Option("auto", "--clock", help=CLOCK_HELP),
+        wait: bool = typer.Option(False, "--wait", help=WAIT_HELP),
+        retry_failed: bool = typer.Option(False, "--retry-failed", help=RETRY_HELP),
         address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray)."),
         csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to CSV."),
         parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to Parquet."),
@@ -158,6 +163,7 @@ def register(app: typer.Typer) -> None:
             time_budgets=_floats(time_budgets, "--time-budgets"), eval_budgets=tuple(int(v) for v in eb) if eb else None,
             iterations=iterations, family_grid=family_grid, landscape=None if landscape else (0, 0),
         )
+        check_exports(csv, parquet, out)
         method_opts = parse_method_options(method_option)
         _check_method_options(method_opts, [exp.build(seed, opts) for exp in exps])
         det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
@@ -181,7 +187,8 @@ def register(app: typer.Typer) -> None:
             if method_opts:
                 config["method_options"] = method_opts
             summary = run_with_progress(spec, samples, out_dir, det, executor=executor, address=address,
-                                        source=source, config=config, quiet=quiet, workers=n_workers)
+                                        source=source, config=config, quiet=quiet, workers=n_workers, wait=wait,
+                                        retry_failed=retry_failed)
             finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
         if group:
             from vbl_robust.report.claims import claims_html, claims_of, write_claims
