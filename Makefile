@@ -23,7 +23,7 @@ demo: $(STAMP)
 	$(BIN)/vbl-robust demo --out runs/demo
 
 test: $(STAMP)
-	$(BIN)/pytest -q -x --timeout=900
+	$(BIN)/pytest -q -x --timeout=900 --durations=15
 
 test-full: $(STAMP)
 	$(BIN)/pytest -q --timeout=3600 --full

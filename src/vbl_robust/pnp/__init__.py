@@ -1,7 +1,7 @@
 """PnP on the four runway corners: OpenCV solvers with failure flags, and a differentiable layer.
 
-See :mod:`.solvers` for conventions (OpenCV pixels, world → camera ``rvec``/``tvec``, ``C = −Rᵀt``) and
-``notes/pnp.md`` for the facts behind the choice of solvers.
+See :mod:`.solvers` for conventions (OpenCV pixels, world → camera ``rvec``/``tvec``, ``C = −Rᵀt``) and the
+facts behind the choice of solvers, :mod:`.differentiable` for why the differentiable layer is hand-written.
 """
 
 from .differentiable import GRAD_MODES, PnPPosition, pnp_position_torch

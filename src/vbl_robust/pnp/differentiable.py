@@ -1,7 +1,7 @@
 """Differentiable PnP: OpenCV forward, exact implicit-function gradient backward.
 
 This layer is hand-written because no maintained library provides an exact gradient for PnP on four coplanar
-points (``notes/pnp.md``): kornia's DLT needs ≥ 6 non-coplanar points, pytorch3d / PyPose EPnP fail on coplanar
+points: kornia's DLT needs ≥ 6 non-coplanar points, pytorch3d / PyPose EPnP fail on coplanar
 points, and BPnP (not packaged) differentiates a depth-weighted constraint that is not the one OpenCV solved.
 
 Forward

@@ -10,8 +10,8 @@ Conventions
 * ``reproj_error_px`` is the RMS over the four corners of the pixel distance between the reprojected corners
   and ``points_2d``: ``sqrt(mean_i ‖π_i − x_i‖²)``.
 
-Solvers (``SOLVERS``; facts in ``notes/pnp.md``)
------------------------------------------------
+Solvers (``SOLVERS``)
+---------------------
 ``"ippe_lm"`` (default)
     The two IPPE poses of the planar ambiguity (:func:`.ippe.ippe_poses`, all rows at once, hand-written NumPy
     because OpenCV has no batched IPPE) are both refined with Levenberg–Marquardt in float64 to the stationary
