@@ -49,3 +49,7 @@ class Verdict(StrEnum):
     BREACH = "breach"
     NO_BREACH_FOUND = "no breach found"
     FAILED = "failed"
+
+#: Warning torch 2.14 gives about its own use of ``torch.jit.script`` when torch.func first loads its
+#: decompositions (the gradient methods): nothing a user can act on, silenced by the CLI and its worker processes.
+TORCH_JIT_WARNING = r"`torch\.jit\.script` is deprecated"

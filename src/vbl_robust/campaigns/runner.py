@@ -218,8 +218,13 @@ def _pool_worker(tasks: Any, results: Any, detector: DetectorSpec, settings: Set
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)
     except (OSError, AttributeError):  # pragma: no cover - not Linux
         pass
+    import warnings
+
     import torch
 
+    from ..constants import TORCH_JIT_WARNING
+
+    warnings.filterwarnings("ignore", message=TORCH_JIT_WARNING, category=FutureWarning)
     torch.set_num_threads(1)
     det = detector_for(detector)
     while (task := tasks.get()) is not None:

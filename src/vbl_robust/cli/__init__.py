@@ -37,9 +37,9 @@ def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log progr
           version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
                                        help="Print the version and exit.")) -> None:
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    # torch 2.14 warns about its own use of torch.jit.script when torch.func first loads its decompositions
-    # (the gradient methods); nothing the user can act on.
-    warnings.filterwarnings("ignore", message=r"`torch\.jit\.script` is deprecated", category=FutureWarning)
+    from vbl_robust.constants import TORCH_JIT_WARNING
+
+    warnings.filterwarnings("ignore", message=TORCH_JIT_WARNING, category=FutureWarning)
 
 
 for _name in _COMMAND_MODULES:
