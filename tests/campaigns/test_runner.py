@@ -170,3 +170,25 @@ def test_one_writer_per_store(tmp_path, small_samples, oracle):
             assert st.count() == 0 and st.runs() == []
         s = run_campaign(small_spec(), small_samples[:1], st, detector=oracle)  # free again
         assert s.status == "finished" and st.count() == 2
+
+
+def test_changed_pixels_are_refused_not_reused(tmp_path, small_samples, oracle):
+    """The store identifies an image file by its bytes too: after the file changes, a rerun names the sample
+    instead of reusing results computed on the old pixels; rewriting the same bytes is not a change."""
+    import os
+
+    from PIL import Image
+
+    path = tmp_path / "img.png"
+    Image.fromarray(small_samples[0].image).save(path)
+    on_file = dataclasses.replace(small_samples[0], id="on_file", image_path=path, _image=None, _loader=None)
+    spec = small_spec(methods=("random",))
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        assert run_campaign(spec, [on_file], st, detector=oracle).done == 1
+        Image.fromarray(small_samples[0].image).save(path)  # the same pixels, a new mtime
+        os.utime(path, ns=(1, 1))
+        assert run_campaign(spec, [on_file], st, detector=oracle).skipped == 1
+        Image.fromarray(small_samples[1].image).save(path)  # other pixels
+        with pytest.raises(ValueError, match=r"pixels of 1 sample\(s\) changed .*on_file"):
+            run_campaign(spec, [on_file], st, detector=oracle)
+        assert st.count() == 1

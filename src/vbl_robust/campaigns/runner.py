@@ -144,6 +144,7 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
     det_identity = detector.identity()
     store.bind_campaign(spec.name, spec.to_dict(), det_identity)
     jobs = plan(spec, samples, detector)
+    store.check_contents(samples)
     store.add_samples(sample_record(s, i) for i, s in enumerate(samples))
     done_keys = store.done_keys()
     pending = [j for j in jobs if j.key not in done_keys]

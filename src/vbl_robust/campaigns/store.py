@@ -7,6 +7,9 @@ Layout (one file, ``results.sqlite``; schema version :data:`SCHEMA_VERSION` in `
 - ``runs`` — one row per invocation: code version, model file SHA-256, dataset identity, full config JSON,
   seed, executor, host, start/finish times, jobs done.
 - ``samples`` — id, index, slant distance, envelope, size and a geometry fingerprint of each sample.
+- ``contents`` — for a sample read from an image file: the file's SHA-256 (with its size and mtime, so it is
+  recomputed only when they change): a rerun on changed pixels is refused (:meth:`ResultStore.check_contents`)
+  instead of reusing results computed on the old ones.
 - ``jobs`` — one row per finished job (:class:`JobRow`), ``key`` UNIQUE: worst value and point, verdict,
   counts (failed evaluations per reason included), timings, the search trace (JSON) and every evaluated point
   with its failure reason and completion time (JSON, zlib-compressed), or a PnP payload (JSON).
@@ -83,6 +86,11 @@ CREATE TABLE IF NOT EXISTS samples (
     height INTEGER,
     fingerprint TEXT,
     meta_json TEXT
+);
+CREATE TABLE IF NOT EXISTS contents (
+    sample_id TEXT PRIMARY KEY,     -- a sample read from an image file: what its pixels were
+    path TEXT, size INTEGER, mtime_ns INTEGER,
+    sha256 TEXT                     -- of the file's bytes; recomputed only when size or mtime changed
 );
 CREATE TABLE IF NOT EXISTS jobs (
     key TEXT NOT NULL UNIQUE,
@@ -526,6 +534,37 @@ class ResultStore:
         cur = self._con.execute("SELECT * FROM samples ORDER BY sample_index")
         names = [c[0] for c in cur.description]
         return {r[0]: dict(zip(names, r, strict=True)) for r in cur.fetchall()}
+
+    def check_contents(self, samples: Iterable[Any]) -> None:
+        """Record the image-file digest of each sample read from a file (``image_path``), and refuse
+        (``ValueError`` naming them) samples whose file's bytes differ from those their stored jobs were computed
+        on. A file whose size and mtime are unchanged is not read again; samples rendered in memory have no file
+        (their pixels follow from their geometry and the generator, both in the job keys and the provenance)."""
+        from ..digest import file_sha256
+
+        stored = {r[0]: r[1:] for r in self._con.execute("SELECT sample_id, size, mtime_ns, sha256 FROM contents")}
+        with_jobs = {r[0] for r in self._con.execute("SELECT DISTINCT sample_id FROM jobs")}
+        changed, rows = [], []
+        for s in samples:
+            path = getattr(s, "image_path", None)
+            if path is None or not Path(path).is_file():
+                continue  # rendered in memory, or missing (the job records that failure)
+            st = Path(path).stat()
+            old = stored.get(s.id)
+            if old is not None and (old[0], old[1]) == (st.st_size, st.st_mtime_ns):
+                continue
+            digest = file_sha256(path)
+            if old is not None and old[2] != digest and s.id in with_jobs:
+                changed.append(f"{s.id} ({path})")
+                continue
+            rows.append((s.id, str(path), st.st_size, st.st_mtime_ns, digest))
+        if changed:
+            raise ValueError(f"{self.path}: the pixels of {len(changed)} sample(s) changed since their results were "
+                             f"stored: {', '.join(changed[:5])}{' …' if len(changed) > 5 else ''}; run them into "
+                             "another --out (the stored results describe the old images)")
+        with self._tx():
+            self._con.executemany("INSERT OR REPLACE INTO contents (sample_id, path, size, mtime_ns, sha256) "
+                                  "VALUES (?, ?, ?, ?, ?)", rows)
 
     # -- jobs ---------------------------------------------------------------------------------------------
     def done_keys(self) -> set[str]:
