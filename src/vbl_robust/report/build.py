@@ -48,9 +48,6 @@ from .html import esc, figure_png, fmt_num, img, page, table
 
 logger = logging.getLogger(__name__)
 
-#: Search methods whose traces hold |PO_k| and RA(k).
-DIRECT_FAMILY = ("georobust", "georobust-a", "georobust-av", "direct", "direct-l")
-
 
 @dataclass
 class Section:
@@ -324,7 +321,9 @@ def section_families(ctx: Context) -> Section | None:
 
 
 def section_convergence(ctx: Context) -> Section | None:
-    conv = mx.convergence([r for r in ctx.main if r.method in DIRECT_FAMILY])
+    from ..search import direct_family
+
+    conv = mx.convergence([r for r in ctx.main if r.method in direct_family()])
     if not conv:
         return None
     s = Section("GeoRobust convergence: |PO_k| and RA(k)")

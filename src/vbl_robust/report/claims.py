@@ -1,9 +1,9 @@
 """The paper's claims, each checked on the results stores of ``vbl-robust reproduce paper --out ROOT``.
 
 Every number comes from ``ROOT/<experiment>/results.sqlite`` through the report's own metrics
-(:mod:`vbl_robust.campaigns.metrics`; :mod:`.build`'s ``Context``, ``_reference``, ``_main_boxes``,
-``DIRECT_FAMILY``): nothing is typed by hand. A missing store gives "not run yet"; a store where only some images
-have every planned job is used on those ("partial: n of N images").
+(:mod:`vbl_robust.campaigns.metrics`; :mod:`.build`'s ``Context``, ``_reference``, ``_main_boxes``): nothing is
+typed by hand. A missing store gives "not run yet"; a store where only some images have every planned job is
+used on those ("partial: n of N images").
 
 Verdicts (:data:`VERDICTS`): a claim is made of parts, each judged by a pure rule below (None: not measurable);
 every part holds → "holds", some → "partly", none → "does not hold", none measurable → "not run yet"
@@ -47,7 +47,8 @@ from ..campaigns.pnpcheck import TRUNCATED
 from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import JobRow, JobStatus, ResultStore
 from ..constants import Verdict
-from .build import DIRECT_FAMILY, Context, _main_boxes, _reference
+from ..search import direct_family
+from .build import Context, _main_boxes, _reference
 from .html import fmt_num
 
 __all__ = ["CLAIMS", "VERDICTS", "Claim", "at_most", "behind", "claims_html", "claims_markdown", "claims_of", "combine",
@@ -364,7 +365,7 @@ def _distance(e: _Exp) -> Row:
 
 
 def _convergence(e: _Exp) -> Row:
-    conv = mx.convergence([r for r in e.ctx.main if r.method in DIRECT_FAMILY])
+    conv = mx.convergence([r for r in e.ctx.main if r.method in direct_family()])
     ra = {c["iteration"]: c["ra_mean"] for c in conv}
     po = [c["po_mean"] for c in conv]
     early = {k: v for k, v in ra.items() if k <= RA_BY_ITER and math.isfinite(v)}

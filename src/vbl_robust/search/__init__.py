@@ -24,7 +24,7 @@ evaluation budget off those stamps (one run of an *anytime* method answers every
 from .adaptive import AdaptiveGeoRobust, AdaptiveGeoRobustV
 from .anytime import at_budget, prefix_length
 from .apgd import APGD, apgd_checkpoints
-from .api import METHODS, anytime_methods, make_optimizer, maximize, method_options
+from .api import METHODS, anytime_methods, direct_family, make_optimizer, maximize, method_options
 from .base import CLOCKS, Optimizer, use_clock
 from .bounds import sound_upper_bound
 from .cells import Cells
@@ -56,6 +56,7 @@ __all__ = [
     "Verdict",
     "anytime_methods",
     "apgd_checkpoints",
+    "direct_family",
     "at_budget",
     "make_optimizer",
     "maximize",

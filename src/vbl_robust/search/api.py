@@ -64,6 +64,11 @@ def anytime_methods() -> tuple[str, ...]:
     return tuple(name for name, cls in METHODS.items() if cls.anytime)
 
 
+def direct_family() -> tuple[str, ...]:
+    """Names of the registered DIRECT-family methods (their trace has |PO_k| and RA(k))."""
+    return tuple(name for name, cls in METHODS.items() if issubclass(cls, Direct))
+
+
 def method_options(method: str) -> list[str]:
     """Names of the keyword options of ``method`` (besides budgets and seed)."""
     cls = _method(method)
