@@ -189,3 +189,15 @@ def test_an_out_or_export_path_that_cannot_be_written_is_refused_before_the_run(
     out = tmp_path / "run"
     res = runner.invoke(app, ["audit", "--out", str(out), "--n", "1", "--csv", str(blocker / "x.csv"), *SMALL])
     assert res.exit_code == 2 and "cannot write there" in res.output and not out.exists()
+
+
+def test_a_store_that_is_not_sqlite_is_one_line_not_a_traceback(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "results.sqlite").write_bytes(b"SQLite format 3\x00 truncated")
+    for args in (["report", str(run)], ["audit", "--out", str(run), "--n", "1", *SMALL]):
+        res = runner.invoke(app, args)
+        assert res.exit_code == 2 and "not a readable vbl-robust results store" in res.output, res.output
+        assert res.exception is None or isinstance(res.exception, SystemExit)
+    res = runner.invoke(app, ["report", str(run), "--out", str(run / "results.sqlite")])
+    assert res.exit_code == 2 and "is a file" in res.output

@@ -409,9 +409,13 @@ class ResultStore:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         # isolation_level=None: we open transactions ourselves (BEGIN IMMEDIATE … COMMIT).
         self._con = sqlite3.connect(str(self.path), isolation_level=None, timeout=30.0)
-        self._con.execute("PRAGMA journal_mode=WAL")
-        self._con.execute("PRAGMA synchronous=NORMAL")  # durable against process kills (not power loss)
-        self._migrate()
+        try:
+            self._con.execute("PRAGMA journal_mode=WAL")
+            self._con.execute("PRAGMA synchronous=NORMAL")  # durable against process kills (not power loss)
+            self._migrate()
+        except sqlite3.DatabaseError as exc:  # truncated, or not SQLite at all: one line, not a traceback
+            self._con.close()
+            raise ValueError(f"{self.path}: not a readable vbl-robust results store ({exc})") from None
 
     @classmethod
     def open_existing(cls, path: str | Path) -> ResultStore:

@@ -250,7 +250,11 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
         spec.check()  # before anything is created or run
     except ValueError as exc:
         fail(str(exc))
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        ResultStore(out / "results.sqlite").close()  # a store that cannot be opened fails here, in one line
+    except (ValueError, OSError) as exc:
+        fail(f"--out {out}: {exc}")
     columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("jobs"),
                TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), TextColumn("{task.fields[status]}"))
     with ResultStore(out / "results.sqlite") as store, Progress(*columns, disable=quiet, transient=False) as bar:

@@ -23,6 +23,8 @@ def register(app: typer.Typer) -> None:
         from vbl_robust.campaigns import ResultStore, export
         from vbl_robust.report import build_report
 
+        if out is not None and out.exists() and not out.is_dir():
+            fail(f"--out {out}: is a file; the report goes into a directory (report.html and figures/)")
         try:
             path = build_report(run, out)
             if csv or parquet:
