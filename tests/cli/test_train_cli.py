@@ -45,3 +45,9 @@ def test_train_passes_the_training_levers(tmp_path, monkeypatch):
     res = runner.invoke(app, ["train", "--out", str(tmp_path), "--crops-only"])
     assert res.exit_code == 0, res.output
     assert seen["full_views"] is False
+
+
+def test_train_refuses_an_unknown_optimizer_before_any_work(tmp_path):
+    res = runner.invoke(app, ["train", "--optimizer", "foo", "--out", str(tmp_path / "run"), "--epochs", "1"])
+    assert res.exit_code == 2 and "optimizer must be one of auto, SGD" in res.output and "'foo'" in res.output
+    assert not (tmp_path / "run").exists()

@@ -219,6 +219,10 @@ def _finished(last: Path) -> bool:
     return ck.get("epoch", -1) == -1 or ck.get("optimizer") is None
 
 
+#: Optimizers ultralytics' trainer knows (``BaseTrainer.build_optimizer``), checked before any data is rendered.
+OPTIMIZERS = ("auto", "SGD", "Adam", "Adamax", "AdamW", "NAdam", "RAdam", "RMSprop")
+
+
 def train(
     out_dir: str | Path, *, samples: Sequence[Sample] | None = None, n_train: int = 1000, n_val: int = 100,
     imgsz: int = 320, epochs: int = 10, batch: int = 16, seed: int = 0, resume: bool = False,
@@ -284,6 +288,9 @@ def train(
         raise ValueError("train: full_views=False (crops only) needs detector='twostage' and at least one crop")
     if imgsz % 32:
         raise ValueError(f"train: imgsz must be a multiple of 32, got {imgsz}")
+    opt = overrides.get("optimizer", "auto")
+    if opt not in OPTIMIZERS:
+        raise ValueError(f"train: optimizer must be one of {', '.join(OPTIMIZERS)}, got {opt!r}")
     out_dir = Path(out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     import_ultralytics()
