@@ -20,8 +20,10 @@ def test_lard_directory_round_trip_and_random_subset(tmp_path):
     assert len(samples) == 2 and src["kind"] == "lard" and src["rows"] == 4 and len(src["csv_sha256"]) == 64
     again, _ = load_samples(2, 0, lard=tmp_path / "ds")
     assert [s.id for s in again] == [s.id for s in samples]
-    everything, _ = load_samples(10, 0, lard=tmp_path / "ds")
+    everything, _ = load_samples(4, 0, lard=tmp_path / "ds")
     assert len(everything) == 4
+    with pytest.raises(ValueError, match="10 images asked for, the dataset has 4 usable rows"):
+        load_samples(10, 0, lard=tmp_path / "ds")
     assert samples[0].image.shape == (96, 96, 3)
 
 

@@ -147,6 +147,8 @@ def test_the_summary_table_never_cuts_a_method_name(tmp_path):
     (["--roll", "-5"], "--roll -5: a half-width must be > 0"),
     (["--contrast", "1.4,0.7"], "--contrast 1.4,0.7: expected lower < upper"),
     (["--parquet", "x.csv"], "--parquet x.csv: the file name must end in .parquet"),
+    (["--address", "auto"], "--address auto applies to --executor ray only"),
+    (["--sustain", "5"], "--sustain 5 applies to --sequences only"),
 ])
 def test_a_configuration_error_is_refused_before_any_work(tmp_path, args, message):
     """Not "every image unsafe" with exit 0: one line naming the setting and value, exit 2, nothing stored."""

@@ -35,8 +35,8 @@ def load_samples(n: int, seed: int, *, lard: str | Path | None = None, width: in
     """``n`` samples and a description of their source (provenance).
 
     Synthetic (``lard`` None): ``vbl_robust.scenes.generate(n, seed=seed, width=, height=)``. LARD: all rows of the
-    dataset read with :func:`vbl_robust.data.read_lard`, then ``n`` of them drawn at random with ``seed`` (all of
-    them when the dataset has ``n`` or fewer), kept in file order.
+    dataset read with :func:`vbl_robust.data.read_lard`, then ``n`` of them drawn at random with ``seed``, kept in
+    file order (``ValueError`` when the dataset has fewer than ``n``).
     """
     if n < 1:
         raise ValueError(f"number of images must be >= 1, got {n}")
@@ -51,11 +51,11 @@ def load_samples(n: int, seed: int, *, lard: str | Path | None = None, width: in
     allrows = list(read_lard(csv_path, db_path, **read_options))
     if not allrows:
         raise ValueError(f"--lard {lard}: the dataset has no usable rows")
-    if n < len(allrows):
-        idx = np.sort(np.random.default_rng(seed).choice(len(allrows), size=n, replace=False))
-        samples = [allrows[i] for i in idx]
-    else:
-        samples = allrows
+    if n > len(allrows):  # never fewer images than asked without a word
+        raise ValueError(f"--lard {lard}: {n} images asked for, the dataset has {len(allrows)} usable rows (ask for "
+                         f"{len(allrows)} or fewer)")
+    idx = np.sort(np.random.default_rng(seed).choice(len(allrows), size=n, replace=False))
+    samples = [allrows[i] for i in idx]
     return samples, {"kind": "lard", "csv": str(csv_path), "csv_sha256": file_sha256(csv_path), "db": str(db_path),
                      "db_sha256": file_sha256(db_path), "rows": len(allrows), "n": len(samples), "seed": seed,
                      "options": {k: str(v) for k, v in read_options.items()}}

@@ -432,6 +432,10 @@ def register(app: typer.Typer) -> None:
             fail("give at least one of --roll, --contrast, --perturb")
         if executor not in ("local", "ray"):
             fail(f"--executor must be 'local' or 'ray', got {executor!r}")
+        if address is not None and executor != "ray":
+            fail(f"--address {address} applies to --executor ray only")
+        if sequences is None and sustain != 1:
+            fail(f"--sustain {sustain} applies to --sequences only")
         try:
             box = ParameterBox(bounds)
             budget = Budget(max_evals=max_evals or None, max_seconds=max_seconds, stop_at_breach=early_stop)

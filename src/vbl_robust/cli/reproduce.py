@@ -152,6 +152,8 @@ def register(app: typer.Typer) -> None:
 
         if executor not in ("local", "ray"):
             fail(f"--executor must be 'local' or 'ray', got {executor!r}")
+        if address is not None and executor != "ray":
+            fail(f"--address {address} applies to --executor ray only")
         try:
             group = {"all": tuple(EXPERIMENTS), "paper": PAPER}.get(experiment)
             exps = [EXPERIMENTS[n] for n in group] if group else [get_experiment(experiment)]
