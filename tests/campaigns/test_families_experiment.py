@@ -110,7 +110,7 @@ def test_estimate_and_planned_work():
     assert evals == len(PERTURBATIONS) * 5 * 3 * 10 + grids
     # 2 images x 10 families x 5 levels x 3 methods (georobust, georobust-av, random) x 200 evaluations
     res = CliRunner().invoke(app, ["reproduce", "families", "--estimate", "--oracle", "--images", "2",
-                                   "--family-grid", "0"])
+                                   "--family-grid", "0", "--probe-seconds", "0.2"])
     assert res.exit_code == 0, res.output
     assert re.search(r"families\s+2 images\s+≤\s+60000 evaluations", res.output), res.output
 

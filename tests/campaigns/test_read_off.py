@@ -135,7 +135,7 @@ def test_rows_without_reads_pass_through(tmp_path, monkeypatch):
 
 
 def test_export_and_main_rows_add_the_read_off_rows(tmp_path, monkeypatch):
-    from vbl_robust.campaigns.export import flat_rows
+    from vbl_robust.campaigns.tables import flat_rows
 
     _, stored, _ = _stored_run(tmp_path, monkeypatch)
     spec = CampaignSpec("t", ())

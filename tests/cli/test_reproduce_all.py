@@ -37,7 +37,7 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
     bundle = tmp_path / "bundle"
     repro = tmp_path / "REPRODUCTION.md"
     repro.write_text("# prose before\n<!-- bundle:begin -->\nold table\n<!-- bundle:end -->\nprose after\n")
-    res = runner.invoke(app, ["bundle", str(out), "--out", str(bundle), "--reproduction", str(repro)])
+    res = runner.invoke(app, ["bundle", str(out), "--out", str(bundle), "--reproduction", str(repro), "--stores"])
     assert res.exit_code == 0, res.output
     text = repro.read_text()
     assert text.startswith("# prose before\n") and text.endswith("prose after\n") and "old table" not in text
@@ -55,7 +55,14 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
         assert f"<title>vbl-robust {name}</title>" in page
         assert name != "spatial-1d" or "data:image/png;base64," in page  # figures are embedded
         assert not (bundle / name / "figures").exists() and not (bundle / name / "results.sqlite").exists()
+        assert (bundle / name / "results.sqlite.xz").stat().st_size > 0
         assert f"| {name} | {n_jobs} / {n_jobs} |" in status
+    # a fresh checkout resumes from the bundle's packed stores: nothing is run again
+    fresh = tmp_path / "fresh"
+    resumed = runner.invoke(app, ["reproduce", "all", "--out", str(fresh), "--resume-from", str(bundle), *SMALL])
+    assert resumed.exit_code == 0, resumed.output
+    assert resumed.output.count("store restored from") == len(EXPERIMENTS) and "0 new jobs" in resumed.output
+    assert all(f"{name}: 0 new jobs" in resumed.output for name in EXPERIMENTS)
     missing = runner.invoke(app, ["bundle", str(tmp_path / "nothing"), "--out", str(bundle)])
     assert missing.exit_code == 2 and "no experiment run directory" in missing.output
     repro.write_text("no markers\n")

@@ -75,6 +75,19 @@ def test_folder_per_sequence_and_frame_order():
     assert seqs[0].samples[0] is samples[1]
 
 
+def test_frames_grouped_by_name_must_show_one_runway():
+    """A file-name prefix shared by approaches to two runways is not one sequence: refused, naming both."""
+    base = generate(2, seed=0, **SMALL)
+    metas = [{"airport": "LFPO", "runway": "06"}, {"airport": "EGLL", "runway": "27L"}]
+    samples = [dataclasses.replace(s, id=f"approach/{i:04d}.png", meta=m)
+               for i, (s, m) in enumerate(zip(base, metas, strict=True))]
+    with pytest.raises(ValueError, match=r"sequence 'approach' \(grouped by image names\) mixes runways EGLL/27L, "
+                                         r"LFPO/06"):
+        group_sequences(samples)
+    same = [dataclasses.replace(s, meta=metas[0]) for s in samples]
+    assert [len(q.samples) for q in group_sequences(same)] == [2]
+
+
 def test_times_from_time_to_landing():
     base = generate(3, seed=0, **SMALL)
     samples = [dataclasses.replace(s, id=f"CYEG-20_{i:03d}.jpg", meta={"time_to_landing": str(30.0 - 0.5 * i)})

@@ -2,7 +2,7 @@
 
 >>> from vbl_robust.campaigns import EXPERIMENTS
 >>> sorted(EXPERIMENTS)[:3]
-['convergence', 'distance-profile', 'pnp-validation']
+['convergence', 'distance-profile', 'families']
 
 Typical use (what ``vbl-robust reproduce`` does)::
 
@@ -10,51 +10,74 @@ Typical use (what ``vbl-robust reproduce`` does)::
     samples, source = load_samples(100, seed)
     with ResultStore(out / "results.sqlite") as store:
         run_campaign(spec, samples, store, detector=DetectorSpec.auto(), dataset_source=source)
+
+Names are resolved lazily, as in :mod:`vbl_robust`: importing a light submodule (the experiments' specs, for
+the command line's help) does not import torch.
 """
 
-from .experiments import EXPERIMENTS, Experiment, Options, audit_spec, experiment
-from .export import export
-from .metrics import (
-    convergence,
-    distance_profile,
-    phi_crit,
-    pnp_summary,
-    reference_rows,
-    smallest_breach_levels,
-    summarize,
-    survival_rate,
-)
-from .provenance import DetectorSpec, code_version, dataset_identity, file_sha256, sample_fingerprint
-from .runner import EXECUTORS, Progress, RunSummary, plan, run_campaign
-from .samples import find_lard_files, load_samples
-from .spec import (
-    EPS_SAFE_M,
-    PENALTY_M,
-    Block,
-    BoxSpec,
-    Budget,
-    CampaignSpec,
-    Job,
-    roll_box,
-    roll_contrast_box,
-)
-from .store import JobRow, JobStatus, Points, ResultStore
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+#: public name -> the submodule that defines it
+_LAZY: dict[str, str] = {
+    "EXPERIMENTS": "experiments",
+    "Experiment": "experiments",
+    "Options": "experiments",
+    "audit_spec": "experiments",
+    "experiment": "experiments",
+    "export": "tables",
+    "convergence": "metrics",
+    "distance_profile": "metrics",
+    "phi_crit": "metrics",
+    "pnp_summary": "metrics",
+    "reference_rows": "metrics",
+    "smallest_breach_levels": "metrics",
+    "summarize": "metrics",
+    "survival_rate": "metrics",
+    "DetectorSpec": "provenance",
+    "code_version": "provenance",
+    "dataset_identity": "provenance",
+    "file_sha256": "provenance",
+    "sample_fingerprint": "provenance",
+    "EXECUTORS": "runner",
+    "Progress": "runner",
+    "RunSummary": "runner",
+    "plan": "runner",
+    "run_campaign": "runner",
+    "find_lard_files": "samples",
+    "load_samples": "samples",
+    "EPS_SAFE_M": "spec",
+    "PENALTY_M": "spec",
+    "Block": "spec",
+    "BoxSpec": "spec",
+    "Budget": "spec",
+    "CampaignSpec": "spec",
+    "Job": "spec",
+    "roll_box": "spec",
+    "roll_contrast_box": "spec",
+    "JobRow": "store",
+    "JobStatus": "store",
+    "Points": "store",
+    "ResultStore": "store",
+}
 
 __all__ = [
-    "EPS_SAFE_M",
-    "EXECUTORS",
-    "EXPERIMENTS",
-    "PENALTY_M",
     "Block",
     "BoxSpec",
     "Budget",
     "CampaignSpec",
     "DetectorSpec",
+    "EPS_SAFE_M",
+    "EXECUTORS",
+    "EXPERIMENTS",
     "Experiment",
     "Job",
     "JobRow",
     "JobStatus",
     "Options",
+    "PENALTY_M",
     "Points",
     "Progress",
     "ResultStore",
@@ -81,3 +104,17 @@ __all__ = [
     "summarize",
     "survival_rate",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module 'vbl_robust.campaigns' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -4,7 +4,7 @@
 or ``all`` writes them; a run still in progress is read as it stands) and writes, per experiment, into
 ``out/<experiment>/``:
 
-- ``jobs.parquet``: the job table (:func:`~vbl_robust.campaigns.export.export`: one line per job and per read-off
+- ``jobs.parquet``: the job table (:func:`~vbl_robust.campaigns.tables.export`: one line per job and per read-off
   budget; traces and evaluated points stay in the store);
 - ``report.html``: the self-contained report (figures embedded);
 - ``provenance.json``: the campaign spec and every run of the store (code version, model SHA-256, detector,
@@ -12,11 +12,14 @@ or ``all`` writes them; a run still in progress is read as it stands) and writes
   of planned, images, worker seconds (the sum of the jobs' own seconds: CPU seconds when each worker has one
   thread) and search seconds;
 
+and, with ``stores=True``, ``results.sqlite.xz``: a compact copy of the store (``VACUUM INTO`` then xz), from which
+:func:`restore_store` lets a fresh checkout resume an unfinished run (``reproduce --resume-from``);
+
 and ``out/status.md``: one line per experiment (jobs done / planned, images, wall and worker hours), and
 ``out/claims.md``: the paper's claims checked on those stores (:mod:`vbl_robust.report.claims`). With
 ``reproduction=PATH`` the part of that Markdown file between :data:`BEGIN` and :data:`END` is replaced by the
-claims and status tables (the rest of it is prose kept as written). The SQLite stores themselves are not copied
-(tens of MB); rerunning the command that made them regenerates them.
+claims and status tables (the rest of it is prose kept as written). Without ``stores``
+the SQLite stores are not copied (tens of MB); rerunning the command that made them regenerates them.
 """
 
 from __future__ import annotations
@@ -73,15 +76,55 @@ def provenance(store: ResultStore) -> dict[str, Any]:
     }
 
 
-def write_experiment(run: Path, out: Path) -> dict[str, Any]:
-    """Bundle one run directory into ``out`` (created); returns its provenance totals."""
+#: File name of a packed store in a bundle (:func:`pack_store`).
+PACKED = STORE + ".xz"
+
+
+def pack_store(store: ResultStore, path: Path) -> Path:
+    """A compact copy of ``store`` at ``path`` (xz): ``VACUUM INTO`` a temporary file (a consistent snapshot even
+    while a run writes), then xz. :func:`restore_store` unpacks it."""
+    import lzma
+    import sqlite3
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d) / STORE
+        con = sqlite3.connect(str(store.path))
+        try:
+            con.execute("VACUUM INTO ?", (str(tmp),))
+        finally:
+            con.close()
+        path.write_bytes(lzma.compress(tmp.read_bytes(), preset=9))
+    return path
+
+
+def restore_store(packed: Path, run: Path) -> bool:
+    """Unpack the packed store ``packed`` into the run directory ``run`` if it holds no store yet (an existing
+    store is never replaced); True when it did."""
+    import lzma
+
+    target = Path(run) / STORE
+    if target.exists() or not Path(packed).is_file():
+        return False
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = target.with_name(STORE + ".restoring")
+    tmp.write_bytes(lzma.decompress(Path(packed).read_bytes()))
+    tmp.replace(target)
+    return True
+
+
+def write_experiment(run: Path, out: Path, stores: bool = False) -> dict[str, Any]:
+    """Bundle one run directory into ``out`` (created; with its packed store when ``stores``); returns its
+    provenance totals."""
     from ..report import build_report
-    from .export import export
+    from .tables import export
 
     out.mkdir(parents=True, exist_ok=True)
     with ResultStore.open_existing(run) as store:
         prov = provenance(store)
         export(store, out / "jobs.parquet")
+        if stores:
+            pack_store(store, out / PACKED)
     (out / "provenance.json").write_text(json.dumps(prov, indent=1, sort_keys=True, default=str) + "\n")
     build_report(run, out)
     shutil.rmtree(out / "figures", ignore_errors=True)  # embedded in report.html
@@ -104,7 +147,7 @@ def status_markdown(totals: dict[str, dict[str, Any]]) -> str:
 
 
 def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
-                 reproduction: Path | None = None) -> dict[str, dict[str, Any]]:
+                 reproduction: Path | None = None, stores: bool = False) -> dict[str, dict[str, Any]]:
     """Bundle every experiment run under ``root`` (those of ``names`` that exist) into ``out``; writes
     ``out/status.md`` and ``out/claims.md`` (and the generated part of ``reproduction``) and returns the totals per
     experiment. ``FileNotFoundError`` when there is no run; ``ValueError`` when ``reproduction`` lacks the
@@ -119,7 +162,7 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
         text = Path(reproduction).read_text()
         if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
             raise ValueError(f"{reproduction}: needs one {BEGIN} line followed by one {END} line")
-    totals = {run.name: write_experiment(run, Path(out) / run.name) for run in runs}
+    totals = {run.name: write_experiment(run, Path(out) / run.name, stores) for run in runs}
     status = status_markdown(totals)
     claims = claims_markdown(claims_of(root), str(root))
     (Path(out) / "status.md").write_text(status)

@@ -382,7 +382,8 @@ def register(app: typer.Typer) -> None:
                                                  "brightness, gamma, noise_std (roll_deg here replaces --roll)."),
         methods: str = typer.Option(METHODS_DEFAULT, "--methods", help="Comma-separated search methods."),
         method_option: list[str] | None = typer.Option(None, "--method-option", help=METHOD_OPTION_HELP),
-        max_evals: int | None = typer.Option(200, "--max-evals", help="Evaluations per image and method (0 = none)."),
+        max_evals: int | None = typer.Option(200, "--max-evals", help="Evaluations per image and method (0 = no "
+                                                 "evaluation cap: then give --max-seconds)."),
         max_seconds: float | None = typer.Option(None, "--max-seconds", help="Seconds per image and method."),
         early_stop: bool = typer.Option(True, "--early-stop/--no-early-stop", help="Stop an image's search at its "
                                         "first breach (answers 'is there a breach?')."),

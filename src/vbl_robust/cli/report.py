@@ -44,13 +44,15 @@ def register(app: typer.Typer) -> None:
         reproduction: Path | None = typer.Option(None, "--reproduction", help="A Markdown file (REPRODUCTION.md) "
                                                  "whose part between '<!-- bundle:begin -->' and "
                                                  "'<!-- bundle:end -->' is replaced by the claims and status tables."),
+        stores: bool = typer.Option(False, "--stores", help="Also a compact copy of each store (results.sqlite.xz), "
+                                    "from which `reproduce --resume-from DIR` resumes an unfinished run elsewhere."),
     ) -> None:
         """Write a results bundle: per experiment the job table (Parquet), the report and the provenance, and a
         status table; runs still in progress are bundled as they stand (rerun to refresh)."""
         from vbl_robust.campaigns.bundle import write_bundle
 
         try:
-            totals = write_bundle(root, out, reproduction=reproduction)
+            totals = write_bundle(root, out, reproduction=reproduction, stores=stores)
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         for name, t in totals.items():

@@ -135,6 +135,9 @@ def register(app: typer.Typer) -> None:
         clock: str = typer.Option("auto", "--clock", help=CLOCK_HELP),
         wait: bool = typer.Option(False, "--wait", help=WAIT_HELP),
         retry_failed: bool = typer.Option(False, "--retry-failed", help=RETRY_HELP),
+        resume_from: Path | None = typer.Option(None, "--resume-from", help="A bundle written with `vbl-robust "
+                                                "bundle --stores`: its stores seed the run directories under --out "
+                                                "that have none yet, so the run goes on where the bundle's ended."),
         address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray)."),
         csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to CSV."),
         parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to Parquet."),
@@ -177,12 +180,19 @@ def register(app: typer.Typer) -> None:
                       probe_seconds)
             return
         root = out or Path("runs") / (experiment if group else exps[0].name)
+        if resume_from is not None and not resume_from.is_dir():
+            fail(f"--resume-from {resume_from}: not a directory")
         for exp in exps:
             spec = exp.build(seed, opts)
             spec = with_method_options(spec, method_opts, strict=False)  # checked over all experiments above
             spec, n_workers = run_settings(spec, clock, device, workers)
             n = images or exp.images
             out_dir = root / exp.name if group else root
+            if resume_from is not None:
+                from vbl_robust.campaigns.bundle import PACKED, restore_store
+
+                if restore_store(resume_from / exp.name / PACKED, out_dir):
+                    typer.echo(f"{exp.name}: store restored from {resume_from / exp.name / PACKED}")
             samples, source = load(n, seed, lard, width, height)
             config = {"command": "reproduce", "experiment": exp.name, "images": n, "seed": seed,
                       "lard": str(lard) if lard else None, "options": repr(opts), "width": width, "height": height}

@@ -189,7 +189,7 @@ def group_sequences(samples: Iterable[Sample], *, rate_hz: float | None = None) 
 
     Raises:
         ValueError: one line naming the file, row and field: some rows with a ``sequence_id`` and some without, a
-            bad ``frame_index``, an image name that does not name a frame, the same frame twice, times that do not
+            sequence whose frames show different runways (airport/runway), a bad ``frame_index``, an image name that does not name a frame, the same frame twice, times that do not
             increase with the frame index, or a bad ``rate_hz``.
     """
     if rate_hz is not None and (isinstance(rate_hz, bool) or not isinstance(rate_hz, int | float | np.number)
@@ -210,6 +210,12 @@ def group_sequences(samples: Iterable[Sample], *, rate_hz: float | None = None) 
     out = []
     for seq, frames in groups.items():
         ordered = sorted(frames.items())
+        runways = {((f.meta or {}).get("airport"), (f.meta or {}).get("runway")) for _, f in ordered}
+        if len(runways) > 1:  # frames grouped by their names alone must still be one approach
+            names = ", ".join(f"{a}/{r}" for a, r in sorted(runways, key=str)[:4])
+            raise ValueError(f"{_where(ordered[0][1])}: sequence {seq!r} (grouped by "
+                             f"{'columns' if by_columns else 'image names'}) mixes runways {names}; give each "
+                             "approach its own sequence_id")
         times, source = _times(ordered, rate_hz)
         index = np.array([f for f, _ in ordered], dtype=np.int64)
         gaps = sorted(set(range(int(index[0]), int(index[-1]) + 1)) - set(index.tolist()))
