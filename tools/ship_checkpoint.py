@@ -60,13 +60,15 @@ def info_from_protocol(p: dict, version: int, epochs: int) -> dict:
     det = {s: _all(r)["detection_rate"] for s, r in tests.items()}
     far = {s: _all(r, "far")["survival_ippe_lm"] for s, r in tests.items()}
     err = {s: _all(r)["pos_err_pct_ippe_lm"] for s, r in tests.items()}
-    validated = val["detection_rate"] >= 0.97 and val["survival_ippe_lm"] >= 0.90
+    from vbl_robust.detect.evaluate import GATES, GOALS
+
+    validated = val["detection_rate"] >= GATES["detection_rate"] and val["survival_ippe_lm"] >= GATES["survival_ippe_lm"]
     goals = []
     lo = min(surv, key=surv.get)
-    if min(surv.values()) < 0.90 or min(det.values()) < 0.97:
+    if min(surv.values()) < GATES["survival_ippe_lm"] or min(det.values()) < GATES["detection_rate"]:
         goals.append(f"test seeds: nominal survival {100 * min(surv.values()):.1f} - {100 * max(surv.values()):.1f} %, "
                      f"below the 90 % gate on seed {lo} (far approaches {100 * far[lo]:.1f} %)")
-    if min(surv.values()) < 0.95:
+    if min(surv.values()) < GOALS["survival_ippe_lm"]:
         goals.append(f"nominal survival goal 95 % open (test seeds {100 * min(surv.values()):.1f} - "
                      f"{100 * max(surv.values()):.1f} %; far {100 * min(far.values()):.1f} - {100 * max(far.values()):.1f} %)")
     if max(err.values()) > 5.0:

@@ -39,10 +39,7 @@ from vbl_robust.space import ParameterBox
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_PENALTY_M", "FAILURE_REASONS", "EvalRecord", "Objective"]
-
-#: Error assigned to any failure, metres (alias of :data:`vbl_robust.constants.PENALTY_M`).
-DEFAULT_PENALTY_M = PENALTY_M
+__all__ = ["FAILURE_REASONS", "EvalRecord", "Objective"]
 
 #: The failure codes of :attr:`EvalRecord.reason` (see :data:`vbl_robust.constants.FAILURE_REASONS`).
 FAILURE_REASONS = tuple(_REASONS)
@@ -78,7 +75,7 @@ class EvalRecord:
     reproj_error_px: np.ndarray
     reason: tuple[str, ...]
     detail: tuple[str, ...]
-    penalty_m: float = DEFAULT_PENALTY_M
+    penalty_m: float = PENALTY_M
 
     def __len__(self) -> int:
         return int(self.loss.shape[0])

@@ -43,6 +43,8 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
     assert text.startswith("# prose before\n") and text.endswith("prose after\n") and "old table" not in text
     assert (bundle / "claims.md").read_text() in text and (bundle / "status.md").read_text() in text
     status = (bundle / "status.md").read_text()
+    with ResultStore.open_existing(out / "spatial-1d") as store:
+        n_jobs_s1 = store.count()
     for name in EXPERIMENTS:
         with ResultStore.open_existing(out / name) as store:
             n_jobs = store.count()
@@ -57,6 +59,15 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
         assert not (bundle / name / "figures").exists() and not (bundle / name / "results.sqlite").exists()
         assert (bundle / name / "results.sqlite.xz").stat().st_size > 0
         assert f"| {name} | {n_jobs} / {n_jobs} |" in status
+    # a smaller run reproduces the bundle's rows (the check: reproduce EXPERIMENT --images 3)
+    from vbl_robust.campaigns.bundle import compare_runs
+
+    again = tmp_path / "again"
+    assert runner.invoke(app, ["reproduce", "spatial-1d", "--out", str(again), "--workers", "1", *SMALL]).exit_code == 0
+    assert compare_runs(again, out / "spatial-1d") == {"rows": n_jobs_s1, "common": n_jobs_s1, "differ": []}
+    other = tmp_path / "other"  # another seed: other searches, no common row
+    assert runner.invoke(app, ["reproduce", "spatial-1d", "--out", str(other), "--seed", "1", *SMALL]).exit_code == 0
+    assert compare_runs(other, out / "spatial-1d")["common"] == 0
     # a fresh checkout resumes from the bundle's packed stores: nothing is run again
     fresh = tmp_path / "fresh"
     resumed = runner.invoke(app, ["reproduce", "all", "--out", str(fresh), "--resume-from", str(bundle), *SMALL])

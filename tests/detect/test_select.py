@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.detect import DEFAULT_CONF_THRESHOLD, Detections, Detector, DifferentiableDetector, select
+from vbl_robust.constants import CONF_THRESHOLD
+from vbl_robust.detect import Detections, Detector, DifferentiableDetector, select
 
 
 def _dets(confs, offset=0.0):
@@ -19,7 +20,7 @@ def test_max_confidence_wins_and_threshold_applies():
     np.testing.assert_allclose(s.conf[:2], [0.9, 0.2])
     assert np.isnan(s.conf[2])
     assert np.isnan(s.keypoints[1]).all() and np.isnan(s.keypoints[2]).all()  # failures carry no keypoints
-    assert DEFAULT_CONF_THRESHOLD == 0.25  # the paper's τ_conf; exactly τ is accepted (row 3)
+    assert CONF_THRESHOLD == 0.25  # the paper's τ_conf; exactly τ is accepted (row 3)
 
 
 def test_threshold_is_a_parameter_and_ties_take_the_first():

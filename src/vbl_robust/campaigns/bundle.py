@@ -173,3 +173,27 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
         Path(reproduction).write_text(f"{head}{BEGIN}\n## The paper's claims, checked\n\n{claims}\n"
                                       f"## Status of the runs\n\n{status}{END}{tail}")
     return totals
+
+
+def compare_runs(small: Path, big: Path, rel: float = 1e-3) -> dict[str, Any]:
+    """Check that a smaller run reproduces a larger one's rows (``reproduce EXPERIMENT --images 3`` against the
+    bundle's run): every job of ``small`` must be in ``big`` under the same key, with the same status, verdict,
+    worst θ, evaluation and iteration counts, and worst error within ``rel`` (relative). Rows read off a time
+    budget are not compared (timings differ run to run). Returns ``{"rows", "common", "differ": [keys…]}``."""
+    with ResultStore.open_existing(small) as a, ResultStore.open_existing(big) as b:
+        rows_a = {r.key: r for r in a.jobs(with_trace=False)}
+        rows_b = {r.key: r for r in b.jobs(with_trace=False)}
+    differ = []
+    for key, r in rows_a.items():
+        s = rows_b.get(key)
+        if s is None:
+            differ.append(key)
+            continue
+        if r.budget is not None and r.budget.max_seconds is not None:
+            continue
+        same = ((r.status, r.verdict, r.nfev, r.nit, r.worst_x) == (s.status, s.verdict, s.nfev, s.nit, s.worst_x)
+                and (r.worst_m == s.worst_m or (r.worst_m is not None and s.worst_m is not None
+                                                and abs(r.worst_m - s.worst_m) <= rel * max(1.0, abs(s.worst_m)))))
+        if not same:
+            differ.append(key)
+    return {"rows": len(rows_a), "common": sum(k in rows_b for k in rows_a), "differ": differ}

@@ -9,7 +9,6 @@
 """
 
 from .base import (
-    DEFAULT_CONF_THRESHOLD,
     DetectContext,
     Detections,
     Detector,
@@ -20,7 +19,6 @@ from .base import (
 from .oracle import OracleDetector
 
 __all__ = [
-    "DEFAULT_CONF_THRESHOLD",
     "DetectContext",
     "Detections",
     "Detector",

@@ -53,7 +53,6 @@ if TYPE_CHECKING:
     from vbl_robust.data.sample import Sample
 
 __all__ = [
-    "DEFAULT_CONF_THRESHOLD",
     "DetectContext",
     "Detections",
     "ImageViews",
@@ -63,9 +62,6 @@ __all__ = [
     "Selection",
     "select",
 ]
-
-#: τ_conf (alias of :data:`vbl_robust.constants.CONF_THRESHOLD`, kept for existing imports).
-DEFAULT_CONF_THRESHOLD = CONF_THRESHOLD
 
 
 def _np(a, dtype=np.float64) -> np.ndarray:
@@ -267,7 +263,7 @@ class Selection:
     reason: tuple[str, ...]
 
 
-def select(detections: Sequence[Detections] | Detections, conf_threshold: float = DEFAULT_CONF_THRESHOLD) -> Selection:
+def select(detections: Sequence[Detections] | Detections, conf_threshold: float = CONF_THRESHOLD) -> Selection:
     """σ_select: per image, the candidate of maximum confidence if ``conf ≥ conf_threshold``, else a failure.
 
     Ties go to the first candidate. A single :class:`Detections` is treated as a batch of one.
