@@ -59,8 +59,9 @@ def provenance(store: ResultStore) -> dict[str, Any]:
     runs = store.runs()
     jobs = store.jobs(with_trace=False)
     planned = max((int(r["jobs_total"] or 0) for r in runs), default=0)
+    campaign = store.campaign()
     return {
-        "campaign": store.campaign(),
+        "campaign": campaign,
         "runs": runs,
         "totals": {
             "jobs_done": len(jobs),
@@ -70,7 +71,7 @@ def provenance(store: ResultStore) -> dict[str, Any]:
             "wall_s": sum(_wall_seconds(r) for r in runs),
             "worker_s": sum(float(r.job_s or 0.0) for r in jobs),
             "search_s": sum(float(r.search_s or 0.0) for r in jobs),
-            "clock": (store.campaign() or {}).get("spec", {}).get("clock", "wall"),
+            "clock": (campaign or {}).get("spec", {}).get("clock", "wall"),
             "workers": sorted({r["config"].get("workers") for r in runs if r.get("config")} - {None}),
         },
     }

@@ -201,17 +201,13 @@ class _Chunks:
         rate = self.points / max(self.seconds, 1e-12)
         return max(1, min(left, self.cap, int(CHUNK_TIME_FRACTION * rate * (nxt - now))))
 
-    def _breached(self, values: np.ndarray) -> bool:
-        above = self.opt.stop_above
-        return above is not None and bool(np.any(np.isfinite(values) & (values > above)))
-
     def run(self, x: np.ndarray, evaluate: Callable[[np.ndarray], tuple[Any, Any]]) -> bool:
         """Evaluate and tell the batch ``x``; False when the time budget or a breach cut it (told with
         ``tell_partial``)."""
         opt, n, done = self.opt, len(x), 0
         parts: list[tuple[np.ndarray, tuple[str, ...] | None, Any, np.ndarray]] = []
         while done < n:
-            if done and (opt.time_up(done) or self._breached(parts[-1][0])):
+            if done and (opt.time_up(done) or opt._first_breach(parts[-1][0]) is not None):
                 break
             k = self.size(n - done)
             t0 = opt.elapsed()
