@@ -11,21 +11,21 @@ Public API (names are resolved lazily, so ``import vbl_robust`` stays cheap)::
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from .lazy import lazy_names
 from .space import ParameterBox
 
 __version__ = "0.1.0"
 
-# public name -> (module, attribute); attribute None = the module itself
-_LAZY: dict[str, tuple[str, str | None]] = {
-    "Sample": ("vbl_robust.data.sample", "Sample"),
-    "Objective": ("vbl_robust.pipeline", "Objective"),
-    "OracleDetector": ("vbl_robust.detect.oracle", "OracleDetector"),
-    "UltralyticsDetector": ("vbl_robust.detect.ultralytics", "UltralyticsDetector"),
-    "OnnxDetector": ("vbl_robust.detect.onnx", "OnnxDetector"),
-    "default_detector": ("vbl_robust.detect.shipped", "default_detector"),
+# public name -> the module that defines it, or (module, None) for the module itself
+_LAZY: dict[str, str | tuple[str, None]] = {
+    "Sample": "vbl_robust.data.sample",
+    "Objective": "vbl_robust.pipeline",
+    "OracleDetector": "vbl_robust.detect.oracle",
+    "UltralyticsDetector": "vbl_robust.detect.ultralytics",
+    "OnnxDetector": "vbl_robust.detect.onnx",
+    "default_detector": "vbl_robust.detect.shipped",
     "scenes": ("vbl_robust.scenes", None),
     "data": ("vbl_robust.data", None),
     "search": ("vbl_robust.search", None),
@@ -45,16 +45,4 @@ if TYPE_CHECKING:  # pragma: no cover
     from .data.sample import Sample  # noqa: F401
 
 
-def __getattr__(name: str) -> Any:
-    try:
-        module, attr = _LAZY[name]
-    except KeyError:
-        raise AttributeError(f"module 'vbl_robust' has no attribute {name!r}") from None
-    mod = importlib.import_module(module)
-    value = mod if attr is None else getattr(mod, attr)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(__all__)
+__getattr__, __dir__ = lazy_names(__name__, _LAZY, globals(), __all__)

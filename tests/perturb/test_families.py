@@ -25,6 +25,8 @@ from vbl_robust.perturb import (
     motion_blur,
     resize_image,
 )
+from vbl_robust.perturb.family import Family
+from vbl_robust.perturb.registry import family_of
 from vbl_robust.perturb.views import resample, to_tensor
 from vbl_robust.perturb.weather import noise_pattern_tensor
 from vbl_robust.space import KNOWN_UNITS, ParameterBox
@@ -50,6 +52,12 @@ def test_registry_contract():
             assert spec.minimum <= a <= prev[0] and prev[1] <= b <= spec.maximum and (a, b) != prev
             prev = (a, b)
         Perturbation(ParameterBox({name: spec.levels[-1]}))  # the extreme level is a valid box
+        fam = family_of(name)  # its maps: one Family object, shared by the parameters it reads
+        assert isinstance(fam, Family) and name in fam.params and set(fam.needs_K) <= set(fam.params)
+        if spec.kind == "photometric":
+            assert type(fam).pointwise is not Family.pointwise
+        if spec.kind == "geometric":
+            assert type(fam).points is not Family.points and type(fam).source_coords is not Family.source_coords
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -17,50 +17,49 @@ the command line's help) does not import torch.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from vbl_robust.lazy import lazy_names
 
 #: public name -> the submodule that defines it
 _LAZY: dict[str, str] = {
-    "EXPERIMENTS": "experiments",
-    "Experiment": "experiments",
-    "Options": "experiments",
-    "audit_spec": "experiments",
-    "experiment": "experiments",
-    "export": "tables",
-    "convergence": "metrics",
-    "distance_profile": "metrics",
-    "phi_crit": "metrics",
-    "pnp_summary": "metrics",
-    "reference_rows": "metrics",
-    "smallest_breach_levels": "metrics",
-    "summarize": "metrics",
-    "survival_rate": "metrics",
-    "DetectorSpec": "provenance",
-    "code_version": "provenance",
-    "dataset_identity": "provenance",
-    "file_sha256": "provenance",
-    "sample_fingerprint": "provenance",
-    "EXECUTORS": "runner",
-    "Progress": "runner",
-    "RunSummary": "runner",
-    "plan": "runner",
-    "run_campaign": "runner",
-    "find_lard_files": "samples",
-    "load_samples": "samples",
-    "EPS_SAFE_M": "spec",
-    "PENALTY_M": "spec",
-    "Block": "spec",
-    "BoxSpec": "spec",
-    "Budget": "spec",
-    "CampaignSpec": "spec",
-    "Job": "spec",
-    "roll_box": "spec",
-    "roll_contrast_box": "spec",
-    "JobRow": "store",
-    "JobStatus": "store",
-    "Points": "store",
-    "ResultStore": "store",
+    "EXPERIMENTS": ".experiments",
+    "Experiment": ".experiments",
+    "Options": ".experiments",
+    "audit_spec": ".experiments",
+    "experiment": ".experiments",
+    "export": ".tables",
+    "convergence": ".metrics",
+    "distance_profile": ".metrics",
+    "phi_crit": ".metrics",
+    "pnp_summary": ".metrics",
+    "reference_rows": ".metrics",
+    "smallest_breach_levels": ".metrics",
+    "summarize": ".metrics",
+    "survival_rate": ".metrics",
+    "DetectorSpec": ".provenance",
+    "code_version": ".provenance",
+    "dataset_identity": ".provenance",
+    "file_sha256": ".provenance",
+    "sample_fingerprint": ".provenance",
+    "EXECUTORS": ".runner",
+    "Progress": ".runner",
+    "RunSummary": ".runner",
+    "plan": ".runner",
+    "run_campaign": ".runner",
+    "find_lard_files": ".samples",
+    "load_samples": ".samples",
+    "EPS_SAFE_M": ".spec",
+    "PENALTY_M": ".spec",
+    "Block": ".spec",
+    "BoxSpec": ".spec",
+    "Budget": ".spec",
+    "CampaignSpec": ".spec",
+    "Job": ".spec",
+    "roll_box": ".spec",
+    "roll_contrast_box": ".spec",
+    "JobRow": ".store",
+    "JobStatus": ".store",
+    "Points": ".store",
+    "ResultStore": ".store",
 }
 
 __all__ = [
@@ -106,15 +105,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    try:
-        module = _LAZY[name]
-    except KeyError:
-        raise AttributeError(f"module 'vbl_robust.campaigns' has no attribute {name!r}") from None
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(__all__)
+__getattr__, __dir__ = lazy_names(__name__, _LAZY, globals(), __all__)

@@ -13,6 +13,8 @@ from typing import Any
 
 import typer
 
+from vbl_robust.perturb.registry import PERTURBATIONS, known
+
 from .common import fail, parse_lipschitz, parse_range
 
 METHODS_DEFAULT = "georobust-av,random,apgd"  # = vbl_robust.campaigns.experiments.AUDIT_METHODS
@@ -126,13 +128,11 @@ def box_label(bounds: dict[str, tuple[float, float]]) -> str:
 def parse_perturb(items: list[str] | None) -> dict[str, tuple[float, float]]:
     """``--perturb NAME=LO,HI`` (repeatable; a bare ``NAME`` takes the family's plausible default range) →
     ``{name: (lo, hi)}`` in the order given; a one-line error naming the flag and the value on bad input."""
-    from vbl_robust.perturb import PERTURBATIONS
-
     out: dict[str, tuple[float, float]] = {}
     for item in items or ():
         name, sep, text = (part.strip() for part in item.partition("="))
         if name not in PERTURBATIONS:
-            fail(f"--perturb {item}: unknown perturbation {name!r}; known perturbations: {', '.join(PERTURBATIONS)}")
+            fail(f"--perturb {item}: unknown perturbation {name!r}; known perturbations: {known()}")
         if name in out:
             fail(f"--perturb {item}: {name} is given more than once")
         spec = PERTURBATIONS[name]
@@ -378,8 +378,8 @@ def register(app: typer.Typer) -> None:
         contrast: str | None = typer.Option(None, "--contrast", help="Contrast factor range 'lo,hi' (e.g. 0.7,1.4)."),
         perturb: list[str] | None = typer.Option(None, "--perturb", help="Another perturbation family and its range, "
                                                  "NAME=LO,HI (repeatable; a bare NAME takes its plausible default "
-                                                 "range): pitch_deg, yaw_deg, blur_px, motion_blur_px, haze, "
-                                                 "brightness, gamma, noise_std (roll_deg here replaces --roll)."),
+                                                 f"range): {known()} (roll_deg here replaces --roll; contrast "
+                                                 "here or in --contrast, not both)."),
         methods: str = typer.Option(METHODS_DEFAULT, "--methods", help="Comma-separated search methods."),
         method_option: list[str] | None = typer.Option(None, "--method-option", help=METHOD_OPTION_HELP),
         max_evals: int | None = typer.Option(200, "--max-evals", help="Evaluations per image and method (0 = no "

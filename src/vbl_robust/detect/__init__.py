@@ -8,6 +8,8 @@
 - :mod:`.shipped` — the shipped model (path, design, validation, caveats) and :class:`DetectorSpec`.
 """
 
+from vbl_robust.lazy import lazy_names
+
 from .base import (
     DetectContext,
     Detections,
@@ -43,11 +45,4 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str):
-    if name not in _LAZY:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    import importlib
-
-    value = getattr(importlib.import_module(_LAZY[name], __name__), name)
-    globals()[name] = value
-    return value
+__getattr__, __dir__ = lazy_names(__name__, _LAZY, globals(), __all__)

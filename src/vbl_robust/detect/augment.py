@@ -7,10 +7,10 @@ blur, haze and blur; the training data had none of them (ultralytics' HSV jitter
 
 What: with probability ``p`` a training sample's *source image* (full resolution, before any view is cut) gets
 a random appearance change; each family is then drawn independently with probability ``p_family``, its value
-uniform in its range (contrast and gamma log-uniform), and applied in the registry's order (optics, then
-photometry, then noise: :mod:`vbl_robust.perturb.compose`). The maths is the perturbation families' own
-(:mod:`vbl_robust.perturb.optical`, ``photometric``, ``weather``), so training sees exactly what an audit
-applies; only the noise differs — a fresh standard-normal draw per sample from the sample's seed stream, not
+uniform in its range (log-uniform for the registry's multiplicative families, contrast and gamma), and applied in
+the registry's order (optics, then photometry, then noise: :mod:`vbl_robust.perturb.registry`). The maps are the
+families' own (:meth:`Family.frame_torch <vbl_robust.perturb.family.Family.frame_torch>`), so training sees
+exactly what an audit applies; only the noise differs — a fresh standard-normal draw per sample from the sample's seed stream, not
 the audit's one fixed pattern (the network must not learn one pattern). Geometry is never touched, so the
 keypoint labels stay exact. Validation views are never jittered (they measure the nominal model).
 
@@ -27,19 +27,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..perturb.optical import gaussian_blur, motion_blur
-from ..perturb.photometric import brightness, contrast, gamma
-from ..perturb.weather import gaussian_noise, haze
+from ..perturb.family import FrameContext
+from ..perturb.registry import PERTURBATIONS, family_of
+from ..perturb.resample import PixelScale
 
 __all__ = ["AppearanceJitter"]
-
-#: families in the order they are applied, and whether their range is drawn log-uniformly
-_ORDER = (("blur_px", False), ("motion_blur_px", False), ("haze", False), ("contrast", True),
-          ("brightness", False), ("gamma", True), ("noise_std", False))
-
-#: the family functions of the non-noise families, ``f(images (1, C, H, W), values (1,))``
-_APPLY = {"blur_px": gaussian_blur, "motion_blur_px": motion_blur, "haze": haze, "contrast": contrast,
-          "brightness": brightness, "gamma": gamma}
 
 
 @dataclass(frozen=True)
@@ -64,18 +56,26 @@ class AppearanceJitter:
     gamma: tuple[float, float] = (0.75, 1.33)
     noise_std: tuple[float, float] = (0.0, 0.05)
 
+    @classmethod
+    def families(cls) -> tuple[str, ...]:
+        """The jittered families (the range fields), in the registry's order."""
+        fields = cls.__dataclass_fields__
+        return tuple(n for n in PERTURBATIONS if n in fields)
+
     def __post_init__(self) -> None:
         for name in ("p", "p_family"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and 0.0 <= v <= 1.0):
                 raise ValueError(f"AppearanceJitter: {name} must be in [0, 1], got {v!r}")
-        for name, log in _ORDER:
+        for name in self.families():
+            spec, log = PERTURBATIONS[name], PERTURBATIONS[name].multiplicative
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi) or (log and lo <= 0):
                 raise ValueError(f"AppearanceJitter: {name} must be a finite (low, high) range"
                                  f"{' of positive factors' if log else ''}, got {(lo, hi)!r}")
-            if name in ("blur_px", "motion_blur_px", "haze", "noise_std") and lo < 0:
-                raise ValueError(f"AppearanceJitter: {name} must be >= 0, got {(lo, hi)!r}")
+            if lo < spec.minimum or hi > spec.maximum:
+                raise ValueError(f"AppearanceJitter: {name} must lie within [{spec.minimum:g}, {spec.maximum:g}], "
+                                 f"got {(lo, hi)!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
@@ -83,11 +83,13 @@ class AppearanceJitter:
     def draw(self, rng: np.random.Generator) -> dict[str, float]:
         """The changes of one sample: ``{family: value}`` (empty: unchanged). Consumes ``rng`` the same way
         whatever is drawn, so the rest of a sample's stream does not depend on it."""
-        u = rng.random(1 + 2 * len(_ORDER))
+        names = self.families()
+        u = rng.random(1 + 2 * len(names))
         if u[0] >= self.p:
             return {}
         out = {}
-        for k, (name, log) in enumerate(_ORDER):
+        for k, name in enumerate(names):
+            log = PERTURBATIONS[name].multiplicative
             if u[1 + 2 * k] >= self.p_family:
                 continue
             lo, hi = getattr(self, name)
@@ -102,13 +104,8 @@ class AppearanceJitter:
             return image, changes
         x = image
         one = torch.ones(1, dtype=x.dtype)
-        for name, _ in _ORDER:
-            if name not in changes:
-                continue
-            v = changes[name] * one
-            if name == "noise_std":
-                pattern = torch.from_numpy(rng.standard_normal(tuple(x.shape[1:])).astype(np.float32)).to(x.dtype)
-                x = gaussian_noise(x, v, pattern)
-            else:
-                x = _APPLY[name](x, v)
+        ctx = FrameContext(scale=PixelScale(), rng=rng)  # the source's own pixels; a fresh noise draw
+        for name in self.families():
+            if name in changes:
+                x = family_of(name).frame_torch(x, {name: changes[name] * one}, ctx)
         return x.clamp(0.0, 1.0), changes

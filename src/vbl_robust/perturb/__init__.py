@@ -3,51 +3,68 @@
 Functions take batched tensors and are differentiable w.r.t. their parameters (kornia style, with thin
 ``nn.Module`` wrappers); OpenCV/NumPy twins serve the no-gradient path. :class:`Perturbation` ties them to the
 parameter names of a :class:`~vbl_robust.space.ParameterBox` (the registry :data:`PERTURBATIONS`, in the order
-of application: geometry, optics, photometry, noise — see :mod:`.compose`). Conventions live where the families
-do: :mod:`.geometric` (roll: centre, sign, padding), :mod:`.attitude` (roll, pitch, yaw as ``K R K⁻¹``),
+of application: geometry, optics, photometry, noise — see :mod:`.registry`; each family's maps are one
+:class:`~vbl_robust.perturb.family.Family`). Conventions live where the families
+do: :mod:`.geometric` (roll: centre, sign, padding), :mod:`.rotation` (roll, pitch, yaw as ``K R K⁻¹``),
 :mod:`.optical` (Gaussian and motion blur), :mod:`.photometric` (contrast, brightness, gamma), :mod:`.weather`
 (haze and its airlight, the seeded noise pattern) and :mod:`.resample` (resizing, scaled intrinsics).
 
 :class:`ViewSampler` (:mod:`.views`) is the boundary to the detectors: the views of ``T(x; θ)`` that a detector
 asks for (the letterboxed frame, crops), sampled from the unperturbed image, and points moved both ways.
+
+Names are resolved lazily: reading the registry (the command line's help does) imports no torch.
 """
 
-from .attitude import Attitude, attitude, attitude_homography, attitude_numpy, attitude_points
-from .compose import KINDS, PERTURBATIONS, Perturbation, PerturbationSpec
-from .geometric import Roll, default_center, roll, roll_matrix, roll_numpy, roll_points
-from .optical import (
-    GaussianBlur,
-    MotionBlur,
-    gaussian_blur,
-    gaussian_blur_numpy,
-    motion_blur,
-    motion_blur_numpy,
-)
-from .photometric import (
-    LUMA_WEIGHTS,
-    Brightness,
-    Contrast,
-    Gamma,
-    brightness,
-    brightness_numpy,
-    contrast,
-    contrast_numpy,
-    gamma,
-    gamma_numpy,
-)
-from .resample import PixelScale, resize_image
-from .views import ViewSampler
-from .weather import (
-    HAZE_AIRLIGHT,
-    NOISE_SEED,
-    GaussianNoise,
-    Haze,
-    gaussian_noise,
-    gaussian_noise_numpy,
-    haze,
-    haze_numpy,
-    noise_pattern,
-)
+from __future__ import annotations
+
+from vbl_robust.lazy import lazy_names
+
+#: public name -> the submodule that defines it
+_LAZY: dict[str, str] = {
+    "Attitude": ".rotation",
+    "attitude": ".rotation",
+    "attitude_homography": ".rotation",
+    "attitude_numpy": ".rotation",
+    "attitude_points": ".rotation",
+    "KINDS": ".registry",
+    "PERTURBATIONS": ".registry",
+    "PerturbationSpec": ".registry",
+    "Perturbation": ".compose",
+    "Roll": ".geometric",
+    "default_center": ".geometric",
+    "roll": ".geometric",
+    "roll_matrix": ".geometric",
+    "roll_numpy": ".geometric",
+    "roll_points": ".geometric",
+    "GaussianBlur": ".optical",
+    "MotionBlur": ".optical",
+    "gaussian_blur": ".optical",
+    "gaussian_blur_numpy": ".optical",
+    "motion_blur": ".optical",
+    "motion_blur_numpy": ".optical",
+    "LUMA_WEIGHTS": ".photometric",
+    "Brightness": ".photometric",
+    "Contrast": ".photometric",
+    "Gamma": ".photometric",
+    "brightness": ".photometric",
+    "brightness_numpy": ".photometric",
+    "contrast": ".photometric",
+    "contrast_numpy": ".photometric",
+    "gamma": ".photometric",
+    "gamma_numpy": ".photometric",
+    "PixelScale": ".resample",
+    "resize_image": ".resample",
+    "ViewSampler": ".views",
+    "HAZE_AIRLIGHT": ".weather",
+    "NOISE_SEED": ".weather",
+    "GaussianNoise": ".weather",
+    "Haze": ".weather",
+    "gaussian_noise": ".weather",
+    "gaussian_noise_numpy": ".weather",
+    "haze": ".weather",
+    "haze_numpy": ".weather",
+    "noise_pattern": ".weather",
+}
 
 __all__ = [
     "HAZE_AIRLIGHT",
@@ -94,3 +111,6 @@ __all__ = [
     "roll_numpy",
     "roll_points",
 ]
+
+
+__getattr__, __dir__ = lazy_names(__name__, _LAZY, globals(), __all__)

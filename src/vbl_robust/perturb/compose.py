@@ -1,21 +1,9 @@
 """Apply the perturbations named by a :class:`~vbl_robust.space.ParameterBox` to one image, batched over θ.
 
 Column ``i`` of a θ array ``(N, d)`` is the parameter ``box.names[i]`` in real units (see :mod:`vbl_robust.space`).
-Known names are in :data:`PERTURBATIONS` (their conventions live in the family modules); a parameter absent from
-the box keeps its identity value.
-
-Order of application (the order of :data:`PERTURBATIONS`), following the light from the scene to the pixels:
-
-1. **geometry** — the camera attitude ``roll_deg``, ``pitch_deg``, ``yaw_deg`` (one homography ``K R K⁻¹``,
-   :mod:`.attitude`; roll alone is the rotation of :mod:`.geometric`);
-2. **optics** — ``blur_px``, then ``motion_blur_px`` (convolutions of the perturbed frame, :mod:`.optical`; they
-   commute);
-3. **photometry** — ``haze`` (:mod:`.weather`; it commutes with the optics, so this is where the atmosphere
-   acts), then ``contrast``, ``brightness``, ``gamma`` (:mod:`.photometric`, the camera's tone processing);
-4. **noise** — ``noise_std`` (:mod:`.weather`), last, on the sensor's pixel grid.
-
-The order matters where operations do not commute: the contrast's grey mean sees the reflected borders, the
-blurs and the haze; the clamps of contrast, brightness and noise; gamma bends what came before it.
+Known names, their meaning and their order of application are the registry's (:mod:`.registry`); each
+family's maths is its :class:`~vbl_robust.perturb.family.Family` (:mod:`.family`). :class:`Perturbation` only
+iterates the registry: it names no family. A parameter absent from the box keeps its identity value.
 
 Units: angles in degrees; ``blur_px`` and ``motion_blur_px`` in pixels **of the sample's image** (the composer
 scales them to a resized source with the :class:`~vbl_robust.perturb.PixelScale` it is given, so one θ means the
@@ -25,169 +13,33 @@ scale; ``contrast`` and ``gamma`` dimensionless.
 Camera: the attitude needs the pinhole ``K`` of the pixels it warps (``K=``, e.g.
 :meth:`PixelScale.intrinsics <vbl_robust.perturb.PixelScale.intrinsics>` of the sample's ``K``); roll needs only
 the principal point (``center=``, or ``K``'s).
-
-Budget levels: every :class:`PerturbationSpec` carries a physically plausible ``default`` range (the CLI's
-``--perturb NAME``) and five nested ``levels`` from mild to extreme, each with its justification (for
-per-family experiments).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from vbl_robust.space import ParameterBox
 
-from .attitude import attitude, attitude_numpy, attitude_points, attitude_source_coords
-from .geometric import roll, roll_numpy, roll_points, roll_source_coords
-from .optical import gaussian_blur, gaussian_blur_numpy, motion_blur, motion_blur_numpy
-from .photometric import (
-    LUMA_WEIGHTS,
-    brightness,
-    brightness_numpy,
-    contrast,
-    contrast_about,
-    contrast_numpy,
-    gamma,
-    gamma_numpy,
-    gray_mean,
-)
+from .family import Family, FrameContext
+from .photometric import gray_mean
+from .registry import PERTURBATIONS, family_of, known
 from .resample import PixelScale
-from .weather import (
-    HAZE_AIRLIGHT,
-    gaussian_noise,
-    gaussian_noise_numpy,
-    haze,
-    haze_numpy,
-    noise_pattern,
-    noise_pattern_tensor,
-)
 
-__all__ = ["KINDS", "PERTURBATIONS", "Perturbation", "PerturbationSpec"]
-
-#: What a family does: ``geometric`` moves pixels (and points); ``optical`` convolves the frame; ``photometric``
-#: maps each pixel value; ``noise`` adds the fixed pattern on the frame's pixel grid.
-KINDS = ("geometric", "optical", "photometric", "noise")
+__all__ = ["Perturbation"]
 
 
-@dataclass(frozen=True)
-class PerturbationSpec:
-    """What a parameter name means.
-
-    Attributes:
-        name: the box's parameter name.
-        kind: one of :data:`KINDS`.
-        identity: the value that leaves the image unchanged.
-        minimum, maximum: the family's domain (θ outside it is an error; the box may be anywhere inside).
-        description: convention and unit, one line.
-        unit: the unit (as :data:`vbl_robust.space.KNOWN_UNITS`).
-        default: a physically plausible default range ``(lower, upper)``.
-        levels: five nested ranges from mild to extreme (each contains the previous one and the identity).
-        rationale: why these levels.
-    """
-
-    name: str
-    kind: str
-    identity: float
-    minimum: float
-    description: str
-    maximum: float = np.inf
-    unit: str = ""
-    default: tuple[float, float] = (0.0, 0.0)
-    levels: tuple[tuple[float, float], ...] = ()
-    rationale: str = ""
-
-
-def _sym(*half_widths: float) -> tuple[tuple[float, float], ...]:
-    return tuple((-h, h) for h in half_widths)
-
-
-def _upto(*highs: float) -> tuple[tuple[float, float], ...]:
-    return tuple((0.0, h) for h in highs)
-
-
-#: The parameter names a box may use, in the order they are applied (module docstring).
-PERTURBATIONS: dict[str, PerturbationSpec] = {
-    "roll_deg": PerturbationSpec(
-        "roll_deg", "geometric", 0.0, -np.inf,
-        "camera roll about the optical axis, degrees, positive = right wing down (image turns counter-clockwise)",
-        unit="deg", default=(-15.0, 15.0), levels=_sym(2.0, 5.0, 10.0, 20.0, 30.0),
-        rationale="a stabilised final approach banks a few degrees (±2–5°); gusts and corrections reach ±10°; "
-                  "±20–30° is a turning approach (30° is the usual bank limit); the roll budgets of the paper",
-    ),
-    "pitch_deg": PerturbationSpec(
-        "pitch_deg", "geometric", 0.0, -np.inf,
-        "camera pitch about its left axis, degrees, positive = nose up (scene moves down in the image)",
-        unit="deg", default=(-5.0, 5.0), levels=_sym(1.0, 2.0, 5.0, 10.0, 15.0),
-        rationale="±1° is an attitude-estimate or camera-mount error; ±2° a glide-path deviation; ±5° turbulence "
-                  "and flare; ±10–15° go-around or upset attitudes (the runway leaves a 60° FOV beyond ~±20°)",
-    ),
-    "yaw_deg": PerturbationSpec(
-        "yaw_deg", "geometric", 0.0, -np.inf,
-        "camera yaw about its up axis, degrees, positive = nose right (scene moves left in the image)",
-        unit="deg", default=(-5.0, 5.0), levels=_sym(1.0, 2.0, 5.0, 10.0, 20.0),
-        rationale="±1–2° is a heading-estimate or mount error; ±5–10° the crab angle of a crosswind approach; "
-                  "±20° an extreme crab (the LARD envelopes sample ±24° of heading offset)",
-    ),
-    "blur_px": PerturbationSpec(
-        "blur_px", "optical", 0.0, 0.0,
-        "Gaussian blur, standard deviation in pixels of the sample's image (defocus, turbulence, dirty lens)",
-        unit="px", default=(0.0, 2.0), levels=_upto(0.5, 1.0, 2.0, 4.0, 8.0),
-        rationale="σ ≤ 0.5 px is a sharp lens; 1–2 px mild defocus or compression softening; 4 px a misted or "
-                  "defocused lens; 8 px (0.5° at LARD's 1024 px / 60°) a severely degraded image",
-    ),
-    "motion_blur_px": PerturbationSpec(
-        "motion_blur_px", "optical", 0.0, 0.0,
-        "horizontal linear motion blur, length in pixels of the sample's image, centred (yaw rate x exposure)",
-        unit="px", default=(0.0, 8.0), levels=_upto(2.0, 4.0, 8.0, 16.0, 32.0),
-        rationale="angular rate x exposure x focal length: 5°/s for 10 ms at 887 px/rad is 0.8 px; turbulence "
-                  "at 20°/s for 20 ms gives 6 px; 16–32 px are long exposures in low light with strong turbulence",
-    ),
-    "haze": PerturbationSpec(
-        "haze", "photometric", 0.0, 0.0,
-        "uniform haze, fraction of airlight A = 0.8 blended in (x' = (1 - h) x + h A), 0 = clear",
-        maximum=1.0, unit="fraction", default=(0.0, 0.4), levels=_upto(0.1, 0.2, 0.4, 0.6, 0.8),
-        rationale="Koschmieder h = 1 - exp(-3.912 d / V) at d = 2 km: visibility V = 75, 35, 15, 8.5 and 4.9 km; "
-                  "0.8 is about the visibility minimum of a visual approach",
-    ),
-    "contrast": PerturbationSpec(
-        "contrast", "photometric", 1.0, 0.0, "contrast factor (torchvision definition), 1 = unchanged",
-        unit="factor", default=(0.7, 1.4), levels=((0.9, 1.1), (0.8, 1.25), (0.7, 1.4), (0.5, 2.0), (0.4, 2.5)),
-        rationale="multiplicatively symmetric about 1 (0.8 ≈ 1/1.25); the paper's 2-D boxes; 0.4–2.5 washes the "
-                  "image out or saturates most of it",
-    ),
-    "brightness": PerturbationSpec(
-        "brightness", "photometric", 0.0, -np.inf,
-        "additive brightness offset, fraction of full scale (0.1 = +25.5 grey levels), clamped to [0, 1]",
-        unit="full scale", default=(-0.2, 0.2), levels=_sym(0.05, 0.1, 0.2, 0.3, 0.5),
-        rationale="±0.05 is auto-exposure jitter; ±0.1–0.2 an exposure error of about ±1/3–2/3 stop at mid grey; "
-                  "±0.3–0.5 sun glare or a failed exposure control",
-    ),
-    "gamma": PerturbationSpec(
-        "gamma", "photometric", 1.0, 0.0,
-        "gamma exponent x' = x ** gamma, 1 = unchanged (< 1 brightens the shadows)",
-        unit="exponent", default=(0.67, 1.5), levels=((0.9, 1.1), (0.8, 1.25), (0.67, 1.5), (0.5, 2.0), (0.4, 2.5)),
-        rationale="multiplicatively symmetric about 1; 0.8–1.25 spans tone curves of camera profiles, 0.5–2 a "
-                  "wrong encoding assumption (linear vs sRGB is about 2.2)",
-    ),
-    "noise_std": PerturbationSpec(
-        "noise_std", "noise", 0.0, 0.0,
-        "additive Gaussian noise, standard deviation in fraction of full scale, fixed seeded pattern",
-        unit="full scale", default=(0.0, 0.05), levels=_upto(0.01, 0.02, 0.05, 0.1, 0.2),
-        rationale="0.01 (2.5 grey levels) is a daylight sensor; 0.02–0.05 dusk or high gain; 0.1–0.2 night "
-                  "imaging at maximum gain",
-    ),
-}
-
-#: The families that move pixels: one homography. Roll alone keeps the rotation of :mod:`.geometric`.
-ATTITUDE = ("roll_deg", "pitch_deg", "yaw_deg")
-
-
-def _known() -> str:
-    return ", ".join(PERTURBATIONS)
+def _groups(names: Sequence[str]) -> list[tuple[Family, str, tuple[str, ...]]]:
+    """The families of ``names`` in the registry's order: ``(family, kind, its parameters in the box)``."""
+    out: dict[int, tuple[Family, str, list[str]]] = {}
+    for name in PERTURBATIONS:
+        if name in names:
+            fam = family_of(name)
+            out.setdefault(id(fam), (fam, PERTURBATIONS[name].kind, []))[2].append(name)
+    return [(fam, kind, tuple(params)) for fam, kind, params in out.values()]
 
 
 class Perturbation:
@@ -212,10 +64,10 @@ class Perturbation:
     def __init__(self, box: ParameterBox | Sequence[str]):
         names = tuple(box.names) if isinstance(box, ParameterBox) else tuple(box)
         if not names:
-            raise ValueError(f"Perturbation: no parameters given; known perturbations: {_known()}")
+            raise ValueError(f"Perturbation: no parameters given; known perturbations: {known()}")
         for name in names:
             if name not in PERTURBATIONS:
-                raise ValueError(f"Perturbation: unknown parameter {name!r}; known perturbations: {_known()}")
+                raise ValueError(f"Perturbation: unknown parameter {name!r}; known perturbations: {known()}")
         if len(set(names)) != len(names):
             raise ValueError(f"Perturbation: duplicate parameter names in {names}")
         if isinstance(box, ParameterBox):
@@ -227,6 +79,7 @@ class Perturbation:
                     raise ValueError(f"Perturbation: upper bound of {name!r} must be <= {spec.maximum}, got {hi}")
         self.names = names
         self._index = {n: i for i, n in enumerate(names)}
+        self._groups = _groups(names)
 
     def __repr__(self) -> str:
         return f"Perturbation({list(self.names)})"
@@ -240,7 +93,15 @@ class Perturbation:
         return name in self._index
 
     def _kinds(self) -> set[str]:
-        return {PERTURBATIONS[n].kind for n in self.names}
+        return {kind for _, kind, _ in self._groups}
+
+    def _of_kind(self, *kinds: str) -> list[tuple[Family, tuple[str, ...]]]:
+        return [(fam, params) for fam, kind, params in self._groups if kind in kinds]
+
+    def _values(self, theta, params: tuple[str, ...], like=None) -> dict:
+        """``{name: column}`` of θ for ``params`` (on ``like``'s device when given)."""
+        return {n: self.column(theta, n) if like is None else _column_tensor(self.column(theta, n), like)
+                for n in params}
 
     @property
     def is_geometric(self) -> bool:
@@ -248,10 +109,9 @@ class Perturbation:
         return "geometric" in self._kinds()
 
     @property
-    def uses_homography(self) -> bool:
-        """True when the geometry is the full attitude homography (``pitch_deg`` or ``yaw_deg`` in the box);
-        a roll-only box keeps the rotation of :mod:`.geometric` bit for bit."""
-        return self.has("pitch_deg") or self.has("yaw_deg")
+    def needs_K(self) -> tuple[str, ...]:
+        """The box's parameters that need the intrinsics ``K`` (not only the principal point)."""
+        return tuple(n for fam, _, params in self._groups for n in params if n in fam.needs_K)
 
     @property
     def needs_frame(self) -> bool:
@@ -303,10 +163,9 @@ class Perturbation:
             elif not np.allclose(np.asarray(center, np.float64).reshape(-1), K[:2, 2], rtol=0.0, atol=1e-9):
                 raise ValueError(f"Perturbation: center {center!r} is not the principal point {K[:2, 2].tolist()} "
                                  "of K")
-        elif self.uses_homography:
-            wanted = [n for n in ("pitch_deg", "yaw_deg") if self.has(n)]
-            raise ValueError(f"Perturbation: {' and '.join(wanted)} need the camera intrinsics: pass K (3, 3) in "
-                             "the image's pixels")
+        elif self.needs_K:
+            raise ValueError(f"Perturbation: {' and '.join(self.needs_K)} need the camera intrinsics: pass K (3, 3) "
+                             "in the image's pixels")
         return center, K
 
     @staticmethod
@@ -342,35 +201,29 @@ class Perturbation:
         center, K = self._camera(center, K)
         sc = self._scale(scale)
         base = image.astype(np.float32) / 255.0 if image.dtype == np.uint8 else image.astype(np.float32, copy=False)
-        col = {name: self.column(t, name) for name in PERTURBATIONS}
-        homography = self.uses_homography
-        pattern = (noise_pattern(h, w, base.shape[2], base_size=sc.original_size(w, h))
-                   if self.has("noise_std") else None)
+        ctx = FrameContext(center=center, K=K, scale=sc)
+        steps = [(fam, kind == "geometric", params, self._values(t, params),
+                  tuple(PERTURBATIONS[n].identity for n in params)) for fam, kind, params in self._groups]
         out = np.empty((t.shape[0], *base.shape), dtype=np.float32)
         for k in range(t.shape[0]):
-            angles = [col[n][k] for n in ATTITUDE]
-            if not any(angles):
-                out[k] = base
-            else:
-                warped = (attitude_numpy(base, *angles, K, out=out[k]) if homography
-                          else roll_numpy(base, angles[0], center, out=out[k]))
-                if not np.shares_memory(warped, out[k]):  # OpenCV could not write in place (e.g. 1 channel)
-                    out[k] = warped
-            frame = out[k]
-            if col["blur_px"][k] > 0.0:
-                gaussian_blur_numpy(frame, col["blur_px"][k] * sc.sx, col["blur_px"][k] * sc.sy, out=frame)
-            if col["motion_blur_px"][k] > 0.0:
-                motion_blur_numpy(frame, col["motion_blur_px"][k] * sc.sx, out=frame)
-            if col["haze"][k] != 0.0:
-                haze_numpy(frame, col["haze"][k], out=frame)
-            if col["contrast"][k] != 1.0:
-                contrast_numpy(frame, col["contrast"][k], out=frame)
-            if col["brightness"][k] != 0.0:
-                brightness_numpy(frame, col["brightness"][k], out=frame)
-            if col["gamma"][k] != 1.0:
-                gamma_numpy(frame, col["gamma"][k], out=frame)
-            if col["noise_std"][k] != 0.0:
-                gaussian_noise_numpy(frame, col["noise_std"][k], pattern, out=frame)
+            frame, src = out[k], base
+            for fam, moves, params, cols, identity in steps:
+                v = {n: cols[n][k] for n in params}
+                if all(v[n] == i for n, i in zip(params, identity, strict=True)):
+                    continue  # the identity: nothing to compute
+                if moves:  # a warp reads its source and writes the frame
+                    if src is frame:
+                        src = frame.copy()
+                    res = fam.frame_numpy(src, v, ctx, frame)
+                else:  # the other kinds work in place
+                    if src is not frame:
+                        frame[...] = src
+                    res = fam.frame_numpy(frame, v, ctx, frame)
+                if not np.shares_memory(res, frame):  # OpenCV could not write in place (e.g. 1 channel)
+                    frame[...] = res
+                src = frame
+            if src is not frame:
+                frame[...] = src
         return out
 
     def images_torch(self, image, theta, *, center=None, K=None, scale=None) -> torch.Tensor:
@@ -384,47 +237,14 @@ class Perturbation:
         t = self.check_theta(theta if isinstance(theta, torch.Tensor) else torch.as_tensor(np.asarray(theta)))
         t = t.to(x.device)  # θ follows the image to its device (differentiable: the gradient flows back)
         n = t.shape[0]
-        h, w = x.shape[-2:]
         center, K = self._camera(center, K)
         sc = self._scale(scale)
-        if self.uses_homography:
-            x = attitude(x, *(self.column(t, a) for a in ATTITUDE), K)
-        elif self.has("roll_deg"):
-            x = roll(x, self.column(t, "roll_deg"), center)
-        if self.has("blur_px"):
-            s = self.column(t, "blur_px")
-            x = gaussian_blur(x, torch.stack([s * sc.sx, s * sc.sy], dim=-1))
-        if self.has("motion_blur_px"):
-            x = motion_blur(x, self.column(t, "motion_blur_px") * sc.sx)
-        x = self._photometric(x, t, None)
-        if self.has("noise_std"):
-            pattern = noise_pattern_tensor(h, w, x.shape[1], base_size=sc.original_size(w, h)).to(x.device)
-            x = gaussian_noise(x, self.column(t, "noise_std"), pattern)
+        ctx = FrameContext(center=center, K=K, scale=sc)
+        for fam, _, params in self._groups:
+            x = fam.frame_torch(x, self._values(t, params), ctx)
         if x.shape[0] != n:
             x = x.expand(n, -1, -1, -1)
         return x
-
-    def _photometric(self, values: torch.Tensor, theta, stats):
-        """Haze, contrast, brightness and gamma, in that order; ``stats`` = the grey means of the frames before
-        them (None: compute them from ``values``, which are then whole frames)."""
-        if self.has("haze"):
-            amount = _column_tensor(self.column(theta, "haze"), values)
-            values = haze(values, amount)
-        if self.has("contrast"):
-            factor = _column_tensor(self.column(theta, "contrast"), values)
-            if stats is None:
-                values = contrast(values, factor)
-            else:
-                if self.has("haze"):  # the grey mean of the hazed frame, exactly (the blend is linear)
-                    grey = HAZE_AIRLIGHT * (sum(LUMA_WEIGHTS) if values.shape[1] == 3 else 1.0)
-                    a = amount.to(stats.dtype)
-                    stats = (1.0 - a) * stats + a * grey
-                values = contrast_about(values, factor, stats)
-        if self.has("brightness"):
-            values = brightness(values, _column_tensor(self.column(theta, "brightness"), values))
-        if self.has("gamma"):
-            values = gamma(values, _column_tensor(self.column(theta, "gamma"), values))
-        return values
 
     # -- what the view sampler needs (vbl_robust.perturb.views.ViewSampler) ---------------------------------
     @property
@@ -435,20 +255,16 @@ class Perturbation:
     @property
     def needs_stats(self) -> bool:
         """True when a photometric family needs statistics of the whole frame (the contrast's grey mean)."""
-        return self.has("contrast")
+        return any(fam.needs_stats for fam, _ in self._of_kind("photometric"))
 
     def source_coords(self, qu: torch.Tensor, qv: torch.Tensor, theta, center: torch.Tensor, K=None):
         """Inverse geometric map: perturbed-image OpenCV coordinates ``(B, …)`` → source coordinates (unreflected),
         for θ rows ``(B, d)``; the identity when no parameter is geometric. ``K`` (3, 3): required by the attitude
         homography (``pitch_deg``/``yaw_deg``)."""
-        if self.uses_homography:
-            if K is None:
-                raise ValueError("Perturbation.source_coords: pitch_deg/yaw_deg need the intrinsics K")
-            cols = [_column_tensor(self.column(theta, a), qu) for a in ATTITUDE]
-            return attitude_source_coords(qu, qv, *cols, K)
-        if "roll_deg" not in self._index:
-            return qu, qv
-        return roll_source_coords(qu, qv, _column_tensor(self.column(theta, "roll_deg"), qu), center)
+        ctx = FrameContext(center=center, K=K)
+        for fam, params in reversed(self._of_kind("geometric")):  # the inverse: last map first
+            qu, qv = fam.source_coords(qu, qv, self._values(theta, params, qu), ctx)
+        return qu, qv
 
     def photometric_stats(self, values: torch.Tensor) -> torch.Tensor:
         """``(B,)`` statistics the photometric families need, from samples ``(B, 3, n, n)`` of the geometrically
@@ -458,9 +274,15 @@ class Perturbation:
     def photometric_torch(self, values: torch.Tensor, theta, stats: torch.Tensor | None) -> torch.Tensor:
         """The pointwise photometric families (haze, contrast, brightness, gamma) on pixel values ``(B, 3, …)`` of
         the geometrically perturbed frames; ``stats`` from :meth:`photometric_stats` (needed by the contrast)."""
-        if self.has("contrast") and stats is None:
-            raise ValueError("Perturbation.photometric_torch: the contrast needs the frames' grey means (stats)")
-        return self._photometric(values, theta, stats)
+        for fam, params in self._of_kind("photometric"):
+            v = self._values(theta, params, values)
+            if fam.needs_stats and stats is None:
+                raise ValueError(f"Perturbation.photometric_torch: {fam!r} needs the frames' grey means (stats), "
+                                 "and no exact grey mean is known at this point")
+            values = fam.pointwise(values, v, stats)
+            if stats is not None:
+                stats = fam.stats_after(stats, v, values.shape[1])
+        return values
 
     # -- points --------------------------------------------------------------------------------------------
     def points(self, points, theta, *, center=None, K=None):
@@ -473,11 +295,10 @@ class Perturbation:
         t = self.check_theta(theta)
         if self.is_geometric:
             center, K = self._camera(center, K)
-            if self.uses_homography:
-                return attitude_points(points, *(self.column(t, a) for a in ATTITUDE), K)
-            if center is None:
-                raise ValueError("Perturbation.points: roll_deg needs the rotation centre (center=) or K")
-            return roll_points(points, self.column(t, "roll_deg"), center)
+            ctx = FrameContext(center=center, K=K)
+            for fam, params in self._of_kind("geometric"):
+                points = fam.points(points, self._values(t, params), ctx)
+            return points
         n = t.shape[0]
         if isinstance(points, torch.Tensor) or isinstance(t, torch.Tensor):
             p = torch.as_tensor(points, dtype=t.dtype if isinstance(t, torch.Tensor) else torch.float64)

@@ -36,7 +36,11 @@ import torch
 from kornia.filters import filter2d, filter2d_separable
 from torch import nn
 
+from .family import Family
+
 __all__ = [
+    "GAUSSIAN_BLUR",
+    "MOTION_BLUR",
     "TRUNCATE",
     "GaussianBlur",
     "MotionBlur",
@@ -229,3 +233,35 @@ class MotionBlur(nn.Module):
 
     def forward(self, images: torch.Tensor, length_px) -> torch.Tensor:
         return motion_blur(images, length_px)
+
+
+class _GaussianBlur(Family):
+    """The registry's map of ``blur_px`` (σ in the sample's pixels, scaled to the frame's)."""
+
+    params = ("blur_px",)
+
+    def frame_numpy(self, frame, v, ctx, out):
+        s = v["blur_px"]
+        return gaussian_blur_numpy(frame, s * ctx.scale.sx, s * ctx.scale.sy, out=out)
+
+    def frame_torch(self, x, v, ctx):
+        s = v["blur_px"]
+        return gaussian_blur(x, torch.stack([s * ctx.scale.sx, s * ctx.scale.sy], dim=-1))
+
+
+class _MotionBlur(Family):
+    """The registry's map of ``motion_blur_px`` (horizontal length in the sample's pixels, scaled to the frame's)."""
+
+    params = ("motion_blur_px",)
+
+    def frame_numpy(self, frame, v, ctx, out):
+        return motion_blur_numpy(frame, v["motion_blur_px"] * ctx.scale.sx, out=out)
+
+    def frame_torch(self, x, v, ctx):
+        return motion_blur(x, v["motion_blur_px"] * ctx.scale.sx)
+
+
+#: the Gaussian blur family (registry entry ``blur_px``)
+GAUSSIAN_BLUR = _GaussianBlur()
+#: the motion blur family (registry entry ``motion_blur_px``)
+MOTION_BLUR = _MotionBlur()

@@ -31,7 +31,12 @@ import torch
 from kornia.enhance import adjust_brightness, adjust_gamma
 from torch import nn
 
+from .family import Family, Pointwise
+
 __all__ = [
+    "BRIGHTNESS",
+    "CONTRAST",
+    "GAMMA",
     "LUMA_WEIGHTS",
     "Brightness",
     "Contrast",
@@ -192,3 +197,28 @@ class Gamma(nn.Module):
 
     def forward(self, images: torch.Tensor, exponent) -> torch.Tensor:
         return gamma(images, exponent)
+
+
+class _Contrast(Family):
+    """The registry's map of ``contrast``: about the grey mean of the whole frame, or of the geometrically perturbed
+    frame (``stats``) when only sampled pixel values are at hand."""
+
+    params = ("contrast",)
+    needs_stats = True
+
+    def frame_numpy(self, frame, v, ctx, out):
+        return contrast_numpy(frame, v["contrast"], out=out)
+
+    def frame_torch(self, x, v, ctx):
+        return contrast(x, v["contrast"].to(x.device))
+
+    def pointwise(self, values, v, stats):
+        return contrast_about(values, v["contrast"], stats)
+
+
+#: the contrast family (registry entry ``contrast``)
+CONTRAST = _Contrast()
+#: the brightness family (registry entry ``brightness``)
+BRIGHTNESS = Pointwise("brightness", brightness, brightness_numpy)
+#: the gamma family (registry entry ``gamma``)
+GAMMA = Pointwise("gamma", gamma, gamma_numpy)

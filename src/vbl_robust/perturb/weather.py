@@ -31,8 +31,12 @@ import numpy as np
 import torch
 from torch import nn
 
+from .family import Family, Pointwise
+
 __all__ = [
+    "HAZE",
     "HAZE_AIRLIGHT",
+    "SENSOR_NOISE",
     "NOISE_SEED",
     "GaussianNoise",
     "Haze",
@@ -170,3 +174,43 @@ class GaussianNoise(nn.Module):
     def forward(self, images: torch.Tensor, std) -> torch.Tensor:
         c, h, w = images.shape[-3:]
         return gaussian_noise(images, std, noise_pattern_tensor(h, w, c, seed=self.seed))
+
+
+class _Haze(Pointwise):
+    """The registry's map of ``haze``; the blend is linear, so the frame's grey mean after it is known exactly."""
+
+    def __init__(self):
+        super().__init__("haze", haze, haze_numpy)
+
+    def stats_after(self, stats, v, channels):
+        from .photometric import LUMA_WEIGHTS
+
+        grey = HAZE_AIRLIGHT * (sum(LUMA_WEIGHTS) if channels == 3 else 1.0)
+        a = v["haze"].to(stats.dtype)
+        return (1.0 - a) * stats + a * grey
+
+
+class _SensorNoise(Family):
+    """The registry's map of ``noise_std``: the fixed seeded pattern on the sample's pixel grid (a fresh draw from
+    ``ctx.rng`` in training)."""
+
+    params = ("noise_std",)
+
+    def frame_numpy(self, frame, v, ctx, out):
+        h, w, c = frame.shape
+        pattern = noise_pattern(h, w, c, base_size=ctx.scale.original_size(w, h))
+        return gaussian_noise_numpy(frame, v["noise_std"], pattern, out=out)
+
+    def frame_torch(self, x, v, ctx):
+        c, h, w = x.shape[1:]
+        if ctx.rng is not None:
+            pattern = torch.from_numpy(ctx.rng.standard_normal((c, h, w)).astype(np.float32)).to(x.device, x.dtype)
+        else:
+            pattern = noise_pattern_tensor(h, w, c, base_size=ctx.scale.original_size(w, h)).to(x.device)
+        return gaussian_noise(x, v["noise_std"], pattern)
+
+
+#: the haze family (registry entry ``haze``)
+HAZE = _Haze()
+#: the sensor noise family (registry entry ``noise_std``)
+SENSOR_NOISE = _SensorNoise()

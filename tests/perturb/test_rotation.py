@@ -1,4 +1,4 @@
-"""Camera attitude as the homography K R K⁻¹ (perturb/attitude.py): OpenCV agreement, signs, exact point maps."""
+"""Camera attitude as the homography K R K⁻¹ (perturb/rotation.py): OpenCV agreement, signs, exact point maps."""
 
 import cv2
 import numpy as np
@@ -27,7 +27,7 @@ from vbl_robust.perturb import (
     roll_numpy,
     roll_points,
 )
-from vbl_robust.perturb.attitude import attitude_source_coords
+from vbl_robust.perturb.rotation import attitude_source_coords
 from vbl_robust.space import ParameterBox
 
 # principal point deliberately off the image centre (79.5, 59.5); f for a 70° horizontal FOV

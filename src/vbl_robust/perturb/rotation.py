@@ -47,9 +47,11 @@ from torch import nn
 
 from vbl_robust.geometry.camera import BODY_TO_CV
 
-from .geometric import roll_matrix, roll_source_coords
+from .family import Family, FrameContext, identity_like
+from .geometric import roll, roll_matrix, roll_numpy, roll_points, roll_source_coords
 
 __all__ = [
+    "CAMERA_ATTITUDE",
     "Attitude",
     "attitude",
     "attitude_homography",
@@ -276,3 +278,47 @@ class Attitude(nn.Module):
 
     def forward(self, images: torch.Tensor, roll_deg, pitch_deg, yaw_deg) -> torch.Tensor:
         return attitude(images, roll_deg, pitch_deg, yaw_deg, self.K)
+
+
+class _CameraAttitude(Family):
+    """The registry's maps of ``roll_deg``, ``pitch_deg`` and ``yaw_deg``: one homography when pitch or yaw is in
+    the box; a roll-only box keeps the rotation of :mod:`.geometric` bit for bit (it needs only the principal
+    point)."""
+
+    params = ("roll_deg", "pitch_deg", "yaw_deg")
+    needs_K = ("pitch_deg", "yaw_deg")
+
+    def _homography(self, v: dict) -> bool:
+        return "pitch_deg" in v or "yaw_deg" in v
+
+    def _angles(self, v: dict) -> list:
+        like = next(iter(v.values()))
+        return [v[n] if n in v else identity_like(like, 0.0) for n in self.params]
+
+    def frame_numpy(self, frame, v, ctx: FrameContext, out):
+        if self._homography(v):
+            return attitude_numpy(frame, *(float(v.get(n, 0.0)) for n in self.params), ctx.K, out=out)
+        return roll_numpy(frame, v["roll_deg"], ctx.center, out=out)
+
+    def frame_torch(self, x, v, ctx: FrameContext):
+        if self._homography(v):
+            return attitude(x, *self._angles(v), ctx.K)
+        return roll(x, v["roll_deg"], ctx.center)
+
+    def points(self, points, v, ctx: FrameContext):
+        if self._homography(v):
+            return attitude_points(points, *self._angles(v), ctx.K)
+        if ctx.center is None:
+            raise ValueError("Perturbation.points: roll_deg needs the rotation centre (center=) or K")
+        return roll_points(points, v["roll_deg"], ctx.center)
+
+    def source_coords(self, qu, qv, v, ctx: FrameContext):
+        if self._homography(v):
+            if ctx.K is None:
+                raise ValueError("Perturbation.source_coords: pitch_deg/yaw_deg need the intrinsics K")
+            return attitude_source_coords(qu, qv, *self._angles(v), ctx.K)
+        return roll_source_coords(qu, qv, v["roll_deg"], ctx.center)
+
+
+#: the camera attitude family (registry entries ``roll_deg``, ``pitch_deg``, ``yaw_deg``)
+CAMERA_ATTITUDE = _CameraAttitude()
