@@ -2,15 +2,16 @@
 
 The measurement itself is an experiment of hours on this CPU (≈ 5 min per image for four methods on six boxes),
 too long for ``make bench``; it is resumable and its store is committed, so this section formats what the store
-holds (:mod:`tools.survival_table`: the images every method completed, and the found / true worst ratios on the
+holds (:func:`vbl_robust.report.markdown.survival_markdown`: the images every method completed, and the found / true worst ratios on the
 image that has a dense landscape grid) and names the command that produced it and would extend it. Nothing is
 evaluated here.
 """
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
+
+from vbl_robust.report.markdown import survival_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLE = ROOT / "results" / "issue17_spatial2d"
@@ -28,18 +29,11 @@ OTHERS = (
 )
 
 
-def _tool():
-    spec = importlib.util.spec_from_file_location("survival_table", ROOT / "tools" / "survival_table.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def main(quick: bool = False) -> str:
     head = ("## Real pipeline in 2-D: the GeoRobusts, random, APGD (spatial-2d)\n\n"
             "Shipped detector (two-stage, `auto` engine), synthetic approaches of `reproduce spatial-2d --seed 0`, "
             "200 evaluations per image and box, early stop at the first breach. Read from the committed store "
-            f"`results/issue17_spatial2d/results.sqlite` (`python tools/survival_table.py results/issue17_spatial2d`); "
+            f"`results/issue17_spatial2d/results.sqlite` (`vbl-robust report results/issue17_spatial2d --format md`); "
             f"produced, and resumed or extended, by `{COMMAND}`.\n\n")
     if not (BUNDLE / "results.sqlite").exists():
         return head + "_No committed store: run the command above._\n"
@@ -51,5 +45,5 @@ def main(quick: bool = False) -> str:
     head += ("\"any of them\" is the union of every row's breaches (a lower bound on the true breach count; no "
              "image has a dense 2-D reference besides the first). The landscape grid (61 × 36 points) is coarser than "
              "the roll scale of L (0.1–0.3°), so the searches find values above its maximum (ratios above 1).\n\n")
-    body = _tool().survival_markdown(str(BUNDLE), tuple(str(p) for p, _, _ in others))
+    body = survival_markdown(str(BUNDLE), tuple(str(p) for p, _, _ in others))
     return head + body.replace(str(BUNDLE), "results/issue17_spatial2d")

@@ -2,7 +2,7 @@
 # Issue 16 measurement: sustained-breach survival vs per-frame survival on the same approach frames and box.
 # 10 generated sequences x 20 frames at 1 Hz (seed 7), shipped detector, roll ±10°, GeoRobust, 24 evaluations
 # per sequence / image, early stop at the first breach. One torch thread. Each audit resumes when rerun.
-#   bash tools/measure_sequences.sh            (≈ 1 h on one core of this 2-core CPU)
+#   bash benchmarks/measure_sequences.sh            (≈ 1 h on one core of this 2-core CPU)
 set -euo pipefail
 export OMP_NUM_THREADS=1 YOLO_OFFLINE=1 YOLO_VERBOSE=False MPLBACKEND=Agg
 VR=${VR:-.venv/bin/vbl-robust}

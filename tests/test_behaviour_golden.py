@@ -1,4 +1,4 @@
-"""The fixed audit of ``tools/behaviour_rows.py`` gives the rows recorded before the redesign (issue 12).
+"""The fixed audit of ``tests/golden/behaviour_rows.py`` gives the rows recorded before the redesign (issue 12).
 
 The rows were written by the code before the perturbation / detector / objective redesign (on the shipped model
 v6; the redesign, commit 2eb3dbf, reproduced them) and rewritten for each shipped model since (v7, v8, v9) by the same tool
@@ -28,7 +28,7 @@ THETA_ABS = 1e-6
 
 @pytest.mark.parametrize("config", ["twostage", "single", "oracle"])
 def test_audit_rows_unchanged(config, script):
-    tool = script("tools/behaviour_rows.py")
+    tool = script("tests/golden/behaviour_rows.py")
     golden = json.loads(tool.GOLDEN.read_text())[config]
     rows = tool.audit_rows(config)
     assert [(r["sample_id"], r["method"]) for r in rows] == [(g["sample_id"], g["method"]) for g in golden]

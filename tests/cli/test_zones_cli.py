@@ -194,3 +194,45 @@ def test_refine_zones_is_refused_for_sequence_audits(tmp_path):
     res = runner.invoke(app, ["audit", "--out", str(tmp_path), "--sequences", "1", "--frames", "2", "--max-evals", "3",
                               "--refine-zones", "10", *SMALL])
     assert res.exit_code == 2 and "--refine-zones" in res.output
+
+
+def _md_rows(text: str) -> dict[str, list[str]]:
+    """Markdown table rows by their first cell (the header and rule skipped)."""
+    rows = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in text.splitlines() if ln.startswith("| ")]
+    return {r[0]: r[1:] for r in rows[1:]}
+
+
+def test_zones_markdown_is_the_mean_of_the_job_fractions(gated_run):
+    out, _ = gated_run
+    res = runner.invoke(app, ["zones", str(out), "--role", "main", "--estimate", "--format", "md"])
+    assert res.exit_code == 0, res.output
+    assert "basis: each search's own estimate (not sound)" in res.output and "random 4" in res.output
+    jobs = [j for j in zones_of_run(out, roles=("main",), estimate=True) if j.zones is not None]
+    rows = _md_rows(res.output)
+    for method in ("georobust", "georobust-a", "direct"):
+        mine = [j.zones for j in jobs if j.method == method]
+        assert rows[method][1] == str(len(mine))  # jobs (one box here: one row per method)
+        assert rows[method][3] == f"{100 * np.mean([z.fractions['breached'] for z in mine]):.1f}"
+        assert int(rows[method][2]) == sum(z.fractions["breached"] > 0 for z in mine)
+
+
+def test_report_markdown_survival_table_from_the_store(gated_run, tmp_path):
+    out, _ = gated_run
+    res = runner.invoke(app, ["report", str(out), "--format", "md"])
+    assert res.exit_code == 0, res.output
+    assert "2 images completed by every method (of 2 started)" in res.output
+    with ResultStore.open_existing(out) as store:
+        spec = CampaignSpec.from_dict(store.campaign()["spec"])
+        from vbl_robust.campaigns.metrics import main_rows, summarize
+
+        lines = summarize(main_rows(store, spec, with_trace=False), spec.eps_safe_m, by=("method", "box_label"))
+    rows = _md_rows(res.output.split("Landscape grid")[0])
+    for ln in lines:
+        assert rows[ln["method"]][0] == f"{ln['survival']:.1f} ({ln['breaches']})"
+    assert "any of them" in rows and "Landscape grid on image" in res.output  # the dense grid's found / true ratios
+    # refused: md prints, it writes nothing; --with needs md and the same experiment
+    for args, msg in ((["--format", "md", "--out", str(tmp_path)], "--format md prints"),
+                      (["--with", str(out)], "--with belongs to --format md"),
+                      (["--format", "pdf"], "--format pdf")):
+        res = runner.invoke(app, ["report", str(out), *args])
+        assert res.exit_code == 2 and msg in res.output, res.output

@@ -5,7 +5,7 @@ random / APGD, 20 evaluations each, no early stop, seed 0 — on the shipped mod
 and on the oracle (1 px fixed corner noise). ``--write`` stores the rows in ``tests/golden/behaviour_rows.json``
 (done once, on the code before a refactoring); ``tests/test_behaviour_golden.py`` recomputes and compares them.
 
-    python tools/behaviour_rows.py --write
+    python tests/golden/behaviour_rows.py --write
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import json
 import tempfile
 from pathlib import Path
 
-GOLDEN = Path(__file__).resolve().parents[1] / "tests" / "golden" / "behaviour_rows.json"
+GOLDEN = Path(__file__).resolve().parent / "behaviour_rows.json"
 CONFIGS = ("twostage", "single", "oracle")
 FIELDS = ("method", "sample_id", "worst_m", "worst_x", "nfev", "nit", "verdict", "search_status")
 

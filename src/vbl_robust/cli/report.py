@@ -1,4 +1,5 @@
-"""``vbl-robust report RUN``: rebuild the HTML report (and exports) of a run directory from its results store;
+"""``vbl-robust report RUN``: rebuild the HTML report (and exports) of a run directory from its results store, or
+print its tables as Markdown (``--format md``, :mod:`vbl_robust.report.markdown`);
 ``vbl-robust bundle ROOT --out DIR``: the committable bundle of a set of experiment runs
 (:mod:`vbl_robust.campaigns.bundle`)."""
 
@@ -18,11 +19,25 @@ def register(app: typer.Typer) -> None:
         out: Path | None = typer.Option(None, "--out", help="Directory for report.html and figures/ (default: RUN)."),
         csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to CSV."),
         parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to Parquet."),
+        fmt: str = typer.Option("html", "--format", help="html (the report) or md: print the survival tables "
+                                "(and a families run's ranking) as Markdown instead, on the images every method "
+                                "completed."),
+        others: list[Path] | None = typer.Option(None, "--with", help="--format md: another run of the same "
+                                                 "experiment and seed whose methods join the table (repeatable)."),
     ) -> None:
         """Regenerate a run's self-contained HTML report (figures, tables, provenance) from its store."""
         from vbl_robust.campaigns import ResultStore, export
         from vbl_robust.report import build_report
 
+        if fmt not in ("html", "md"):
+            fail(f"--format {fmt}: choose html or md")
+        if fmt == "md":
+            if out is not None or csv is not None or parquet is not None:
+                fail("--format md prints to standard output: --out, --csv and --parquet belong to --format html")
+            typer.echo(_markdown(run, others or []), nl=False)
+            return
+        if others:
+            fail("--with belongs to --format md")
         if out is not None and out.exists() and not out.is_dir():
             fail(f"--out {out}: is a file; the report goes into a directory (report.html and figures/)")
         try:
@@ -58,3 +73,19 @@ def register(app: typer.Typer) -> None:
         for name, t in totals.items():
             typer.echo(f"{name}: {t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} images")
         typer.echo(f"bundle: {out}")
+
+
+def _markdown(run: Path, others: list[Path]) -> str:
+    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.campaigns.spec import CampaignSpec
+    from vbl_robust.report.markdown import families_markdown, survival_markdown
+
+    try:
+        text = survival_markdown(run, others)
+        with ResultStore.open_existing(run) as store:
+            name = CampaignSpec.from_dict(store.campaign()["spec"]).name
+        if name == "families":
+            text += "\n" + families_markdown(run)
+    except (ValueError, FileNotFoundError) as exc:
+        fail(str(exc))
+    return text

@@ -2,8 +2,9 @@
 
 The zones of each search job are rebuilt by replaying its method on the stored values
 (:func:`vbl_robust.zones.replay`: nothing is evaluated) and classified breached / undecided / ruled out
-(:mod:`vbl_robust.zones`). Output: JSON (one object per job: identity, box, class fractions, zones) or CSV (one
-row per zone, with its job's identity and fractions); jobs of methods without a cover (random, Sobol, APGD) are
+(:mod:`vbl_robust.zones`). Output: JSON (one object per job: identity, box, class fractions, zones), CSV (one
+row per zone, with its job's identity and fractions) or Markdown (the mean class fractions per method and box);
+jobs of methods without a cover (random, Sobol, APGD) are
 listed as skipped with the reason.
 """
 
@@ -20,7 +21,7 @@ import typer
 
 from .common import fail, parse_lipschitz
 
-FORMATS = ("json", "csv")
+FORMATS = ("json", "csv", "md")
 
 
 def register(app: typer.Typer) -> None:
@@ -35,7 +36,7 @@ def register(app: typer.Typer) -> None:
                                       "(GeoRobust's K̂: NOT sound; labelled an estimate)."),
         threshold: float | None = typer.Option(None, "--threshold", help="ε in metres (default: the run's ε_safe)."),
         role: str = typer.Option("all", "--role", help="Jobs of this role only: main, reference, landscape or all."),
-        fmt: str = typer.Option("json", "--format", help="json or csv."),
+        fmt: str = typer.Option("json", "--format", help="json, csv or md (the mean fractions per method and box)."),
         out: Path | None = typer.Option(None, "--out", help="Write to this file (default: standard output)."),
         plot: Path | None = typer.Option(None, "--plot", help="Also draw each 1-D/2-D job's zones to DIR/<key>.png."),
     ) -> None:
@@ -43,7 +44,7 @@ def register(app: typer.Typer) -> None:
         from vbl_robust.zones import ReplayError, plot_zones, zones_of_run
 
         if fmt not in FORMATS:
-            fail(f"--format {fmt}: choose json or csv")
+            fail(f"--format {fmt}: choose json, csv or md")
         if role not in ("all", "main", "reference", "landscape"):
             fail(f"--role {role}: choose main, reference, landscape or all")
         if lipschitz is not None and estimate:
@@ -65,7 +66,12 @@ def register(app: typer.Typer) -> None:
                             fg=typer.colors.YELLOW)
             elif j.note:
                 typer.secho(f"note: {j.method} on {j.sample_id}: {j.note}", err=True, fg=typer.colors.YELLOW)
-        text = _as_json(run, jobs) if fmt == "json" else _as_csv(done)
+        if fmt == "md":
+            from vbl_robust.report.markdown import zones_markdown
+
+            text = zones_markdown(jobs)
+        else:
+            text = _as_json(run, jobs) if fmt == "json" else _as_csv(done)
         if out is None:
             typer.echo(text, nl=False)
         else:

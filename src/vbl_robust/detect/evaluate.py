@@ -13,7 +13,7 @@ close one within tens of pixels).
 *Edge tilt* (:func:`edge_tilt_slope`): the slope of the predicted on the true angle of the runway's two
 threshold edges (TL→TR, BL→BR) over correct detections. 1 is a detector that reads the edges' orientation; 0 one
 that draws them level whatever the camera roll. Up to v7 every model had 0.2–0.35 (session 10); the angles
-themselves barely move the PnP position (``tools/far_error_budget.py``: the threshold widths do).
+themselves barely move the PnP position (the model card's *What decides far survival*: the threshold widths do).
 """
 
 from __future__ import annotations

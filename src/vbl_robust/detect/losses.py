@@ -2,7 +2,7 @@
 
 Why: at far range the camera position from PnP is decided by the two threshold edges' widths in the image (the
 slant distance scales with 1 / width); with the true near-threshold width, far survival on the validation set
-would be 96.8 % instead of 87.1 % (``tools/far_error_budget.py``). Ultralytics' keypoint loss is an OKS, the
+would be 96.8 % instead of 87.1 % (model card, *What decides far survival*). Ultralytics' keypoint loss is an OKS, the
 squared corner distance divided by the box area, applied to each corner on its own: it does not see that a 0.5 px
 error of both near corners in opposite directions is a 7 % width error of a far runway, and its gradient vanishes
 as the error shrinks (quadratic near zero).

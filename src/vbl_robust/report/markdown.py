@@ -1,0 +1,199 @@
+"""A stored run's tables as Markdown (``vbl-robust report RUN --format md``, ``vbl-robust zones RUN --format md``).
+
+Everything is read from the store; nothing is evaluated. Only images whose every main job is stored count, so a
+run still in progress (or resumed across sessions) compares its methods on the same images.
+
+* :func:`survival_markdown` — survival % (breaches) per method and box, the union "any of them", evaluations
+  spent, and where the run holds a dense landscape grid the found / true worst ratio of each method;
+  ``others`` adds the main rows of other runs of the same experiment and seed as more methods (labelled with
+  their options, e.g. ``georobust-a [vertices=True]``);
+* :func:`families_markdown` — the families ranking of a ``reproduce families`` run (the report's families
+  section as a table);
+* :func:`zones_markdown` — vulnerability-zone fractions per method and box, over all jobs and over the jobs that
+  found no breach.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import defaultdict
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..campaigns import metrics as mx
+from ..campaigns.spec import CampaignSpec
+from ..campaigns.store import ResultStore
+
+__all__ = ["families_markdown", "survival_markdown", "zones_markdown"]
+
+
+def _table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    return ["| " + " | ".join(head) + " |", "|" + "---|" * len(head), *("| " + " | ".join(r) + " |" for r in rows)]
+
+
+def _labelled(r) -> str:
+    opts = ", ".join(f"{k}={v}" for k, v in sorted(dict(r.options).items()))
+    return f"{r.method} [{opts}]" if opts else r.method
+
+
+def _mean(values: list) -> float:
+    vals = [v for v in values if v is not None]
+    return float(np.mean(vals)) if vals else float("nan")
+
+
+def _read(run: str | Path):
+    with ResultStore.open_existing(run) as store:
+        spec = CampaignSpec.from_dict(store.campaign()["spec"])
+        rows = mx.main_rows(store, spec, with_trace=False)
+        land = store.jobs(kind="search", role="landscape", with_points=True, with_trace=False)
+    return spec, rows, land
+
+
+def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str:
+    """The survival tables of the run directory or store ``run`` (module docstring); ``ValueError`` when an other
+    run is not the same experiment, seed and images."""
+    spec, rows, land = _read(run)
+    for other in others:
+        ospec, more, _ = _read(other)
+        if (ospec.name, ospec.seed) != (spec.name, spec.seed):
+            raise ValueError(f"{other}: experiment {ospec.name} seed {ospec.seed}, not {spec.name} seed {spec.seed}")
+        index = {r.sample_index: r.sample_id for r in rows}
+        clash = sorted({r.sample_index for r in more if index.get(r.sample_index, r.sample_id) != r.sample_id})
+        if clash:
+            raise ValueError(f"{other}: images {clash[:5]} differ from {run}'s (another image set)")
+        rows += [dataclasses.replace(r, method=_labelled(r)) for r in more]
+    if not rows:
+        raise ValueError(f"{run}: no search jobs stored yet")
+    keys = {(r.method, r.box_label) for r in rows}
+    per_image: dict[str, set] = defaultdict(set)
+    for r in rows:
+        per_image[r.sample_id].add((r.method, r.box_label))
+    done = sorted(s for s, k in per_image.items() if k == keys)
+    rows = [r for r in rows if r.sample_id in done]
+    eps = spec.eps_safe_m
+    lines = mx.summarize(rows, eps, by=("method", "box_label"))
+    boxes = [b for b, _ in sorted({ln["box_label"]: ln["box_level"] for ln in lines}.items(),
+                                  key=lambda kv: kv[1] or 0.0)]
+    methods = list(dict.fromkeys(ln["method"] for ln in lines))
+    cell = {(ln["method"], ln["box_label"]): ln for ln in lines}
+    out = [f"{run}: {len(done)} images completed by every method (of {len(per_image)} started); "
+           f"ε_safe = {eps:g} m; cell = survival % (breaches)", ""]
+    table = [[m, *(f"{cell[(m, b)]['survival']:.1f} ({cell[(m, b)]['breaches']})" if (m, b) in cell else "–"
+                   for b in boxes)] for m in methods]
+    if len(methods) > 1 and done:  # the union: an image breaches a box when any method found a breach there
+        hit = defaultdict(set)
+        for r in rows:
+            if r.worst_m is not None and r.worst_m > eps:
+                hit[r.box_label].add(r.sample_id)
+        table.append(["any of them", *(f"{100.0 * (len(done) - len(hit[b])) / len(done):.1f} ({len(hit[b])})"
+                                       for b in boxes)])
+    out += _table(["method", *boxes], table)
+    if len(methods) > 1:
+        out += ["", "Evaluations spent per job, mean over all jobs / over the jobs that found a breach: " + "; ".join(
+            f"{m} {_mean([r.nfev for r in rows if r.method == m]):.0f} / "
+            f"{_mean([r.nfev for r in rows if r.method == m and (r.worst_m or 0) > eps]):.1f}" for m in methods) + "."]
+    for g in land:
+        if g.points is None or not len(g.points) or g.sample_id not in done:
+            continue
+        xs, fs = g.points.xs, g.points.fs
+        here = {(r.method, r.box_label): r for r in rows if r.sample_id == g.sample_id}
+        ratios = []
+        for m in methods:
+            vals = []
+            for b in boxes:
+                r = here.get((m, b))
+                if r is None or r.box is None or r.worst_m is None:
+                    vals.append("–")
+                    continue
+                box = r.box.box
+                inside = np.all((xs >= box.lower - 1e-9) & (xs <= box.upper + 1e-9), axis=1)
+                true = float(np.nanmax(fs[inside])) if inside.any() else float("nan")
+                vals.append(f"{r.worst_m / true:.3f}" if true > 0 else "–")
+            ratios.append([m, *vals])
+        out += ["", f"Landscape grid on image {g.sample_id} ({len(fs)} points over {g.box_label}): found / true worst",
+                "", *_table(["method", *boxes], ratios)]
+    return "\n".join(out) + "\n"
+
+
+def families_markdown(run: str | Path, series: str = "all") -> str:
+    """The families ranking of a ``reproduce families`` run (``series="any"``: only the combined series, the
+    ranking's basis); ``ValueError`` when the run holds no family jobs."""
+    from . import build as B
+
+    if series not in ("all", "any"):
+        raise ValueError(f"series must be 'all' or 'any', got {series!r}")
+    with ResultStore.open_existing(run) as store:
+        spec = CampaignSpec.from_dict(store.campaign()["spec"])
+        main_rows = mx.main_rows(store, spec)
+        ctx = B.Context(store, spec, Path(run), main_rows, store.samples())
+        ref = B._reference(ctx, B._main_boxes(ctx))
+    per_image_main = len({(r.method, r.box_label) for r in main_rows})
+    counts: dict[str, int] = defaultdict(int)
+    for r in main_rows:
+        counts[r.sample_id] += 1
+    ref_counts: dict[str, int] = defaultdict(int)
+    for r in ref:
+        ref_counts[r.sample_id] += 1
+    ref_full = max(ref_counts.values(), default=0)
+    done = {s for s, n in counts.items() if n == per_image_main and (not ref or ref_counts[s] == ref_full)}
+    rows = [r for r in main_rows if r.sample_id in done and mx.family_of(r) is not None]
+    if not rows:
+        raise ValueError(f"{run}: no complete family jobs (a `reproduce families` run)")
+    profile = mx.family_profile(rows + [r for r in ref if r.sample_id in done], spec.eps_safe_m)
+    order = mx.rank_families(profile)
+    lines = B.family_lines(profile, order)
+    if series == "any":
+        lines = [ln for ln in lines if ln["method"] == B.F.style(mx.ANY_METHOD)["label"]]
+    ks = [k for k in lines[0] if k.startswith("L") and k[1:].isdigit()] if lines else []
+
+    def num(v) -> str:
+        return "–" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.0f}"
+
+    out = [f"{run}: {len(done)} complete images of {len(counts)} started; reference rows per image {ref_full}; "
+           f"ranking (most vulnerable first): {', '.join(order)}", ""]
+    out += _table(["rank", "family", "method", "images", *[f"{k} %" for k in ks], "< 50 % at", "< 10 % at"],
+                  [[str(ln["rank"]), ln["family"], ln["method"], str(ln["n"]), *(num(ln[k]) for k in ks),
+                    ln["below_50"], ln["below_10"]] for ln in lines])
+    return "\n".join(out) + "\n"
+
+
+def zones_markdown(jobs: Sequence) -> str:
+    """Zone fractions per method and box of :func:`vbl_robust.zones.zones_of_run`'s jobs, with the basis their
+    "ruled out" rests on (a given Lipschitz constant: sound; the searches' own estimates: not sound)."""
+    from ..zones import CLASSES
+
+    def basis(zm) -> str:
+        if zm.basis == "sound":
+            return f"sound under L = {zm.lipschitz} ({zm.norm}-norm, real units)"
+        return "each search's own estimate (not sound)" if zm.basis == "estimate" else "no constant"
+
+    groups: dict[tuple[str, str], list] = defaultdict(list)
+    skipped: dict[str, int] = defaultdict(int)
+    for j in jobs:
+        if j.zones is None:
+            skipped[j.method] += 1
+        else:
+            groups[(j.method, j.box_label or "")].append(j)
+
+    def volume(label: str) -> float:  # boxes by size: the volume of the first job's box
+        box = groups[next(k for k in groups if k[1] == label)][0].box
+        return float(np.prod(np.asarray(box.upper) - np.asarray(box.lower)))
+
+    rows = []
+    for method, label in sorted(groups, key=lambda k: (k[0], volume(k[1]))):
+        maps = [j.zones for j in groups[(method, label)]]
+        hit = [zm.fractions["breached"] > 0 for zm in maps]
+        clean = [zm for zm, h in zip(maps, hit, strict=True) if not h]
+        rows.append([method, label, str(len(maps)), str(sum(hit)),
+                     *(f"{100 * np.mean([zm.fractions[c] for zm in maps]):.1f}" for c in CLASSES),
+                     *(f"{100 * np.mean([zm.fractions[c] for zm in clean]):.1f}" if clean else "–"
+                       for c in CLASSES if c != "breached")])
+    head = ["method", "box", "jobs", "breached jobs", *(f"% {c.replace('_', ' ')}" for c in CLASSES),
+            *(f"% {c.replace('_', ' ')} (no-breach jobs)" for c in CLASSES if c != "breached")]
+    bases = sorted({basis(j.zones) for j in jobs if j.zones is not None})
+    out = [f"zones, basis: {'; '.join(bases) or 'none'}; skipped (no cover): "
+           + (", ".join(f"{m} {n}" for m, n in sorted(skipped.items())) or "none"), "", *_table(head, rows)]
+    return "\n".join(out) + "\n"
