@@ -172,7 +172,7 @@ def _first_breach(quick: bool) -> list[str]:
         start = time.perf_counter()
 
         def f(x, obj=obj, calls=calls, start=start):
-            v = float(obj(np.asarray(x, np.float64)[None])[0])
+            v = float(obj(np.asarray(x, np.float64)[None]).values[0])
             calls.append(v)
             if v > EPS_SAFE_M:
                 raise _Breach(time.perf_counter() - start)

@@ -64,14 +64,14 @@ def main(quick: bool = False) -> str:
 
     obj = Objective(samples[0], OracleDetector(noise_px=0.5), BOX)
     obj(theta[:2])
-    obj.torch(torch.tensor(theta[:2], requires_grad=True)).sum().backward()  # warm-up
+    obj(torch.tensor(theta[:2], requires_grad=True)).values.sum().backward()  # warm-up
     big = np.tile(theta, (3, 1))
     t0 = time.perf_counter()
     obj(big)
     t_np = time.perf_counter() - t0
     t = torch.tensor(big, requires_grad=True)
     t0 = time.perf_counter()
-    obj.torch(t).sum().backward()
+    obj(t).values.sum().backward()
     t_torch = time.perf_counter() - t0
     lines += [
         "",

@@ -29,7 +29,7 @@ def test_each_method_searches_a_4d_box(objective, method):
     assert r.names == BOX.names and r.xs.shape[1] == 4 and 0 < r.nfev <= 40
     assert BOX.contains(r.xs).all() and np.isfinite(r.fun)
     if method == "georobust":  # DIRECT starts at the centre
-        assert r.fun >= objective(BOX.center[None])[0] - 1e-9
-    assert r.fun == pytest.approx(float(objective(r.x[None])[0]), rel=1e-6)  # the reported worst case is real
+        assert r.fun >= objective(BOX.center[None]).values[0] - 1e-9
+    assert r.fun == pytest.approx(float(objective(r.x[None]).values[0]), rel=1e-6)  # the reported worst case is real
     again = maximize(objective, BOX, method, max_evals=40, seed=3)
     np.testing.assert_array_equal(again.xs, r.xs)  # same seed, same run

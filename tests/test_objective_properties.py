@@ -46,7 +46,9 @@ def test_inside_the_box_the_oracle_error_is_finite_nonnegative_and_below_1m(samp
     assert np.isfinite(rec.loss).all() and (rec.loss >= 0).all()
     assert rec.loss.max() < 1.0, (ENVELOPES[k], theta, rec.loss)  # roll about the optical axis moves no camera
     assert rec.reason == ("",) * theta.shape[0] and not rec.failed.any()
-    np.testing.assert_array_equal(objective(theta), rec.loss)  # __call__ is evaluate().loss
+    ev = objective(theta)  # __call__ is evaluate()'s losses and reasons
+    np.testing.assert_array_equal(ev.values, rec.loss)
+    assert ev.reasons == rec.reason
 
 
 @settings(PROPS, max_examples=10)
@@ -118,7 +120,7 @@ def test_a_non_finite_theta_is_a_value_error(samples, theta, data, bad):
 def test_one_row_and_empty_batches():
     sample = generate(1, seed=0, width=256, height=256, envelopes=("far",), debug=True)[0]
     objective = Objective(sample, OracleDetector(), BOX)
-    assert objective(np.array([3.0, 1.2])).shape == (1,)  # a 1-D θ of length d is one row
+    assert objective(np.array([3.0, 1.2])).values.shape == (1,)  # a 1-D θ of length d is one row
     rec = objective.evaluate(np.zeros((0, 2)))
     assert rec.loss.shape == (0,) and rec.reason == ()
 

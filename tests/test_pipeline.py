@@ -66,15 +66,15 @@ def test_oracle_on_generated_scenes_of_every_envelope():
     theta = grid(n_roll=5)
     for env in ("close", "medium", "far"):
         for s in generate(1, seed=7, width=512, height=512, envelopes=(env,)):
-            assert Objective(s, OracleDetector(), BOX)(theta).max() < 1.0, (env, s.id)
+            assert Objective(s, OracleDetector(), BOX)(theta).values.max() < 1.0, (env, s.id)
 
 
 def test_iterative_is_never_better_than_ippe_lm(samples):
     """ITERATIVE without a start (the paper's solver) can fall into wrong minima; ippe_lm is the reference."""
     theta = grid(n_roll=7, contrasts=(1.0,))
     for s in samples:
-        lm = Objective(s, OracleDetector(), BOX, pnp="ippe_lm")(theta)
-        it = Objective(s, OracleDetector(), BOX, pnp="iterative")(theta)
+        lm = Objective(s, OracleDetector(), BOX, pnp="ippe_lm")(theta).values
+        it = Objective(s, OracleDetector(), BOX, pnp="iterative")(theta).values
         assert np.all(it >= lm - 1e-3)
 
 
@@ -111,8 +111,8 @@ def test_every_failure_is_penalised_with_its_reason(samples):
         np.testing.assert_array_equal(rec.loss, [5000.0, 5000.0])
         assert np.isnan(rec.error_m).all()
     assert set(FAILURE_REASONS) >= set(cases)
-    assert Objective(s, StubDetector(s.corners_2d, conf=0.2), BOX, conf_threshold=0.1)(theta).max() < 1.0
-    assert Objective(s, StubDetector(s.corners_2d, empty=True), BOX, penalty_m=123.0)(theta).tolist() == [123.0, 123.0]
+    assert Objective(s, StubDetector(s.corners_2d, conf=0.2), BOX, conf_threshold=0.1)(theta).values.max() < 1.0
+    assert Objective(s, StubDetector(s.corners_2d, empty=True), BOX, penalty_m=123.0)(theta).values.tolist() == [123.0, 123.0]
 
 
 def test_oracle_fail_outside_penalises_only_the_rows_that_lose_a_corner():
@@ -132,7 +132,7 @@ def test_unloadable_pixels_penalise_every_row_without_raising(tmp_path):
     assert rec.reason == ("image_unavailable",) * 2 and rec.loss.tolist() == [5000.0, 5000.0]
     assert "nope.png" in rec.detail[0] and "nope.png" in obj.image_error
     theta = torch.tensor([[0.0, 1.0]], dtype=torch.float64, requires_grad=True)
-    loss = obj.torch(theta)
+    loss = obj(theta).values
     loss.sum().backward()
     assert loss.tolist() == [5000.0] and theta.grad.abs().max() == 0
 
@@ -159,7 +159,7 @@ def test_user_errors_are_value_errors_at_construction(samples):
     with pytest.raises(ValueError, match=r"theta must have shape \(N, 2\)"):
         obj(np.zeros((3, 3)))
     with pytest.raises(ValueError, match="not differentiable"):
-        Objective(s, StubDetector(s.corners_2d), BOX).torch(torch.zeros(1, 2))
+        Objective(s, StubDetector(s.corners_2d), BOX)(torch.zeros(1, 2))
 
 
 # -- batching, resolution, records --------------------------------------------------------------------------------
@@ -186,7 +186,7 @@ def test_user_detectors_with_tensor_containers(samples):
 
     obj = Objective(s, Plain(), BOX)
     theta = np.array([[0.0, 1.0], [0.0, 2.0]])
-    assert obj(theta).max() < 1e-3 and obj.torch(torch.tensor(theta)).max() < 1e-3
+    assert obj(theta).values.max() < 1e-3 and obj(torch.tensor(theta)).values.max() < 1e-3
 
 
 def test_chunks_bound_the_detector_batch_and_do_not_change_results(samples):
@@ -199,7 +199,7 @@ def test_chunks_bound_the_detector_batch_and_do_not_change_results(samples):
     np.testing.assert_array_equal(a.loss, b.loss)
     assert a.theta.shape == (15, 2) and len(a.to_rows()) == 15 and a.to_rows()[3]["roll_deg"] == theta[3, 0]
     assert EvalRecord.concat([a, b]).loss.shape == (30,)
-    assert Objective(s, det, BOX)(np.zeros((0, 2))).shape == (0,)
+    assert Objective(s, det, BOX)(np.zeros((0, 2))).values.shape == (0,)
 
 
 class RecordingOracle(OracleDetector):
@@ -236,12 +236,12 @@ def test_perturbing_at_the_detector_resolution(samples):
 
 
 # -- the differentiable path ---------------------------------------------------------------------------------------
-def _fd_grad(f, theta, h):
+def _fd_grad(f, theta, h):  # f returns Evaluations
     g = np.zeros_like(theta)
     for j in range(theta.shape[1]):
         e = np.zeros(theta.shape[1])
         e[j] = h[j]
-        g[:, j] = (f(theta + e) - f(theta - e)) / (2 * h[j])
+        g[:, j] = (f(theta + e).values - f(theta - e).values) / (2 * h[j])
     return g
 
 
@@ -251,8 +251,8 @@ def test_torch_matches_numpy_and_finite_differences_with_a_noisy_oracle(samples)
     obj = Objective(s, det, BOX)
     theta = np.array([[-12.0, 0.8], [4.0, 1.0], [21.0, 2.0]])
     t = torch.tensor(theta, requires_grad=True)
-    loss = obj.torch(t)
-    np.testing.assert_allclose(loss.detach().numpy(), obj(theta), rtol=1e-7)
+    loss = obj(t).values
+    np.testing.assert_allclose(loss.detach().numpy(), obj(theta).values, rtol=1e-7)
     assert loss.min() > 1.0  # the noise makes L non-trivial and roll-dependent
     loss.sum().backward()
     fd = _fd_grad(obj, theta, h=(1e-3, 1e-3))
@@ -264,7 +264,7 @@ def test_torch_matches_numpy_and_finite_differences_with_a_noisy_oracle(samples)
 def test_exact_oracle_gradient_is_zero_for_roll(samples):
     obj = Objective(samples[0], OracleDetector(), BOX)
     t = torch.tensor([[-8.0, 1.3], [17.0, 0.6]], dtype=torch.float64, requires_grad=True)
-    obj.torch(t).sum().backward()
+    obj(t).values.sum().backward()
     assert torch.isfinite(t.grad).all() and t.grad.abs().max() < 1e-3
 
 
@@ -292,8 +292,8 @@ def test_gradient_through_pixels_matches_finite_differences():
     obj = Objective(s, ContrastBiasedOracle(), BOX)
     theta = np.array([[-9.0, 0.7], [14.0, 1.6]])
     t = torch.tensor(theta, requires_grad=True)
-    loss = obj.torch(t)
-    np.testing.assert_allclose(loss.detach().numpy(), obj(theta), rtol=1e-5)  # kornia vs OpenCV warps (measured 4e-7)
+    loss = obj(t).values
+    np.testing.assert_allclose(loss.detach().numpy(), obj(theta).values, rtol=1e-5)  # kornia vs OpenCV warps (measured 4e-7)
     loss.sum().backward()
     fd = _fd_grad(obj, theta, h=(0.05, 0.005))
     assert np.abs(fd[:, 1]).min() > 0.3  # contrast now moves the keypoints, hence the position
@@ -305,13 +305,13 @@ def test_penalised_rows_have_zero_not_nan_gradients():
     box = ParameterBox({"roll_deg": (-90, 90), "contrast": (0.5, 2)})
     obj = Objective(s, OracleDetector(fail_outside=True, noise_px=1.0), box)
     t = torch.tensor([[0.0, 1.0], [90.0, 1.0], [5.0, 1.2]], dtype=torch.float64, requires_grad=True)
-    loss = obj.torch(t)
+    loss = obj(t).values
     assert loss[1].item() == 5000.0 and loss[0] < 5000 and loss[2] < 5000
     loss.sum().backward()
     assert torch.isfinite(t.grad).all() and t.grad[1].abs().max() == 0 and t.grad[[0, 2], 0].abs().min() > 0
     # every row penalised: backward still works and gives zeros
     t2 = torch.tensor([[90.0, 1.0]], dtype=torch.float64, requires_grad=True)
-    obj.torch(t2).sum().backward()
+    obj(t2).values.sum().backward()
     assert t2.grad.abs().max() == 0
 
 
@@ -327,7 +327,7 @@ def test_pnp_failures_in_the_differentiable_path_do_not_leak_nan(samples):
 
     obj = Objective(s, HalfBroken(noise_px=1.0), BOX)
     t = torch.tensor([[3.0, 1.0], [6.0, 1.0], [-4.0, 1.0]], dtype=torch.float64, requires_grad=True)
-    loss = obj.torch(t)
+    loss = obj(t).values
     assert loss[1].item() == 5000.0
     loss.sum().backward()
     assert torch.isfinite(t.grad).all() and t.grad[1].abs().max() == 0
@@ -336,5 +336,5 @@ def test_pnp_failures_in_the_differentiable_path_do_not_leak_nan(samples):
 def test_nfev_counts_rows(samples):
     obj = Objective(samples[0], OracleDetector(), BOX)
     obj(grid(n_roll=3, contrasts=(1.0,)))
-    obj.torch(torch.zeros(2, 2) + torch.tensor([0.0, 1.0]))
+    obj(torch.zeros(2, 2) + torch.tensor([0.0, 1.0]))
     assert obj.nfev == 5

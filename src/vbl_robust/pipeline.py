@@ -8,10 +8,15 @@ parameter vectors θ ``(N, d)`` in real units (columns named by the box)::
     ŷ     = PnP(k, corners_3d, K)      camera position in the runway frame (pnp/)
     L     = ‖ŷ − y‖₂  (metres), or PENALTY_M (5000 m) on ANY failure
 
-Every chunk of θ goes through one loop, :meth:`Objective._chunk`, in one of two modes: black box
-(``objective(theta)`` / :meth:`Objective.evaluate`: NumPy, no gradient, OpenCV PnP) or differentiable
-(:meth:`Objective.torch`: the detector's ``detect_top`` and the implicit PnP gradient; penalised rows are
-constant with zero gradient, never NaN). Both record per row why an evaluation failed
+One contract for every objective (this one and :class:`~vbl_robust.sequences.SequenceObjective`):
+``objective(theta)`` returns :class:`~vbl_robust.search.Evaluations` (values in metres and a failure reason per
+row) and :meth:`Objective.evaluate` the full :class:`EvalRecord`; the type of θ picks the mode. A NumPy θ is the
+black box (no gradient, OpenCV PnP); a torch θ the differentiable path (the detector's ``detect_top`` and the
+implicit PnP gradient; the values are a float64 tensor attached to θ; penalised rows are constant with zero
+gradient, never NaN). Each chunk of θ is two steps: :meth:`Objective.detect` (one detector call and σ_select →
+a :class:`~vbl_robust.detect.Selection`) and :meth:`Objective.score` (PnP and the error → an
+:class:`EvalRecord`); an objective over several frames batches the first step across frames and scores each
+frame with the second. Both modes record per row why an evaluation failed
 (:data:`vbl_robust.constants.FAILURE_REASONS`): ``image_unavailable`` (the pixels cannot be loaded — every row,
 never an exception), ``no_detection``, ``low_confidence``, ``non_finite_keypoints``, ``pnp_failed``,
 ``non_finite_position``. A successful row is never capped: a wild but "successful" PnP can exceed the penalty.
@@ -23,6 +28,7 @@ pixels; keypoints are mapped back to the sample's pixels before PnP (``resolutio
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 
@@ -32,9 +38,10 @@ import torch
 from vbl_robust.constants import CONF_THRESHOLD, PENALTY_M
 from vbl_robust.constants import FAILURE_REASONS as _REASONS
 from vbl_robust.data.sample import Sample
-from vbl_robust.detect.base import DetectContext, Detector, select
+from vbl_robust.detect.base import DetectContext, Detector, Selection, select
 from vbl_robust.perturb import Perturbation, PixelScale, ViewSampler, resize_image
 from vbl_robust.pnp import SOLVERS, pnp_position_torch, solve
+from vbl_robust.search.evaluations import Evaluations
 from vbl_robust.space import ParameterBox
 
 logger = logging.getLogger(__name__)
@@ -62,6 +69,7 @@ class EvalRecord:
         reason: ``N`` failure codes from :data:`FAILURE_REASONS`, ``""`` for a success.
         detail: ``N`` free-text details (PnP's reason, the image error), ``""`` when none.
         penalty_m: the penalty used.
+        loss_t: the differentiable path only: ``loss`` as a ``(N,)`` float64 tensor attached to θ (else None).
     """
 
     sample_id: str
@@ -76,9 +84,14 @@ class EvalRecord:
     reason: tuple[str, ...]
     detail: tuple[str, ...]
     penalty_m: float = PENALTY_M
+    loss_t: torch.Tensor | None = None
 
     def __len__(self) -> int:
         return int(self.loss.shape[0])
+
+    def evaluations(self) -> Evaluations:
+        """What a search receives: the losses (the tensor on the differentiable path) and the failure reasons."""
+        return Evaluations(self.loss if self.loss_t is None else self.loss_t, self.reason)
 
     @property
     def failed(self) -> np.ndarray:
@@ -108,19 +121,23 @@ class EvalRecord:
         def cat(attr):
             return np.concatenate([getattr(r, attr) for r in records])
 
+        grad = [r.loss_t for r in records if r.loss_t is not None]
+        if grad and len(grad) != len(records):
+            raise ValueError("EvalRecord.concat: records of both modes (some differentiable, some not)")
         return EvalRecord(
             r0.sample_id, r0.names, cat("theta"), cat("loss"), cat("error_m"), cat("position"), cat("conf"),
             cat("keypoints"), cat("reproj_error_px"), sum((r.reason for r in records), ()),
-            sum((r.detail for r in records), ()), r0.penalty_m,
+            sum((r.detail for r in records), ()), r0.penalty_m, torch.cat(grad) if grad else None,
         )
 
 
 class Objective:
-    """``L(θ)`` for one sample: ``objective(theta (N, d)) -> (N,)`` metres; ``objective.torch`` differentiable.
+    """``L(θ)`` for one sample: ``objective(theta (N, d)) -> Evaluations`` (metres and failure reasons; a torch θ
+    gives values differentiable w.r.t. it).
 
     Args:
         sample: the :class:`~vbl_robust.data.sample.Sample` (its pixels are loaded on the first evaluation).
-        detector: any :class:`~vbl_robust.detect.Detector` (``differentiable = True`` for :meth:`torch`).
+        detector: any :class:`~vbl_robust.detect.Detector` (``differentiable = True`` for a torch θ).
         box: the :class:`~vbl_robust.space.ParameterBox` whose names select the perturbations.
         pnp: PnP solver name (``"ippe_lm"`` default, ``"iterative"``, ``"sqpnp"``, ``"ippe"``).
         conf_threshold: τ_conf of σ_select.
@@ -140,7 +157,7 @@ class Objective:
 
     >>> import vbl_robust as vr                                     # doctest: +SKIP
     >>> objective = vr.Objective(sample, vr.OracleDetector(), box)  # doctest: +SKIP
-    >>> objective(np.array([[10.0, 1.2]]))                          # doctest: +SKIP
+    >>> objective(np.array([[10.0, 1.2]])).values                   # doctest: +SKIP
     array([3.1e-07])
     """
 
@@ -254,65 +271,80 @@ class Objective:
                               K=self._scale.intrinsics(self.sample.K), scale=self._scale, frame=self._base)
         return DetectContext(self.sample, sampler, self._scale)
 
-    # -- the two entry points ------------------------------------------------------------------------------------
-    def __call__(self, theta) -> np.ndarray:
-        """``theta (N, d)`` real units → ``L (N,)`` float64 metres."""
-        return self.evaluate(theta).loss
+    # -- the contract: θ → Evaluations / EvalRecord (module docstring) -------------------------------------------
+    def __call__(self, theta) -> Evaluations:
+        """``theta (N, d)`` real units → :class:`~vbl_robust.search.Evaluations`: ``L`` in metres (float64; a tensor
+        differentiable w.r.t. a torch θ) and the failure reason per row."""
+        return self.evaluate(theta).evaluations()
 
     def evaluate(self, theta) -> EvalRecord:
-        """Like ``__call__`` with every detail per row (positions, confidences, keypoints, failure reasons)."""
-        try:
-            t = np.asarray(theta, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"theta must be numbers, shape (N, {self.dim}) for parameters {self.names}; "
-                             f"got {theta!r}"[:300]) from None
-        return self._run(self.perturbation.check_theta(t))[0]
+        """Like ``__call__`` with every detail per row (positions, confidences, keypoints, failure reasons).
 
-    def torch(self, theta, *, reasons: bool = False):
-        """``theta (N, d)`` tensor → ``L (N,)`` float64 tensor, differentiable w.r.t. θ (``reasons=True``: also the
-        ``N`` failure codes).
-
-        Gradients flow through the view sampler, the detector's ``detect_top`` and the implicit PnP gradient.
-        Penalised rows are the constant ``penalty_m`` with zero gradient (never NaN).
+        A torch θ takes the differentiable path: gradients flow through the view sampler, the detector's
+        ``detect_top`` and the implicit PnP gradient into :attr:`EvalRecord.loss_t`; penalised rows are the constant
+        ``penalty_m`` with zero gradient (never NaN).
         """
-        if not getattr(self.detector, "differentiable", False) or not callable(getattr(self.detector, "detect_top", None)):
-            raise ValueError(f"Objective.torch: detector {self.detector!r} is not differentiable (no detect_top); "
-                             "it supports only the black-box path")
-        t = theta if isinstance(theta, torch.Tensor) else torch.as_tensor(np.asarray(theta, dtype=np.float64))
-        rec, loss = self._run(self.perturbation.check_theta(t))
-        loss = loss + 0.0 * t.sum(dim=1).to(torch.float64)  # keeps the result attached to θ even if all failed
-        return (loss, rec.reason) if reasons else loss
-
-    # -- one loop for both modes ---------------------------------------------------------------------------------
-    def _run(self, t) -> tuple[EvalRecord, torch.Tensor | None]:
-        grad = isinstance(t, torch.Tensor)
+        if isinstance(theta, torch.Tensor):
+            self.check_differentiable()
+            t = self.perturbation.check_theta(theta)
+        else:
+            try:
+                t = np.asarray(theta, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(f"theta must be numbers, shape (N, {self.dim}) for parameters {self.names}; "
+                                 f"got {theta!r}"[:300]) from None
+            t = self.perturbation.check_theta(t)
         self._load()
         self.nfev += t.shape[0]
-        theta_np = t.detach().cpu().numpy().astype(np.float64) if grad else t
         if self._image_error or t.shape[0] == 0:
-            rec = self._all_failed(theta_np, "image_unavailable" if self._image_error else "", self._image_error)
-            return rec, torch.full((t.shape[0],), self.penalty_m, dtype=torch.float64) if grad else None
-        parts = [self._chunk(t[i : i + self.batch_size], grad) for i in range(0, t.shape[0], self.batch_size)]
-        rec = parts[0][0] if len(parts) == 1 else EvalRecord.concat([p[0] for p in parts])
-        return rec, (torch.cat([p[1] for p in parts]) if grad else None)
+            rec = self._all_failed(t, "image_unavailable" if self._image_error else "", self._image_error)
+        else:
+            parts = [self.score(c, self.detect(c)) for c in (t[i : i + self.batch_size]
+                                                              for i in range(0, t.shape[0], self.batch_size))]
+            rec = parts[0] if len(parts) == 1 else EvalRecord.concat(parts)
+        if rec.loss_t is not None:  # keeps the result attached to θ even if every row failed
+            rec = dataclasses.replace(rec, loss_t=rec.loss_t + 0.0 * t.sum(dim=1).to(torch.float64))
+        return rec
 
-    def _chunk(self, th, grad: bool) -> tuple[EvalRecord, torch.Tensor | None]:
-        """One detector call and one PnP call for θ rows ``th``; the loss tensor too when ``grad``."""
-        n = th.shape[0]
-        ctx = self.context(th)
-        if grad:
-            conf_t, kp_t = self.detector.detect_top(ctx)
+    def check_differentiable(self) -> None:
+        """``ValueError`` unless the detector has the differentiable path (``detect_top``) a torch θ needs."""
+        if not getattr(self.detector, "differentiable", False) or not callable(getattr(self.detector, "detect_top",
+                                                                                      None)):
+            raise ValueError(f"Objective: detector {self.detector!r} is not differentiable (no detect_top); it "
+                             "supports only the black-box path (a NumPy theta)")
+
+    # -- the two steps of a chunk ----------------------------------------------------------------------------------
+    def detect(self, theta) -> Selection:
+        """Step 1: one detector call on the views of θ rows ``(B, d)`` and σ_select (:meth:`selection`)."""
+        ctx = self.context(theta)
+        if isinstance(theta, torch.Tensor):
+            return self.selection(self.detector.detect_top(ctx), int(theta.shape[0]))
+        with torch.no_grad():
+            return self.selection(self.detector.detect(ctx), int(theta.shape[0]))
+
+    def selection(self, raw, n: int) -> Selection:
+        """σ_select of a detector's output for ``n`` rows — a list of ``Detections`` (``detect``) or the top
+        candidates ``(conf (n,), keypoints (n, 4, 2))`` of ``detect_top`` (then ``keypoints_t`` is set) — with the
+        keypoints in the sample's pixels."""
+        if isinstance(raw, tuple):
+            conf_t, kp_t = raw
             kp_t = self._scale.to_original(kp_t.reshape(n, 4, 2).to(torch.float64))
             conf = conf_t.detach().reshape(-1).cpu().numpy().astype(np.float64)
-            kp = kp_t.detach().cpu().numpy()
-            reason = ["" if c >= self.conf_threshold else "low_confidence" for c in conf]
-        else:
-            with torch.no_grad():
-                dets = self.detector.detect(ctx)
-            if len(dets) != n:
-                raise ValueError(f"Objective: detector {self.detector!r} returned {len(dets)} results for {n} images")
-            sel = select(dets, self.conf_threshold)
-            conf, kp, reason = sel.conf, self._scale.to_original(sel.keypoints), list(sel.reason)
+            ok = conf >= self.conf_threshold
+            return Selection(kp_t.detach().cpu().numpy(), conf, ok,
+                             tuple("" if good else "low_confidence" for good in ok), kp_t)
+        dets = list(raw)
+        if len(dets) != n:
+            raise ValueError(f"Objective: detector {self.detector!r} returned {len(dets)} results for {n} images")
+        sel = select(dets, self.conf_threshold)
+        return dataclasses.replace(sel, keypoints=self._scale.to_original(sel.keypoints))
+
+    def score(self, theta, sel: Selection) -> EvalRecord:
+        """Step 2: PnP on the selected keypoints and the position error of θ rows ``(B, d)`` → :class:`EvalRecord`
+        (with ``loss_t`` when ``sel`` came from the differentiable path)."""
+        grad = sel.keypoints_t is not None
+        n = int(theta.shape[0])
+        kp, conf, reason = sel.keypoints, sel.conf, list(sel.reason)
         finite_kp = np.isfinite(kp).all(axis=(1, 2))
         for i in np.nonzero((np.array(reason) == "") & ~finite_kp)[0]:
             reason[i] = "non_finite_keypoints"
@@ -321,8 +353,8 @@ class Objective:
         error, detail = np.full(n, np.nan), [""] * n
         y = self.sample.position
         if rows.size and grad:
-            pos_t, ok_t = pnp_position_torch(kp_t[rows], self.sample.corners_3d, self.sample.K, method=self.pnp,
-                                             grad=self.pnp_grad)
+            pos_t, ok_t = pnp_position_torch(sel.keypoints_t[rows], self.sample.corners_3d, self.sample.K,
+                                             method=self.pnp, grad=self.pnp_grad)
             position[rows] = pos_t.detach().cpu().numpy()
             success = ok_t.cpu().numpy()
         elif rows.size:
@@ -340,23 +372,25 @@ class Objective:
                 error[i] = err[j]
         failed = np.array([r != "" for r in reason])
         error[failed] = np.nan
-        theta_np = th.detach().cpu().numpy().astype(np.float64) if grad else th
-        rec = EvalRecord(str(self.sample.id), self.names, theta_np, np.where(failed, self.penalty_m, error), error,
-                         position, conf, kp, reproj, tuple(reason), tuple(detail), self.penalty_m)
-        if not grad:
-            return rec, None
-        loss = torch.full((n,), self.penalty_m, dtype=torch.float64, device=th.device)
-        good = np.nonzero(~failed[rows])[0] if rows.size else np.zeros(0, dtype=int)
-        if good.size:  # the loss lives with θ (the CPU for APGD), whatever device ran the pipeline
-            yt = torch.as_tensor(y, dtype=torch.float64, device=th.device)
-            err_t = torch.linalg.vector_norm(pos_t[good].to(th.device) - yt, dim=1)
-            loss = loss.index_put((torch.as_tensor(rows[good], device=th.device),), err_t)
-        return rec, loss
+        theta_np = theta.detach().cpu().numpy().astype(np.float64) if isinstance(theta, torch.Tensor) else theta
+        loss_t = None
+        if grad:
+            loss_t = torch.full((n,), self.penalty_m, dtype=torch.float64, device=theta.device)
+            good = np.nonzero(~failed[rows])[0] if rows.size else np.zeros(0, dtype=int)
+            if good.size:  # the loss lives with θ (the CPU for APGD), whatever device ran the pipeline
+                yt = torch.as_tensor(y, dtype=torch.float64, device=theta.device)
+                err_t = torch.linalg.vector_norm(pos_t[good].to(theta.device) - yt, dim=1)
+                loss_t = loss_t.index_put((torch.as_tensor(rows[good], device=theta.device),), err_t)
+        return EvalRecord(str(self.sample.id), self.names, theta_np, np.where(failed, self.penalty_m, error), error,
+                          position, conf, kp, reproj, tuple(reason), tuple(detail), self.penalty_m, loss_t)
 
-    def _all_failed(self, t: np.ndarray, reason: str, detail: str) -> EvalRecord:
+    def _all_failed(self, t, reason: str, detail: str) -> EvalRecord:
         n = t.shape[0]
         nan = np.full(n, np.nan)
+        grad = isinstance(t, torch.Tensor)
         return EvalRecord(
-            str(self.sample.id), self.names, t, np.full(n, self.penalty_m), nan, np.full((n, 3), np.nan), nan.copy(),
-            np.full((n, 4, 2), np.nan), nan.copy(), (reason,) * n, (detail,) * n, self.penalty_m,
+            str(self.sample.id), self.names, t.detach().cpu().numpy().astype(np.float64) if grad else t,
+            np.full(n, self.penalty_m), nan, np.full((n, 3), np.nan), nan.copy(), np.full((n, 4, 2), np.nan),
+            nan.copy(), (reason,) * n, (detail,) * n, self.penalty_m,
+            torch.full((n,), self.penalty_m, dtype=torch.float64) if grad else None,
         )

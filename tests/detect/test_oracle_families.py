@@ -37,7 +37,7 @@ def test_any_camera_rotation_leaves_the_error_below_a_metre(scenes):
         assert set(rec.reason) <= {"", "no_detection"} and inside.mean() > 0.75, (s.id, inside.mean())
         assert rec.loss[inside].max() < 1.0, (s.id, rec.loss[inside].max())
         t = torch.tensor(theta[inside][:4], requires_grad=True)
-        loss = obj.torch(t)
+        loss = obj(t).values
         loss.sum().backward()
         assert float(loss.detach().max()) < 1.0 and torch.isfinite(t.grad).all()
 
@@ -46,7 +46,7 @@ def test_any_camera_rotation_leaves_the_error_below_a_metre(scenes):
 @given(angles=st.tuples(st.floats(-30, 30), st.floats(-10, 10), st.floats(-10, 10)))
 def test_rotation_invariance_property(scenes, angles):
     obj = Objective(scenes[0], OracleDetector(), ROTATION, pnp="ippe_lm")
-    assert obj(np.array([angles]))[0] < 1.0
+    assert obj(np.array([angles])).values[0] < 1.0
 
 
 def test_keypoints_at_the_detector_resolution_use_the_scaled_intrinsics(scenes):
@@ -90,7 +90,8 @@ def test_a_runway_pushed_out_of_the_image_is_a_recorded_failure(scenes):
     assert rec.loss[:3].max() < 1.0
     # the differentiable path: confidence 0 (low_confidence), the penalty, a zero and finite gradient
     t = torch.tensor(theta, requires_grad=True)
-    loss, reasons = Objective(s, OracleDetector(), box).torch(t, reasons=True)
+    ev = Objective(s, OracleDetector(), box)(t)
+    loss, reasons = ev.values, ev.reasons
     loss.sum().backward()
     assert reasons[3:] == ("low_confidence",) * 2 and loss[3:].tolist() == [PENALTY_M] * 2
     assert torch.isfinite(t.grad).all() and float(t.grad[3:].abs().max()) == 0.0

@@ -41,7 +41,7 @@ def test_objective_views_agree_with_perturbing_the_image_first(two):
     theta = box.from_unit(np.random.default_rng(0).random((8, 2)))
     assert np.median(np.abs(obj.evaluate(theta).keypoints - perturbed_first(theta))) < 0.5  # px of 128
     t = torch.tensor(theta[:3], requires_grad=True)
-    obj.torch(t).sum().backward()
+    obj(t).values.sum().backward()
     assert torch.isfinite(t.grad).all()
 
 

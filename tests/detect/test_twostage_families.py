@@ -52,5 +52,5 @@ def test_every_family_at_once_on_both_paths(two):
     assert rec.loss.shape == (4,) and np.isfinite(rec.loss).all()
     assert set(rec.reason) <= {"", "pnp_failed", "non_finite_position"}
     t = torch.tensor(theta[:2], requires_grad=True)
-    obj.torch(t).sum().backward()
+    obj(t).values.sum().backward()
     assert torch.isfinite(t.grad).all()

@@ -256,18 +256,25 @@ def test_plain_numpy_function_in_real_units():
     assert r.x_dict() == {"a": float(r.x[0])}
 
 
-def test_apgd_uses_the_torch_attribute_of_an_objective_object():
+def test_gradient_methods_call_the_objective_with_a_tensor_the_others_with_an_array():
+    """One callable serves both kinds of method (as the pipeline's objectives do): the type of θ picks the path."""
     import torch
 
     from vbl_robust.search import maximize
     from vbl_robust.space import ParameterBox
 
-    class Obj:
-        def __call__(self, x):  # numpy path: never used by APGD
-            raise AssertionError("APGD must call .torch")
+    seen = []
 
-        def torch(self, x):
-            return -((x - 0.25) ** 2).sum(dim=1) + torch.zeros(1, dtype=x.dtype)
+    def f(x):
+        seen.append(type(x))
+        if isinstance(x, torch.Tensor):
+            assert x.requires_grad
+            return -((x - 0.25) ** 2).sum(dim=1)
+        return -((x - 0.25) ** 2).sum(axis=1)
 
-    r = maximize(Obj(), ParameterBox({"a": (-1, 1)}), "apgd", max_evals=60, seed=0)
-    assert abs(float(r.x[0]) - 0.25) < 1e-2
+    box = ParameterBox({"a": (-1, 1)})
+    r = maximize(f, box, "apgd", max_evals=60, seed=0)
+    assert abs(float(r.x[0]) - 0.25) < 1e-2 and set(seen) == {torch.Tensor}
+    seen.clear()
+    maximize(f, box, "direct", max_evals=30)
+    assert set(seen) == {np.ndarray}

@@ -90,7 +90,7 @@ def test_torch_path_equals_the_black_box_and_its_gradient_is_the_setting_frame(s
     theta = np.array([[4.0, 1.1], [-9.0, 0.8]])
     rec = f.evaluate(theta)
     x = torch.tensor(theta, requires_grad=True)
-    ev = f.torch(x)
+    ev = f(x)
     np.testing.assert_allclose(ev.values.detach().numpy(), rec.value, rtol=1e-6)
     assert ev.reasons == rec.reason
     (g,) = torch.autograd.grad(ev.values.sum(), x)
@@ -98,7 +98,7 @@ def test_torch_path_equals_the_black_box_and_its_gradient_is_the_setting_frame(s
         j = int(rec.window_start[i])
         frame = j + int(np.argmin(rec.loss[j:j + 3, i]))
         xi = torch.tensor(theta[i:i + 1], requires_grad=True)
-        (gi,) = torch.autograd.grad(f.frames[frame].torch(xi).sum(), xi)
+        (gi,) = torch.autograd.grad(f.frames[frame](xi).values.sum(), xi)
         np.testing.assert_allclose(g[i].numpy(), gi[0].numpy(), rtol=1e-6, atol=1e-9)
     assert torch.all(torch.isfinite(g))
 
@@ -106,7 +106,7 @@ def test_torch_path_equals_the_black_box_and_its_gradient_is_the_setting_frame(s
 def test_failed_rows_have_zero_gradient(sequence):
     f = SequenceObjective(sequence, _failing(sequence), BOX, sustain=3)
     x = torch.tensor([[7.0, 1.0]], dtype=torch.float64, requires_grad=True)
-    ev = f.torch(x)
+    ev = f(x)
     (g,) = torch.autograd.grad(ev.values.sum(), x)
     # the differentiable path sees a zero confidence: low_confidence
     assert ev.values.item() == 5000.0 and ev.reasons == ("low_confidence",) and g.abs().max() == 0.0
@@ -156,7 +156,7 @@ def test_frames_are_batched_through_a_pixel_detector_with_the_same_results():
     assert rb.reasons == rs.reasons and not any(r for f in rb.reasons for r in f)
     assert len(set(np.round(rb.loss[:, 0], 6))) == 5 and len(set(np.round(rb.loss[1], 6))) == 3
     xb, xs = (torch.tensor(theta, requires_grad=True) for _ in range(2))
-    vb, vs = fb.torch(xb).values, fs.torch(xs).values
+    vb, vs = fb(xb).values, fs(xs).values
     np.testing.assert_allclose(vb.detach().numpy(), vs.detach().numpy(), rtol=1e-6)
     (gb,), (gs,) = torch.autograd.grad(vb.sum(), xb), torch.autograd.grad(vs.sum(), xs)
     np.testing.assert_allclose(gb.numpy(), gs.numpy(), rtol=1e-5, atol=1e-8)

@@ -89,7 +89,7 @@ def probe_rate(det: Any, seconds: float = 5.0, *, gradient: bool = False) -> flo
         if gradient:
             theta = torch.tensor(x, dtype=torch.float64, requires_grad=True)
             with torch.enable_grad():
-                obj.torch(theta).sum().backward()
+                obj(theta).values.sum().backward()
         else:
             obj.evaluate(x)
 

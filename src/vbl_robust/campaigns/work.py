@@ -134,26 +134,6 @@ def worst_details(objective: Any, x: np.ndarray) -> dict[str, Any]:
             "position": [float(v) if math.isfinite(v) else None for v in rec.position[0]]}
 
 
-def search_function(objective: Any, needs_gradient: bool) -> Callable[[Any], Any]:
-    """What a search calls on a pipeline :class:`~vbl_robust.pipeline.Objective`: per point the loss (metres, the
-    penalty where failed) and the failure reason, as :class:`~vbl_robust.search.Evaluations` —
-    ``objective.evaluate(theta)`` (black box) or ``objective.torch(theta, reasons=True)`` (gradient path)."""
-    from ..search import Evaluations
-
-    if needs_gradient:
-        def differentiable(theta: Any) -> Evaluations:
-            loss, reasons = objective.torch(theta, reasons=True)
-            return Evaluations(loss, tuple(reasons))
-
-        return differentiable
-
-    def black_box(theta: np.ndarray) -> Evaluations:
-        rec = objective.evaluate(theta)
-        return Evaluations(rec.loss, tuple(rec.reason))
-
-    return black_box
-
-
 def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
     """Run one search job on a built objective; returns the :class:`~vbl_robust.search.SearchResult` (with the
     failure reason and completion time of every evaluated point).
@@ -168,7 +148,7 @@ def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
 
     b = job.budget
     needs_gradient = METHODS[job.method].needs_gradient
-    f = search_function(objective, needs_gradient)
+    f = objective  # a NumPy θ is the black box, a torch θ (gradient methods) the differentiable path
     opts = dict(job.options)
     if settings.lipschitz is not None and "lipschitz" not in opts:
         opts["lipschitz"] = settings.lipschitz

@@ -129,7 +129,7 @@ def refine_audit(out: Path, samples: list, detector: Any, budget: int, *,
     zones, to ``out/zones_refined.json``. Returns that path."""
     from vbl_robust.campaigns.spec import CampaignSpec
     from vbl_robust.campaigns.store import ResultStore
-    from vbl_robust.campaigns.work import detector_for, search_function
+    from vbl_robust.campaigns.work import detector_for
     from vbl_robust.pipeline import Objective
     from vbl_robust.zones import ReplayError, job_zones, refine_zones
 
@@ -157,7 +157,7 @@ def refine_audit(out: Path, samples: list, detector: Any, budget: int, *,
             fail(f"--refine-zones: sample {row.sample_id} of the store is not among this audit's samples")
         objective = Objective(sample, det, row.box.box, pnp=spec.pnp, conf_threshold=spec.conf_threshold,
                               penalty_m=spec.penalty_m)
-        ref = refine_zones(search_function(objective, False), jz.zones, budget, seed=row.seed or 0)
+        ref = refine_zones(objective, jz.zones, budget, seed=row.seed or 0)
         entries.append({"key": row.key, "sample_id": row.sample_id, "sample_index": row.sample_index,
                         "method": row.method, "box_label": row.box_label, "basis": ref.after.basis,
                         "basis_description": ref.after.describe(), **ref.to_dict()})

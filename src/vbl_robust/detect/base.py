@@ -40,7 +40,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 import torch
@@ -255,12 +255,15 @@ class Selection:
         ok: ``(B,)`` True when a candidate with ``conf ≥ τ_conf`` was selected.
         reason: ``B`` strings: ``""``, ``"no_detection"`` (or the reason an empty :class:`Detections` gives) or
             ``"low_confidence"``.
+        keypoints_t: the differentiable path (``detect_top``): ``keypoints`` as a float64 tensor attached to θ;
+            None otherwise.
     """
 
     keypoints: np.ndarray
     conf: np.ndarray
     ok: np.ndarray
     reason: tuple[str, ...]
+    keypoints_t: Any = None
 
 
 def select(detections: Sequence[Detections] | Detections, conf_threshold: float = CONF_THRESHOLD) -> Selection:

@@ -115,9 +115,9 @@ def maximize(
             ordered as ``box.names``) -> ``(n,)`` values (numpy, list or torch tensor). For ``"apgd"``: a
             torch-differentiable function: it receives a ``torch.float64`` tensor ``(n, d)`` with
             ``requires_grad=True`` and must return a ``(n,)`` tensor connected to it by autograd, each value
-            depending on its own row only (the gradient is taken of the sum). An object with a callable
-            ``torch`` attribute (such as :class:`vbl_robust.Objective`) is called through it for ``"apgd"``
-            and directly for the other methods. Either kind of ``f`` may instead return
+            depending on its own row only (the gradient is taken of the sum). The pipeline's objectives
+            (:class:`vbl_robust.Objective`) are both kinds: the type of θ picks their path. Either kind of ``f``
+            may instead return
             :class:`~vbl_robust.search.Evaluations` (the values as above, and a failure reason per point, ``""``
             = success): the search uses the values, the result counts the failures per reason. NaN/inf values
             are failed evaluations, never errors.
@@ -152,7 +152,7 @@ def maximize(
         stop_above=stop_above, seed=seed, **method_options,
     )
     if opt.needs_gradient:
-        evaluate = _with_gradient(getattr(f, "torch", None) if callable(getattr(f, "torch", None)) else f, method)
+        evaluate = _with_gradient(f, method)
     else:
         evaluate = _values_only(f)
     chunks = _Chunks(opt, int(chunk_size), marks) if max_seconds is not None or stop_above is not None else None

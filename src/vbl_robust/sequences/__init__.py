@@ -3,7 +3,7 @@
 A filter downstream of the pose estimate rides out one bad frame, not a perturbation that lasts. For an
 :class:`~vbl_robust.data.ApproachSequence` and a box Θ, :class:`SequenceObjective` scores θ by the error sustained
 over ``k`` consecutive frames (:func:`sustained`), callable by every method of :func:`vbl_robust.search.maximize`
-(APGD through :meth:`SequenceObjective.torch`); :func:`breach_summary` gives the breach runs and where along
+(a torch θ takes the differentiable path APGD needs); :func:`breach_summary` gives the breach runs and where along
 the approach they start; :func:`plot_errors_along_approach` draws the per-frame errors against distance.
 
 >>> import vbl_robust as vr                                                                # doctest: +SKIP

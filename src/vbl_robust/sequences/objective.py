@@ -3,9 +3,10 @@
 One θ is held over the whole sequence (a steady bank, a lasting contrast change): every frame ``f`` is scored by
 its own :class:`~vbl_robust.pipeline.Objective` (perturb → detect → select → PnP → error, failures count
 ``penalty_m``), and the θ row's value is the error sustained over ``sustain`` consecutive frames
-(:func:`.sustain.sustained`). ``objective(theta (n, d))`` returns
-:class:`~vbl_robust.search.Evaluations`; :meth:`SequenceObjective.torch` the differentiable twin (APGD), built
-from each frame's :meth:`Objective.torch`.
+(:func:`.sustain.sustained`). The contract is the frame objective's (:mod:`vbl_robust.pipeline`):
+``objective(theta (n, d))`` returns :class:`~vbl_robust.search.Evaluations` and :meth:`SequenceObjective.evaluate`
+the full :class:`SequenceRecord`; a torch θ gives values differentiable w.r.t. it (APGD), through each frame's
+differentiable path.
 
 Failure reason of a θ row: ``""`` unless every frame of the window that sets the value failed; then the
 failure code of the window's first frame (the value is then the penalty).
@@ -14,9 +15,10 @@ Frame batching
     With a detector that reads pixels (``uses_pixels``) and frames of one size and camera, the views of all
     frames for a θ batch go through the detector together: rows (frame, θ) are cut into chunks of ``batch_size``
     that may span frames, each chunk one ``detect`` (or ``detect_top``) call on a context whose view sampler
-    stacks the frames' samplers; the detections are then handed to each frame's ``Objective``, which selects,
-    solves PnP and scores as usual. The detector must not read ``context.sample`` or move points on such a
-    context (the oracle does: it is always called per frame, as is any detector with ``uses_pixels = False``).
+    stacks the frames' samplers; each frame's ``Objective`` then turns its rows into a selection
+    (:meth:`~vbl_robust.pipeline.Objective.selection`) and scores them (:meth:`~vbl_robust.pipeline.Objective.score`:
+    PnP and the error). The detector must not read ``context.sample`` or move points on such a context (the
+    oracle does: it is always called per frame, as is any detector with ``uses_pixels = False``).
     ``batch_frames=False`` calls the detector per frame; both give the same detections up to the float rounding
     that the composition of a network batch changes.
 """
@@ -61,6 +63,7 @@ class SequenceRecord:
         reason: ``n`` row failure codes (module docstring).
         frames: the ``F`` per-frame :class:`~vbl_robust.pipeline.EvalRecord` (positions, confidences, keypoints).
         distances_m, times_s: ``(F,)`` of the sequence (horizontal distance from the LTP; seconds).
+        value_t: the differentiable path only: ``value`` as a ``(n,)`` float64 tensor attached to θ (else None).
     """
 
     sequence_id: str
@@ -75,9 +78,14 @@ class SequenceRecord:
     frames: tuple[EvalRecord, ...]
     distances_m: np.ndarray
     times_s: np.ndarray
+    value_t: torch.Tensor | None = None
 
     def __len__(self) -> int:
         return int(self.value.shape[0])
+
+    def evaluations(self) -> Evaluations:
+        """What a search receives: the sustained errors (the tensor on the differentiable path) and the reasons."""
+        return Evaluations(self.value if self.value_t is None else self.value_t, self.reason)
 
     def summary(self, i: int = 0, eps_m: float = EPS_SAFE_M) -> dict:
         """Breach facts of row ``i`` (:func:`.sustain.breach_summary`) with θ by name and the row's reason."""
@@ -139,44 +147,6 @@ class _StackedViews:
                          "SequenceObjective(batch_frames=False)")
 
 
-class _FrameReplay:
-    """A frame's detector: hands out the detections computed for the whole batch, else calls the detector."""
-
-    def __init__(self, detector) -> None:
-        self.detector = detector
-        self.input_size = getattr(detector, "input_size", None)
-        self.uses_pixels = getattr(detector, "uses_pixels", True)
-        self.differentiable = getattr(detector, "differentiable", False)
-        self.clear()
-
-    def __repr__(self) -> str:
-        return repr(self.detector)
-
-    def clear(self) -> None:
-        self.dets: list | None = None
-        self.top: tuple[torch.Tensor, torch.Tensor] | None = None
-        self.pos = 0
-
-    def _take(self, n: int, total: int) -> slice:
-        if self.pos + n > total:
-            raise RuntimeError(f"SequenceObjective: frame asked for {self.pos + n} detections, {total} were computed")
-        s = slice(self.pos, self.pos + n)
-        self.pos += n
-        return s
-
-    def detect(self, context):
-        if self.dets is None:
-            return self.detector.detect(context)
-        return self.dets[self._take(len(context), len(self.dets))]
-
-    def detect_top(self, context):
-        if self.top is None:
-            return self.detector.detect_top(context)
-        conf, kp = self.top
-        s = self._take(len(context), int(conf.shape[0]))
-        return conf[s], kp[s]
-
-
 class SequenceObjective:
     """``S_k(θ)`` of one approach sequence: ``objective(theta (n, d)) -> Evaluations`` (metres).
 
@@ -221,11 +191,10 @@ class SequenceObjective:
         self.box = box
         self.batch_frames = batch_frames
         self.batch_size = batch_size
-        self._replays = [_FrameReplay(detector) for _ in sequence.samples] if batch_frames else []
         self.frames = [
-            Objective(s, self._replays[f] if self._replays else detector, box, pnp, conf_threshold=conf_threshold,
-                      penalty_m=penalty_m, batch_size=batch_size, resolution=resolution, pnp_grad=pnp_grad)
-            for f, s in enumerate(sequence.samples)
+            Objective(s, detector, box, pnp, conf_threshold=conf_threshold, penalty_m=penalty_m,
+                      batch_size=batch_size, resolution=resolution, pnp_grad=pnp_grad)
+            for s in sequence.samples
         ]
         self.penalty_m = float(penalty_m)
         self.nfev = 0
@@ -247,7 +216,7 @@ class SequenceObjective:
     def batched(self) -> bool:
         """Whether the frames go through the detector together (decided on first use: it loads the pixels)."""
         if self._batchable is None:
-            ok = bool(self._replays) and getattr(self.detector, "uses_pixels", True)
+            ok = self.batch_frames and getattr(self.detector, "uses_pixels", True)
             live = [o for o in self.frames if not o.image_error] if ok else []
             if ok and live:
                 first = live[0]
@@ -256,54 +225,50 @@ class SequenceObjective:
             self._batchable = bool(ok and len(live) > 1)
         return self._batchable
 
-    # -- entry points ------------------------------------------------------------------------------------------
+    # -- the contract (module docstring) ---------------------------------------------------------------------
     def __call__(self, theta) -> Evaluations:
-        """``theta (n, d)`` real units → :class:`Evaluations` (``S_k`` in metres, failure reasons)."""
-        rec = self.evaluate(theta)
-        return Evaluations(rec.value, rec.reason)
+        """``theta (n, d)`` real units → :class:`Evaluations` (``S_k`` in metres, failure reasons; a tensor
+        differentiable w.r.t. a torch θ)."""
+        return self.evaluate(theta).evaluations()
 
     def evaluate(self, theta) -> SequenceRecord:
         """Like ``__call__`` with the per-frame errors, reasons and records."""
-        t = self.frames[0].perturbation.check_theta(np.asarray(theta, dtype=np.float64))
-        recs = self._per_frame(t, lambda obj: obj.evaluate(t))
-        loss = np.stack([r.loss for r in recs])
-        reasons = [r.reason for r in recs]
-        value, start = sustained(loss, self.sustain) if t.shape[0] else (np.zeros(0), np.zeros(0, dtype=int))
-        seq = self.sequence
-        return SequenceRecord(str(seq.id), self.names, self.sustain, t, loss, tuple(reasons), value, start,
-                              _row_reasons(reasons, start, self.sustain), tuple(recs), seq.distances_m,
-                              np.asarray(seq.times, dtype=np.float64))
-
-    def torch(self, theta) -> Evaluations:
-        """``theta (n, d)`` tensor → :class:`Evaluations` whose values are a ``(n,)`` float64 tensor differentiable
-        w.r.t. θ (the per-frame :meth:`Objective.torch` through min over windows and max over windows)."""
-        t = theta if isinstance(theta, torch.Tensor) else torch.as_tensor(np.asarray(theta, dtype=np.float64))
-        outs = self._per_frame(t, lambda obj: obj.torch(t, reasons=True))
-        loss = torch.stack([o[0] for o in outs])
-        reasons = [tuple(o[1]) for o in outs]
-        value = sustained_torch(loss, self.sustain)
-        _, start = sustained(loss.detach().cpu().numpy(), self.sustain)
-        return Evaluations(value, _row_reasons(reasons, start, self.sustain))
-
-    # -- one loop over the frames --------------------------------------------------------------------------------
-    def _per_frame(self, t, run):
+        grad = isinstance(theta, torch.Tensor)
+        if grad:
+            self.frames[0].check_differentiable()
+        check = self.frames[0].perturbation.check_theta
+        t = check(theta) if grad else check(np.asarray(theta, dtype=np.float64))
         n = int(t.shape[0])
         self.nfev += n
-        try:
-            if n and self.batched:
-                self._prefetch(t)
-            return [run(obj) for obj in self.frames]
-        finally:
-            for r in self._replays:
-                r.clear()
+        recs = self._per_frame(t)
+        loss = np.stack([r.loss for r in recs]) if recs else np.zeros((0, n))
+        reasons = [r.reason for r in recs]
+        value, start = sustained(loss, self.sustain) if n else (np.zeros(0), np.zeros(0, dtype=int))
+        value_t = None
+        if grad:  # attached to θ even where every frame failed (a constant penalty)
+            value_t = sustained_torch(torch.stack([r.loss_t for r in recs]), self.sustain) + 0.0 * t.sum(dim=1).to(torch.float64)
+        seq = self.sequence
+        return SequenceRecord(str(seq.id), self.names, self.sustain,
+                              t.detach().cpu().numpy().astype(np.float64) if grad else t, loss, tuple(reasons), value,
+                              start, _row_reasons(reasons, start, self.sustain), tuple(recs), seq.distances_m,
+                              np.asarray(seq.times, dtype=np.float64), value_t)
 
-    def _prefetch(self, t) -> None:
-        """Detect every (frame, θ row) in chunks spanning frames; hand each frame its detections."""
+    # -- the frames ------------------------------------------------------------------------------------------------
+    def _per_frame(self, t) -> list[EvalRecord]:
+        """Every frame's :class:`EvalRecord` for θ rows ``t``: detected together when the frames batch."""
+        if not (int(t.shape[0]) and self.batched):
+            return [obj.evaluate(t) for obj in self.frames]
+        raw = self._detect_all(t)
+        return [obj.evaluate(t) if f not in raw else obj.score(t, obj.selection(raw[f], int(t.shape[0])))
+                for f, obj in enumerate(self.frames)]
+
+    def _detect_all(self, t) -> dict[int, object]:
+        """Detect every (frame, θ row) in chunks spanning frames: per frame with pixels, the detector's raw output
+        for its rows (a list of detections, or ``detect_top``'s ``(conf, keypoints)``)."""
         grad = isinstance(t, torch.Tensor)
         n = int(t.shape[0])
         live = [f for f, o in enumerate(self.frames) if not o.image_error]
-        dets: dict[int, list] = {f: [] for f in live}
-        tops: dict[int, list] = {f: [] for f in live}
+        parts: dict[int, list] = {f: [] for f in live}
         total = len(live) * n
         for a in range(0, total, self.batch_size):
             b = min(a + self.batch_size, total)
@@ -313,11 +278,11 @@ class SequenceObjective:
                 pieces.append((live[p], i1 - i0, self.frames[live[p]].context(t[i0:i1])))
             ctx = pieces[0][2] if len(pieces) == 1 else dataclasses.replace(
                 pieces[0][2], sampler=_StackedViews([c.sampler for _, _, c in pieces]))
+            sizes = [m for _, m, _ in pieces]
             if grad:
                 conf, kp = self.detector.detect_top(ctx)
-                for (f, _, _), c, k in zip(pieces, conf.split([m for _, m, _ in pieces]),
-                                           kp.split([m for _, m, _ in pieces]), strict=True):
-                    tops[f].append((c, k))
+                for (f, _, _), c, k in zip(pieces, conf.split(sizes), kp.split(sizes), strict=True):
+                    parts[f].append((c, k))
             else:
                 with torch.no_grad():
                     out = list(self.detector.detect(ctx))
@@ -325,11 +290,9 @@ class SequenceObjective:
                     raise ValueError(f"SequenceObjective: detector {self.detector!r} returned {len(out)} results for "
                                      f"{b - a} images")
                 pos = 0
-                for f, m, _ in pieces:
-                    dets[f].extend(out[pos:pos + m])
+                for f, m in zip((f for f, _, _ in pieces), sizes, strict=True):
+                    parts[f].extend(out[pos:pos + m])
                     pos += m
-        for f in live:
-            if grad:
-                self._replays[f].top = (torch.cat([c for c, _ in tops[f]]), torch.cat([k for _, k in tops[f]]))
-            else:
-                self._replays[f].dets = dets[f]
+        if grad:
+            return {f: (torch.cat([c for c, _ in ps]), torch.cat([k for _, k in ps])) for f, ps in parts.items()}
+        return parts
