@@ -148,6 +148,9 @@ def test_the_summary_table_never_cuts_a_method_name(tmp_path):
     (["--contrast", "1.4,0.7"], "--contrast 1.4,0.7: expected lower < upper"),
     (["--parquet", "x.csv"], "--parquet x.csv: the file name must end in .parquet"),
     (["--address", "auto"], "--address auto applies to --executor ray only"),
+    (["--executor", "ray", "--address", "127.0.0.1:1"], "--address 127.0.0.1:1: no Ray cluster answers at 127.0.0.1:1"),
+    (["--executor", "ray", "--address", "ray://nohost"], "--address ray://nohost: expected host:port"),
+    (["--executor", "dask"], "--executor must be one of local, ray, got 'dask'"),
     (["--sustain", "5"], "--sustain 5 applies to --sequences only"),
 ])
 def test_a_configuration_error_is_refused_before_any_work(tmp_path, args, message):

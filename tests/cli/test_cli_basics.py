@@ -43,3 +43,40 @@ def test_a_symmetric_half_width_must_be_positive(text):
     """``--roll -15`` is refused, not read as ±15 (a sign the user typed is never dropped silently)."""
     with pytest.raises(typer.BadParameter, match="half-width must be > 0"):
         parse_range(text, name="--roll", symmetric=True)
+
+
+def _commands():
+    import typer.main
+
+    group = typer.main.get_command(app)
+    return group, {name: group.get_command(None, name) for name in group.list_commands(None)}
+
+
+def test_every_option_has_help_and_flags_show_no_type():
+    group, commands = _commands()
+    for name, cmd in [("vbl-robust", group), *commands.items()]:
+        for p in cmd.params:
+            if p.param_type_name == "option":
+                assert p.help, f"{name} {p.opts[0]}: no help text"
+        res = runner.invoke(app, ["--help"] if cmd is group else [name, "--help"], terminal_width=200)
+        assert res.exit_code == 0 and "<bool>" not in res.output, name
+
+
+def test_quiet_and_verbose_before_or_after_the_command(tmp_path):
+    import logging
+
+    from vbl_robust.cli import common
+
+    args = ["--oracle", "--n", "1", "--max-evals", "3", "--roll", "5", "--width", "96", "--height", "96",
+            "--methods", "random", "--no-report", "--out"]
+    loud = runner.invoke(app, ["audit", *args, str(tmp_path / "a")])
+    for i, order in enumerate((["-q", "audit"], ["audit", "-q"])):
+        res = runner.invoke(app, [*order, *args, str(tmp_path / f"q{i}")])
+        assert res.exit_code == 0, res.output
+        assert "survival" in loud.output and "survival" not in res.output  # the table is not printed
+    for order in (["-v", "audit", "--help"], ["audit", "-v", "--help"]):
+        assert runner.invoke(app, order).exit_code == 0
+    res = runner.invoke(app, ["-v", "audit", *args, str(tmp_path / "v")])
+    assert res.exit_code == 0 and logging.getLogger().level == logging.INFO
+    runner.invoke(app, ["audit", *args, str(tmp_path / "v")])  # the next invocation starts from its own flags
+    assert logging.getLogger().level == logging.WARNING and common._GLOBAL == {"quiet": False, "verbose": False}

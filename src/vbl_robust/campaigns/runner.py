@@ -72,6 +72,39 @@ class RunSummary:
     status: str
 
 
+#: Seconds to wait for a Ray cluster's address to accept a connection before a run is refused.
+RAY_CONNECT_TIMEOUT_S = 10.0
+
+
+def check_executor(executor: str, address: str | None, *, timeout_s: float = RAY_CONNECT_TIMEOUT_S) -> None:
+    """``ValueError`` (one line naming the option) before any work: an unknown executor, ``address`` without Ray,
+    or a Ray address (``host:port``, ``ray://host:port``; ``auto`` is Ray's own lookup) whose port does not accept
+    a TCP connection within ``timeout_s`` — Ray itself would retry for minutes."""
+    import socket
+    from urllib.parse import urlsplit
+
+    if executor not in EXECUTORS:
+        raise ValueError(f"--executor must be one of {', '.join(EXECUTORS)}, got {executor!r}")
+    if address is None:
+        return
+    if executor != "ray":
+        raise ValueError(f"--address {address} applies to --executor ray only")
+    if address == "auto":
+        return
+    parts = urlsplit(address if "://" in address else f"ray://{address}")
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host, port = None, None
+    if not host or port is None:
+        raise ValueError(f"--address {address}: expected host:port or ray://host:port (or auto)")
+    try:
+        socket.create_connection((host, port), timeout=timeout_s).close()
+    except OSError as exc:
+        raise ValueError(f"--address {address}: no Ray cluster answers at {host}:{port} within {timeout_s:g} s "
+                         f"({exc.strerror or exc})") from None
+
+
 def sample_record(sample: Any, index: int) -> dict[str, Any]:
     """Row of the ``samples`` table."""
     import json

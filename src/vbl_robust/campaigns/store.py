@@ -404,28 +404,67 @@ class ResultStore:
     0
     """
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, *, readonly: bool = False):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        # isolation_level=None: we open transactions ourselves (BEGIN IMMEDIATE … COMMIT).
-        self._con = sqlite3.connect(str(self.path), isolation_level=None, timeout=30.0)
+        self.readonly = readonly
         try:
-            self._con.execute("PRAGMA journal_mode=WAL")
-            self._con.execute("PRAGMA synchronous=NORMAL")  # durable against process kills (not power loss)
-            self._migrate()
+            if readonly:
+                self._con = self._open_readonly()
+                return
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            # isolation_level=None: we open transactions ourselves (BEGIN IMMEDIATE … COMMIT).
+            self._con = sqlite3.connect(str(self.path), isolation_level=None, timeout=30.0)
+            try:
+                self._con.execute("PRAGMA journal_mode=WAL")
+                self._con.execute("PRAGMA synchronous=NORMAL")  # durable against process kills (not power loss)
+                self._migrate()
+            except BaseException:
+                self._con.close()
+                raise
         except sqlite3.DatabaseError as exc:  # truncated, or not SQLite at all: one line, not a traceback
-            self._con.close()
             raise ValueError(f"{self.path}: not a readable vbl-robust results store ({exc})") from None
 
+    def _open_readonly(self) -> sqlite3.Connection:
+        """A connection that writes nothing. Without a write-ahead log beside the file (no writer, nothing left to
+        replay) the file is read as it stands (``immutable``: no ``-shm``/``-wal`` file is made, so it works in a
+        read-only directory; a writer that starts meanwhile writes its log, not this file, until a checkpoint);
+        with one, SQLite's read-only mode reads the log too (and falls back to the file alone where the log's
+        shared memory cannot be opened). A store of an older layout is copied into memory and updated there."""
+        uri = self.path.resolve().as_uri()
+        con = None
+        if Path(f"{self.path}-wal").exists():
+            con = sqlite3.connect(f"{uri}?mode=ro", uri=True, isolation_level=None, timeout=30.0)
+            try:
+                version = int(con.execute("PRAGMA user_version").fetchone()[0])
+            except sqlite3.OperationalError:
+                con.close()
+                con = None
+        if con is None:
+            con = sqlite3.connect(f"{uri}?mode=ro&immutable=1", uri=True, isolation_level=None)
+            version = int(con.execute("PRAGMA user_version").fetchone()[0])
+        if version < SCHEMA_VERSION:
+            mem = sqlite3.connect(":memory:", isolation_level=None)
+            con.backup(mem)
+            con.close()
+            self._con = con = mem
+            self._migrate()
+        elif version > SCHEMA_VERSION:
+            con.close()
+            raise ValueError(f"{self.path}: results store schema version {version} is newer than this vbl-robust's "
+                             f"({SCHEMA_VERSION}); upgrade vbl-robust to read it")
+        con.execute("PRAGMA query_only = ON")
+        return con
+
     @classmethod
-    def open_existing(cls, path: str | Path) -> ResultStore:
-        """Open a store that must exist (a run directory or the ``.sqlite`` file itself)."""
+    def open_existing(cls, path: str | Path, *, readonly: bool = True) -> ResultStore:
+        """Open a store that must exist (a run directory or the ``.sqlite`` file itself) — read-only unless told
+        otherwise: reading a run (report, zones, tables, bundles) never writes it, and works where it cannot."""
         p = Path(path)
         if p.is_dir():
             p = p / "results.sqlite"
         if not p.is_file():
             raise FileNotFoundError(f"{p}: no results store (run `vbl-robust audit` or `reproduce` with --out first)")
-        return cls(p)
+        return cls(p, readonly=readonly)
 
     def _migrate(self) -> None:
         """Create the tables of a new store; bring an older one to :data:`SCHEMA_VERSION` (adds columns)."""

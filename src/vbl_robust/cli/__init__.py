@@ -6,10 +6,11 @@ Heavy imports (torch, ultralytics, OpenCV) happen inside the commands, so ``vbl-
 from __future__ import annotations
 
 import importlib
-import logging
 import warnings
 
 import typer
+
+from .common import set_verbosity
 
 app = typer.Typer(
     name="vbl-robust",
@@ -17,6 +18,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain help: flags read "-q, --quiet" (rich mode shows "<bool>"), long help wraps wide
     context_settings={"help_option_names": ["-h", "--help"]},
 )
 
@@ -33,10 +35,11 @@ _COMMAND_MODULES = ("scenes", "audit", "reproduce", "report", "train", "zones")
 
 
 @app.callback()
-def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log progress details (INFO)."),
+def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log progress details (INFO); also after the command."),
+          quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or tables; also after the command."),
           version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
-                                       help="Print the version and exit.")) -> None:
-    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+                               help="Print the version and exit.")) -> None:
+    set_verbosity(quiet=quiet, verbose=verbose, before_command=True)
     from vbl_robust.constants import TORCH_JIT_WARNING
 
     warnings.filterwarnings("ignore", message=TORCH_JIT_WARNING, category=FutureWarning)

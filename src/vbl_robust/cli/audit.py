@@ -15,7 +15,7 @@ import typer
 
 from vbl_robust.perturb.registry import PERTURBATIONS, known
 
-from .common import fail, parse_lipschitz, parse_range
+from .common import QUIET_HELP, VERBOSE_HELP, fail, parse_lipschitz, parse_range, set_verbosity
 
 METHODS_DEFAULT = "georobust-av,random,apgd"  # = vbl_robust.campaigns.experiments.AUDIT_METHODS
 
@@ -285,16 +285,16 @@ def check_exports(csv: Path | None, parquet: Path | None, out: Path | None = Non
 
     if out is not None and out.exists() and not out.is_dir():
         fail(f"--out {out}: is a file, not a run directory")
-    for flag, path, suffix in (("--csv", csv, ".csv"), ("--parquet", parquet, ".parquet")):
+    for option, path, suffix in (("--csv", csv, ".csv"), ("--parquet", parquet, ".parquet")):
         if path is None:
             continue
         if path.suffix.lower() != suffix:
-            fail(f"{flag} {path}: the file name must end in {suffix}")
+            fail(f"{option} {path}: the file name must end in {suffix}")
         if path.is_dir():
-            fail(f"{flag} {path}: is a directory")
+            fail(f"{option} {path}: is a directory")
         parent = next((p for p in (path.parent, *path.parent.parents) if p.exists()), Path("."))
         if not parent.is_dir() or not os.access(parent, os.W_OK):
-            fail(f"{flag} {path}: cannot write there ({parent} is not a writable directory)")
+            fail(f"{option} {path}: cannot write there ({parent} is not a writable directory)")
 
 
 def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, report: bool, quiet: bool = False) -> None:
@@ -401,7 +401,8 @@ def register(app: typer.Typer) -> None:
         csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to this CSV file."),
         parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to this Parquet file."),
         report: bool = typer.Option(True, "--report/--no-report", help="Write report.html into --out."),
-        quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or table."),
+        quiet: bool = typer.Option(False, "--quiet", "-q", help=QUIET_HELP),
+        verbose: bool = typer.Option(False, "--verbose", "-v", help=VERBOSE_HELP),
         sequences: str | None = typer.Option(None, "--sequences", help="Audit approach sequences instead of images: "
                                              "a number N (generated) or a LARD V2 directory grouped into sequences; "
                                              "one θ is held over each sequence (see --sustain)."),
@@ -420,6 +421,8 @@ def register(app: typer.Typer) -> None:
         from vbl_robust.campaigns import BoxSpec, Budget, audit_spec
         from vbl_robust.space import ParameterBox
 
+        quiet = set_verbosity(quiet=quiet, verbose=verbose)
+
         bounds: dict[str, tuple[float, float]] = {}
         extra = parse_perturb(perturb)
         if roll.strip().lower() != "none" and "roll_deg" not in extra:
@@ -431,10 +434,12 @@ def register(app: typer.Typer) -> None:
         bounds.update(extra)
         if not bounds:
             fail("give at least one of --roll, --contrast, --perturb")
-        if executor not in ("local", "ray"):
-            fail(f"--executor must be 'local' or 'ray', got {executor!r}")
-        if address is not None and executor != "ray":
-            fail(f"--address {address} applies to --executor ray only")
+        from vbl_robust.campaigns.runner import check_executor
+
+        try:
+            check_executor(executor, address)
+        except ValueError as exc:
+            fail(str(exc))
         if sequences is None and sustain != 1:
             fail(f"--sustain {sustain} applies to --sequences only")
         try:
@@ -489,7 +494,7 @@ def register(app: typer.Typer) -> None:
     def demo(
         out: Path = typer.Option(Path("runs/demo"), "--out", help="Run directory."),
         n: int = typer.Option(10, "--n", min=1, help="Number of synthetic images."),
-        seed: int = typer.Option(0, "--seed"),
+        seed: int = typer.Option(0, "--seed", help="Seed of the synthetic images and of every search."),
         max_evals: int = typer.Option(40, "--max-evals", min=1, help="Evaluations per image and method."),
         oracle: bool = typer.Option(False, "--oracle", help="Use the oracle detector instead of the shipped model."),
         engine: str = typer.Option("auto", "--engine", help=ENGINE_HELP),
@@ -497,7 +502,8 @@ def register(app: typer.Typer) -> None:
         landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="Dense 21 × 11 grid on the first "
                                        "image for the report's landscape figure."),
         workers: int = typer.Option(0, "--workers", help=WORKERS_HELP),
-        quiet: bool = typer.Option(False, "--quiet", "-q"),
+        quiet: bool = typer.Option(False, "--quiet", "-q", help=QUIET_HELP),
+        verbose: bool = typer.Option(False, "--verbose", "-v", help=VERBOSE_HELP),
     ) -> None:
         """A small audit on the defaults (10 synthetic images, georobust-av / random / APGD, roll ±15° and contrast
         [0.7, 1.4], early stop at a breach) with its HTML report — a few minutes on a laptop CPU."""
@@ -505,6 +511,7 @@ def register(app: typer.Typer) -> None:
 
         from vbl_robust.campaigns import Budget, audit_spec, roll_contrast_box
 
+        quiet = set_verbosity(quiet=quiet, verbose=verbose)
         if "OMP_NUM_THREADS" not in os.environ:
             torch.set_num_threads(max(1, min(4, os.cpu_count() or 1)))
         spec = audit_spec(roll_contrast_box(15.0, (0.7, 1.4)), budget=Budget(max_evals=max_evals), seed=seed,

@@ -1,10 +1,29 @@
-"""Helpers shared by the CLI commands: turning user input into one-line errors."""
+"""Helpers shared by the CLI commands: one-line errors, verbosity."""
 
 from __future__ import annotations
 
+import logging
 import math
 
 import typer
+
+QUIET_HELP = "No progress bar or tables (also accepted before the command: vbl-robust -q COMMAND)."
+VERBOSE_HELP = "Log progress details (INFO) (also accepted before the command: vbl-robust -v COMMAND)."
+
+#: what the options before the command said (``vbl-robust -q audit …``)
+_GLOBAL = {"quiet": False, "verbose": False}
+
+
+def set_verbosity(*, quiet: bool = False, verbose: bool = False, before_command: bool = False) -> bool:
+    """Apply ``-v`` (INFO logging) and ``-q`` given before the command (``before_command``: what they say for this
+    invocation) or after it (added to that); returns whether to be quiet."""
+    if before_command:
+        _GLOBAL.update(quiet=quiet, verbose=verbose)
+    _GLOBAL["quiet"] = _GLOBAL["quiet"] or quiet
+    _GLOBAL["verbose"] = _GLOBAL["verbose"] or verbose
+    logging.basicConfig(format="%(levelname)s %(name)s: %(message)s")
+    logging.getLogger().setLevel(logging.INFO if _GLOBAL["verbose"] else logging.WARNING)
+    return _GLOBAL["quiet"]
 
 
 def fail(message: str, code: int = 2) -> None:

@@ -31,7 +31,7 @@ from .audit import (
     run_with_progress,
     with_method_options,
 )
-from .common import fail
+from .common import QUIET_HELP, VERBOSE_HELP, fail, set_verbosity
 
 
 def _floats(text: str | None, name: str) -> tuple[float, ...] | None:
@@ -147,16 +147,21 @@ def register(app: typer.Typer) -> None:
                                       "images) and its upper bound, and exit."),
         probe_seconds: float = typer.Option(5.0, "--probe-seconds", min=0.01, help="--estimate: seconds each "
                                             "evaluation-rate probe runs (black box, gradient)."),
-        quiet: bool = typer.Option(False, "--quiet", "-q"),
+        quiet: bool = typer.Option(False, "--quiet", "-q", help=QUIET_HELP),
+        verbose: bool = typer.Option(False, "--verbose", "-v", help=VERBOSE_HELP),
     ) -> None:
         """Run one of the paper's experiments, or all; rerunning the same command resumes it."""
         from vbl_robust.campaigns.experiments import Options, with_options
         from vbl_robust.campaigns.experiments import experiment as get_experiment
 
-        if executor not in ("local", "ray"):
-            fail(f"--executor must be 'local' or 'ray', got {executor!r}")
-        if address is not None and executor != "ray":
-            fail(f"--address {address} applies to --executor ray only")
+        quiet = set_verbosity(quiet=quiet, verbose=verbose)
+
+        from vbl_robust.campaigns.runner import check_executor
+
+        try:
+            check_executor(executor, address)
+        except ValueError as exc:
+            fail(str(exc))
         try:
             group = {"all": tuple(EXPERIMENTS), "paper": PAPER}.get(experiment)
             exps = [EXPERIMENTS[n] for n in group] if group else [get_experiment(experiment)]
