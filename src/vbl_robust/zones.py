@@ -296,6 +296,7 @@ def replay(row: JobRow, spec: CampaignSpec | None = None, *, eps_safe_m: float |
     max(1, |x|)), or the method stops before the stored points are used up; ``ValueError`` for a row that holds
     no search points.
     """
+    from .campaigns.work import search_kwargs
     from .search import Evaluations, make_optimizer
 
     if row.kind != "search" or row.box is None or row.budget is None:
@@ -303,13 +304,9 @@ def replay(row: JobRow, spec: CampaignSpec | None = None, *, eps_safe_m: float |
     pts = row.points
     if pts is None:
         raise ValueError(f"job {row.key}: the row holds no evaluated points (read it with with_points=True)")
-    b = row.budget
     eps = eps_safe_m if eps_safe_m is not None else (spec.eps_safe_m if spec is not None else EPS_SAFE_M)
-    opts = dict(row.options)
-    if spec is not None and spec.lipschitz is not None and "lipschitz" not in opts:
-        opts["lipschitz"] = spec.lipschitz  # as the runner passed it (it changes no point)
-    opt = make_optimizer(row.method, row.box.box, max_evals=b.max_evals, max_iters=b.max_iters,
-                         stop_above=eps if b.stop_at_breach else None, seed=row.seed or 0, **opts)
+    opt = make_optimizer(row.method, row.box.box, **search_kwargs(
+        row.options, row.budget, eps_safe_m=eps, lipschitz=None if spec is None else spec.lipschitz, seed=row.seed))
     n, pos = len(pts), 0
     while pos < n:
         x = opt.ask()

@@ -50,7 +50,7 @@ from .spec import BoxSpec, Budget
 #: Version of the layout below (``PRAGMA user_version``).
 SCHEMA_VERSION = 3
 
-_SCHEMA = """
+_SCHEMA_TEMPLATE = """
 CREATE TABLE IF NOT EXISTS campaign (
     id INTEGER PRIMARY KEY CHECK (id = 1),
     name TEXT NOT NULL,
@@ -92,45 +92,95 @@ CREATE TABLE IF NOT EXISTS contents (
     path TEXT, size INTEGER, mtime_ns INTEGER,
     sha256 TEXT                     -- of the file's bytes; recomputed only when size or mtime changed
 );
-CREATE TABLE IF NOT EXISTS jobs (
-    key TEXT NOT NULL UNIQUE,
-    run_id INTEGER,
-    experiment TEXT, kind TEXT, role TEXT, method TEXT,
-    sample_id TEXT, sample_index INTEGER,
-    box_label TEXT, box_level REAL, box_json TEXT,
-    budget_label TEXT, budget_json TEXT,
-    seed INTEGER, options_json TEXT, chain TEXT,
-    status TEXT NOT NULL,           -- done | failed | implied
-    reason TEXT,                    -- why a job failed / what implied it
-    worst_m REAL,                   -- worst error found (m); the penalty for a failed sample
-    worst_x_json TEXT,              -- {name: value} of the worst point, real units
-    verdict TEXT,                   -- breach | no breach found | certified | failed
-    nfev INTEGER, nit INTEGER,
-    search_status TEXT, message TEXT,
-    search_s REAL,                  -- seconds inside the search (objective calls included)
-    job_s REAL,                     -- seconds for the whole job (objective building included)
-    upper_bound REAL, bound_estimate REAL, lipschitz_estimate REAL,
-    trace_json TEXT,
-    points BLOB,                    -- zlib(JSON {"xs": [[...]], "fs": [...], "reasons": [...], "ts": [...]})
-    payload_json TEXT,              -- PnP comparison results, details of the worst point
-    finished_at TEXT,
-    n_failed INTEGER,               -- failed evaluations (schema 2)
-    failures_json TEXT,             -- {reason: count} of the failed evaluations (schema 2)
-    worst_reason TEXT               -- failure reason at the worst point, "" = a successful evaluation (schema 2)
-);
+{jobs}
 CREATE INDEX IF NOT EXISTS jobs_by_sample ON jobs (sample_id);
 """
 
-#: Columns added by schema version 2 (added to an older store when it is opened).
-_ADDED_COLUMNS = {"n_failed": "INTEGER", "failures_json": "TEXT", "worst_reason": "TEXT"}
 
-JOB_COLUMNS = (
-    "key", "run_id", "experiment", "kind", "role", "method", "sample_id", "sample_index", "box_label", "box_level",
-    "box_json", "budget_label", "budget_json", "seed", "options_json", "chain", "status", "reason", "worst_m",
-    "worst_x_json", "verdict", "nfev", "nit", "search_status", "message", "search_s", "job_s", "upper_bound",
-    "bound_estimate", "lipschitz_estimate", "trace_json", "points", "payload_json", "finished_at",
-    *_ADDED_COLUMNS,
+def _same(v: Any) -> Any:
+    return v
+
+
+def _json(v: Any) -> str | None:
+    return None if v is None else json.dumps(v)
+
+
+def _loads(v: str | None) -> Any:
+    return None if v is None else json.loads(v)
+
+
+@dataclass(frozen=True)
+class _Column:
+    """One column of the jobs table: its declaration, the :class:`JobRow` field it holds and how the value goes in
+    (``dump``) and comes out (``load``; None: a column derived on write only, e.g. ``box_label`` for queries)."""
+
+    name: str
+    decl: str
+    field: str
+    dump: Any = _same
+    load: Any = _same
+    comment: str = ""
+    since: int = 0  # the schema version that added it (added to older stores on open)
+
+
+#: The jobs table, in column order: the one place a job field is declared, written and read.
+_JOB_TABLE: tuple[_Column, ...] = (
+    _Column("key", "TEXT NOT NULL UNIQUE", "key"),
+    _Column("run_id", "INTEGER", "run_id"),
+    *(_Column(n, "TEXT", n) for n in ("experiment", "kind", "role", "method", "sample_id")),
+    _Column("sample_index", "INTEGER", "sample_index"),
+    _Column("box_label", "TEXT", "box_label", load=None),
+    _Column("box_level", "REAL", "box_level", load=None),
+    _Column("box_json", "TEXT", "box", lambda b: None if b is None else json.dumps(b.to_dict()),
+            lambda v: None if v is None else BoxSpec.from_dict(json.loads(v))),
+    _Column("budget_label", "TEXT", "budget_label", load=None),
+    _Column("budget_json", "TEXT", "budget", lambda b: None if b is None else json.dumps(b.to_dict()),
+            lambda v: None if v is None else Budget.from_dict(json.loads(v))),
+    _Column("seed", "INTEGER", "seed"),
+    _Column("options_json", "TEXT", "options", lambda o: json.dumps(dict(o)), lambda v: _loads(v) or {}),
+    _Column("chain", "TEXT", "chain"),
+    _Column("status", "TEXT NOT NULL", "status", lambda st: st.value, comment="done | failed | implied"),
+    _Column("reason", "TEXT", "reason", comment="why a job failed / what implied it"),
+    _Column("worst_m", "REAL", "worst_m", comment="worst error found (m); the penalty for a failed sample"),
+    _Column("worst_x_json", "TEXT", "worst_x", lambda x: _json(None if x is None else dict(x)), _loads,
+            comment="{name: value} of the worst point, real units"),
+    _Column("verdict", "TEXT", "verdict", lambda v: None if v is None else v.value,
+            comment="breach | no breach found | certified | failed"),
+    _Column("nfev", "INTEGER", "nfev", load=lambda v: v or 0),
+    _Column("nit", "INTEGER", "nit", load=lambda v: v or 0),
+    _Column("search_status", "TEXT", "search_status"),
+    _Column("message", "TEXT", "message"),
+    _Column("search_s", "REAL", "search_s", comment="seconds inside the search (objective calls included)"),
+    _Column("job_s", "REAL", "job_s", comment="seconds for the whole job (objective building included)"),
+    *(_Column(n, "REAL", n) for n in ("upper_bound", "bound_estimate", "lipschitz_estimate")),
+    _Column("trace_json", "TEXT", "trace", lambda tr: json.dumps([t.to_dict() for t in tr]) if tr else None,
+            lambda v: tuple(TraceRow.from_dict(t) for t in _loads(v) or ())),
+    _Column("points", "BLOB", "points", lambda pt: None if pt is None else pt.to_blob(),
+            lambda v: Points.from_blob(v) if v else None,
+            comment='zlib(JSON {"xs": [[...]], "fs": [...], "reasons": [...], "ts": [...]})'),
+    _Column("payload_json", "TEXT", "payload", _json, _loads,
+            comment="PnP comparison results, details of the worst point"),
+    _Column("finished_at", "TEXT", "finished_at"),
+    _Column("n_failed", "INTEGER", "n_failed", comment="failed evaluations (schema 2)", since=2),
+    _Column("failures_json", "TEXT", "failures", lambda f: json.dumps(dict(f)) if f else None,
+            lambda v: _loads(v) or {}, comment="{reason: count} of the failed evaluations (schema 2)", since=2),
+    _Column("worst_reason", "TEXT", "worst_reason", since=2,
+            comment='failure reason at the worst point, "" = a successful evaluation (schema 2)'),
 )
+
+
+def _jobs_ddl() -> str:
+    lines = [f"    {c.name} {c.decl}{',' if i < len(_JOB_TABLE) - 1 else ''}{f'  -- {c.comment}' if c.comment else ''}"
+             for i, c in enumerate(_JOB_TABLE)]
+    return "CREATE TABLE IF NOT EXISTS jobs (\n" + "\n".join(lines) + "\n);"
+
+
+_SCHEMA = _SCHEMA_TEMPLATE.format(jobs=_jobs_ddl())
+
+#: Columns added by schema version 2 (added to an older store when it is opened).
+_ADDED_COLUMNS = {c.name: c.decl for c in _JOB_TABLE if c.since == 2}
+
+JOB_COLUMNS = tuple(c.name for c in _JOB_TABLE)
 
 #: Keys of a campaign spec that only change how results are shown (the report's figures): they never make a
 #: store refuse a run, and the newer value is recorded.
@@ -354,45 +404,13 @@ class JobRow:
         return dataclasses.replace(self, **changes)
 
 
-def _json(v: Any) -> str | None:
-    return None if v is None else json.dumps(v)
-
-
 def _to_columns(r: JobRow) -> tuple[Any, ...]:
-    c = {
-        "key": r.key, "run_id": r.run_id, "experiment": r.experiment, "kind": r.kind, "role": r.role,
-        "method": r.method, "sample_id": r.sample_id, "sample_index": r.sample_index, "box_label": r.box_label,
-        "box_level": r.box_level, "box_json": None if r.box is None else json.dumps(r.box.to_dict()),
-        "budget_label": r.budget_label, "budget_json": None if r.budget is None else json.dumps(r.budget.to_dict()),
-        "seed": r.seed, "options_json": json.dumps(dict(r.options)), "chain": r.chain, "status": r.status.value,
-        "reason": r.reason, "worst_m": r.worst_m, "worst_x_json": _json(None if r.worst_x is None else dict(r.worst_x)),
-        "verdict": None if r.verdict is None else r.verdict.value, "nfev": r.nfev, "nit": r.nit,
-        "search_status": r.search_status, "message": r.message, "search_s": r.search_s, "job_s": r.job_s,
-        "upper_bound": r.upper_bound, "bound_estimate": r.bound_estimate, "lipschitz_estimate": r.lipschitz_estimate,
-        "trace_json": json.dumps([t.to_dict() for t in r.trace]) if r.trace else None,
-        "points": None if r.points is None else r.points.to_blob(), "payload_json": _json(r.payload),
-        "finished_at": r.finished_at, "n_failed": r.n_failed,
-        "failures_json": json.dumps(dict(r.failures)) if r.failures else None, "worst_reason": r.worst_reason,
-    }
-    return tuple(c[k] for k in JOB_COLUMNS)
+    return tuple(c.dump(getattr(r, c.field)) for c in _JOB_TABLE)
 
 
 def _from_columns(d: Mapping[str, Any]) -> JobRow:
-    box, budget, trace = _loads(d["box_json"]), _loads(d["budget_json"]), _loads(d.get("trace_json"))
-    blob = d.get("points")
-    return JobRow(
-        key=d["key"], experiment=d["experiment"], kind=d["kind"], role=d["role"], method=d["method"],
-        sample_id=d["sample_id"], sample_index=d["sample_index"], status=d["status"], run_id=d["run_id"],
-        box=None if box is None else BoxSpec.from_dict(box), budget=None if budget is None else Budget.from_dict(budget),
-        seed=d["seed"], options=_loads(d["options_json"]) or {}, chain=d["chain"], reason=d["reason"],
-        worst_m=d["worst_m"], worst_x=_loads(d["worst_x_json"]), verdict=d["verdict"], nfev=d["nfev"] or 0,
-        nit=d["nit"] or 0, n_failed=d["n_failed"], failures=_loads(d["failures_json"]) or {},
-        worst_reason=d["worst_reason"], search_status=d["search_status"], message=d["message"],
-        search_s=d["search_s"], job_s=d["job_s"], upper_bound=d["upper_bound"], bound_estimate=d["bound_estimate"],
-        lipschitz_estimate=d["lipschitz_estimate"], trace=tuple(TraceRow.from_dict(t) for t in trace or ()),
-        points=Points.from_blob(blob) if blob else None, payload=_loads(d["payload_json"]),
-        finished_at=d["finished_at"],
-    )
+    """A row from the columns read (``points`` / ``trace_json`` may be left out: None / empty)."""
+    return JobRow(**{c.field: c.load(d[c.name]) for c in _JOB_TABLE if c.load is not None and c.name in d})
 
 
 class ResultStore:
@@ -670,10 +688,6 @@ class _Transaction:
 
 def _dumps(v: Any) -> str | None:
     return None if v is None else json.dumps(v, sort_keys=True, default=str)
-
-
-def _loads(v: str | None) -> Any:
-    return None if v is None else json.loads(v)
 
 
 def _first_difference(a: Any, b: Any, path: str = "") -> str:

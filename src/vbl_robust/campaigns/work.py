@@ -21,7 +21,7 @@ import logging
 import math
 import time
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -149,19 +149,27 @@ def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
     b = job.budget
     needs_gradient = METHODS[job.method].needs_gradient
     f = objective  # a NumPy θ is the black box, a torch θ (gradient methods) the differentiable path
-    opts = dict(job.options)
-    if settings.lipschitz is not None and "lipschitz" not in opts:
-        opts["lipschitz"] = settings.lipschitz
     timing: dict[str, Any] = {"chunk_size": breach_chunk(objective)}
     if b.max_seconds is not None:
         _warm_up(f, job.box.box, needs_gradient)
         timing = {"min_evals": b.min_evals, "time_marks": b.read_seconds,
                   "chunk_size": int(getattr(objective, "batch_size", DEFAULT_CHUNK))}
+    kwargs = search_kwargs(job.options, b, eps_safe_m=settings.eps_safe_m, lipschitz=settings.lipschitz,
+                           seed=job.seed)
     with use_clock(settings.clock):
-        return maximize(
-            f, job.box.box, job.method, max_evals=b.max_evals, max_iters=b.max_iters, max_seconds=b.max_seconds,
-            stop_above=settings.eps_safe_m if b.stop_at_breach else None, seed=job.seed, **timing, **opts,
-        )
+        return maximize(f, job.box.box, job.method, max_seconds=b.max_seconds, **timing, **kwargs)
+
+
+def search_kwargs(options: Mapping[str, Any], budget: Any, *, eps_safe_m: float, lipschitz: Any,
+                  seed: int | None) -> dict[str, Any]:
+    """The optimizer's arguments of a search job apart from its time budget: evaluation and iteration budgets, the
+    early stop at ε_safe, the seed and the method's options (the run's ``lipschitz`` unless the job sets one).
+    :func:`run_search_job` runs a job with them and :func:`vbl_robust.zones.replay` rebuilds its optimizer."""
+    opts = dict(options)
+    if lipschitz is not None and "lipschitz" not in opts:
+        opts["lipschitz"] = lipschitz  # it changes no point
+    return {"max_evals": budget.max_evals, "max_iters": budget.max_iters,
+            "stop_above": eps_safe_m if budget.stop_at_breach else None, "seed": seed or 0, **opts}
 
 
 def breach_chunk(objective: Any) -> int:
