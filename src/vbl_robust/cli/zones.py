@@ -123,47 +123,16 @@ def _cell(v: float | None) -> str | float:
 # -- audit --refine-zones -----------------------------------------------------------------------------------------
 def refine_audit(out: Path, samples: list, detector: Any, budget: int, *,
                  lipschitz: float | tuple[float, ...] | None, quiet: bool = False) -> Path:
-    """After an audit: for each main search job with a cover, spend ``budget`` more evaluations inside its
-    undecided zones (:func:`vbl_robust.zones.refine_zones`, GeoRobust per zone), under the run's ``lipschitz``
-    (sound) or else each search's own estimate; print how the fractions changed and write them, with the refined
-    zones, to ``out/zones_refined.json``. Returns that path."""
-    from vbl_robust.campaigns.spec import CampaignSpec
-    from vbl_robust.campaigns.store import ResultStore
-    from vbl_robust.campaigns.work import detector_for
-    from vbl_robust.pipeline import Objective
-    from vbl_robust.zones import ReplayError, job_zones, refine_zones
+    """After an audit: :func:`vbl_robust.campaigns.refine.refine_run`, then how the fractions changed (a table)."""
+    from vbl_robust.campaigns.refine import refine_run
+    from vbl_robust.zones import ReplayError
 
-    with ResultStore.open_existing(out) as store:
-        spec = CampaignSpec.from_dict(store.campaign()["spec"])
-        rows = store.jobs(kind="search", role="main", with_points=True, with_trace=False)
-    by_id = {str(s.id): s for s in samples}
-    det = detector_for(detector)
-    entries, table = [], []
-    for row in rows:
-        try:
-            jz = job_zones(row, spec, lipschitz=lipschitz, estimate=lipschitz is None)
-        except ReplayError as exc:
-            fail(f"--refine-zones: replay failed: {exc}")
-        except ValueError as exc:  # no estimate (e.g. a search that saw only failures)
-            jz = None
-            note = str(exc)
-        else:
-            note = jz.note
-        if jz is None or jz.zones is None:
-            entries.append({"key": row.key, "sample_id": row.sample_id, "method": row.method, "note": note})
-            continue
-        sample = by_id.get(str(row.sample_id))
-        if sample is None:
-            fail(f"--refine-zones: sample {row.sample_id} of the store is not among this audit's samples")
-        objective = Objective(sample, det, row.box.box, pnp=spec.pnp, conf_threshold=spec.conf_threshold,
-                              penalty_m=spec.penalty_m)
-        ref = refine_zones(objective, jz.zones, budget, seed=row.seed or 0)
-        entries.append({"key": row.key, "sample_id": row.sample_id, "sample_index": row.sample_index,
-                        "method": row.method, "box_label": row.box_label, "basis": ref.after.basis,
-                        "basis_description": ref.after.describe(), **ref.to_dict()})
-        table.append((row.sample_index, row.method, ref))
-    path = out / "zones_refined.json"
-    path.write_text(json.dumps({"budget_per_job": budget, "jobs": entries}, indent=1, allow_nan=False) + "\n")
+    try:
+        path, refined = refine_run(out, samples, detector, budget, lipschitz=lipschitz)
+    except ReplayError as exc:
+        fail(f"--refine-zones: replay failed: {exc}")
+    except ValueError as exc:
+        fail(f"--refine-zones: {exc}")
     if not quiet:
         from rich.console import Console
         from rich.table import Table
@@ -171,11 +140,11 @@ def refine_audit(out: Path, samples: list, detector: Any, budget: int, *,
         t = Table(title=f"zones refined with {budget} evaluations per job (volume %, before → after)")
         for c in ("image", "method", "evals", "breached", "undecided", "ruled out", "basis"):
             t.add_column(c, justify="left" if c in ("image", "method", "basis") else "right")
-        for index, method, ref in table:
-            b, a = ref.before.fractions, ref.after.fractions
-            t.add_row(f"#{index}", method, str(ref.evaluations),
+        for r in refined:
+            b, a = r.refinement.before.fractions, r.refinement.after.fractions
+            t.add_row(f"#{r.sample_index}", r.method, str(r.refinement.evaluations),
                       *(f"{100 * b[c]:.1f} → {100 * a[c]:.1f}" for c in ("breached", "undecided", "ruled_out")),
-                      ref.after.basis)
+                      r.refinement.after.basis)
         Console().print(t)
     typer.echo(f"refined zones: {path}")
     return path
