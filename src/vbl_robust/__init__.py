@@ -35,7 +35,6 @@ _LAZY: dict[str, str | tuple[str, None]] = {
     "detect": ("vbl_robust.detect", None),
     "campaigns": ("vbl_robust.campaigns", None),
     "report": ("vbl_robust.report", None),
-    "zones": ("vbl_robust.zones", None),
 }
 
 __all__ = ["ParameterBox", "__version__", *_LAZY]

@@ -14,9 +14,9 @@ from typer.testing import CliRunner
 
 import vbl_robust.search.api as search_api
 from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, ResultStore, run_campaign
+from vbl_robust.campaigns.replay import replay, zones_of_run
 from vbl_robust.campaigns.spec import roll_contrast_box
 from vbl_robust.cli import app
-from vbl_robust.zones import replay, zones_of_run
 
 runner = CliRunner()
 SMALL = ["--oracle", "--oracle-noise", "0.5", "--width", "256", "--height", "256", "--quiet"]

@@ -16,11 +16,12 @@ import torch
 
 from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, ResultStore, run_campaign
 from vbl_robust.campaigns import metrics as mx
+from vbl_robust.campaigns.replay import zones_of_run
 from vbl_robust.campaigns.spec import roll_box, roll_contrast_box
 from vbl_robust.report import build as B
 from vbl_robust.report import build_report
 from vbl_robust.report.html import fmt_num
-from vbl_robust.zones import CLASSES, zones_of_run
+from vbl_robust.search.zones import CLASSES
 
 GATE = 4.0
 GATED = DetectorSpec("factory", "zones_helpers:RollGate")
@@ -198,8 +199,9 @@ def test_a_search_stopped_at_its_first_point_has_no_estimate_and_rules_nothing_o
 
 
 def test_the_zone_figure_takes_a_2d_landscape_as_a_heat_map(tmp_path):
+    from vbl_robust.report.figures import plot_zones
     from vbl_robust.search import make_optimizer
-    from vbl_robust.zones import plot_zones, zones
+    from vbl_robust.search.zones import zones
 
     box = BOX.box
     f = lambda x: np.where(x[:, 0] > GATE, 5000.0, 20.0 + np.abs(x[:, 0]))  # noqa: E731

@@ -56,6 +56,8 @@ _LAZY: dict[str, str] = {
     "Job": ".spec",
     "roll_box": ".spec",
     "roll_contrast_box": ".spec",
+    "job_zones": ".replay",
+    "zones_of_run": ".replay",
     "JobRow": ".store",
     "JobStatus": ".store",
     "Points": ".store",
@@ -90,6 +92,7 @@ __all__ = [
     "export",
     "file_sha256",
     "find_lard_files",
+    "job_zones",
     "load_samples",
     "phi_crit",
     "plan",
@@ -102,6 +105,7 @@ __all__ = [
     "smallest_breach_levels",
     "summarize",
     "survival_rate",
+    "zones_of_run",
 ]
 
 

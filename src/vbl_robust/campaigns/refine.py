@@ -1,9 +1,9 @@
 """Refine a stored run's vulnerability zones: more evaluations where its searches left Θ undecided.
 
 What ``vbl-robust audit --refine-zones BUDGET`` does after the audit: for each main search job whose method keeps a
-cover of the box (DIRECT family, grid), its zones are rebuilt from the store (:func:`vbl_robust.zones.job_zones`,
+cover of the box (DIRECT family, grid), its zones are rebuilt from the store (:func:`vbl_robust.campaigns.replay.job_zones`,
 nothing re-evaluated) and ``budget`` more evaluations are spent inside its undecided zones
-(:func:`vbl_robust.zones.refine_zones`: GeoRobust per zone, largest first), under the given Lipschitz constant
+(:func:`vbl_robust.search.zones.refine_zones`: GeoRobust per zone, largest first), under the given Lipschitz constant
 (sound) or else each search's own estimate. The result — per job the class fractions before and after and the
 refined zones — is written to ``RUN/zones_refined.json``.
 """
@@ -20,7 +20,7 @@ __all__ = ["Refined", "refine_run"]
 
 @dataclass(frozen=True)
 class Refined:
-    """One refined job: its image index, method and the :class:`~vbl_robust.zones.Refinement`."""
+    """One refined job: its image index, method and the :class:`~vbl_robust.search.zones.Refinement`."""
 
     sample_index: int
     method: str
@@ -32,11 +32,12 @@ def refine_run(run: str | Path, samples: list, detector: Any, budget: int, *,
     """Refine the zones of every main search job of the run directory ``run`` (module docstring); ``samples`` are
     the run's samples (matched by id), ``detector`` what :func:`~vbl_robust.campaigns.work.detector_for` takes.
 
-    Returns the path of ``zones_refined.json`` and the refined jobs. Raises :class:`~vbl_robust.zones.ReplayError`
+    Returns the path of ``zones_refined.json`` and the refined jobs. Raises :class:`~vbl_robust.campaigns.replay.ReplayError`
     when a stored search cannot be replayed, ``ValueError`` when a stored sample is not among ``samples``.
     """
+    from ..campaigns.replay import ReplayError, job_zones
     from ..pipeline import Objective
-    from ..zones import ReplayError, job_zones, refine_zones
+    from ..search.zones import refine_zones
     from .spec import CampaignSpec
     from .store import ResultStore
     from .work import detector_for

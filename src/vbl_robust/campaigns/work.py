@@ -164,7 +164,7 @@ def search_kwargs(options: Mapping[str, Any], budget: Any, *, eps_safe_m: float,
                   seed: int | None) -> dict[str, Any]:
     """The optimizer's arguments of a search job apart from its time budget: evaluation and iteration budgets, the
     early stop at ε_safe, the seed and the method's options (the run's ``lipschitz`` unless the job sets one).
-    :func:`run_search_job` runs a job with them and :func:`vbl_robust.zones.replay` rebuilds its optimizer."""
+    :func:`run_search_job` runs a job with them and :func:`vbl_robust.campaigns.replay.replay` rebuilds its optimizer."""
     opts = dict(options)
     if lipschitz is not None and "lipschitz" not in opts:
         opts["lipschitz"] = lipschitz  # it changes no point

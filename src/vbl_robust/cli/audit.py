@@ -15,7 +15,13 @@ import typer
 
 from vbl_robust.perturb.registry import PERTURBATIONS, known
 
-from .common import QUIET_HELP, VERBOSE_HELP, fail, parse_lipschitz, parse_range, set_verbosity
+from . import options as o
+from .common import (
+    fail,
+    parse_lipschitz,
+    parse_range,
+    set_verbosity,
+)
 
 METHODS_DEFAULT = "georobust-av,random,apgd"  # = vbl_robust.campaigns.experiments.AUDIT_METHODS
 
@@ -24,19 +30,6 @@ METHODS_DEFAULT = "georobust-av,random,apgd"  # = vbl_robust.campaigns.experimen
 #: Fixed corner noise of the oracle stand-in (``--oracle``, or no validated model installed): exact corners
 #: make L(θ) flat in roll (< 1 cm), which shows nothing; 1 px is about what a good detector achieves.
 DEMO_ORACLE_NOISE_PX = 1.0
-
-
-ENGINE_HELP = ("Inference engine of the black-box path: auto (ONNX Runtime when installed), torch, onnxruntime or "
-               "openvino — always fp32; the outputs stay within 1e-3 px of torch's, APGD stays on torch.")
-WAIT_HELP = "When another run is writing the same --out, wait for it to end instead of refusing."
-RETRY_HELP = ("Run the jobs stored as failed again (e.g. after a missing image was restored); a plain rerun skips "
-              "them.")
-WORKERS_HELP = ("Worker processes of a local run, one torch thread each (default 0: one per core, or "
-                "$VBL_ROBUST_WORKERS); 1 runs in this process.")
-CLOCK_HELP = ("Clock of time budgets: process (CPU seconds of the evaluating process, which other work on the machine "
-              "does not move), wall, or auto (process on a CPU, wall on a GPU). Recorded with the results.")
-DEVICE_HELP = ("Where the pipeline runs: cpu (default), cuda, cuda:N, or auto (CUDA when available). On a GPU the "
-               "perturbation, views, detector and differentiable PnP run there; --engine auto then means torch.")
 
 
 def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_noise: float,
@@ -162,11 +155,6 @@ def parse_methods(text: str) -> tuple[str, ...]:
     if twice:
         raise typer.BadParameter(f"--methods {text}: {', '.join(twice)} given more than once")
     return methods
-
-
-METHOD_OPTION_HELP = ("A search method's option, METHOD.OPTION=VALUE (repeatable; VALUE read as YAML: 9, 0.5, true, "
-                      "[3, 5]), e.g. georobust-a.min_ratio=9 or georobust.alpha=3; recorded in the store and the "
-                      "job keys.")
 
 
 def parse_method_options(values: list[str] | None) -> dict[str, dict[str, Any]]:
@@ -359,21 +347,17 @@ def register(app: typer.Typer) -> None:
     def audit(
         out: Path = typer.Option(Path("runs/audit"), "--out", help="Run directory (results.sqlite, report.html)."),
         n: int = typer.Option(20, "--n", "--images", min=1, help="Number of images."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the image choice and of the searches."),
-        lard: Path | None = typer.Option(None, "--lard", help="LARD V2 dataset directory (CSV + runway DB JSON) "
-                                         "instead of generated synthetic approaches."),
-        width: int = typer.Option(1024, help="Synthetic image width (px)."),
-        height: int = typer.Option(1024, help="Synthetic image height (px)."),
-        model: Path | None = typer.Option(None, "--model", help="Detector: a YOLO-pose .pt or .onnx file, or 'default' "
-                                          "for the shipped model (default: the shipped model once it is validated, "
-                                          "else the oracle)."),
-        trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading a .pt pickle from outside the package."),
-        design: str = typer.Option("auto", "--detector", help="Detector design: auto (the shipped model's own; a "
-                                   "user's model as one pass), single (one pass: the paper's pipeline) or twostage."),
-        engine: str = typer.Option("auto", "--engine", help=ENGINE_HELP),
-        device: str = typer.Option("cpu", "--device", help=DEVICE_HELP),
-        oracle: bool = typer.Option(False, "--oracle", help="Use the oracle detector (exact projected corners)."),
-        oracle_noise: float = typer.Option(0.0, "--oracle-noise", help="Oracle: fixed per-image corner noise (px)."),
+        seed: int = o.SEED,
+        lard: Path | None = o.LARD,
+        width: int = o.WIDTH,
+        height: int = o.HEIGHT,
+        model: Path | None = o.MODEL,
+        trust_model: bool = o.TRUST_MODEL,
+        design: str = o.DESIGN,
+        engine: str = o.ENGINE,
+        device: str = o.DEVICE,
+        oracle: bool = o.ORACLE,
+        oracle_noise: float = o.ORACLE_NOISE,
         roll: str = typer.Option("15", "--roll", help="Roll range in degrees: '15' (= ±15) or 'lo,hi'; 'none' to omit."),
         contrast: str | None = typer.Option(None, "--contrast", help="Contrast factor range 'lo,hi' (e.g. 0.7,1.4)."),
         perturb: list[str] | None = typer.Option(None, "--perturb", help="Another perturbation family and its range, "
@@ -381,7 +365,7 @@ def register(app: typer.Typer) -> None:
                                                  f"range): {known()} (roll_deg here replaces --roll; contrast "
                                                  "here or in --contrast, not both)."),
         methods: str = typer.Option(METHODS_DEFAULT, "--methods", help="Comma-separated search methods."),
-        method_option: list[str] | None = typer.Option(None, "--method-option", help=METHOD_OPTION_HELP),
+        method_option: list[str] | None = o.METHOD_OPTION,
         max_evals: int | None = typer.Option(200, "--max-evals", help="Evaluations per image and method (0 = no "
                                                  "evaluation cap: then give --max-seconds)."),
         max_seconds: float | None = typer.Option(None, "--max-seconds", help="Seconds per image and method."),
@@ -392,17 +376,17 @@ def register(app: typer.Typer) -> None:
         pnp: str = typer.Option("ippe_lm", "--pnp", help="PnP solver: ippe_lm, iterative, sqpnp, ippe."),
         landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="Dense grid on the first image for the "
                                        "report's landscape figure."),
-        executor: str = typer.Option("local", "--executor", help="local or ray."),
-        workers: int = typer.Option(0, "--workers", help=WORKERS_HELP),
-        clock: str = typer.Option("auto", "--clock", help=CLOCK_HELP),
-        wait: bool = typer.Option(False, "--wait", help=WAIT_HELP),
-        retry_failed: bool = typer.Option(False, "--retry-failed", help=RETRY_HELP),
-        address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: start a local Ray)."),
-        csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to this CSV file."),
-        parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to this Parquet file."),
-        report: bool = typer.Option(True, "--report/--no-report", help="Write report.html into --out."),
-        quiet: bool = typer.Option(False, "--quiet", "-q", help=QUIET_HELP),
-        verbose: bool = typer.Option(False, "--verbose", "-v", help=VERBOSE_HELP),
+        executor: str = o.EXECUTOR,
+        workers: int = o.WORKERS,
+        clock: str = o.CLOCK,
+        wait: bool = o.WAIT,
+        retry_failed: bool = o.RETRY_FAILED,
+        address: str | None = o.ADDRESS,
+        csv: Path | None = o.CSV,
+        parquet: Path | None = o.PARQUET,
+        report: bool = o.REPORT,
+        quiet: bool = o.QUIET,
+        verbose: bool = o.VERBOSE,
         sequences: str | None = typer.Option(None, "--sequences", help="Audit approach sequences instead of images: "
                                              "a number N (generated) or a LARD V2 directory grouped into sequences; "
                                              "one θ is held over each sequence (see --sustain)."),
@@ -493,17 +477,17 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def demo(
         out: Path = typer.Option(Path("runs/demo"), "--out", help="Run directory."),
-        n: int = typer.Option(10, "--n", min=1, help="Number of synthetic images."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the synthetic images and of every search."),
+        n: int = typer.Option(10, "--n", "--images", min=1, help="Number of synthetic images."),
+        seed: int = o.SEED,
         max_evals: int = typer.Option(40, "--max-evals", min=1, help="Evaluations per image and method."),
-        oracle: bool = typer.Option(False, "--oracle", help="Use the oracle detector instead of the shipped model."),
-        engine: str = typer.Option("auto", "--engine", help=ENGINE_HELP),
-        device: str = typer.Option("cpu", "--device", help=DEVICE_HELP),
+        oracle: bool = o.ORACLE,
+        engine: str = o.ENGINE,
+        device: str = o.DEVICE,
         landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="Dense 21 × 11 grid on the first "
                                        "image for the report's landscape figure."),
-        workers: int = typer.Option(0, "--workers", help=WORKERS_HELP),
-        quiet: bool = typer.Option(False, "--quiet", "-q", help=QUIET_HELP),
-        verbose: bool = typer.Option(False, "--verbose", "-v", help=VERBOSE_HELP),
+        workers: int = o.WORKERS,
+        quiet: bool = o.QUIET,
+        verbose: bool = o.VERBOSE,
     ) -> None:
         """A small audit on the defaults (10 synthetic images, georobust-av / random / APGD, roll ±15° and contrast
         [0.7, 1.4], early stop at a breach) with its HTML report — a few minutes on a laptop CPU."""

@@ -1,4 +1,4 @@
-"""Helpers shared by the CLI commands: one-line errors, verbosity."""
+"""Helpers shared by the CLI commands: one-line errors, verbosity (the shared options: :mod:`.options`)."""
 
 from __future__ import annotations
 
@@ -6,9 +6,6 @@ import logging
 import math
 
 import typer
-
-QUIET_HELP = "No progress bar or tables (also accepted before the command: vbl-robust -q COMMAND)."
-VERBOSE_HELP = "Log progress details (INFO) (also accepted before the command: vbl-robust -v COMMAND)."
 
 #: what the options before the command said (``vbl-robust -q audit …``)
 _GLOBAL = {"quiet": False, "verbose": False}

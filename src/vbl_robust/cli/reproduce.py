@@ -13,14 +13,8 @@ from typing import Any
 
 import typer
 
+from . import options as o
 from .audit import (
-    CLOCK_HELP,
-    DEVICE_HELP,
-    ENGINE_HELP,
-    METHOD_OPTION_HELP,
-    RETRY_HELP,
-    WAIT_HELP,
-    WORKERS_HELP,
     check_exports,
     detector_spec,
     finish,
@@ -31,7 +25,10 @@ from .audit import (
     run_with_progress,
     with_method_options,
 )
-from .common import QUIET_HELP, VERBOSE_HELP, fail, set_verbosity
+from .common import (
+    fail,
+    set_verbosity,
+)
 
 
 def _floats(text: str | None, name: str) -> tuple[float, ...] | None:
@@ -100,21 +97,20 @@ def register(app: typer.Typer) -> None:
         out: Path | None = typer.Option(None, "--out", help="Run directory (default runs/<experiment>)."),
         images: int | None = typer.Option(None, "--images", min=1, help="Number of images (default: the paper's, "
                                           "100; 1000 for pnp-validation)."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the image choice and of the searches."),
-        lard: Path | None = typer.Option(None, "--lard", help="LARD V2 dataset directory instead of synthetic scenes."),
-        width: int = typer.Option(1024, help="Synthetic image width (px)."),
-        height: int = typer.Option(1024, help="Synthetic image height (px)."),
-        model: Path | None = typer.Option(None, "--model", help="Detector .pt/.onnx (default: the shipped model)."),
-        trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading a .pt pickle from outside the package."),
-        design: str = typer.Option("auto", "--detector", help="Detector design: auto (the shipped model's own; a "
-                                   "user's model as one pass), single (one pass: the paper's pipeline) or twostage."),
-        engine: str = typer.Option("auto", "--engine", help=ENGINE_HELP),
-        device: str = typer.Option("cpu", "--device", help=DEVICE_HELP),
-        oracle: bool = typer.Option(False, "--oracle", help="Use the oracle detector (exact projected corners)."),
-        oracle_noise: float = typer.Option(0.0, "--oracle-noise", help="Oracle: fixed per-image corner noise (px)."),
+        seed: int = o.SEED,
+        lard: Path | None = o.LARD,
+        width: int = o.WIDTH,
+        height: int = o.HEIGHT,
+        model: Path | None = o.MODEL,
+        trust_model: bool = o.TRUST_MODEL,
+        design: str = o.DESIGN,
+        engine: str = o.ENGINE,
+        device: str = o.DEVICE,
+        oracle: bool = o.ORACLE,
+        oracle_noise: float = o.ORACLE_NOISE,
         methods: str | None = typer.Option(None, "--methods", help="Comma-separated methods (default "
                                            "georobust,georobust-av,random,apgd; families: the same less apgd)."),
-        method_option: list[str] | None = typer.Option(None, "--method-option", help=METHOD_OPTION_HELP),
+        method_option: list[str] | None = o.METHOD_OPTION,
         landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="spatial-2d / runtime-2d: the dense "
                                        "61 × 36 grid on the first image (the report's heat map, about 2200 "
                                        "evaluations)."),
@@ -130,25 +126,25 @@ def register(app: typer.Typer) -> None:
         family_grid: int | None = typer.Option(None, "--family-grid", min=0, help="Families: fewest points of each "
                                                "family's dense-grid reference over its largest level (default 201; "
                                                "0 = none)."),
-        executor: str = typer.Option("local", "--executor", help="local or ray."),
-        workers: int = typer.Option(0, "--workers", help=WORKERS_HELP),
-        clock: str = typer.Option("auto", "--clock", help=CLOCK_HELP),
-        wait: bool = typer.Option(False, "--wait", help=WAIT_HELP),
-        retry_failed: bool = typer.Option(False, "--retry-failed", help=RETRY_HELP),
+        executor: str = o.EXECUTOR,
+        workers: int = o.WORKERS,
+        clock: str = o.CLOCK,
+        wait: bool = o.WAIT,
+        retry_failed: bool = o.RETRY_FAILED,
         resume_from: Path | None = typer.Option(None, "--resume-from", help="A bundle written with `vbl-robust "
                                                 "bundle --stores`: its stores seed the run directories under --out "
                                                 "that have none yet, so the run goes on where the bundle's ended."),
-        address: str | None = typer.Option(None, "--address", help="Ray cluster address (default: a local Ray)."),
-        csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to CSV."),
-        parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to Parquet."),
-        report: bool = typer.Option(True, "--report/--no-report", help="Write report.html into --out."),
+        address: str | None = o.ADDRESS,
+        csv: Path | None = o.CSV,
+        parquet: Path | None = o.PARQUET,
+        report: bool = o.REPORT,
         estimate: bool = typer.Option(False, "--estimate", help="Print each experiment's expected duration "
                                       "(from a measured probe of the detector here and the breach rates of the first "
                                       "images) and its upper bound, and exit."),
         probe_seconds: float = typer.Option(5.0, "--probe-seconds", min=0.01, help="--estimate: seconds each "
                                             "evaluation-rate probe runs (black box, gradient)."),
-        quiet: bool = typer.Option(False, "--quiet", "-q", help=QUIET_HELP),
-        verbose: bool = typer.Option(False, "--verbose", "-v", help=VERBOSE_HELP),
+        quiet: bool = o.QUIET,
+        verbose: bool = o.VERBOSE,
     ) -> None:
         """Run one of the paper's experiments, or all; rerunning the same command resumes it."""
         from vbl_robust.campaigns.experiments import Options, with_options

@@ -1,8 +1,8 @@
 """``vbl-robust zones RUN``: the vulnerability zones of a stored run; and ``audit --refine-zones``'s refinement.
 
 The zones of each search job are rebuilt by replaying its method on the stored values
-(:func:`vbl_robust.zones.replay`: nothing is evaluated) and classified breached / undecided / ruled out
-(:mod:`vbl_robust.zones`). Output: JSON (one object per job: identity, box, class fractions, zones), CSV (one
+(:func:`vbl_robust.campaigns.replay.replay`: nothing is evaluated) and classified breached / undecided / ruled out
+(:mod:`vbl_robust.search.zones`). Output: JSON (one object per job: identity, box, class fractions, zones), CSV (one
 row per zone, with its job's identity and fractions) or Markdown (the mean class fractions per method and box);
 jobs of methods without a cover (random, Sobol, APGD) are
 listed as skipped with the reason.
@@ -41,7 +41,8 @@ def register(app: typer.Typer) -> None:
         plot: Path | None = typer.Option(None, "--plot", help="Also draw each 1-D/2-D job's zones to DIR/<key>.png."),
     ) -> None:
         """Breached / undecided / ruled-out zones of Θ for each search job of a run (replayed, not re-evaluated)."""
-        from vbl_robust.zones import ReplayError, plot_zones, zones_of_run
+        from vbl_robust.campaigns.replay import ReplayError, zones_of_run
+        from vbl_robust.report.figures import plot_zones
 
         if fmt not in FORMATS:
             fail(f"--format {fmt}: choose json, csv or md")
@@ -125,7 +126,7 @@ def refine_audit(out: Path, samples: list, detector: Any, budget: int, *,
                  lipschitz: float | tuple[float, ...] | None, quiet: bool = False) -> Path:
     """After an audit: :func:`vbl_robust.campaigns.refine.refine_run`, then how the fractions changed (a table)."""
     from vbl_robust.campaigns.refine import refine_run
-    from vbl_robust.zones import ReplayError
+    from vbl_robust.campaigns.replay import ReplayError
 
     try:
         path, refined = refine_run(out, samples, detector, budget, lipschitz=lipschitz)

@@ -12,9 +12,9 @@ evaluations (``n_failed``) and their counts per failure reason.
 
 Vulnerability zones (:func:`section_zones`, after the landscape) need no declaration: a run with main jobs of a
 method that keeps a cover of its box (DIRECT family, grid) gets them. Each such job is replayed on its stored
-values (:func:`vbl_robust.zones.job_zones`: no evaluation) and classified sound under the run's Lipschitz
+values (:func:`vbl_robust.campaigns.replay.job_zones`: no evaluation) and classified sound under the run's Lipschitz
 constant, else on the method's own estimate (labelled "not sound"); the landscape image's jobs are drawn over its
-landscape (:func:`vbl_robust.zones.plot_zones`), and a table gives the fractions of Θ per class over all jobs.
+landscape (:func:`vbl_robust.report.figures.plot_zones`), and a table gives the fractions of Θ per class over all jobs.
 A job whose replay fails is listed as skipped, with the reason.
 
 Budgets read off a trace (the runtime experiments' anytime methods): the main rows are derived per read budget
@@ -38,11 +38,13 @@ import numpy as np
 
 from ..campaigns import metrics as mx
 from ..campaigns.experiments import EXPERIMENTS, range_text
+from ..campaigns.replay import JobZones, ReplayError, job_zones
 from ..campaigns.spec import FIGURES, BoxSpec, CampaignSpec
 from ..campaigns.store import JobRow, JobStatus, ResultStore
 from ..constants import FAILURE_REASONS, Verdict
+from ..report.figures import plot_zones
 from ..search import METHODS, NON_FINITE
-from ..zones import CLASSES, JobZones, ReplayError, ZoneMap, job_zones, plot_zones
+from ..search.zones import CLASSES, ZoneMap
 from . import figures as F
 from .html import esc, figure_png, fmt_num, img, page, table
 
@@ -85,7 +87,7 @@ class Context:
         return img(png, name, caption)
 
     def figure_file(self, path: Path, name: str, caption: str) -> str:
-        """A PNG already written under ``figures/`` (e.g. by :func:`vbl_robust.zones.plot_zones`), embedded."""
+        """A PNG already written under ``figures/`` (e.g. by :func:`vbl_robust.report.figures.plot_zones`), embedded."""
         self.figures.append(path)
         return img(path.read_bytes(), name, caption)
 
@@ -473,7 +475,7 @@ class Zoned:
 
 
 def _zones_of(row: JobRow, spec: CampaignSpec) -> Zoned:
-    """:func:`~vbl_robust.zones.job_zones` on the run's basis: its Lipschitz constant (sound) when it has one, else
+    """:func:`~vbl_robust.campaigns.replay.job_zones` on the run's basis: its Lipschitz constant (sound) when it has one, else
     the method's own slope estimate (a map whose cells carry none, a single evaluated cell, keeps no ruled-out
     zone). A replay that fails skips the job, with the reason, and never the report."""
     try:

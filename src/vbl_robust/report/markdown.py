@@ -161,9 +161,9 @@ def families_markdown(run: str | Path, series: str = "all") -> str:
 
 
 def zones_markdown(jobs: Sequence) -> str:
-    """Zone fractions per method and box of :func:`vbl_robust.zones.zones_of_run`'s jobs, with the basis their
+    """Zone fractions per method and box of :func:`vbl_robust.campaigns.replay.zones_of_run`'s jobs, with the basis their
     "ruled out" rests on (a given Lipschitz constant: sound; the searches' own estimates: not sound)."""
-    from ..zones import CLASSES
+    from ..search.zones import CLASSES
 
     def basis(zm) -> str:
         if zm.basis == "sound":

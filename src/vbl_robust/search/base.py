@@ -347,7 +347,7 @@ class Optimizer:
 
         DIRECT family: the current rectangles (a batch asked but not yet told is not part of them). Grid: one cell
         per node, half a spacing around it clipped to the box; nodes not evaluated yet are cells with
-        ``failed=True``. The cells are what :mod:`vbl_robust.zones` classifies into breached / undecided / ruled-out
+        ``failed=True``. The cells are what :mod:`vbl_robust.search.zones` classifies into breached / undecided / ruled-out
         zones.
         """
         return None

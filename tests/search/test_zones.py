@@ -1,4 +1,4 @@
-"""Vulnerability zones (:mod:`vbl_robust.zones`) on functions whose breach set and Lipschitz constant are known."""
+"""Vulnerability zones (:mod:`vbl_robust.search.zones`) on functions whose breach set and Lipschitz constant are known."""
 
 from __future__ import annotations
 
@@ -10,11 +10,13 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import vbl_robust as vr
+from vbl_robust.campaigns.replay import ReplayError, job_zones, replay, zones_of_run
 from vbl_robust.campaigns.spec import BoxSpec, Budget
 from vbl_robust.campaigns.store import JobRow, Points
+from vbl_robust.report.figures import plot_zones
 from vbl_robust.search import Cells, Evaluations, make_optimizer
+from vbl_robust.search.zones import CLASSES, refine_zones, zones
 from vbl_robust.space import ParameterBox
-from vbl_robust.zones import CLASSES, ReplayError, job_zones, plot_zones, refine_zones, replay, zones
 
 EPS = 1000.0
 BOX1 = ParameterBox({"roll_deg": (-10.0, 10.0)})
@@ -281,8 +283,9 @@ def test_plot_zones_draws_1d_and_2d(tmp_path):
         plot_zones(zones(run("direct", box3, lambda x: x.sum(axis=1), max_evals=20).cells(), EPS), tmp_path / "c.png")
 
 
-def test_the_package_exposes_zones():
-    assert vr.zones.zones is zones and "zones" in vr.__all__
+def test_the_package_exposes_zones_where_they_live():
+    assert vr.search.zones.zones is zones and vr.campaigns.zones_of_run is zones_of_run
+    assert "zones_of_run" in vr.campaigns.__all__
 
 
 @pytest.mark.parametrize("lipschitz", [None, 1e-3])
