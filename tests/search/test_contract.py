@@ -278,3 +278,15 @@ def test_gradient_methods_call_the_objective_with_a_tensor_the_others_with_an_ar
     seen.clear()
     maximize(f, box, "direct", max_evals=30)
     assert set(seen) == {np.ndarray}
+
+
+def test_every_method_names_and_labels_itself_once():
+    """The registry key is the class's ``name``; its display label (figures, reports) lives on the class too."""
+    from vbl_robust.report.figures import style
+    from vbl_robust.search import METHODS
+
+    labels = set()
+    for key, cls in METHODS.items():
+        assert cls.name == key and cls.label and style(key)["label"] == cls.label
+        labels.add(cls.label)
+    assert len(labels) == len(METHODS)

@@ -29,15 +29,15 @@ REFERENCE = "grid (reference)"
 #: The families' combined series (:data:`vbl_robust.campaigns.metrics.ANY_METHOD`).
 ANY_METHOD = "any method"
 STYLE: dict[str, dict[str, Any]] = {
-    "georobust": {"color": "#1f77b4", "marker": "o", "label": "GeoRobust"},
-    "georobust-a": {"color": "#17becf", "marker": "P", "label": "GeoRobust-A (adaptive metric)"},
-    "georobust-av": {"color": "#ff7f0e", "marker": "X", "label": "GeoRobust-AV (adaptive + vertices)"},
-    "random": {"color": "#2ca02c", "marker": "s", "label": "Random"},
-    "apgd": {"color": "#d62728", "marker": "^", "label": "APGD"},
-    "sobol": {"color": "#9467bd", "marker": "D", "label": "Sobol"},
-    "direct": {"color": "#8c564b", "marker": "v", "label": "DIRECT"},
-    "direct-l": {"color": "#e377c2", "marker": "<", "label": "DIRECT-L"},
-    "grid": {"color": "black", "marker": ".", "label": "grid"},
+    "georobust": {"color": "#1f77b4", "marker": "o"},
+    "georobust-a": {"color": "#17becf", "marker": "P"},
+    "georobust-av": {"color": "#ff7f0e", "marker": "X"},
+    "random": {"color": "#2ca02c", "marker": "s"},
+    "apgd": {"color": "#d62728", "marker": "^"},
+    "sobol": {"color": "#9467bd", "marker": "D"},
+    "direct": {"color": "#8c564b", "marker": "v"},
+    "direct-l": {"color": "#e377c2", "marker": "<"},
+    "grid": {"color": "black", "marker": "."},
     REFERENCE: {"color": "black", "marker": "", "label": "grid (true worst case)", "linestyle": "--"},
     ANY_METHOD: {"color": "#7f7f7f", "marker": "", "label": "any method (grid included)", "linestyle": ":"},
 }
@@ -46,9 +46,12 @@ EPS_STYLE = {"color": "#d62728", "linestyle": ":", "linewidth": 1.2}
 
 
 def style(method: str) -> dict[str, Any]:
-    """Plot style of a method (a grey default for unknown names)."""
-    s = STYLE.get(method, {"color": "grey", "marker": "x", "label": method})
-    return {"linestyle": "-", **s}
+    """Plot style of a method (a grey default for unknown names); its label is the optimizer class's."""
+    from ..search import METHODS
+
+    s = STYLE.get(method, {"color": "grey", "marker": "x"})
+    label = s.get("label") or (METHODS[method].label if method in METHODS else method)
+    return {"linestyle": "-", **s, "label": label}
 
 
 def method_order(methods: Iterable[str]) -> list[str]:

@@ -104,6 +104,7 @@ class AdaptiveGeoRobust(GeoRobust):
     """
 
     name: ClassVar[str] = "georobust-a"
+    label: ClassVar[str] = "GeoRobust-A (adaptive metric)"
     _arrays: ClassVar[tuple[str, ...]] = (*GeoRobust._arrays, "_local", "_deferred")
     _inherited: ClassVar[tuple[str, ...]] = ("_local", "_deferred")
 
@@ -190,4 +191,5 @@ class AdaptiveGeoRobustV(AdaptiveGeoRobust):
     ``georobust-a`` stay what they are (a resumed store never mixes the two)."""
 
     name: ClassVar[str] = "georobust-av"
+    label: ClassVar[str] = "GeoRobust-AV (adaptive + vertices)"
     defaults: ClassVar[dict[str, Any]] = {**AdaptiveGeoRobust.defaults, "vertices": True}

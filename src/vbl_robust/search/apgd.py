@@ -67,6 +67,7 @@ class APGD(Optimizer):
     """
 
     name: ClassVar[str] = "apgd"
+    label: ClassVar[str] = "APGD"
     needs_gradient: ClassVar[bool] = True
     anytime: ClassVar[bool] = False  # n_iter (the step-size schedule) is fitted to max_evals
 

@@ -107,6 +107,8 @@ class Optimizer:
     """
 
     name: ClassVar[str] = ""
+    #: The method's name in figures and reports.
+    label: ClassVar[str] = ""
     needs_gradient: ClassVar[bool] = False
     #: The points asked for do not depend on the budgets (see the module docstring).
     anytime: ClassVar[bool] = True

@@ -83,6 +83,7 @@ class Direct(Optimizer):
     """
 
     name: ClassVar[str] = "direct"
+    label: ClassVar[str] = "DIRECT"
     covers: ClassVar[bool] = True
     #: Per-rectangle arrays (first axis = rectangle), and those a child copies from its parent when created.
     _arrays: ClassVar[tuple[str, ...]] = ("_centers", "_levels", "_g", "_failed")
@@ -399,6 +400,7 @@ class DirectL(Direct):
     """Gablonsky's locally biased DIRECT-L: half-longest-side size, one rectangle per (size, value) group."""
 
     name: ClassVar[str] = "direct-l"
+    label: ClassVar[str] = "DIRECT-L"
     defaults: ClassVar[dict[str, Any]] = {"size": "side", "ties": "one", "alpha": 1, "f_scale": 0.0}
 
 
@@ -413,4 +415,5 @@ class GeoRobust(Direct):
     optimal, and |PO_k| triples with each iteration (measured 1 → 3 → 8 → … → 1999 by k = 9)."""
 
     name: ClassVar[str] = "georobust"
+    label: ClassVar[str] = "GeoRobust"
     defaults: ClassVar[dict[str, Any]] = {"size": "side", "ties": "alpha", "alpha": 2, "f_scale": "auto"}

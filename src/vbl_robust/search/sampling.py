@@ -47,6 +47,7 @@ class RandomSearch(_Batched):
     """Uniform random search (``numpy.random.default_rng(seed)``), ``batch_size`` points per iteration."""
 
     name: ClassVar[str] = "random"
+    label: ClassVar[str] = "Random"
 
     def __init__(self, box: ParameterBox, *, batch_size: int = 64, **budget: Any):
         super().__init__(box, batch_size=batch_size, **budget)
@@ -61,6 +62,7 @@ class SobolSearch(_Batched):
     of ``batch_size`` (powers of two keep its balance properties)."""
 
     name: ClassVar[str] = "sobol"
+    label: ClassVar[str] = "Sobol"
 
     def __init__(self, box: ParameterBox, *, batch_size: int = 64, **budget: Any):
         super().__init__(box, batch_size=batch_size, **budget)
@@ -100,6 +102,7 @@ class GridSearch(Optimizer):
     """
 
     name: ClassVar[str] = "grid"
+    label: ClassVar[str] = "grid"
     covers: ClassVar[bool] = True
 
     def __init__(
