@@ -1,4 +1,5 @@
-"""The detector's evaluation protocol (issue 14): a validation set for every choice, test seeds for the figures.
+"""The detector's evaluation protocol (issue 14; seeds, gates and goals: :mod:`vbl_robust.detect.protocol`): a
+validation set for every choice, test seeds for the figures.
 
 - **Validation** (``VALIDATION_SEEDS``, 510 approaches each): the sets every choice is made on — checkpoints,
   schedules, data mixes — compared on their pooled rows. Seed 20261122 is the former benchmark set on which v5,
@@ -33,11 +34,9 @@ import time
 
 import torch
 
-from vbl_robust.detect.evaluate import GATES, GOALS
+from vbl_robust.detect.protocol import GATES, GOALS, TEST_SEEDS, VALIDATION_SEEDS
 
-VALIDATION_SEEDS = (20_261_122, 20_261_202, 20_261_203, 20_261_204)
 VALIDATION_SEED = VALIDATION_SEEDS[0]  # the first validation seed (older tools' default)
-TEST_SEEDS = (777_001, 31_337, 4_242)
 
 
 def detector(model: str | None, second: str | None = None, **window):

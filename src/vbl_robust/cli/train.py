@@ -1,4 +1,5 @@
-"""``vbl-robust train``: train (or keep training) the runway-corner YOLOv8n-pose, offline, resumable."""
+"""``vbl-robust train``: train (or keep training) the runway-corner YOLOv8n-pose, offline, resumable;
+``vbl-robust ship``: make a trained checkpoint the default model when the protocol's rule allows it."""
 
 from __future__ import annotations
 
@@ -25,7 +26,6 @@ def register(app: typer.Typer) -> None:
         detector: str = typer.Option("twostage", "--detector", help="'twostage' (full view + runway crop) or 'single'."),
         init: str = typer.Option(None, "--init", help="Initial weights of a first stage: a .pt path or 'default' (the shipped model)."),
         trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading an --init .pt pickle from outside the package."),
-        ship_model: bool = typer.Option(False, "--ship", help="Copy the stage's best weights into the package as the default model."),
         crops: int = typer.Option(2, "--crops", min=0, help="Jittered runway crops rendered per training sample (two-stage)."),
         crops_used: int = typer.Option(None, "--crops-used", min=0, help="Train on only the first N crops of each sample (more weight on full views)."),
         min_box: float = typer.Option(None, "--min-box", min=0, help="Minimum labelled box side in view pixels (default 7.5 % of --imgsz)."),
@@ -69,7 +69,53 @@ def register(app: typer.Typer) -> None:
                            appearance=tr.AppearanceJitter() if appearance else None, full_views=not crops_only)
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
-        typer.echo(f"stage {res.stage_dir.name}: best weights {res.best}")
-        if ship_model:
-            path = tr.ship(res.best, detector=detector, imgsz=imgsz)
-            typer.echo(f"shipped {path} (update MODEL_CARD.md with the benchmark: python benchmarks/bench_detector.py)")
+        typer.echo(f"stage {res.stage_dir.name}: best weights {res.best} (measure it with "
+                   "benchmarks/detector_protocol.py --model ... --json P.json, then vbl-robust ship)")
+
+    @app.command()
+    def ship(
+        checkpoint: Path = typer.Argument(..., help="The trained weights (.pt) to ship."),
+        version: int = typer.Option(..., "--version", min=1, help="The model's version number (default.json)."),
+        epochs: int = typer.Option(..., "--epochs", min=0, help="Epochs the model was trained in all (default.json)."),
+        protocol: Path = typer.Option(..., "--protocol", help="The checkpoint's protocol JSON (benchmarks/"
+                                      "detector_protocol.py --split all --json): default.json's note, gate and open "
+                                      "goals are computed from it."),
+        against: Path | None = typer.Option(None, "--against", help="The shipped model's protocol JSON: the "
+                                            "replacement rule (more pooled validation approaches survive, exact "
+                                            "McNemar p < 0.05) is checked before anything is written."),
+        force: bool = typer.Option(False, "--force", help="Ship even without --against or when the rule is not met "
+                                   "(a first model, or a rule set aside on purpose: say why in the model card)."),
+        trust_model: bool = typer.Option(False, "--trust-model", help="The checkpoint is a pickle: confirm you trust it."),
+    ) -> None:
+        """Ship a trained checkpoint as the default detector (two-stage, 320 px), default.json from its protocol."""
+        import json
+
+        from vbl_robust.detect.protocol import info_from_protocol, replacement_verdict
+
+        if not checkpoint.is_file():
+            fail(f"{checkpoint}: file not found")
+        if not trust_model:
+            fail(f"{checkpoint}: a .pt file is a pickle that runs code when loaded; pass --trust-model if you trust it")
+        try:
+            result = json.loads(protocol.read_text())
+            shipped = json.loads(against.read_text()) if against is not None else None
+        except (OSError, ValueError) as exc:
+            fail(f"--protocol/--against: {exc}")
+        if shipped is None and not force:
+            fail("--against SHIPPED.json is required (the replacement rule); --force skips it")
+        if shipped is not None:
+            ok, why = replacement_verdict(result, shipped)
+            typer.echo(f"replacement rule {'met' if ok else 'NOT met'}: {why}")
+            if not ok and not force:
+                fail("not shipped: the candidate cannot be told from the shipped model (--force ships anyway)")
+        try:
+            info = info_from_protocol(result, version, epochs)
+        except (KeyError, StopIteration) as exc:
+            fail(f"--protocol {protocol}: not a complete protocol result (benchmarks/detector_protocol.py --split all "
+                 f"--json): missing {exc}")
+        from vbl_robust.detect.offline import setup_offline
+        from vbl_robust.detect.train import ship as ship_weights
+
+        setup_offline()
+        typer.echo(json.dumps(info, indent=1))
+        typer.echo(f"shipped {ship_weights(checkpoint, detector='twostage', imgsz=320, info=info)}")

@@ -29,11 +29,6 @@ from ..data.sample import Sample
 from ..perturb.views import to_tensor
 from .base import DetectContext, select
 
-#: The detector protocol's gates (a model below them is not shipped) and goals, as fractions (position error in %
-#: of the slant distance); ``benchmarks/detector_protocol.py`` and ``tools/ship_checkpoint.py`` apply them.
-GATES = {"detection_rate": 0.97, "survival_ippe_lm": 0.90}
-GOALS = {"detection_rate": 0.98, "survival_ippe_lm": 0.95, "far_survival_ippe_lm": 0.90, "pos_err_pct_ippe_lm": 5.0}
-
 #: nominal survival: position error ≤ this many metres with no perturbation
 SURVIVAL_M = 1000.0
 
