@@ -18,9 +18,10 @@ from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, Resu
 from vbl_robust.campaigns import metrics as mx
 from vbl_robust.campaigns.replay import zones_of_run
 from vbl_robust.campaigns.spec import roll_box, roll_contrast_box
-from vbl_robust.report import build as B
 from vbl_robust.report import build_report
+from vbl_robust.report import zone_section as B
 from vbl_robust.report.html import fmt_num
+from vbl_robust.report.rows import Context
 from vbl_robust.search.zones import CLASSES
 
 GATE = 4.0
@@ -63,9 +64,9 @@ def gated_2d(tmp_path_factory, samples):
     return _run(tmp_path_factory.mktemp("gated2d"), spec, samples)
 
 
-def _context(run: Path, store: ResultStore) -> B.Context:
+def _context(run: Path, store: ResultStore) -> Context:
     spec = CampaignSpec.from_dict(store.campaign()["spec"])
-    return B.Context(store, spec, run, mx.main_rows(store, spec), store.samples())
+    return Context(store, spec, run, mx.main_rows(store, spec), store.samples())
 
 
 def _expected(run: Path) -> dict[str, dict[str, float]]:

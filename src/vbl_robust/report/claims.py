@@ -1,7 +1,7 @@
 """The paper's claims, each checked on the results stores of ``vbl-robust reproduce paper --out ROOT``.
 
 Every number comes from ``ROOT/<experiment>/results.sqlite`` through the report's own metrics
-(:mod:`vbl_robust.campaigns.metrics`; :mod:`.build`'s ``Context``, ``_reference``, ``_main_boxes``): nothing is
+(:mod:`vbl_robust.campaigns.metrics`; :mod:`.build`'s ``Context``, ``reference``, ``main_boxes``): nothing is
 typed by hand. A missing store gives "not run yet"; a store where only some images have every planned job is
 used on those ("partial: n of N images").
 
@@ -48,8 +48,8 @@ from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import JobRow, JobStatus, ResultStore
 from ..constants import Verdict
 from ..search import direct_family
-from .build import Context, _main_boxes, _reference
 from .html import fmt_num
+from .rows import Context, main_boxes, reference
 
 __all__ = ["CLAIMS", "VERDICTS", "Claim", "at_most", "behind", "claims_html", "claims_markdown", "claims_of", "combine",
            "crosses_by", "first_breach_s", "largest_jump", "phi_near", "plateaus_near", "ra_below",
@@ -190,7 +190,7 @@ class _Exp:
         return [r for r in self.ctx.store.jobs(**kw) if r.sample_id in self.ids]
 
     def reference(self) -> list[JobRow]:
-        return [r for r in _reference(self.ctx, _main_boxes(self.ctx)) if r.sample_id in self.ids]
+        return [r for r in reference(self.ctx, main_boxes(self.ctx)) if r.sample_id in self.ids]
 
 
 def _open(root: Path, name: str, stack: ExitStack) -> _Exp | str:

@@ -121,15 +121,17 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
 def families_markdown(run: str | Path, series: str = "all") -> str:
     """The families ranking of a ``reproduce families`` run (``series="any"``: only the combined series, the
     ranking's basis); ``ValueError`` when the run holds no family jobs."""
-    from . import build as B
+    from . import rows as R
+    from .figures import style
+    from .sections import family_lines
 
     if series not in ("all", "any"):
         raise ValueError(f"series must be 'all' or 'any', got {series!r}")
     with ResultStore.open_existing(run) as store:
         spec = CampaignSpec.from_dict(store.campaign()["spec"])
         main_rows = mx.main_rows(store, spec)
-        ctx = B.Context(store, spec, Path(run), main_rows, store.samples())
-        ref = B._reference(ctx, B._main_boxes(ctx))
+        ctx = R.Context(store, spec, Path(run), main_rows, store.samples())
+        ref = R.reference(ctx, R.main_boxes(ctx))
     per_image_main = len({(r.method, r.box_label) for r in main_rows})
     counts: dict[str, int] = defaultdict(int)
     for r in main_rows:
@@ -144,9 +146,9 @@ def families_markdown(run: str | Path, series: str = "all") -> str:
         raise ValueError(f"{run}: no complete family jobs (a `reproduce families` run)")
     profile = mx.family_profile(rows + [r for r in ref if r.sample_id in done], spec.eps_safe_m)
     order = mx.rank_families(profile)
-    lines = B.family_lines(profile, order)
+    lines = family_lines(profile, order)
     if series == "any":
-        lines = [ln for ln in lines if ln["method"] == B.F.style(mx.ANY_METHOD)["label"]]
+        lines = [ln for ln in lines if ln["method"] == style(mx.ANY_METHOD)["label"]]
     ks = [k for k in lines[0] if k.startswith("L") and k[1:].isdigit()] if lines else []
 
     def num(v) -> str:

@@ -1,0 +1,135 @@
+"""The report's context and row selection: which stored rows each section reads (main, reference, landscape)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from ..campaigns import metrics as mx
+from ..campaigns.spec import BoxSpec, CampaignSpec
+from ..campaigns.store import JobRow, JobStatus, ResultStore
+from . import figures as F
+from .html import figure_png, img
+
+
+@dataclass
+class Section:
+    title: str
+    html: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Context:
+    """What every section builder needs: the stored rows, the spec and where figures go."""
+
+    store: ResultStore
+    spec: CampaignSpec
+    out_dir: Path
+    main: list[JobRow]
+    samples: dict[str, dict[str, Any]]
+    figures: list[Path] = field(default_factory=list)
+
+    @property
+    def eps(self) -> float:
+        return self.spec.eps_safe_m
+
+    @cached_property
+    def runs(self) -> list[JobRow]:
+        """The stored main search jobs with their points (as run: no rows read off a trace)."""
+        return self.store.jobs(kind="search", role="main", with_points=True, with_trace=False)
+
+    def figure(self, fig: Any, name: str, caption: str) -> str:
+        png = figure_png(fig)
+        plt.close(fig)
+        path = self.out_dir / "figures" / f"{name}.png"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(png)
+        self.figures.append(path)
+        return img(png, name, caption)
+
+    def figure_file(self, path: Path, name: str, caption: str) -> str:
+        """A PNG already written under ``figures/`` (e.g. by :func:`vbl_robust.report.figures.plot_zones`), embedded."""
+        self.figures.append(path)
+        return img(path.read_bytes(), name, caption)
+
+
+def reference(ctx: Context, boxes: Sequence[BoxSpec]) -> list[JobRow]:
+    ref = ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
+    return mx.reference_rows(ref, boxes, ctx.eps, ctx.spec.penalty_m)
+
+
+def main_boxes(ctx: Context) -> list[BoxSpec]:
+    seen: dict[str, BoxSpec] = {}
+    for r in ctx.main:
+        if r.box is not None:
+            seen.setdefault(r.box.label, r.box)
+    return list(seen.values())
+
+
+def evaluated(r: JobRow) -> bool:
+    return r.status is JobStatus.DONE and r.points is not None and len(r.points) > 0
+
+
+def landscape_grids(ctx: Context) -> list[JobRow]:
+    """The evaluated landscape grids (landscape role, else the reference grid worth drawing), at most two."""
+    grids = ctx.store.jobs(kind="search", role="landscape", with_points=True, with_trace=False)
+    if not grids:
+        refs = [r for r in ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
+                if evaluated(r)]
+        grids = [interesting(refs, ctx.eps)] if refs else []
+    return [g for g in grids if evaluated(g)][:2]
+
+
+def landscape_runs(ctx: Context, g: JobRow) -> dict[str, JobRow]:
+    """Per method (plotting order) the main run drawn over the landscape grid ``g``: on the grid's image, on the
+    grid's box, else on the largest box inside it; an evaluation budget before a time budget (a time budget can
+    mean thousands of points), then the most evaluations."""
+    names = list(g.box.box.names)
+    same = [r for r in ctx.runs if r.sample_id == g.sample_id and evaluated(r) and list(r.box.box.names) == names]
+    on_box = [r for r in same if r.box.box.bounds() == g.box.box.bounds()]
+    if not on_box and same:
+        top = max(r.box_level for r in same)
+        on_box = [r for r in same if r.box_level == top]
+    first: dict[str, JobRow] = {}
+    for r in sorted(on_box, key=lambda r: (r.budget.max_seconds is not None, -r.nfev)):
+        first.setdefault(r.method, r)
+    return {m: first[m] for m in F.method_order(first)}
+
+
+def where(ctx: Context, sid: str) -> str:
+    dist = ctx.samples.get(sid, {}).get("slant_distance_m")
+    return f"image {sid}" + (f" (slant distance {dist:.0f} m)" if dist else "")
+
+
+def theta_text(x: Mapping[str, float] | None) -> str:
+    """A worst point in short form: "roll_deg=2.22, contrast=1.05"."""
+    return ", ".join(f"{k}={v:.3g}" for k, v in (x or {}).items())
+
+
+def sample_cols(ctx: Context, sid: str) -> dict[str, Any]:
+    s = ctx.samples.get(sid, {})
+    return {"slant_distance_m": s.get("slant_distance_m"), "envelope": s.get("envelope")}
+
+
+def interesting(grids: Sequence[JobRow], eps: float) -> JobRow:
+    """The 1-D reference grid worth drawing: an image that survives unperturbed (L(0) ≤ ε) but breaches somewhere
+    in the box, with its breach region smallest; else the surviving image with the largest worst value."""
+    def nominal(g: JobRow) -> float:
+        i = int(np.argmin(np.abs(g.points.xs[:, 0])))
+        return float(g.points.fs[i]) if np.isfinite(g.points.fs[i]) else math.inf
+
+    ok = [g for g in grids if nominal(g) <= eps]
+    if not ok:
+        return grids[0]
+    breach = [g for g in ok if np.nanmax(g.points.fs) > eps]
+    if breach:
+        return min(breach, key=lambda g: (np.mean(np.where(np.isfinite(g.points.fs), g.points.fs, math.inf) > eps),
+                                          g.sample_index))
+    return max(ok, key=lambda g: np.nanmax(g.points.fs))

@@ -1,0 +1,401 @@
+"""The report's sections, one function each (``section_*``: a :class:`~vbl_robust.report.rows.Context` in, a
+:class:`~vbl_robust.report.rows.Section` or None out), and the tables they share."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..campaigns import metrics as mx
+from ..campaigns.experiments import range_text
+from ..campaigns.store import JobStatus
+from ..constants import FAILURE_REASONS, Verdict
+from ..search import NON_FINITE
+from . import figures as F
+from .html import esc, fmt_num, table
+from .rows import (
+    Context,
+    Section,
+    landscape_grids,
+    landscape_runs,
+    main_boxes,
+    reference,
+    sample_cols,
+    theta_text,
+    where,
+)
+
+_SUMMARY_COLS = [
+    ("method", "method", None), ("box_label", "box", None), ("budget_label", "budget per image", None),
+    ("n", "images", None), ("survival", "survival %", None), ("median_worst_m", "median worst (m)", None),
+    ("breaches", "breaches", None), ("certified", "certified", None), ("failed", "failed", None),
+    ("mean_nfev", "mean evals", None), ("failed_evals", "failed evals", None), ("median_search_s", "median s", None),
+]
+
+
+def _summary_table(summary: Sequence[Mapping[str, Any]]) -> str:
+    cols = list(_SUMMARY_COLS)
+    if any(line.get("read_from") for line in summary):
+        cols.append(("read_from", "read off the run", None))
+    return table(summary, cols, left=("method", "box_label", "budget_label", "read_from"))
+
+
+def _failures_table(summary: Sequence[Mapping[str, Any]], penalty_m: float) -> str:
+    """Failed evaluations per reason and group (the search used the penalty for them), with the codes' meaning."""
+    codes = sorted({c for line in summary for c in line["failures"]})
+    if not codes:
+        return ""
+    lines = [{**line, **{f"reason:{c}": line["failures"].get(c, 0) for c in codes}} for line in summary]
+    cols = [("method", "method", None), ("box_label", "box", None), ("budget_label", "budget per image", None),
+            ("nfev", "evaluations", None), ("failed_evals", "failed", None),
+            *[(f"reason:{c}", c, None) for c in codes]]
+    meaning = {**FAILURE_REASONS, NON_FINITE: "the objective returned NaN or ±inf"}
+    legend = "; ".join(f"<code>{esc(c)}</code>: {esc(meaning.get(c, c))}" for c in codes)
+    return (f"<p>Failed evaluations by reason (each counts in the search with the {penalty_m:g} m penalty): "
+            f"{legend}.</p>" + table(lines, cols, left=("method", "box_label", "budget_label")))
+
+
+# -- sections ------------------------------------------------------------------------------------------------
+def section_overview(ctx: Context, title: str) -> Section:
+    s = Section("Summary")
+    runs = ctx.store.runs()
+    last = runs[-1] if runs else {}
+    det = (last.get("detector") or {})
+    n_done = ctx.store.count()
+    total = last.get("jobs_total")
+    s.html.append(
+        f"<p><b>{esc(title)}</b>. Detector: <b>{esc(det.get('name', '?'))}</b>; {len(ctx.samples)} images; "
+        f"ε_safe = {ctx.eps:g} m, τ_conf = {ctx.spec.conf_threshold:g}, failure penalty {ctx.spec.penalty_m:g} m, "
+        f"PnP solver <code>{esc(ctx.spec.pnp)}</code>, seed {ctx.spec.seed}. Jobs in the store: {n_done}"
+        + (f" of {total}" if total else "") + ".</p>")
+    if ctx.spec.notes:
+        s.html.append(f'<p class="note">{esc(ctx.spec.notes)}</p>')
+    for goal in det.get("open_goals") or []:
+        s.html.append(f'<p class="warn">Open accuracy goal of this detector (its model card): {esc(goal)}.</p>')
+    if det.get("kind") == "oracle":
+        s.html.append('<p class="warn">The oracle detector returns the exact projected runway corners: these results '
+                      "describe a perfect detector (roll about the optical axis does not move the camera), not a "
+                      "trained model.</p>")
+    if total and n_done < total:
+        s.html.append(f'<p class="warn">The campaign is incomplete ({n_done} of {total} jobs): rerun the same '
+                      "command to resume.</p>")
+    if ctx.main:
+        summary = mx.summarize(ctx.main, ctx.eps)
+        s.html.append(_summary_table(summary))
+        s.html.append(_failures_table(summary, ctx.spec.penalty_m))
+    failed = [r for r in ctx.store.jobs(with_trace=False) if r.status is JobStatus.FAILED]
+    if failed:
+        s.html.append(f'<p class="warn">{len(failed)} job(s) failed and count with the {ctx.spec.penalty_m:g} m '
+                      "penalty (never as survivors):</p>")
+        lines = [{"sample_id": r.sample_id, "method": r.method, "box_label": r.box_label, "reason": r.reason}
+                 for r in failed[:50]]
+        s.html.append(table(lines, [("sample_id", "sample", None), ("method", "method", None),
+                                    ("box_label", "box", None), ("reason", "reason", None)],
+                            left=("sample_id", "method", "box_label", "reason")))
+    return s
+
+
+def section_survival_level(ctx: Context) -> Section | None:
+    rows = [r for r in ctx.main if r.chain is None]
+    if len({r.box_level for r in rows}) < 2:
+        return None
+    boxes = main_boxes(ctx)
+    summary = mx.summarize(rows, ctx.eps, by=("method", "box_label"))
+    ref = mx.summarize(reference(ctx, boxes), ctx.eps, by=("method", "box_label"))
+    two_d = any(b.box.dim > 1 for b in boxes)
+    ticks = {b.level: b.label for b in boxes} if two_d else None
+    title = "Survival vs roll and contrast budget" if two_d else "Survival vs roll budget"
+    s = Section(title)
+    fig = F.survival_vs_level(summary + ref, title=title, tick_labels=ticks,
+                              xlabel="perturbation box (roll half-width, contrast range)" if two_d else "roll budget")
+    s.html.append(ctx.figure(fig, "survival_2d" if two_d else "survival_1d",
+                             "Survival rate S_rate: share of images whose worst error found stays ≤ ε_safe. Lower "
+                             "means the search found more breaches (a stronger search)."))
+    s.html.append(_summary_table(summary + ref))
+    return s
+
+
+def section_runtime(ctx: Context) -> Section | None:
+    rows = [r for r in ctx.main if r.budget is not None]
+    time_rows = [r for r in rows if r.budget.max_seconds is not None]
+    eval_rows = [r for r in rows if r.budget.max_seconds is None and r.budget.max_evals is not None]
+    if len({r.budget_label for r in time_rows}) < 2 and len({r.budget_label for r in eval_rows}) < 2:
+        return None
+    boxes = main_boxes(ctx)
+    ref_rows = reference(ctx, boxes)
+    ref = None
+    if ref_rows:
+        w = [r.worst_m for r in ref_rows]
+        ref = {"survival": mx.survival_rate(w, ctx.eps), "median_worst_m": float(np.median(w))}
+    box_label = boxes[0].label if boxes else ""
+    s = Section(f"Runtime budgets ({box_label})")
+    for axis, rs, name in (("max_seconds", time_rows, "time"), ("max_evals", eval_rows, "evals")):
+        if len({r.budget_label for r in rs}) < 2:
+            continue
+        summary = mx.summarize(rs, ctx.eps, by=("method", "budget_label"))
+        for line in summary:
+            line["box_label"] = box_label
+        dims = "2d" if boxes and boxes[0].box.dim > 1 else "1d"
+        fig = F.runtime(summary, axis=axis, eps_safe_m=ctx.eps, reference=ref,
+                        title=f"{'Time' if axis == 'max_seconds' else 'Evaluation'} budget per image, box {box_label}")
+        s.html.append(ctx.figure(fig, f"runtime_{dims}_{name}",
+                                 "Left: survival rate; right: median over images of the worst error found "
+                                 "(no early stop). Dashed black: the dense grid's true worst case."))
+        s.html.append(_summary_table(summary))
+    read = sorted({r.method for r in rows if r.read_from})
+    if read:
+        own = sorted({r.method for r in rows if not r.read_from})
+        s.html.append(f'<p class="note">Read off a trace: {esc(", ".join(read))} ran once per image (budget '
+                      f"{esc(next(r.read_from for r in rows if r.read_from))}); each time budget t counts only the "
+                      "evaluations completed by t, each evaluation budget n the run's first n evaluations."
+                      + (f" Run once per budget: {esc(', '.join(own))}." if own else "") + "</p>")
+    if ref:
+        s.html.append(f"<p>Dense-grid reference on {len(ref_rows)} images: survival {fmt_num(ref['survival'])} %, "
+                      f"median worst {fmt_num(ref['median_worst_m'])} m.</p>")
+    return s
+
+
+def section_distance(ctx: Context) -> Section | None:
+    rows = [r for r in ctx.main if r.chain is not None]
+    if not rows:
+        return None
+    distances = {sid: s["slant_distance_m"] for sid, s in ctx.samples.items()}
+    budgets = sorted({r.box_level for r in rows})
+    limit = max(budgets)
+    ref = reference(ctx, main_boxes(ctx))
+    profile = mx.distance_profile(rows + ref, distances, budgets)
+    s = Section("Vulnerability profile by approach distance")
+    fig = F.distance_profile(profile, limit_deg=limit, budgets=budgets)
+    s.html.append(ctx.figure(fig, "distance_profile",
+                             "φ_crit per slant-distance quartile: the smallest roll budget at which the quartile's "
+                             f"survival drops below 10 %. Bars in the red band: survival never dropped below 10 % "
+                             f"within ±{limit:g}°."))
+    lines = [{**p, "survival_str": " / ".join(fmt_num(v) for v in p["survival"]),
+              "phi": f"≥ {limit:g}°" if not math.isfinite(p["phi_crit"]) else f"{p['phi_crit']:g}°",
+              "range": f"{p['d_min_m']:.0f}–{p['d_max_m']:.0f}"} for p in profile]
+    s.html.append(table(lines, [("quartile", "quartile", None), ("range", "slant distance (m)", None),
+                                ("method", "method", None), ("n", "images", None), ("n_breached", "breached ≤ limit", None),
+                                ("median_level", "median smallest breaching budget (°)", None), ("phi", "φ_crit", None),
+                                ("survival_str", f"survival % at {', '.join(f'{b:g}' for b in budgets)}°", None)],
+                        left=("method", "survival_str")))
+    return s
+
+
+def _level_name(p: Mapping[str, Any], level: float) -> str:
+    """``"L3 (±10°)"``: the level's index and range; "not reached" for ``inf``."""
+    if not math.isfinite(level):
+        return "not reached"
+    k = list(p["levels"]).index(level)
+    return f"L{k + 1} ({range_text(*p['bounds'][k], p['unit'])})"
+
+
+def family_lines(profile: Sequence[Mapping[str, Any]], order: Sequence[str]) -> list[dict[str, Any]]:
+    """The families table: per family (in ranking ``order``) and method (plot order, the combined series last),
+    the rank, images, survival % at each level (``L1`` … ``L5``) and the levels where it drops below 50 % and
+    10 %."""
+    lines = []
+    for rank, fam in enumerate(order, start=1):
+        series = {p["method"]: p for p in profile if p["family"] == fam}
+        for m in F.method_order(series):
+            p = series[m]
+            line: dict[str, Any] = {"rank": rank, "family": fam, "method": F.style(m)["label"],
+                                    "n": max(p["n"], default=0)}
+            line.update({f"L{k}": v for k, v in enumerate(p["survival"], start=1)})
+            for t in mx.RANK_THRESHOLDS:
+                line[f"below_{t:g}"] = _level_name(p, p[f"below_{t:g}"])
+            lines.append(line)
+    return lines
+
+
+def section_families(ctx: Context) -> Section | None:
+    rows = [r for r in ctx.main if mx.family_of(r) is not None]
+    if not rows:
+        return None
+    ref = reference(ctx, main_boxes(ctx))
+    profile = mx.family_profile(rows + ref, ctx.eps)
+    order = mx.rank_families(profile)
+    s = Section("Perturbation families: survival vs budget level")
+    s.html.append(ctx.figure(F.family_ranking(profile, order), "families_ranking",
+                             "Each family alone, ranked by the budget level at which survival drops below 50 % "
+                             "(circle) and below 10 % (diamond), most vulnerable first; an image survives a level "
+                             "when no method, the dense grid included, found a breach (L > ε_safe) within it. "
+                             "Hollow markers in the grey column: not reached at the largest level."))
+    s.html.append(ctx.figure(F.family_survival(profile, order), "families_survival",
+                             "Survival against the level index per family and method (levels nested, chained per "
+                             "image: a breach at a level counts at every larger one). Black dashes: the dense "
+                             "grid's true survival up to its spacing; grey dots: any method."))
+    n_levels = max(len(p["levels"]) for p in profile)
+    levels = []
+    for fam in order:
+        p = next(p for p in profile if p["family"] == fam)
+        levels.append({"family": fam, "unit": p["unit"],
+                       **{f"L{k}": range_text(lo, hi, p["unit"]) for k, (lo, hi) in enumerate(p["bounds"], start=1)}})
+    ks = [f"L{k}" for k in range(1, n_levels + 1)]
+    s.html.append("<p>Budget levels (nested, mild to extreme):</p>")
+    s.html.append(table(levels, [("family", "family", None), ("unit", "unit", None), *[(k, k, esc) for k in ks]],
+                        left=("family", "unit", *ks)))
+    cols = [("rank", "rank", None), ("family", "family", None), ("method", "method", None), ("n", "images", None),
+            *[(k, f"survival % {k}", None) for k in ks],
+            *[(f"below_{t:g}", f"survival < {t:g} % at", esc) for t in mx.RANK_THRESHOLDS]]
+    s.html.append(table(family_lines(profile, order), cols,
+                        left=("family", "method", *[f"below_{t:g}" for t in mx.RANK_THRESHOLDS])))
+    return s
+
+
+def section_convergence(ctx: Context) -> Section | None:
+    from ..search import direct_family
+
+    conv = mx.convergence([r for r in ctx.main if r.method in direct_family()])
+    if not conv:
+        return None
+    s = Section("GeoRobust convergence: |PO_k| and RA(k)")
+    s.html.append(ctx.figure(F.convergence(conv, title="GeoRobust convergence"), "convergence",
+                             "|PO_k|: potentially optimal boxes selected at iteration k. RA(k): their total volume "
+                             "as % of the box, when selected (it need not decrease monotonically)."))
+    k10 = next((c for c in conv if c["iteration"] == 10), None)
+    if k10:
+        s.html.append(f"<p>At k = 10: RA mean {fmt_num(k10['ra_mean'])} % (median {fmt_num(k10['ra_median'])} %), "
+                      f"|PO| mean {fmt_num(k10['po_mean'])}.</p>")
+    cols = [("iteration", "k", None), ("n", "images", None), ("po_mean", "|PO_k| mean", None), ("po_std", "std", None),
+            ("po_median", "median", None), ("po_after_mean", "after budget filter", None), ("ra_mean", "RA(k) % mean", None),
+            ("ra_std", "std", None), ("ra_q25", "25th", None), ("ra_median", "median", None), ("ra_q75", "75th", None),
+            ("nfev_mean", "evals (mean)", None), ("best_median", "median best L (m)", None)]
+    s.html.append(table(conv, cols))
+    return s
+
+
+def section_pnp(ctx: Context) -> Section | None:
+    rows = ctx.store.jobs(kind="pnp", with_trace=False)
+    summary = mx.pnp_summary(rows)
+    if not summary:
+        return None
+    s = Section("PnP solvers")
+    s.html.append(ctx.figure(F.pnp_comparison(summary), "pnp_solvers",
+                             "Median and mean absolute relative error of the camera position per solver, on the "
+                             "ground-truth corners and on the detector's corners (unperturbed images)."))
+    s.html.append(table(summary, [("source", "keypoints", None), ("solver", "solver", None), ("n", "images", None),
+                                  ("failures", "failures", None), ("median_abs_m", "median (m)", None),
+                                  ("mae_abs_m", "MAE (m)", None), ("median_rel_pct", "median (%)", None),
+                                  ("mae_rel_pct", "MAE (%)", None), ("p95_rel_pct", "95th pct (%)", None)],
+                        left=("source", "solver")))
+    cos = [r.payload.get("grad_cosine_bpnp_vs_exact") for r in rows if r.payload]
+    cos = [c for c in cos if c is not None]
+    if cos:
+        s.html.append(f"<p>Gradient agreement of the differentiable layer's BPnP mode with the exact implicit "
+                      f"gradient (cosine over the 8 keypoint coordinates, {len(cos)} images): median "
+                      f"{np.median(cos):.4f}, 5th percentile {np.percentile(cos, 5):.4f}.</p>")
+    return s
+
+
+def section_landscapes(ctx: Context) -> Section | None:
+    grids = landscape_grids(ctx)
+    if not grids:
+        return None
+    s = Section("Loss landscape of one image")
+    for g in grids:
+        names = list(g.box.box.names)
+        by_method = landscape_runs(ctx, g)
+        place = where(ctx, g.sample_id)
+        xs, fs = g.points.xs, g.points.fs
+        if len(names) == 2:
+            fig = F.landscape_2d(xs, fs, names, {m: r.points.xs for m, r in by_method.items()}, eps_safe_m=ctx.eps,
+                                 worst={m: r.points.xs[int(np.nanargmax(r.points.fs))] for m, r in by_method.items()},
+                                 title=f"L over {g.box_label}, {place}")
+            name = "landscape_2d"
+        else:
+            fig = F.landscape_1d(xs, fs, names[0], {m: (r.points.xs, r.points.fs) for m, r in by_method.items()},
+                                 eps_safe_m=ctx.eps, title=f"L over {g.box_label}, {place}")
+            name = "landscape_1d"
+        lab = ", ".join(f"{F.style(m)['label']} on {r.box_label} ({r.budget_label})" for m, r in by_method.items())
+        part = "" if mx.grid_complete(g) else (f", evaluated from the centre outwards and stopped at its first "
+                                               f"breach after {len(fs)} of {g.budget.max_evals} points")
+        s.html.append(ctx.figure(fig, name, f"Dense grid of {len(fs)} points ({esc(g.box_label)}{part}); "
+                                            "markers: "
+                                            f"the points each method evaluated — {esc(lab)}; stars: each method's worst "
+                                            "point. Red: the ε_safe level set."))
+        lines = [{"method": F.style(m)["label"], "box": r.box_label, "budget": r.budget_label, "nfev": r.nfev,
+                  "worst": r.worst_m, "x": theta_text(r.worst_x), "verdict": r.verdict} for m, r in by_method.items()]
+        lines.append({"method": "dense grid", "box": g.box_label, "budget": g.budget_label, "nfev": g.nfev,
+                      "worst": g.worst_m, "x": theta_text(g.worst_x), "verdict": g.verdict})
+        s.html.append(table(lines, [("method", "method", None), ("box", "box", None), ("budget", "budget", None),
+                                    ("nfev", "evals", None), ("worst", "worst (m)", None), ("x", "worst θ", esc),
+                                    ("verdict", "verdict", None)], left=("method", "box", "budget", "x", "verdict")))
+    return s
+
+
+def section_best_vs_evals(ctx: Context) -> Section | None:
+    rows = [r for r in ctx.main if r.status is JobStatus.DONE and r.trace]
+    if not rows:
+        return None
+    n_max = max(r.nfev for r in rows)
+    grid_n = np.unique(np.linspace(1, max(n_max, 1), 200).astype(int))
+    curves = {}
+    for m in F.method_order(r.method for r in rows):
+        mats = []
+        for r in (r for r in rows if r.method == m):
+            n = np.array([t.nfev for t in r.trace])
+            b = np.array([t.best_value for t in r.trace], dtype=np.float64)
+            idx = np.searchsorted(n, grid_n, side="right") - 1
+            v = np.where(idx >= 0, b[np.clip(idx, 0, None)], np.nan)
+            v[grid_n > n[-1]] = b[-1]  # stopped early (breach): keeps its best
+            mats.append(v)
+        mat = np.array(mats)
+        med = np.full(len(grid_n), np.nan)
+        some = np.isfinite(mat).any(axis=0)
+        med[some] = np.nanmedian(mat[:, some], axis=0)
+        curves[m] = (grid_n, med)
+    s = Section("Worst error found vs evaluations")
+    s.html.append(ctx.figure(F.best_vs_evals(curves, eps_safe_m=ctx.eps, title="Search progress (median over images)"),
+                             "best_vs_evals", "A search that stopped at a breach keeps its final value."))
+    return s
+
+
+def section_per_image(ctx: Context) -> Section | None:
+    if not ctx.main:
+        return None
+    methods = F.method_order(r.method for r in ctx.main)
+    by: dict[str, dict[str, Any]] = {}
+    for r in ctx.main:
+        line = by.setdefault(r.sample_id, {"sample_id": r.sample_id, **sample_cols(ctx, r.sample_id)})
+        line[f"{r.method}_worst"] = r.worst_m
+        line[f"{r.method}_verdict"] = r.verdict
+        line[f"{r.method}_x"] = theta_text(r.worst_x)
+    lines = list(by.values())
+    for line in lines:
+        line["worst"] = max(-math.inf if line.get(f"{m}_worst") is None else line[f"{m}_worst"] for m in methods)
+        line["verdict"] = (Verdict.BREACH if line["worst"] > ctx.eps else
+                           Verdict.CERTIFIED if any(line.get(f"{m}_verdict") is Verdict.CERTIFIED for m in methods)
+                           else Verdict.NO_BREACH_FOUND)
+    cols = [("sample_id", "image", None), ("slant_distance_m", "slant dist. (m)", None), ("envelope", "envelope", None)]
+    for m in methods:
+        cols += [(f"{m}_worst", f"{F.style(m)['label']} worst (m)", None), (f"{m}_x", "at θ", esc)]
+    cols += [("worst", "worst of all (m)", None), ("verdict", "verdict", None)]
+    s = Section("Per image: worst case found")
+    s.html.append(table(lines, cols, row_class=lambda r: "breach" if r["verdict"] is Verdict.BREACH else "",
+                        left=("sample_id", "envelope", "verdict", *[f"{m}_x" for m in methods])))
+    return s
+
+
+def section_provenance(ctx: Context) -> Section:
+    s = Section("Provenance")
+    runs = ctx.store.runs()
+    s.html.append(table(runs, [("run_id", "run", None), ("started_at", "started (UTC)", None),
+                               ("finished_at", "finished", None), ("status", "status", None),
+                               ("code_version", "code version", None), ("executor", "executor", None),
+                               ("host", "host", None), ("jobs_total", "jobs", None), ("jobs_skipped", "already done", None),
+                               ("jobs_done", "done in run", None), ("seconds", "seconds", None)],
+                        left=("started_at", "finished_at", "status", "code_version", "executor", "host")))
+    if runs:
+        last = runs[-1]
+        det = last.get("detector") or {}
+        ds = last.get("dataset") or {}
+        s.html.append(f"<p>Detector: {esc(det.get('name'))}; model file SHA-256 <code>{esc(det.get('sha256'))}</code>.<br>"
+                      f"Dataset: {esc(json.dumps(ds.get('source')))}; {ds.get('n')} images; identity "
+                      f"<code>{esc(ds.get('sha256'))}</code>.</p>")
+        s.html.append("<details><summary>Full configuration of the last run (JSON)</summary><pre>"
+                      f"{esc(json.dumps(last.get('config'), indent=1))}</pre></details>")
+    return s
