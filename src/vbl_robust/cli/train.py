@@ -119,3 +119,47 @@ def register(app: typer.Typer) -> None:
         setup_offline()
         typer.echo(json.dumps(info, indent=1))
         typer.echo(f"shipped {ship_weights(checkpoint, detector='twostage', imgsz=320, info=info)}")
+
+    @app.command()
+    def harden(
+        perturb: list[str] = typer.Option(..., "--perturb", help="A perturbation family and its range, NAME=LO,HI "
+                                          "(repeatable; a bare NAME takes its plausible default range): the box "
+                                          "the training views are drawn from."),
+        out: Path = typer.Option(Path("train_runs/harden"), "--out", help="Working directory (one roundNN per round)."),
+        model: Path | None = typer.Option(None, "--model", help="The .pt to harden (default: the shipped model)."),
+        trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading a --model .pt pickle from "
+                                         "outside the package."),
+        rounds: int = typer.Option(2, "--rounds", min=1, help="Rounds: search the worst views, then fine-tune."),
+        k: int = typer.Option(8, "--k", min=1, help="Candidates per training image and round (worst of k)."),
+        epochs: int = typer.Option(2, "--epochs", min=1, help="Epochs per round."),
+        n_train: int = typer.Option(300, "--n-train", min=1, help="Synthetic training approaches."),
+        n_val: int = typer.Option(60, "--n-val", min=1, help="Synthetic validation approaches (clean)."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the approaches, the candidates and the training."),
+        clean: bool = typer.Option(True, "--clean/--no-clean", help="Train on the clean images too (half the views)."),
+        imgsz: int = typer.Option(320, "--imgsz", help="Network input size (multiple of 32)."),
+        batch: int = typer.Option(16, "--batch", min=1, help="Training batch size (views per optimizer step)."),
+        threads: int = typer.Option(None, "--threads", min=1, help="Torch threads for CPU training (default: all cores)."),
+    ) -> None:
+        """Fine-tune a detector on the worst of k perturbed views per image, scored by the audit's error (rounds)."""
+        from vbl_robust.detect.harden import harden as run_harden
+        from vbl_robust.detect.train import VAL_SEED_OFFSET
+        from vbl_robust.scenes import generate
+        from vbl_robust.space import ParameterBox
+
+        from .audit import parse_perturb
+
+        if model is not None and not model.is_file():
+            fail(f"--model {model}: file not found")
+        if model is not None and not trust_model:
+            fail(f"--model {model}: a .pt file is a pickle that runs code when loaded; pass --trust-model if you trust it")
+        try:
+            box = ParameterBox(parse_perturb(perturb))
+            rs = run_harden(out, box, train_samples=generate(n_train, seed=seed),
+                            val_samples=generate(n_val, seed=seed + VAL_SEED_OFFSET), init_weights=model,
+                            rounds=rounds, k=k, epochs=epochs, seed=seed, imgsz=imgsz, batch=batch, threads=threads,
+                            clean=clean)
+        except (ValueError, FileNotFoundError) as exc:
+            fail(str(exc))
+        for r in rs:
+            typer.echo(f"round {r.index}: {r.breaches} of {len(r.worst)} training images breached by their worst "
+                       f"view; weights {r.weights}")

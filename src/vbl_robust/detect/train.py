@@ -230,14 +230,16 @@ def train(
     workers: int = 2, lr0: float | None = None, crops_used: int | None = None, min_box: float | None = None,
     threads: int | None = None, n_airports: int = DEFAULT_POOL, generate_options: dict | None = None,
     appearance: AppearanceJitter | dict | None = None, crop_jitter: CropJitter | dict | None = None,
-    width_loss: float = 0.0, width_loss_min_px: float = 8.0, full_views: bool = True, **overrides,
+    width_loss: float = 0.0, width_loss_min_px: float = 8.0, full_views: bool = True,
+    val_samples: Sequence[Sample] | None = None, **overrides,
 ) -> TrainResult:
     """Train (or continue training) the runway-corner YOLOv8n-pose.
 
     Args:
         out_dir: working directory (dataset + stages); created if missing.
         samples: training data (e.g. ``vbl_robust.data.read_lard(...)``); None → ``n_train + n_val`` synthetic
-            approaches from ``vbl_robust.scenes.generate(seed=seed)``. Split train/val with ``seed``.
+            approaches from ``vbl_robust.scenes.generate(seed=seed)``. Split train/val with ``seed``, unless
+            ``val_samples`` are given: then ``samples`` are all training data and ``val_samples`` the validation.
         n_train, n_val: synthetic set sizes (with ``samples``: ``n_val`` is taken from them for validation).
         imgsz: network input side (views are rendered at this size).
         epochs: epochs of this stage.
@@ -288,6 +290,8 @@ def train(
         raise ValueError("train: full_views=False (crops only) needs detector='twostage' and at least one crop")
     if imgsz % 32:
         raise ValueError(f"train: imgsz must be a multiple of 32, got {imgsz}")
+    if val_samples is not None and samples is None:
+        raise ValueError("train: val_samples needs samples (the training data they validate)")
     opt = overrides.get("optimizer", "auto")
     if opt not in OPTIMIZERS:
         raise ValueError(f"train: optimizer must be one of {', '.join(OPTIMIZERS)}, got {opt!r}")
@@ -335,6 +339,10 @@ def train(
         gen = dict(generate_options or {})
         tr = generate(n_train, seed=seed, n_airports=n_airports, **gen)
         va = generate(n_val, seed=seed + VAL_SEED_OFFSET, n_airports=n_airports, **gen)
+    elif val_samples is not None:
+        tr, va = list(samples), list(val_samples)
+        if not tr or not va:
+            raise ValueError(f"train: need training and validation samples, got {len(tr)} and {len(va)}")
     else:
         samples = list(samples)
         if len(samples) < 2:
