@@ -12,7 +12,7 @@
   ``train_runs/step_m/<dataset>`` links to it), plus random rotations of every view (ultralytics ``degrees=30``,
   corners rotated with the pixels) and twice the keypoint loss gain (``pose`` 36 → 72). Why: every model so far
   predicts the runway's threshold edges nearly level whatever the camera roll — the slope of predicted on true
-  edge angle is 0.23–0.33, on its own training crops too (``tools/edge_tilt.py``) — and at far range that shape error is
+  edge angle is 0.23–0.33, on its own training crops too (the model card's edge-tilt analysis) — and at far range that shape error is
   most of the position error.
 - ``n`` (session 10): as ``l`` (same samples, seed 9, pose gain 36, no rotation: ``l`` is its control) but the
   training crops of small runways are magnified: ``CropJitter(min_side=40)`` instead of 64 (far runways 8× the
@@ -23,7 +23,7 @@
 - ``o`` (session 10): as ``l`` (same samples and crops: ``l`` is its control) with three times the keypoint loss
   gain (``pose`` 36 → 108). Why: ultralytics' keypoint loss is an OKS divided by the box area, so it tolerates
   errors in proportion to the runway's size in the view — and the near-threshold width error is about constant
-  *relative* to it (5.8–8.2 % at every range, ``tools/far_error_budget.py``).
+  *relative* to it (5.8–8.2 % at every range, the model card's *What decides far survival*).
 - ``p`` (session 11 → v8, epoch 2): as ``l`` (same samples and crops: ``l`` is its control; ``o`` the control of its 2-epoch
   schedule) plus the threshold-width loss term of :mod:`vbl_robust.detect.losses` with gain 0.5 (L1 on the log
   ratio of predicted to true threshold-edge widths, edges ≥ 8 px in the view). Why: the widths decide far survival
