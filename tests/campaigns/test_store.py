@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from vbl_robust.campaigns import BoxSpec, Budget, ResultStore
 from vbl_robust.campaigns import store as store_module
-from vbl_robust.campaigns.spec import KINDS, ROLES
+from vbl_robust.campaigns.spec import JOB_KINDS, ROLES
 from vbl_robust.campaigns.store import JobRow, JobStatus, Points, decode_points, encode_points
 from vbl_robust.constants import Verdict
 from vbl_robust.search import TraceRow
@@ -160,7 +160,7 @@ def opt(s):
 
 
 job_rows = st.builds(
-    JobRow, key=st.text(min_size=1, max_size=16), experiment=text, kind=st.sampled_from(KINDS),
+    JobRow, key=st.text(min_size=1, max_size=16), experiment=text, kind=st.sampled_from(JOB_KINDS),
     role=st.sampled_from(ROLES), method=text, sample_id=text, sample_index=st.integers(0, 10**6),
     status=st.sampled_from(JobStatus), run_id=opt(st.integers(1, 10**6)), box=opt(boxes()), budget=opt(budgets),
     seed=opt(st.integers(0, 2**31 - 1)), options=json_dict, chain=opt(text), reason=opt(text), worst_m=opt(finite),

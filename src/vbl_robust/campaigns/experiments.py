@@ -34,7 +34,7 @@ from fractions import Fraction
 from .spec import Block, BoxSpec, Budget, CampaignSpec, roll_box, roll_contrast_box
 
 #: The paper's experiments compare the paper's GeoRobust and georobust-av (labelled apart) with random and APGD.
-METHODS = ("georobust", "georobust-av", "random", "apgd")
+PAPER_METHODS = ("georobust", "georobust-av", "random", "apgd")
 #: ``audit``'s and the demo's methods: georobust-av in place of GeoRobust (it found as many or more breaches at
 #: every spatial-2d box on 30 images, in fewer evaluations; BENCHMARKS.md, spatial-2d section).
 AUDIT_METHODS = ("georobust-av", "random", "apgd")
@@ -72,7 +72,7 @@ class Options:
             does ``grid_step_deg = 0`` (no reference anywhere).
     """
 
-    methods: tuple[str, ...] = METHODS
+    methods: tuple[str, ...] = PAPER_METHODS
     max_evals: int = 200
     grid_step_deg: float = 0.05
     landscape: tuple[int, int] = (61, 36)

@@ -24,12 +24,12 @@ from ..constants import CONF_THRESHOLD, EPS_SAFE_M, PENALTY_M
 from ..digest import canonical_json, digest
 from ..space import ParameterBox
 
-__all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FIGURES", "KINDS", "PENALTY_M", "ROLES", "Block", "BoxSpec", "Budget",
+__all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FIGURES", "JOB_KINDS", "PENALTY_M", "ROLES", "Block", "BoxSpec", "Budget",
            "CampaignSpec", "Job", "canonical_json", "default_figures", "derive_seed", "digest", "roll_box",
            "roll_contrast_box"]
 
 #: Job kinds: a worst-case search, or the PnP-solver comparison of one image.
-KINDS = ("search", "pnp")
+JOB_KINDS = ("search", "pnp")
 #: Roles of a block: the compared searches, a dense-grid reference, a landscape grid for one image.
 ROLES = ("main", "reference", "landscape")
 #: Figures (report sections) a campaign can declare, with the rows each one draws:
@@ -199,8 +199,8 @@ class Block:
     def __post_init__(self) -> None:
         if self.role not in ROLES:
             raise ValueError(f"Block: role must be one of {ROLES}, got {self.role!r}")
-        if self.kind not in KINDS:
-            raise ValueError(f"Block: kind must be one of {KINDS}, got {self.kind!r}")
+        if self.kind not in JOB_KINDS:
+            raise ValueError(f"Block: kind must be one of {JOB_KINDS}, got {self.kind!r}")
         if self.kind == "search" and not (self.boxes and self.methods and self.budgets):
             raise ValueError("Block: a search block needs at least one box, one method and one budget")
         if self.chain:

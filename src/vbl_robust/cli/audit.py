@@ -23,9 +23,6 @@ from .common import (
     set_verbosity,
 )
 
-METHODS_DEFAULT = "georobust-av,random,apgd"  # = vbl_robust.campaigns.experiments.AUDIT_METHODS
-
-
 # -- shared by audit / demo / reproduce ---------------------------------------------------------------------------
 #: Fixed corner noise of the oracle stand-in (``--oracle``, or no validated model installed): exact corners
 #: make L(θ) flat in roll (< 1 cm), which shows nothing; 1 px is about what a good detector achieves.
@@ -343,6 +340,8 @@ def load(n: int, seed: int, lard: Path | None, width: int, height: int) -> tuple
 
 # -- commands -------------------------------------------------------------------------------------------------
 def register(app: typer.Typer) -> None:
+    from vbl_robust.campaigns.experiments import AUDIT_METHODS
+
     @app.command()
     def audit(
         out: Path = typer.Option(Path("runs/audit"), "--out", help="Run directory (results.sqlite, report.html)."),
@@ -364,7 +363,7 @@ def register(app: typer.Typer) -> None:
                                                  "NAME=LO,HI (repeatable; a bare NAME takes its plausible default "
                                                  f"range): {known()} (roll_deg here replaces --roll; contrast "
                                                  "here or in --contrast, not both)."),
-        methods: str = typer.Option(METHODS_DEFAULT, "--methods", help="Comma-separated search methods."),
+        methods: str = typer.Option(",".join(AUDIT_METHODS), "--methods", help="Comma-separated search methods."),
         method_option: list[str] | None = o.METHOD_OPTION,
         max_evals: int | None = typer.Option(200, "--max-evals", help="Evaluations per image and method (0 = no "
                                                  "evaluation cap: then give --max-seconds)."),

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from ..campaigns import metrics as mx
-from ..campaigns.experiments import METHODS, PAPER
+from ..campaigns.experiments import PAPER, PAPER_METHODS
 from ..campaigns.pnpcheck import TRUNCATED
 from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import JobRow, JobStatus, ResultStore
@@ -277,7 +277,7 @@ def _spatial_1d(e: _Exp) -> Row:
     labels, s = _survival([r for r in e.ctx.main if r.chain is None] + e.reference(), e.eps)
     geo, rnd, apgd = s["georobust"], s["random"], s["apgd"]
     truth = _text(s, labels, mx.REFERENCE_METHOD) if mx.REFERENCE_METHOD in s else ""
-    return (_text(s, labels, *METHODS), truth,
+    return (_text(s, labels, *PAPER_METHODS), truth,
             *_judge([(at_most(geo + geo, rnd + apgd), f"georobust {_slash(geo)} ≤ random's and apgd's everywhere"),
                      (at_most(rnd, apgd), f"apgd {_slash(apgd)} ≥ random {_slash(rnd)} everywhere")]), len(e.ids))
 
@@ -307,7 +307,7 @@ def _runtime_1d(e: _Exp) -> Row:
 def _spatial_2d(e: _Exp) -> Row:
     labels, s = _survival([r for r in e.ctx.main if r.chain is None], e.eps)
     rnd, apgd, last = s["random"], s["apgd"], s["georobust"][-1:] or [math.nan]
-    return (_text(s, labels, *METHODS), "",
+    return (_text(s, labels, *PAPER_METHODS), "",
             *_judge([(behind(apgd, rnd), f"apgd {_slash(apgd)} ≥ random {_slash(rnd)} everywhere, > somewhere"),
                      (at_most(last, [NEAR_ZERO_PCT]), f"georobust {_slash(last)} % ≤ {NEAR_ZERO_PCT:g} % at the "
                                                       "largest box")]), len(e.ids))
