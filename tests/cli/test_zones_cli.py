@@ -232,7 +232,37 @@ def test_report_markdown_survival_table_from_the_store(gated_run, tmp_path):
     assert "any of them" in rows and "Landscape grid on image" in res.output  # the dense grid's found / true ratios
     # refused: md prints, it writes nothing; --with needs md and the same experiment
     for args, msg in ((["--format", "md", "--out", str(tmp_path)], "--format md prints"),
-                      (["--with", str(out)], "--with belongs to --format md"),
+                      (["--with", str(out)], "--with and --compare belong to --format md"),
                       (["--format", "pdf"], "--format pdf")):
         res = runner.invoke(app, ["report", str(out), *args])
         assert res.exit_code == 2 and msg in res.output, res.output
+
+
+def test_report_compare_pairs_two_runs_per_image(gated_run, tmp_path):
+    """Before: the gated detector (breaches wherever roll > 4°); after: the same campaign on the plain oracle (no
+    breach). Every image a method breached before is "fixed", none is new; the counts pair per image."""
+    from vbl_robust.scenes import generate
+
+    before, _ = gated_run
+    with ResultStore.open_existing(before) as st:
+        spec = CampaignSpec.from_dict(st.campaign()["spec"])
+        rows = [r for r in st.jobs(kind="search", role="main", with_trace=False)]
+    after = tmp_path / "after"
+    with ResultStore(after / "results.sqlite") as store:
+        run_campaign(spec, generate(2, seed=1, width=96, height=96), store, detector=DetectorSpec("oracle"))
+    res = runner.invoke(app, ["report", str(before), "--format", "md", "--compare", str(after)])
+    assert res.exit_code == 0, res.output
+    lines = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in res.output.splitlines()
+             if ln.startswith("| ")][1:]
+    checked = 0
+    for method, where, n, surv_before, surv_after, fixed, new, _p in lines:
+        if method == "any of them":
+            continue
+        hits = {r.sample_id for r in rows if r.method == method and f"{r.box_label}, {r.budget_label}" == where
+                and r.worst_m is not None and r.worst_m > 1000}
+        assert (n, fixed, new, surv_after) == ("2", str(len(hits)), "0", "100.0"), (method, where)
+        assert surv_before == f"{100 * (2 - len(hits)) / 2:.1f}"
+        checked += 1
+    assert checked == 8  # 4 methods x 2 budgets
+    res = runner.invoke(app, ["report", str(before), "--format", "md", "--compare", str(tmp_path / "none")])
+    assert res.exit_code == 2 and "no results store" in res.output

@@ -24,6 +24,9 @@ def register(app: typer.Typer) -> None:
                                 "completed."),
         others: list[Path] | None = typer.Option(None, "--with", help="--format md: another run of the same "
                                                  "experiment and seed whose methods join the table (repeatable)."),
+        compare: Path | None = typer.Option(None, "--compare", help="--format md: another run of the same "
+                                            "experiment, seed and images (e.g. after `vbl-robust harden`): survival "
+                                            "before (RUN) and after, paired per image, with exact McNemar p."),
     ) -> None:
         """Regenerate a run's self-contained HTML report (figures, tables, provenance) from its store."""
         from vbl_robust.campaigns import ResultStore, export
@@ -34,10 +37,10 @@ def register(app: typer.Typer) -> None:
         if fmt == "md":
             if out is not None or csv is not None or parquet is not None:
                 fail("--format md prints to standard output: --out, --csv and --parquet belong to --format html")
-            typer.echo(_markdown(run, others or []), nl=False)
+            typer.echo(_markdown(run, others or [], compare), nl=False)
             return
-        if others:
-            fail("--with belongs to --format md")
+        if others or compare:
+            fail("--with and --compare belong to --format md")
         if out is not None and out.exists() and not out.is_dir():
             fail(f"--out {out}: is a file; the report goes into a directory (report.html and figures/)")
         try:
@@ -75,12 +78,14 @@ def register(app: typer.Typer) -> None:
         typer.echo(f"bundle: {out}")
 
 
-def _markdown(run: Path, others: list[Path]) -> str:
+def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:
     from vbl_robust.campaigns import ResultStore
     from vbl_robust.campaigns.spec import CampaignSpec
-    from vbl_robust.report.markdown import families_markdown, survival_markdown
+    from vbl_robust.report.markdown import compare_markdown, families_markdown, survival_markdown
 
     try:
+        if compare is not None:
+            return compare_markdown(run, compare)
         text = survival_markdown(run, others)
         with ResultStore.open_existing(run) as store:
             name = CampaignSpec.from_dict(store.campaign()["spec"]).name

@@ -10,7 +10,9 @@ run still in progress (or resumed across sessions) compares its methods on the s
 * :func:`families_markdown` — the families ranking of a ``reproduce families`` run (the report's families
   section as a table);
 * :func:`zones_markdown` — vulnerability-zone fractions per method and box, over all jobs and over the jobs that
-  found no breach.
+  found no breach;
+* :func:`compare_markdown` — two runs of the same images paired per image (a model before and after
+  ``vbl-robust harden``): survival before / after, the images fixed and newly breached, exact McNemar p.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from ..campaigns import metrics as mx
 from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import ResultStore
 
-__all__ = ["families_markdown", "survival_markdown", "zones_markdown"]
+__all__ = ["compare_markdown", "families_markdown", "survival_markdown", "zones_markdown"]
 
 
 def _table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
@@ -52,18 +54,24 @@ def _read(run: str | Path):
     return spec, rows, land
 
 
+def _read_alike(run: str | Path, spec: CampaignSpec, rows: Sequence, other: str | Path):
+    """``other``'s spec and main rows, ``ValueError`` unless it is ``run``'s experiment and seed on its images."""
+    ospec, more, _ = _read(other)
+    if (ospec.name, ospec.seed) != (spec.name, spec.seed):
+        raise ValueError(f"{other}: experiment {ospec.name} seed {ospec.seed}, not {spec.name} seed {spec.seed}")
+    index = {r.sample_index: r.sample_id for r in rows}
+    clash = sorted({r.sample_index for r in more if index.get(r.sample_index, r.sample_id) != r.sample_id})
+    if clash:
+        raise ValueError(f"{other}: images {clash[:5]} differ from {run}'s (another image set)")
+    return ospec, more
+
+
 def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str:
     """The survival tables of the run directory or store ``run`` (module docstring); ``ValueError`` when an other
     run is not the same experiment, seed and images."""
     spec, rows, land = _read(run)
     for other in others:
-        ospec, more, _ = _read(other)
-        if (ospec.name, ospec.seed) != (spec.name, spec.seed):
-            raise ValueError(f"{other}: experiment {ospec.name} seed {ospec.seed}, not {spec.name} seed {spec.seed}")
-        index = {r.sample_index: r.sample_id for r in rows}
-        clash = sorted({r.sample_index for r in more if index.get(r.sample_index, r.sample_id) != r.sample_id})
-        if clash:
-            raise ValueError(f"{other}: images {clash[:5]} differ from {run}'s (another image set)")
+        _, more = _read_alike(run, spec, rows, other)
         rows += [dataclasses.replace(r, method=_labelled(r)) for r in more]
     if not rows:
         raise ValueError(f"{run}: no search jobs stored yet")
@@ -198,4 +206,54 @@ def zones_markdown(jobs: Sequence) -> str:
     bases = sorted({basis(j.zones) for j in jobs if j.zones is not None})
     out = [f"zones, basis: {'; '.join(bases) or 'none'}; skipped (no cover): "
            + (", ".join(f"{m} {n}" for m, n in sorted(skipped.items())) or "none"), "", *_table(head, rows)]
+    return "\n".join(out) + "\n"
+
+
+def compare_markdown(before: str | Path, after: str | Path) -> str:
+    """Two runs of the same experiment and seed on the same images (e.g. a model before and after ``harden``),
+    paired per image: per method and box, survival % before and after on the images both runs completed, the
+    images only one of them survives (fixed: breached before, not after; new: the other way) and the exact McNemar
+    p-value of that difference (:func:`vbl_robust.detect.evaluate.paired_survival`); then the union of all
+    methods ("any of them") per box. ``ValueError`` when the runs are not comparable."""
+    from ..detect.evaluate import paired_survival
+
+    spec, rows_a, _ = _read(before)
+    _, rows_b = _read_alike(before, spec, rows_a, after)
+    eps = spec.eps_safe_m
+
+    several = len({r.budget_label for r in rows_a}) > 1
+
+    def where(r) -> str:  # the box, and the budget where the run has several
+        return f"{r.box_label}, {r.budget_label}" if several else str(r.box_label)
+
+    def survived(rows) -> dict[tuple[str, str, str], bool]:
+        return {(r.method, where(r), r.sample_id): not (r.worst_m is not None and r.worst_m > eps) for r in rows}
+
+    sa, sb = survived(rows_a), survived(rows_b)
+    keys = [(m, b) for m, b in dict.fromkeys((r.method, where(r)) for r in rows_a) if any(k[:2] == (m, b) for k in sb)]
+    boxes = list(dict.fromkeys(b for _, b in keys))
+    table = []
+    for m, b in keys:
+        shared = sorted(k[2] for k in sa if k[:2] == (m, b) and k in sb)
+        if not shared:
+            continue
+        a = [sa[(m, b, s)] for s in shared]
+        c = paired_survival([sb[(m, b, s)] for s in shared], a)
+        table.append([m, b, str(len(shared)), f"{100 * np.mean(a):.1f}", f"{100 * (c['both'] + c['only_a']) / c['n']:.1f}",
+                      str(c["only_a"]), str(c["only_b"]), f"{c['p_value']:.4f}"])
+    if not table:
+        raise ValueError(f"{before} and {after}: no method and box with images both runs completed")
+    for b in boxes:  # an image survives a box when no method found a breach there (images every method covers)
+        ms = [m for m, bb in keys if bb == b]
+        shared = sorted(s for s in {k[2] for k in sa} if all((m, b, s) in sa and (m, b, s) in sb for m in ms))
+        if len(ms) > 1 and shared:
+            a = [all(sa[(m, b, s)] for m in ms) for s in shared]
+            z = [all(sb[(m, b, s)] for m in ms) for s in shared]
+            c = paired_survival(z, a)
+            table.append(["any of them", b, str(len(a)), f"{100 * np.mean(a):.1f}", f"{100 * np.mean(z):.1f}",
+                          str(c["only_a"]), str(c["only_b"]), f"{c['p_value']:.4f}"])
+    out = [f"before: {before}; after: {after} ({spec.name}, seed {spec.seed}, ε_safe = {eps:g} m); paired per image: "
+           "fixed = breached before and not after, new = the other way, p = exact McNemar", ""]
+    out += _table(["method", "box", "images", "survival before %", "survival after %", "fixed", "new breaches", "p"],
+                  table)
     return "\n".join(out) + "\n"
