@@ -36,7 +36,7 @@ def test_onnx_matches_pt(onnx_path, tiny_pose_pt):
 
 
 def test_bad_onnx_files(tmp_path):
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(FileNotFoundError, match="missing.onnx: ONNX file not found"):
         OnnxDetector(tmp_path / "missing.onnx")
     bad = tmp_path / "bad.onnx"
     bad.write_bytes(b"garbage")

@@ -41,7 +41,7 @@ def test_nan_confidence_never_wins():
 def test_detections_accept_tensors_and_check_shapes():
     d = Detections(torch.zeros(2, 4), torch.tensor([0.5, 0.7]), torch.ones(2, 4, 2, requires_grad=True))
     assert isinstance(d.keypoints, np.ndarray) and d.keypoints.shape == (2, 4, 2) and len(d) == 2
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"keypoints must have shape \(2, 4, 2\) for 2 candidates, got \(3, 4, 2\)"):
         Detections(np.zeros((2, 4)), np.zeros(2), np.zeros((3, 4, 2)))
 
 

@@ -144,7 +144,7 @@ def test_times_round_trip_through_dict(box2, clock):
 @pytest.mark.parametrize("bad", [{"seconds": -1.0}, {"evals": -2}, {}])
 def test_at_budget_refuses_bad_budgets(bad, box2):
     r = maximize(bumpy, box2, "random", max_evals=10)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="at_budget: (seconds must be|evals must be|give seconds)"):
         at_budget(r, **bad)
 
 

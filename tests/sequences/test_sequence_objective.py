@@ -168,6 +168,6 @@ def test_bad_arguments(sequence):
     with pytest.raises(ValueError, match="batch_frames must be True or False"):
         SequenceObjective(sequence, vr.OracleDetector(), BOX, batch_frames="yes")
     f = SequenceObjective(sequence, vr.OracleDetector(), BOX)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"theta must have shape \(N, 2\)"):
         f(np.zeros((2, 3)))
     assert f(np.zeros((0, 2))).values.shape == (0,)

@@ -92,10 +92,14 @@ class Detections:
     def __post_init__(self) -> None:
         self.conf = _np(self.conf).reshape(-1)
         m = self.conf.shape[0]
-        self.boxes = _np(self.boxes).reshape(m, 4)
-        self.keypoints = _np(self.keypoints).reshape(m, 4, 2)
+        fields = [("boxes", (m, 4)), ("keypoints", (m, 4, 2))]
         if self.keypoint_conf is not None:
-            self.keypoint_conf = _np(self.keypoint_conf).reshape(m, 4)
+            fields.append(("keypoint_conf", (m, 4)))
+        for name, shape in fields:
+            value = _np(getattr(self, name))
+            if value.size != int(np.prod(shape)):
+                raise ValueError(f"Detections: {name} must have shape {shape} for {m} candidates, got {value.shape}")
+            setattr(self, name, value.reshape(shape))
 
     def __len__(self) -> int:
         return int(self.conf.shape[0])
