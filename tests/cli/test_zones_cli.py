@@ -190,12 +190,6 @@ def test_audit_refine_zones(tmp_path):
     assert "refined zones:" in res.output
 
 
-def test_refine_zones_is_refused_for_sequence_audits(tmp_path):
-    res = runner.invoke(app, ["audit", "--out", str(tmp_path), "--sequences", "1", "--frames", "2", "--max-evals", "3",
-                              "--refine-zones", "10", *SMALL])
-    assert res.exit_code == 2 and "--refine-zones" in res.output
-
-
 def _md_rows(text: str) -> dict[str, list[str]]:
     """Markdown table rows by their first cell (the header and rule skipped)."""
     rows = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in text.splitlines() if ln.startswith("| ")]

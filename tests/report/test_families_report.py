@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import math
 
 import matplotlib.pyplot as plt
@@ -114,24 +113,3 @@ def test_survival_figure_has_a_panel_per_family_in_ranking_order(profile):
     assert list(geo.get_xdata().round()) == [1, 2, 3, 4, 5] and list(geo.get_ydata()) == [100.0, 40.0, 40.0, 0.0, 0.0]
     assert len(figure_png(fig)) > 5000
     plt.close(fig)
-
-
-def test_sequence_audit_page_embeds_the_figure_and_the_table(tmp_path):
-    from vbl_robust.cli.sequence_audit import write_report
-
-    fig, ax = plt.subplots()
-    ax.plot([0, 1], [0, 1])
-    png = tmp_path / "figures" / "sequence_errors.png"
-    png.parent.mkdir()
-    png.write_bytes(figure_png(fig))
-    plt.close(fig)
-    with open(tmp_path / "sequences.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=["sequence_id", "verdict", "worst_sustained_m", "breach_start_m"])
-        w.writeheader()
-        w.writerow({"sequence_id": "q0", "verdict": "breach", "worst_sustained_m": "1234.5678", "breach_start_m": ""})
-        w.writerow({"sequence_id": "q1", "verdict": "no breach found", "worst_sustained_m": "12.5",
-                    "breach_start_m": "800"})
-    page = write_report(tmp_path, png, tmp_path / "sequences.csv", headline="2 sequences", details="box ±5°").read_text()
-    assert page.count("data:image/png;base64,") == 1 and "<th" in page and "2 sequences" in page
-    assert '<tr class="breach"><td class="l">q0</td>' in page and ">1235<" in page and ">12.5<" in page
-    assert ">800<" in page and ">–<" in page

@@ -382,16 +382,23 @@ PAPER = tuple(name for name in EXPERIMENTS if name != "families")
 
 def audit_spec(box: BoxSpec, *, methods: Sequence[str] = AUDIT_METHODS, budget: Budget, seed: int = 0,
                lipschitz: float | tuple[float, ...] | None = None, pnp: str = "ippe_lm",
-               landscape: tuple[int, ...] | None = None) -> CampaignSpec:
+               landscape: tuple[int, ...] | None = None, sustain: int | None = None) -> CampaignSpec:
     """The ``audit`` job: one box, the given methods and budget; optionally a landscape grid on the first image
-    (counts per parameter) for the heat map."""
+    (counts per parameter) for the heat map. ``sustain``: an audit of approach sequences (a sequence campaign,
+    :class:`CampaignSpec`), the error sustained over that many consecutive frames."""
     blocks = [Block(boxes=(box,), methods=tuple(methods), budgets=(budget,))]
     if landscape and min(landscape) > 0:
         blocks.append(_grid_block(box, landscape, role="landscape", max_samples=1))
     stop = "early stop at the first breach" if budget.stop_at_breach else "no early stop"
+    unit = "image" if sustain is None else "sequence"
     figures = ("convergence", "landscape", "progress", "per_image")
-    return CampaignSpec("audit", tuple(blocks), seed=seed, lipschitz=lipschitz, pnp=pnp, figures=figures, notes=(
-        f"Box {box.label}; methods {', '.join(methods)}; budget per image: {budget.label} ({stop})."
+    if sustain is not None:
+        figures = ("sequences", *figures)
+    return CampaignSpec("audit", tuple(blocks), seed=seed, lipschitz=lipschitz, pnp=pnp, figures=figures,
+                        sustain=sustain, notes=(
+        f"Box {box.label}; methods {', '.join(methods)}; budget per {unit}: {budget.label} ({stop})."
+        + ("" if sustain is None else f" One θ held over each approach sequence; its error is the error sustained "
+           f"over {sustain} consecutive frame(s).")
         + ("" if lipschitz is None else f" Lipschitz bound given: {lipschitz} m per unit (certificates possible).")))
 
 

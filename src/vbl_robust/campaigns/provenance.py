@@ -40,7 +40,13 @@ def code_version() -> str:
 
 
 def sample_fingerprint(sample: Any) -> str:
-    """Digest of a sample's identity and geometry (id, size, K, corners 3D/2D, true position)."""
+    """Digest of a sample's identity and geometry (id, size, K, corners 3D/2D, true position); of an approach
+    sequence (a sample of a sequence campaign): its id, its frames' digests, frame indices and times."""
+    frames = getattr(sample, "samples", None)
+    if frames is not None:
+        return digest({"id": sample.id, "frames": [sample_fingerprint(f) for f in frames],
+                       "frame_index": [int(i) for i in sample.frame_index],
+                       "times": [float(t) for t in sample.times]}, 16)
     return digest({
         "id": sample.id, "size": [int(sample.width), int(sample.height)], "K": sample.K.tolist(),
         "corners_3d": sample.corners_3d.tolist(), "corners_2d": sample.corners_2d.tolist(),

@@ -36,15 +36,15 @@ def refine_run(run: str | Path, samples: list, detector: Any, budget: int, *,
     when a stored search cannot be replayed, ``ValueError`` when a stored sample is not among ``samples``.
     """
     from ..campaigns.replay import ReplayError, job_zones
-    from ..pipeline import Objective
     from ..search.zones import refine_zones
     from .spec import CampaignSpec
     from .store import ResultStore
-    from .work import detector_for
+    from .work import Settings, build_objective, detector_for
 
     with ResultStore.open_existing(run) as store:
         spec = CampaignSpec.from_dict(store.campaign()["spec"])
         rows = store.jobs(kind="search", role="main", with_points=True, with_trace=False)
+    settings = Settings.from_spec(spec)
     by_id = {str(s.id): s for s in samples}
     det = detector_for(detector)
     entries: list[dict[str, Any]] = []
@@ -64,8 +64,7 @@ def refine_run(run: str | Path, samples: list, detector: Any, budget: int, *,
         sample = by_id.get(str(row.sample_id))
         if sample is None:
             raise ValueError(f"sample {row.sample_id} of the store is not among this run's samples")
-        objective = Objective(sample, det, row.box.box, pnp=spec.pnp, conf_threshold=spec.conf_threshold,
-                              penalty_m=spec.penalty_m)
+        objective = build_objective(sample, det, row.box.box, settings)
         ref = refine_zones(objective, jz.zones, budget, seed=row.seed or 0)
         entries.append({"key": row.key, "sample_id": row.sample_id, "sample_index": row.sample_index,
                         "method": row.method, "box_label": row.box_label, "basis": ref.after.basis,

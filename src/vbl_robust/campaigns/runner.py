@@ -160,6 +160,7 @@ def run_campaign(
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     spec.check()
+    spec.check_samples(samples)
     lock = WriterLock(store.path).acquire(wait=wait)
     try:
         if retry_failed:

@@ -1,4 +1,5 @@
-"""Where a campaign's samples come from: generated synthetic approaches, or a LARD V2 dataset directory."""
+"""Where a campaign's samples come from: generated synthetic approaches, or a LARD V2 dataset directory; for a
+sequence campaign, generated approach sequences or a LARD V2 directory grouped into sequences."""
 
 from __future__ import annotations
 
@@ -59,3 +60,32 @@ def load_samples(n: int, seed: int, *, lard: str | Path | None = None, width: in
     return samples, {"kind": "lard", "csv": str(csv_path), "csv_sha256": file_sha256(csv_path), "db": str(db_path),
                      "db_sha256": file_sha256(db_path), "rows": len(allrows), "n": len(samples), "seed": seed,
                      "options": {k: str(v) for k, v in read_options.items()}}
+
+
+def load_sequences(source: str | Path, *, frames: int, rate_hz: float, seed: int, width: int = 1024,
+                   height: int = 1024) -> tuple[list[Any], dict[str, Any]]:
+    """The samples of a sequence campaign and their source (provenance): ``source`` a count N (N generated
+    approach sequences of ``frames`` frames at ``rate_hz``, :func:`vbl_robust.scenes.generate_sequences`) or a
+    LARD V2 dataset directory grouped into sequences (:func:`vbl_robust.data.read_lard_sequences`; ``rate_hz``
+    gives the times of data without them). ``ValueError`` / ``FileNotFoundError`` with one line naming
+    ``--sequences`` for bad input."""
+    text = str(source).strip()
+    if text.isdigit():
+        from ..scenes import generate_sequences
+
+        n = int(text)
+        if n < 1:
+            raise ValueError(f"--sequences {source}: need at least 1 sequence")
+        seqs = generate_sequences(n, frames, rate_hz, seed, width=width, height=height)
+        return seqs, {"kind": "synthetic sequences", "n": n, "frames": frames, "rate_hz": rate_hz, "seed": seed,
+                      "width": width, "height": height}
+    if not Path(text).is_dir():
+        raise ValueError(f"--sequences {source}: expected a number of sequences or a LARD V2 dataset directory")
+    from ..data import read_lard_sequences
+
+    csv_path, db_path = find_lard_files(text)
+    seqs = read_lard_sequences(csv_path, db_path, rate_hz=rate_hz)
+    if not seqs:
+        raise ValueError(f"--sequences {source}: the dataset has no usable rows")
+    return seqs, {"kind": "lard sequences", "csv": str(csv_path), "csv_sha256": file_sha256(csv_path),
+                  "db": str(db_path), "db_sha256": file_sha256(db_path), "sequences": len(seqs), "rate_hz": rate_hz}

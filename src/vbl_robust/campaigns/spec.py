@@ -41,7 +41,9 @@ ROLES = ("main", "reference", "landscape")
 #: which survival drops below 50 % and 10 % (plus the reference grids); ``convergence`` — |PO_k| and RA(k) of
 #: DIRECT-family traces; ``landscape`` — L over a dense grid of one image (landscape role, else the reference grid) with the
 #: methods' points; ``progress`` — worst error found against evaluations; ``per_image`` — each image's worst case.
-FIGURES = ("pnp", "survival", "runtime", "distance", "families", "convergence", "landscape", "progress", "per_image")
+#: ``sequences`` — a sequence campaign's errors along each approach and its per-sequence breach facts.
+FIGURES = ("pnp", "survival", "runtime", "distance", "families", "sequences", "convergence", "landscape", "progress",
+           "per_image")
 
 
 def derive_seed(base_seed: int, *parts: Any) -> int:
@@ -305,6 +307,10 @@ class CampaignSpec:
         clock: what time budgets are measured on (:data:`vbl_robust.search.CLOCKS`): ``"wall"``, or
             ``"process"`` (CPU seconds of the evaluating process, which other work on the machine does not move).
             Part of the job context when not ``"wall"`` (so the keys of wall-clock campaigns stay as they were).
+        sustain: ``None`` — every sample is one image and a search job maximises its error; an integer ``k`` — a
+            *sequence campaign*: every sample is an :class:`~vbl_robust.data.ApproachSequence`, one θ is held over
+            its frames and a search job maximises the error sustained over ``k`` consecutive frames
+            (:class:`~vbl_robust.sequences.SequenceObjective`). Part of the job context when set.
     """
 
     name: str
@@ -318,6 +324,7 @@ class CampaignSpec:
     notes: str = ""
     figures: tuple[str, ...] = ()
     clock: str = "wall"
+    sustain: int | None = None
 
     def __post_init__(self) -> None:
         from ..search import CLOCKS
@@ -327,6 +334,11 @@ class CampaignSpec:
         unknown = [f for f in self.figures if f not in FIGURES]
         if unknown:
             raise ValueError(f"CampaignSpec: unknown figure(s) {unknown}; figures are {FIGURES}")
+        if self.sustain is not None and (isinstance(self.sustain, bool) or not isinstance(self.sustain, int)
+                                         or self.sustain < 1):
+            raise ValueError(f"sustain: need an integer >= 1 (frames), got {self.sustain!r}")
+        if self.sustain is not None and any(b.kind != "search" for b in self.blocks):
+            raise ValueError("CampaignSpec: a sequence campaign (sustain set) holds search blocks only")
         object.__setattr__(self, "figures", tuple(self.figures))
 
     def check(self) -> None:
@@ -358,9 +370,33 @@ class CampaignSpec:
                     raise ValueError(f"box {box.label}: {exc}") from None
 
     @property
+    def unit(self) -> str:
+        """What one sample is, for tables and text: ``"image"``, or ``"sequence"`` in a sequence campaign."""
+        return "image" if self.sustain is None else "sequence"
+
+    def check_samples(self, samples: Sequence[Any]) -> None:
+        """Refuse, before any work, samples this campaign cannot run on: ``ValueError``, one line — images given to
+        a sequence campaign or sequences to an image campaign, or a sequence shorter than ``sustain`` frames
+        (every job of it would fail)."""
+        for s in samples:
+            frames = getattr(s, "samples", None)
+            if self.sustain is None and frames is not None:
+                raise ValueError(f"sample {s.id!r} is an approach sequence: a campaign of sequences needs sustain")
+            if self.sustain is not None and frames is None:
+                raise ValueError(f"sample {s.id!r} is one image: a sequence campaign (sustain {self.sustain}) needs "
+                                 "approach sequences")
+            if self.sustain is not None and len(frames) < self.sustain:
+                raise ValueError(f"sustain: need an integer k with 1 <= k <= {len(frames)} (sequence {s.id!r} has "
+                                 f"{len(frames)} frames), got {self.sustain}")
+
+    @property
     def report_figures(self) -> tuple[str, ...]:
-        """The figures the report draws: the declared ones, else :func:`default_figures` of the blocks."""
-        return self.figures or default_figures(self.blocks)
+        """The figures the report draws: the declared ones, else :func:`default_figures` of the blocks (with
+        ``sequences`` for a sequence campaign)."""
+        if self.figures:
+            return self.figures
+        found = default_figures(self.blocks) + (("sequences",) if self.sustain is not None else ())
+        return tuple(f for f in FIGURES if f in found)
 
     def settings(self) -> dict[str, Any]:
         """The settings that change results (part of the job context)."""
@@ -368,6 +404,8 @@ class CampaignSpec:
                "pnp": self.pnp, "lipschitz": self.lipschitz}
         if self.clock != "wall":
             out["clock"] = self.clock
+        if self.sustain is not None:
+            out["sustain"] = self.sustain
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -393,7 +431,7 @@ class CampaignSpec:
         return cls(name=d["name"], blocks=blocks, seed=int(d["seed"]), eps_safe_m=float(d["eps_safe_m"]),
                    penalty_m=float(d["penalty_m"]), conf_threshold=float(d["conf_threshold"]), pnp=d["pnp"],
                    lipschitz=tuple(lip) if isinstance(lip, list) else lip, notes=d.get("notes", ""),
-                   figures=tuple(d.get("figures", ())), clock=d.get("clock", "wall"))
+                   figures=tuple(d.get("figures", ())), clock=d.get("clock", "wall"), sustain=d.get("sustain"))
 
     def context(self, detector_id: str) -> str:
         """Digest of what every job of this campaign shares: the settings and the detector identity."""

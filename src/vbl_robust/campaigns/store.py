@@ -597,7 +597,7 @@ class ResultStore:
         return {r[0]: dict(zip(names, r, strict=True)) for r in cur.fetchall()}
 
     def check_contents(self, samples: Iterable[Any]) -> None:
-        """Record the image-file digest of each sample read from a file (``image_path``), and refuse
+        """Record the image-file digest of each sample (each frame of a sequence) read from a file (``image_path``), and refuse
         (``ValueError`` naming them) samples whose file's bytes differ from those their stored jobs were computed
         on. A file whose size and mtime are unchanged is not read again; samples rendered in memory have no file
         (their pixels follow from their geometry and the generator, both in the job keys and the provenance)."""
@@ -606,19 +606,20 @@ class ResultStore:
         stored = {r[0]: r[1:] for r in self._con.execute("SELECT sample_id, size, mtime_ns, sha256 FROM contents")}
         with_jobs = {r[0] for r in self._con.execute("SELECT DISTINCT sample_id FROM jobs")}
         changed, rows = [], []
-        for s in samples:
-            path = getattr(s, "image_path", None)
-            if path is None or not Path(path).is_file():
-                continue  # rendered in memory, or missing (the job records that failure)
-            st = Path(path).stat()
-            old = stored.get(s.id)
-            if old is not None and (old[0], old[1]) == (st.st_size, st.st_mtime_ns):
-                continue
-            digest = file_sha256(path)
-            if old is not None and old[2] != digest and s.id in with_jobs:
-                changed.append(f"{s.id} ({path})")
-                continue
-            rows.append((s.id, str(path), st.st_size, st.st_mtime_ns, digest))
+        for owner in samples:  # a sequence campaign's sample is an approach sequence: each frame has its file
+            for s in getattr(owner, "samples", None) or (owner,):
+                path = getattr(s, "image_path", None)
+                if path is None or not Path(path).is_file():
+                    continue  # rendered in memory, or missing (the job records that failure)
+                st = Path(path).stat()
+                old = stored.get(s.id)
+                if old is not None and (old[0], old[1]) == (st.st_size, st.st_mtime_ns):
+                    continue
+                digest = file_sha256(path)
+                if old is not None and old[2] != digest and owner.id in with_jobs:
+                    changed.append(f"{s.id} ({path})")
+                    continue
+                rows.append((s.id, str(path), st.st_size, st.st_mtime_ns, digest))
         if changed:
             raise ValueError(f"{self.path}: the pixels of {len(changed)} sample(s) changed since their results were "
                              f"stored: {', '.join(changed[:5])}{' …' if len(changed) > 5 else ''}; run them into "

@@ -58,10 +58,28 @@ class Settings:
     pnp: str
     lipschitz: float | tuple[float, ...] | None = None
     clock: str = "wall"
+    sustain: int | None = None
 
     @classmethod
     def from_spec(cls, spec: Any) -> Settings:
-        return cls(spec.eps_safe_m, spec.penalty_m, spec.conf_threshold, spec.pnp, spec.lipschitz, spec.clock)
+        return cls(spec.eps_safe_m, spec.penalty_m, spec.conf_threshold, spec.pnp, spec.lipschitz, spec.clock,
+                   spec.sustain)
+
+
+def build_objective(sample: Any, detector: Any, box: Any, settings: Settings) -> Any:
+    """The objective a search job maximises over ``box``: the error of one image
+    (:class:`~vbl_robust.pipeline.Objective`), or in a sequence campaign (``settings.sustain`` set) the error one θ
+    sustains over ``sustain`` consecutive frames of an approach sequence
+    (:class:`~vbl_robust.sequences.SequenceObjective`)."""
+    if settings.sustain is not None:
+        from ..sequences import SequenceObjective
+
+        return SequenceObjective(sample, detector, box, settings.pnp, sustain=settings.sustain,
+                                 conf_threshold=settings.conf_threshold, penalty_m=settings.penalty_m)
+    from ..pipeline import Objective
+
+    return Objective(sample, detector, box, pnp=settings.pnp, conf_threshold=settings.conf_threshold,
+                     penalty_m=settings.penalty_m)
 
 
 @dataclass
@@ -132,6 +150,27 @@ def worst_details(objective: Any, x: np.ndarray) -> dict[str, Any]:
     err = float(rec.error_m[0])
     return {"conf": conf if math.isfinite(conf) else None, "error_m": err if math.isfinite(err) else None,
             "position": [float(v) if math.isfinite(v) else None for v in rec.position[0]]}
+
+
+def sequence_details(objective: Any, x: np.ndarray, eps_safe_m: float) -> dict[str, Any]:
+    """What a sequence job stores about its worst θ (two more evaluations of the sequence): the breach facts of the
+    worst θ and of the unperturbed θ (:meth:`~vbl_robust.sequences.SequenceRecord.summary` at ``eps_safe_m``, with
+    each frame's error and failure reason) and the frames (image id, index, time, distance from the runway
+    threshold); JSON-safe (non-finite numbers as None)."""
+    from ..sequences import nominal_theta
+
+    seq = objective.sequence
+    out: dict[str, Any] = {"frames": {"image": [str(s.id) for s in seq.samples],
+                                      "frame_index": [int(i) for i in seq.frame_index],
+                                      "time_s": [_finite(float(t)) for t in seq.times],
+                                      "distance_m": [float(d) for d in seq.distances_m]}}
+    for name, theta in (("worst", np.asarray(x, dtype=np.float64)[None]), ("nominal", nominal_theta(objective.box))):
+        rec = objective.evaluate(theta)
+        facts = {k: (_finite(v) if isinstance(v, float) else v) for k, v in rec.summary(0, eps_safe_m).items()}
+        facts["errors_m"] = [_finite(float(v)) for v in rec.loss[:, 0]]
+        facts["reasons"] = [r[0] for r in rec.reasons]
+        out[name] = facts
+    return out
 
 
 def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
@@ -206,8 +245,6 @@ def _reason(exc: BaseException) -> str:
 def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id: int | None = None,
                     ) -> Iterator[list[JobRow]]:
     """Run a sample's jobs in order; yield the rows to commit after each job."""
-    from ..pipeline import Objective
-
     objectives: dict[str, Any] = {}
     breached: dict[str, JobRow] = {}  # chain -> breaching row
     for job in task.jobs:
@@ -223,17 +260,17 @@ def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id:
                 continue
             label = job.box.label
             if label not in objectives:
-                objectives[label] = Objective(task.sample, detector, job.box.box, pnp=settings.pnp,
-                                              conf_threshold=settings.conf_threshold, penalty_m=settings.penalty_m)
+                objectives[label] = build_objective(task.sample, detector, job.box.box, settings)
             objective = objectives[label]
-            result = run_search_job(job, objective, settings)
             image_error = getattr(objective, "image_error", "")
-            if image_error:  # the pipeline penalised every evaluation: a failed sample, not a breach
+            if image_error:  # the pipeline would penalise every evaluation: a failed sample, not a breach
                 yield [failed_row(job, f"image unavailable: {image_error}", settings, run_id, time.perf_counter() - t0)]
                 continue
+            result = run_search_job(job, objective, settings)
             row = search_row(job, result, settings, run_id, time.perf_counter() - t0)
-            if job.role == "main" and result.x is not None and hasattr(objective, "evaluate"):
-                row = row.replace(payload={"worst": worst_details(objective, result.x)})
+            if job.role == "main" and result.x is not None:
+                row = row.replace(payload={"sequence": sequence_details(objective, result.x, settings.eps_safe_m)}
+                                  if settings.sustain is not None else {"worst": worst_details(objective, result.x)})
         except Exception as exc:  # a sample the pipeline cannot handle is a recorded failure
             logger.warning("sample %s, job %s/%s failed: %s", job.sample_id, job.method, job.box and job.box.label,
                            _reason(exc))

@@ -233,6 +233,7 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
 
     try:
         spec.check()  # before anything is created or run
+        spec.check_samples(samples)
     except ValueError as exc:
         fail(str(exc))
     try:
@@ -310,7 +311,7 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
         for c in cols:  # a method's name is never cut (georobust and georobust-av must stay apart)
             table.add_column(heads[c], no_wrap=c == "method", min_width=max(len(str(ln[c])) for ln in lines)
                              if c == "method" else None)
-        for col in ("images", "survival %", "median worst (m)", "breaches", "failed jobs", "failed evals"):
+        for col in (f"{spec.unit}s", "survival %", "median worst (m)", "breaches", "failed jobs", "failed evals"):
             table.add_column(col, justify="right")
         for line in lines:
             fe = line.get("failed_evals")
@@ -326,6 +327,18 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
         from vbl_robust.report import build_report
 
         typer.echo(f"report: {build_report(out)}")
+
+
+def load_sequence_samples(source: str, frames: int, rate: float, seed: int, width: int, height: int,
+                          ) -> tuple[list, dict]:
+    """The approach sequences of ``--sequences`` (:func:`vbl_robust.campaigns.load_sequences`), or one line."""
+    from vbl_robust.campaigns import load_sequences
+
+    try:
+        return load_sequences(source, frames=frames, rate_hz=rate, seed=seed, width=width, height=height)
+    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+        fail(str(exc))
+    raise AssertionError("unreachable")  # pragma: no cover
 
 
 def load(n: int, seed: int, lard: Path | None, width: int, height: int) -> tuple[list, dict]:
@@ -373,8 +386,9 @@ def register(app: typer.Typer) -> None:
         lipschitz: str | None = typer.Option(None, "--lipschitz", help="Lipschitz constant of the error (m per unit, "
                                              "one number or one per parameter): enables 'certified' verdicts."),
         pnp: str = typer.Option("ippe_lm", "--pnp", help="PnP solver: ippe_lm, iterative, sqpnp, ippe."),
-        landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="Dense grid on the first image for the "
-                                       "report's landscape figure."),
+        landscape: bool | None = typer.Option(None, "--landscape/--no-landscape", help="Dense grid on the first image "
+                                              "for the report's landscape figure (default: on; with --sequences off, "
+                                              "as each grid point costs every frame of the first sequence)."),
         executor: str = o.EXECUTOR,
         workers: int = o.WORKERS,
         clock: str = o.CLOCK,
@@ -433,35 +447,30 @@ def register(app: typer.Typer) -> None:
         level = max(abs(v) for v in bounds["roll_deg"]) if "roll_deg" in bounds else 0.0
         label = box_label(bounds)
         method_list = parse_methods(methods)
+        if landscape is None:  # on for images; for sequences a grid costs every frame per point: asked for only
+            landscape = sequences is None
         counts = (21, 11)[: box.dim] if landscape and box.dim <= 2 else None
         spec = audit_spec(BoxSpec(box, label, level), methods=method_list, budget=budget, seed=seed,
-                          lipschitz=parse_lipschitz(lipschitz), pnp=pnp, landscape=counts)
+                          lipschitz=parse_lipschitz(lipschitz), pnp=pnp, landscape=counts,
+                          sustain=None if sequences is None else sustain)
         method_opts = parse_method_options(method_option)
         spec = with_method_options(spec, method_opts)
         spec, workers = run_settings(spec, clock, device, workers)
         check_exports(csv, parquet, out)
         det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
-        if sequences is not None:  # sequence audits: vbl_robust.cli.sequence_audit
-            from .sequence_audit import run_sequence_audit
-
-            run_sequence_audit(
-                out, sequences, frames=frames, rate=rate, seed=seed, width=width, height=height, sustain=sustain,
-                box=box, methods=method_list, max_evals=max_evals, max_seconds=max_seconds, early_stop=early_stop,
-                pnp=pnp, detector=det, quiet=quiet, config={"command": "audit --sequences", "sequences": sequences,
-                "sustain": sustain, "frames": frames, "rate": rate, "seed": seed, "roll": roll, "contrast": contrast,
-                "methods": list(method_list), "max_evals": max_evals, "max_seconds": max_seconds,
-                "early_stop": early_stop, "pnp": pnp, "width": width, "height": height, "perturb": list(perturb or [])},
-                unsupported={"--lard (use --sequences DIR)": lard is not None, "--lipschitz": lipschitz is not None,
-                             "--executor ray": executor != "local", "--csv": csv is not None,
-                             "--parquet": parquet is not None, "--refine-zones": refine_zones > 0,
-                             "--method-option": bool(method_opts)})
-            return
-        samples, source = load(n, seed, lard, width, height)
+        if sequences is not None:
+            if lard is not None:
+                fail("--lard and --sequences: give a LARD V2 directory of sequences as --sequences DIR")
+            samples, source = load_sequence_samples(sequences, frames, rate, seed, width, height)
+        else:
+            samples, source = load(n, seed, lard, width, height)
         config = {"command": "audit", "n": n, "seed": seed, "lard": str(lard) if lard else None, "roll": roll,
                   "contrast": contrast, "methods": list(method_list), "max_evals": max_evals, "max_seconds": max_seconds,
                   "early_stop": early_stop, "lipschitz": lipschitz, "pnp": pnp, "width": width, "height": height}
         if perturb:
             config["perturb"] = list(perturb)
+        if sequences is not None:
+            config.update(sequences=sequences, sustain=sustain, frames=frames, rate=rate)
         if method_opts:
             config["method_options"] = method_opts
         summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,

@@ -101,6 +101,21 @@ class ApproachSequence:
             return math.nan
         return float(1.0 / np.median(np.diff(self.times)))
 
+    @property
+    def slant_distance_m(self) -> float:
+        """Slant distance of the first frame (where the approach starts): a campaign's sample record."""
+        return self.samples[0].slant_distance_m
+
+    @property
+    def width(self) -> int:
+        """Image width of the first frame."""
+        return int(self.samples[0].width)
+
+    @property
+    def height(self) -> int:
+        """Image height of the first frame."""
+        return int(self.samples[0].height)
+
     def drop_pixels(self) -> None:
         """Forget the cached pixels of every frame (:meth:`Sample.drop_pixels`)."""
         for s in self.samples:

@@ -5,7 +5,8 @@ the table of the numbers behind it, and the provenance of every run (code versio
 identity, configuration) closes the page. Figures are also written as PNG files next to the report.
 
 Where things are: :mod:`.rows` (the context and which stored rows each section reads), :mod:`.sections` (one
-function per section), :mod:`.zone_section` (the vulnerability zones), :mod:`.figures` (drawing), :mod:`.html`
+function per section), :mod:`.zone_section` (the vulnerability zones), :mod:`.sequence_section` (a sequence
+campaign's errors along the approach), :mod:`.figures` (drawing), :mod:`.html`
 (the page); this module only orders the sections and writes the page.
 
 Which figures: the ones the campaign spec declares (``CampaignSpec.figures``, see
@@ -51,6 +52,7 @@ from .sections import (
     section_runtime,
     section_survival_level,
 )
+from .sequence_section import section_sequences
 from .zone_section import section_zones
 
 logger = logging.getLogger(__name__)
@@ -59,7 +61,7 @@ logger = logging.getLogger(__name__)
 #: The section drawing each figure a campaign can declare (``CampaignSpec.figures``), in report order.
 SECTIONS: dict[str, Callable[[Context], Section | None]] = {
     "pnp": section_pnp, "survival": section_survival_level, "runtime": section_runtime, "distance": section_distance,
-    "families": section_families, "convergence": section_convergence, "landscape": section_landscapes, "progress": section_best_vs_evals,
+    "families": section_families, "sequences": section_sequences, "convergence": section_convergence, "landscape": section_landscapes, "progress": section_best_vs_evals,
     "per_image": section_per_image,
 }
 

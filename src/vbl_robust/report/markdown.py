@@ -87,7 +87,7 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
                                   key=lambda kv: kv[1] or 0.0)]
     methods = list(dict.fromkeys(ln["method"] for ln in lines))
     cell = {(ln["method"], ln["box_label"]): ln for ln in lines}
-    out = [f"{run}: {len(done)} images completed by every method (of {len(per_image)} started); "
+    out = [f"{run}: {len(done)} {spec.unit}s completed by every method (of {len(per_image)} started); "
            f"ε_safe = {eps:g} m; cell = survival % (breaches)", ""]
     table = [[m, *(f"{cell[(m, b)]['survival']:.1f} ({cell[(m, b)]['breaches']})" if (m, b) in cell else "–"
                    for b in boxes)] for m in methods]

@@ -29,16 +29,14 @@ from .rows import (
     where,
 )
 
-_SUMMARY_COLS = [
-    ("method", "method", None), ("box_label", "box", None), ("budget_label", "budget per image", None),
-    ("n", "images", None), ("survival", "survival %", None), ("median_worst_m", "median worst (m)", None),
-    ("breaches", "breaches", None), ("certified", "certified", None), ("failed", "failed", None),
-    ("mean_nfev", "mean evals", None), ("failed_evals", "failed evals", None), ("median_search_s", "median s", None),
-]
 
-
-def _summary_table(summary: Sequence[Mapping[str, Any]]) -> str:
-    cols = list(_SUMMARY_COLS)
+def _summary_table(summary: Sequence[Mapping[str, Any]], unit: str = "image") -> str:
+    cols = [
+        ("method", "method", None), ("box_label", "box", None), ("budget_label", f"budget per {unit}", None),
+        ("n", f"{unit}s", None), ("survival", "survival %", None), ("median_worst_m", "median worst (m)", None),
+        ("breaches", "breaches", None), ("certified", "certified", None), ("failed", "failed", None),
+        ("mean_nfev", "mean evals", None), ("failed_evals", "failed evals", None), ("median_search_s", "median s", None),
+    ]
     if any(line.get("read_from") for line in summary):
         cols.append(("read_from", "read off the run", None))
     return table(summary, cols, left=("method", "box_label", "budget_label", "read_from"))
@@ -68,7 +66,7 @@ def section_overview(ctx: Context, title: str) -> Section:
     n_done = ctx.store.count()
     total = last.get("jobs_total")
     s.html.append(
-        f"<p><b>{esc(title)}</b>. Detector: <b>{esc(det.get('name', '?'))}</b>; {len(ctx.samples)} images; "
+        f"<p><b>{esc(title)}</b>. Detector: <b>{esc(det.get('name', '?'))}</b>; {len(ctx.samples)} {ctx.spec.unit}s; "
         f"ε_safe = {ctx.eps:g} m, τ_conf = {ctx.spec.conf_threshold:g}, failure penalty {ctx.spec.penalty_m:g} m, "
         f"PnP solver <code>{esc(ctx.spec.pnp)}</code>, seed {ctx.spec.seed}. Jobs in the store: {n_done}"
         + (f" of {total}" if total else "") + ".</p>")
@@ -85,7 +83,7 @@ def section_overview(ctx: Context, title: str) -> Section:
                       "command to resume.</p>")
     if ctx.main:
         summary = mx.summarize(ctx.main, ctx.eps)
-        s.html.append(_summary_table(summary))
+        s.html.append(_summary_table(summary, ctx.spec.unit))
         s.html.append(_failures_table(summary, ctx.spec.penalty_m))
     failed = [r for r in ctx.store.jobs(with_trace=False) if r.status is JobStatus.FAILED]
     if failed:
@@ -145,7 +143,7 @@ def section_runtime(ctx: Context) -> Section | None:
         s.html.append(ctx.figure(fig, f"runtime_{dims}_{name}",
                                  "Left: survival rate; right: median over images of the worst error found "
                                  "(no early stop). Dashed black: the dense grid's true worst case."))
-        s.html.append(_summary_table(summary))
+        s.html.append(_summary_table(summary, ctx.spec.unit))
     read = sorted({r.method for r in rows if r.read_from})
     if read:
         own = sorted({r.method for r in rows if not r.read_from})
@@ -370,11 +368,12 @@ def section_per_image(ctx: Context) -> Section | None:
         line["verdict"] = (Verdict.BREACH if line["worst"] > ctx.eps else
                            Verdict.CERTIFIED if any(line.get(f"{m}_verdict") is Verdict.CERTIFIED for m in methods)
                            else Verdict.NO_BREACH_FOUND)
-    cols = [("sample_id", "image", None), ("slant_distance_m", "slant dist. (m)", None), ("envelope", "envelope", None)]
+    cols = [("sample_id", ctx.spec.unit, None), ("slant_distance_m", "slant dist. (m)", None),
+            ("envelope", "envelope", None)]
     for m in methods:
         cols += [(f"{m}_worst", f"{F.style(m)['label']} worst (m)", None), (f"{m}_x", "at θ", esc)]
     cols += [("worst", "worst of all (m)", None), ("verdict", "verdict", None)]
-    s = Section("Per image: worst case found")
+    s = Section(f"Per {ctx.spec.unit}: worst case found")
     s.html.append(table(lines, cols, row_class=lambda r: "breach" if r["verdict"] is Verdict.BREACH else "",
                         left=("sample_id", "envelope", "verdict", *[f"{m}_x" for m in methods])))
     return s

@@ -213,6 +213,15 @@ class SequenceObjective:
         return self.box.dim
 
     @property
+    def image_error(self) -> str:
+        """Why a frame's pixels could not be loaded (``""`` when every frame's could): a sequence with a missing
+        frame is a failed sample of a campaign, not a breach (its frame would count the penalty)."""
+        for s, o in zip(self.sequence.samples, self.frames, strict=True):
+            if o.image_error:
+                return f"frame {s.id}: {o.image_error}"
+        return ""
+
+    @property
     def batched(self) -> bool:
         """Whether the frames go through the detector together (decided on first use: it loads the pixels)."""
         if self._batchable is None:
