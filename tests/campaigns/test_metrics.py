@@ -84,12 +84,15 @@ def test_summarize_groups_in_first_seen_order():
             for m, w, nf, fails in (("random", 10.0, 0, {}), ("apgd", 2000.0, None, {}),
                                     ("random", 3000.0, 3, {"no_detection": 2, "pnp_failed": 1}))]
     s = mx.summarize(rows, 1000.0)
-    assert [x["method"] for x in s] == ["random", "apgd"]
-    assert s[0]["n"] == 2 and s[0]["survival"] == 50.0 and s[0]["median_worst_m"] == 1505.0 and s[0]["breaches"] == 1
-    assert s[0]["max_evals"] == 10 and math.isnan(s[0]["max_seconds"])
-    assert (s[0]["box_label"], s[0]["budget_label"], s[0]["nfev"]) == ("±5°", "10 evals", 20)
-    assert s[0]["failed_evals"] == 3 and s[0]["failures"] == {"no_detection": 2, "pnp_failed": 1}
-    assert s[1]["failed_evals"] is None and s[1]["failures"] == {}  # a row stored before failures were recorded
+    assert [x.method for x in s] == ["random", "apgd"]
+    assert s[0].n == 2 and s[0].survival == 50.0 and s[0].median_worst_m == 1505.0 and s[0].breaches == 1
+    assert s[0].max_evals == 10 and math.isnan(s[0].max_seconds)
+    assert (s[0].box_label, s[0].budget_label, s[0].nfev) == ("±5°", "10 evals", 20)
+    assert s[0].failed_evals == 3 and s[0].failures == {"no_detection": 2, "pnp_failed": 1}
+    assert s[1].failed_evals is None and s[1].failures == {}  # a row stored before failures were recorded
+    with pytest.raises(ValueError, match="cannot group by"):
+        mx.summarize(rows, 1000.0, by=("seed",))
+    assert mx.summarize(rows, 1000.0, by=("box_label",))[0].method is None  # not grouped by method
 
 
 def test_pnp_summary():

@@ -110,7 +110,7 @@ def test_rows_read_off_a_stored_run_equal_the_search_read_at_each_budget(tmp_pat
         assert np.all(x.points.times <= (b.max_seconds or math.inf)) and len(x.points) == x.nfev
     assert rows[3].nfev == 5 and rows[4].nfev == 60
     s = mx.summarize(rows, spec.eps_safe_m)
-    assert all(line["read_from"] == stored.budget_label for line in s)
+    assert all(line.read_from == stored.budget_label for line in s)
 
 
 def test_a_time_budget_before_the_first_evaluation_finds_nothing(tmp_path, monkeypatch):
@@ -118,7 +118,7 @@ def test_a_time_budget_before_the_first_evaluation_finds_nothing(tmp_path, monke
     early = mx.read_off(stored, Budget(max_seconds=0.001, stop_at_breach=False), spec.eps_safe_m, spec.penalty_m)
     assert early.nfev == 0 and early.worst_m is None and early.verdict is Verdict.NO_BREACH_FOUND
     (line,) = mx.summarize([early], spec.eps_safe_m)
-    assert line["survival"] == 100.0 and line["n_empty"] == 1 and math.isnan(line["median_worst_m"])
+    assert line.survival == 100.0 and line.n_empty == 1 and math.isnan(line.median_worst_m)
 
 
 def test_a_failed_run_reads_as_failed_at_every_budget(tmp_path, monkeypatch):

@@ -222,7 +222,7 @@ def test_report_markdown_survival_table_from_the_store(gated_run, tmp_path):
         lines = summarize(main_rows(store, spec, with_trace=False), spec.eps_safe_m, by=("method", "box_label"))
     rows = _md_rows(res.output.split("Landscape grid")[0])
     for ln in lines:
-        assert rows[ln["method"]][0] == f"{ln['survival']:.1f} ({ln['breaches']})"
+        assert rows[ln.method][0] == f"{ln.survival:.1f} ({ln.breaches})"
     assert "any of them" in rows and "Landscape grid on image" in res.output  # the dense grid's found / true ratios
     # refused: md prints, it writes nothing; --with needs md and the same experiment
     for args, msg in ((["--format", "md", "--out", str(tmp_path)], "--format md prints"),

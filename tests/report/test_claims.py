@@ -47,10 +47,10 @@ def _open(root, name):
 
 def _survival(rows, eps):
     """Per method the survival % per box, by box level, straight from metrics.summarize."""
-    lines = sorted(mx.summarize(rows, eps, by=("method", "box_label")), key=lambda ln: ln["box_level"])
+    lines = sorted(mx.summarize(rows, eps, by=("method", "box_label")), key=lambda ln: ln.box_level)
     out: dict[str, list[float]] = {}
     for ln in lines:
-        out.setdefault(ln["method"], []).append(ln["survival"])
+        out.setdefault(ln.method, []).append(ln.survival)
     return out
 
 

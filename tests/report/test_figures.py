@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
+from vbl_robust.campaigns.metrics import Summary
 from vbl_robust.report import figures as F
 
 
@@ -11,8 +12,11 @@ def summary_rows():
     out = []
     for m, base in (("georobust", 20.0), ("random", 50.0), ("apgd", 70.0), (F.REFERENCE, 10.0)):
         for lv in (2.0, 5.0, 10.0):
-            out.append({"method": m, "box_level": lv, "box_label": f"±{lv:g}°", "survival": base / lv * 2, "n": 5,
-                        "max_seconds": lv / 10, "max_evals": float(lv * 10), "median_worst_m": 100.0 * lv})
+            out.append(Summary(
+                method=m, box_level=lv, box_label=f"±{lv:g}°", budget_label=None, survival=base / lv * 2, n=5,
+                max_seconds=lv / 10, max_evals=float(lv * 10), max_iters=math.nan, median_worst_m=100.0 * lv,
+                n_empty=0, mean_worst_m=100.0 * lv, breaches=0, certified=0, failed=0, nfev=50, mean_nfev=10.0,
+                failed_evals=None, failures={}, median_search_s=0.1, read_from=""))
     return out
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -58,15 +59,69 @@ def failure_counts(rows: Iterable[JobRow]) -> dict[str, int]:
     return dict(sorted(total.items()))
 
 
+#: The :class:`JobRow` attributes :func:`summarize` can group by.
+GROUP_BY = ("method", "box_label", "budget_label", "box_level")
+
+
+@dataclass(frozen=True)
+class Summary:
+    """One group of :func:`summarize`.
+
+    Attributes:
+        method, box_label, budget_label, box_level: the group's value of each attribute it is grouped by (None for
+            one it is not grouped by; ``box_level`` is the first row's when not grouped by it).
+        max_evals, max_seconds, max_iters: the group's numeric budget (NaN when the budget has no such bound).
+        n: rows (images, or sequences); survival: S_rate (%); n_empty: rows with no evaluation completed within
+            their time budget (survivors, left out of the worst-error statistics).
+        median_worst_m, mean_worst_m: over the rows with a worst error (NaN for none).
+        breaches, certified, failed: verdict and status counts.
+        nfev, mean_nfev: evaluations in all and per row; failed_evals: failed evaluations (None when no row
+            recorded them), failures: per reason.
+        median_search_s: median search seconds; read_from: the budget label of the runs the group was read off
+            (:func:`read_off_rows`; "" for runs of their own).
+    """
+
+    method: str | None
+    box_label: str | None
+    budget_label: str | None
+    box_level: float | None
+    max_evals: float
+    max_seconds: float
+    max_iters: float
+    n: int
+    survival: float
+    n_empty: int
+    median_worst_m: float
+    mean_worst_m: float
+    breaches: int
+    certified: int
+    failed: int
+    nfev: int
+    mean_nfev: float
+    failed_evals: int | None
+    failures: Mapping[str, int]
+    median_search_s: float
+    read_from: str
+
+    def as_row(self) -> dict[str, Any]:
+        """The fields by name (for the report's and the command line's tables)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def budget(self, axis: str) -> float:
+        """The numeric budget on ``axis`` ("max_seconds", "max_evals", "max_iters"), NaN when unbounded there."""
+        if axis not in ("max_seconds", "max_evals", "max_iters"):
+            raise ValueError(f"axis must be max_seconds, max_evals or max_iters, got {axis!r}")
+        return getattr(self, axis)
+
+
 def summarize(rows: Iterable[JobRow], eps_safe_m: float,
-              by: Sequence[str] = ("method", "box_label", "budget_label")) -> list[dict[str, Any]]:
-    """One line per group: n images, survival %, median / mean worst error, breaches, failed jobs, evaluations
-    (total ``nfev`` and ``mean_nfev``), failed evaluations (``failed_evals``: None when no row recorded them; ``failures``: per
-    reason), median search seconds, plus the group's ``box_level`` and numeric budgets, and ``read_from`` (the
-    budget label of the runs the group was read off, :func:`read_off_rows`; "" for runs of their own). A row
-    with no evaluation completed within its time budget (``nfev == 0``, no worst error) counts as a survivor
-    (nothing found) and is left out of the worst-error statistics (``n_empty`` counts them). Groups keep first-seen
-    order; ``by`` names :class:`JobRow` attributes."""
+              by: Sequence[str] = ("method", "box_label", "budget_label")) -> list[Summary]:
+    """One :class:`Summary` per group of ``rows`` with equal ``by`` attributes (names from :data:`GROUP_BY`), in
+    first-seen order. A row with no evaluation completed within its time budget (``nfev == 0``, no worst error)
+    counts as a survivor (nothing found) and is left out of the worst-error statistics (``n_empty`` counts them)."""
+    bad = [k for k in by if k not in GROUP_BY]
+    if bad:
+        raise ValueError(f"summarize: cannot group by {bad}; groups are {GROUP_BY}")
     groups: dict[tuple, list[JobRow]] = {}
     for r in rows:
         groups.setdefault(tuple(getattr(r, k) for k in by), []).append(r)
@@ -78,9 +133,10 @@ def summarize(rows: Iterable[JobRow], eps_safe_m: float,
         worst = [-math.inf if e else r.worst_m for r, e in zip(rs, empty, strict=True)]
         s = _stats([w for w, e in zip(worst, empty, strict=True) if not e])
         known = [r.n_failed for r in rs if r.n_failed is not None]
-        line = dict(zip(by, key, strict=True))
-        line.update(
-            box_level=rs[0].box_level,
+        group = dict(zip(by, key, strict=True))
+        out.append(Summary(
+            method=group.get("method"), box_label=group.get("box_label"), budget_label=group.get("budget_label"),
+            box_level=group.get("box_level", rs[0].box_level),
             max_evals=budget_value(rs[0], "max_evals"), max_seconds=budget_value(rs[0], "max_seconds"),
             max_iters=budget_value(rs[0], "max_iters"),
             n=len(rs), survival=survival_rate([0.0 if w == -math.inf else w for w in worst], eps_safe_m),
@@ -92,8 +148,7 @@ def summarize(rows: Iterable[JobRow], eps_safe_m: float,
             failed_evals=sum(known) if known else None, failures=failure_counts(rs),
             median_search_s=float(np.median([r.search_s or 0.0 for r in rs])),
             read_from=next((r.read_from for r in rs if r.read_from), ""),
-        )
-        out.append(line)
+        ))
     return out
 
 
@@ -281,10 +336,10 @@ def family_profile(rows: Iterable[JobRow], eps_safe_m: float,
                 "bounds": [(float(boxes[v].box.lower[0]), float(boxes[v].box.upper[0])) for v in levels],
                 "unit": boxes[levels[0]].box.units[0]}
         for m in dict.fromkeys(r.method for r in rs):
-            lines = {line["box_level"]: line for line in summarize([r for r in rs if r.method == m], eps_safe_m,
-                                                                   by=("box_level",))}
-            surv = [lines[v]["survival"] if v in lines else math.nan for v in levels]
-            entry = {**base, "method": m, "n": [lines[v]["n"] if v in lines else 0 for v in levels], "survival": surv}
+            lines = {line.box_level: line for line in summarize([r for r in rs if r.method == m], eps_safe_m,
+                                                                by=("box_level",))}
+            surv = [lines[v].survival if v in lines else math.nan for v in levels]
+            entry = {**base, "method": m, "n": [lines[v].n if v in lines else 0 for v in levels], "survival": surv}
             entry.update({f"below_{t:g}": first_level_below(levels, surv, t) for t in thresholds})
             out.append(entry)
         first: dict[str, float] = {}

@@ -304,19 +304,19 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
                 typer.echo(f"exported {path}")
     if rows and not quiet:
         lines = summarize(rows, spec.eps_safe_m)
-        cols = ["method"] + [c for c in ("box_label", "budget_label") if len({ln[c] for ln in lines}) > 1]
-        fixed = ", ".join(f"{lines[0][c]}" for c in ("box_label", "budget_label") if c not in cols)
+        cols = ["method"] + [c for c in ("box_label", "budget_label") if len({getattr(ln, c) for ln in lines}) > 1]
+        fixed = ", ".join(str(getattr(lines[0], c)) for c in ("box_label", "budget_label") if c not in cols)
         table = Table(title=f"{spec.name}: survival (worst error ≤ {spec.eps_safe_m:g} m)" + (f" — {fixed}" if fixed else ""))
         heads = {"method": "method", "box_label": "box", "budget_label": "budget"}
         for c in cols:  # a method's name is never cut (georobust and georobust-av must stay apart)
-            table.add_column(heads[c], no_wrap=c == "method", min_width=max(len(str(ln[c])) for ln in lines)
+            table.add_column(heads[c], no_wrap=c == "method", min_width=max(len(str(ln.method)) for ln in lines)
                              if c == "method" else None)
         for col in (f"{spec.unit}s", "survival %", "median worst (m)", "breaches", "failed jobs", "failed evals"):
             table.add_column(col, justify="right")
         for line in lines:
-            fe = line.get("failed_evals")
-            table.add_row(*(str(line[c]) for c in cols), str(line["n"]), f"{line['survival']:.1f}",
-                          f"{line['median_worst_m']:.1f}", str(line["breaches"]), str(line["failed"]),
+            fe = line.failed_evals
+            table.add_row(*(str(getattr(line, c)) for c in cols), str(line.n), f"{line.survival:.1f}",
+                          f"{line.median_worst_m:.1f}", str(line.breaches), str(line.failed),
                           "–" if fe is None else str(fe))
         Console().print(table)
     status = f"{summary.done} new jobs, {summary.skipped} already done, {summary.failed} failed, {summary.seconds:.0f} s"

@@ -218,8 +218,8 @@ def _survival(rows: Sequence[JobRow], eps: float) -> tuple[list[str], dict[str, 
     """(box labels by level, per method the survival % at each box, NaN where it has no row): the report's survival
     table (:func:`~vbl_robust.campaigns.metrics.summarize` by method and box); absent methods read all NaN."""
     lines = mx.summarize(rows, eps, by=("method", "box_label"))
-    labels = [lab for _, lab in sorted({(ln["box_level"], ln["box_label"]) for ln in lines})]
-    got = {(ln["method"], ln["box_label"]): ln["survival"] for ln in lines}
+    labels = [lab for _, lab in sorted({(ln.box_level, ln.box_label) for ln in lines})]
+    got = {(ln.method, ln.box_label): ln.survival for ln in lines}
     return labels, defaultdict(lambda: [math.nan] * len(labels),
                                {m: [got.get((m, b), math.nan) for b in labels] for m, _ in got})
 
@@ -317,7 +317,7 @@ def _runtime_2d(e: _Exp) -> Row:
     rows = [r for r in e.ctx.main if r.budget is not None and r.budget.max_seconds is not None]
     by: dict[str, list[tuple[float, float]]] = {}
     for ln in mx.summarize(rows, e.eps, by=("method", "budget_label")):
-        by.setdefault(ln["method"], []).append((ln["max_seconds"], ln["median_worst_m"]))
+        by.setdefault(ln.method, []).append((ln.max_seconds, ln.median_worst_m))
     curve = {m: sorted(v) for m, v in by.items()}
     ours = "; ".join(f"{m} " + ", ".join(f"{t:g} s: {fmt_num(w)} m" for t, w in v) for m, v in curve.items())
     apgd, geo = curve.get("apgd", []), curve.get("georobust", [])

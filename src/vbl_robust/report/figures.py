@@ -23,6 +23,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 
+from ..campaigns.metrics import Summary  # noqa: E402
 from ..search.zones import BREACHED, CLASSES, RULED_OUT, UNDECIDED, ZoneMap  # noqa: E402
 
 REFERENCE = "grid (reference)"
@@ -61,10 +62,6 @@ def method_order(methods: Iterable[str]) -> list[str]:
     return sorted(ms, key=lambda m: (m in (REFERENCE, ANY_METHOD), list(STYLE).index(m) if m in STYLE else 99, m))
 
 
-def _methods(rows: Sequence[Mapping[str, Any]]) -> list[str]:
-    return method_order(r["method"] for r in rows)
-
-
 _PLAIN = FuncFormatter(lambda v, _: f"{v:g}")
 
 
@@ -79,7 +76,7 @@ def _fig(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (6.4, 4.0),
     return fig, ax
 
 
-def survival_vs_level(summary: Sequence[Mapping[str, Any]], *, title: str, xlabel: str,
+def survival_vs_level(summary: Sequence[Summary], *, title: str, xlabel: str,
                       tick_labels: Mapping[float, str] | None = None) -> Figure:
     """Survival rate (%) against the perturbation budget (box level), one line per method (+ grid reference).
 
@@ -87,14 +84,14 @@ def survival_vs_level(summary: Sequence[Mapping[str, Any]], *, title: str, xlabe
     sideways so that coinciding curves stay visible.
     """
     fig, ax = _fig()
-    levels = sorted({r["box_level"] for r in summary})
+    levels = sorted({r.box_level for r in summary})
     pos = {v: i for i, v in enumerate(levels)}
-    methods = _methods(summary)
+    methods = method_order(r.method for r in summary)
     for j, m in enumerate(methods):
-        rs = sorted((r for r in summary if r["method"] == m), key=lambda r: r["box_level"])
+        rs = sorted((r for r in summary if r.method == m), key=lambda r: r.box_level)
         st = style(m)
         dx = 0.0 if m == REFERENCE else 0.07 * (j - (len(methods) - 2) / 2)
-        ax.plot([pos[r["box_level"]] + dx for r in rs], [r["survival"] for r in rs], marker=st["marker"],
+        ax.plot([pos[r.box_level] + dx for r in rs], [r.survival for r in rs], marker=st["marker"],
                 color=st["color"], linestyle=st["linestyle"], label=st["label"], markersize=6, linewidth=1.6,
                 alpha=0.9, zorder=4 if m == REFERENCE else 3)
     ax.set_xticks(range(len(levels)))
@@ -104,7 +101,7 @@ def survival_vs_level(summary: Sequence[Mapping[str, Any]], *, title: str, xlabe
         ax.set_xticklabels([f"±{v:g}°" for v in levels])
     ax.set_ylim(-3, 103)
     ax.axhline(10, **{**EPS_STYLE, "color": "grey"}, label="10 % (φ_crit level)")
-    n = max((r["n"] for r in summary), default=0)
+    n = max((r.n for r in summary), default=0)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(f"survival rate S_rate (%)   [N = {n} images]")
     ax.set_title(title)
@@ -113,19 +110,19 @@ def survival_vs_level(summary: Sequence[Mapping[str, Any]], *, title: str, xlabe
     return fig
 
 
-def runtime(summary: Sequence[Mapping[str, Any]], *, axis: str, title: str, eps_safe_m: float,
+def runtime(summary: Sequence[Summary], *, axis: str, title: str, eps_safe_m: float,
             reference: Mapping[str, float] | None = None) -> Figure:
     """Two panels against the per-image budget (``axis`` "max_seconds" or "max_evals"): survival rate and
     median worst error, one line per method; ``reference`` = {"survival", "median_worst_m"} of the dense grid."""
     fig, (a1, a2) = _fig(1, 2, size=(10.5, 4.4))
-    rows = [r for r in summary if r.get(axis) is not None and math.isfinite(r.get(axis, math.nan))]
-    for m in _methods(rows):
-        rs = sorted((r for r in rows if r["method"] == m), key=lambda r: r[axis])
+    rows = [r for r in summary if math.isfinite(r.budget(axis))]
+    for m in method_order(r.method for r in rows):
+        rs = sorted((r for r in rows if r.method == m), key=lambda r: r.budget(axis))
         st = style(m)
-        x = [r[axis] for r in rs]
+        x = [r.budget(axis) for r in rs]
         kw = {"marker": st["marker"], "color": st["color"], "label": st["label"], "linewidth": 1.8}
-        a1.plot(x, [r["survival"] for r in rs], **kw)
-        a2.plot(x, [r["median_worst_m"] for r in rs], **kw)
+        a1.plot(x, [r.survival for r in rs], **kw)
+        a2.plot(x, [r.median_worst_m for r in rs], **kw)
     if reference:
         st = style(REFERENCE)
         a1.axhline(reference["survival"], color="black", linestyle="--", label=st["label"])
@@ -134,7 +131,7 @@ def runtime(summary: Sequence[Mapping[str, Any]], *, axis: str, title: str, eps_
     xl = "time budget per image (s)" if axis == "max_seconds" else "evaluation budget per image"
     for a in (a1, a2):
         a.set_xscale("log")
-        xs = sorted({r[axis] for r in rows})
+        xs = sorted({r.budget(axis) for r in rows})
         a.set_xticks(xs)
         a.set_xticklabels([f"{v:g}" for v in xs])
         a.minorticks_off()
@@ -184,7 +181,7 @@ def distance_profile(profile: Sequence[Mapping[str, Any]], *, limit_deg: float, 
     roll budget per quartile for the first method (solid) and the dense-grid reference (dashed) if present."""
     fig, (ax, a2) = _fig(1, 2, size=(11.5, 4.8), gridspec_kw={"width_ratios": [1.25, 1]})
     quartiles = sorted({r["quartile"] for r in profile})
-    methods = _methods(profile)
+    methods = method_order(p["method"] for p in profile)
     width = 0.8 / max(len(methods), 1)
     top = limit_deg * 1.12
     ax.axhspan(limit_deg, top, color="#d62728", alpha=0.15)

@@ -83,13 +83,13 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
     rows = [r for r in rows if r.sample_id in done]
     eps = spec.eps_safe_m
     lines = mx.summarize(rows, eps, by=("method", "box_label"))
-    boxes = [b for b, _ in sorted({ln["box_label"]: ln["box_level"] for ln in lines}.items(),
+    boxes = [b for b, _ in sorted({ln.box_label: ln.box_level for ln in lines}.items(),
                                   key=lambda kv: kv[1] or 0.0)]
-    methods = list(dict.fromkeys(ln["method"] for ln in lines))
-    cell = {(ln["method"], ln["box_label"]): ln for ln in lines}
+    methods = list(dict.fromkeys(ln.method for ln in lines))
+    cell = {(ln.method, ln.box_label): ln for ln in lines}
     out = [f"{run}: {len(done)} {spec.unit}s completed by every method (of {len(per_image)} started); "
            f"ε_safe = {eps:g} m; cell = survival % (breaches)", ""]
-    table = [[m, *(f"{cell[(m, b)]['survival']:.1f} ({cell[(m, b)]['breaches']})" if (m, b) in cell else "–"
+    table = [[m, *(f"{cell[(m, b)].survival:.1f} ({cell[(m, b)].breaches})" if (m, b) in cell else "–"
                    for b in boxes)] for m in methods]
     if len(methods) > 1 and done:  # the union: an image breaches a box when any method found a breach there
         hit = defaultdict(set)

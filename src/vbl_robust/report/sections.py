@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -30,24 +31,24 @@ from .rows import (
 )
 
 
-def _summary_table(summary: Sequence[Mapping[str, Any]], unit: str = "image") -> str:
+def _summary_table(summary: Sequence[mx.Summary], unit: str = "image") -> str:
     cols = [
         ("method", "method", None), ("box_label", "box", None), ("budget_label", f"budget per {unit}", None),
         ("n", f"{unit}s", None), ("survival", "survival %", None), ("median_worst_m", "median worst (m)", None),
         ("breaches", "breaches", None), ("certified", "certified", None), ("failed", "failed", None),
         ("mean_nfev", "mean evals", None), ("failed_evals", "failed evals", None), ("median_search_s", "median s", None),
     ]
-    if any(line.get("read_from") for line in summary):
+    if any(line.read_from for line in summary):
         cols.append(("read_from", "read off the run", None))
-    return table(summary, cols, left=("method", "box_label", "budget_label", "read_from"))
+    return table([ln.as_row() for ln in summary], cols, left=("method", "box_label", "budget_label", "read_from"))
 
 
-def _failures_table(summary: Sequence[Mapping[str, Any]], penalty_m: float) -> str:
+def _failures_table(summary: Sequence[mx.Summary], penalty_m: float) -> str:
     """Failed evaluations per reason and group (the search used the penalty for them), with the codes' meaning."""
-    codes = sorted({c for line in summary for c in line["failures"]})
+    codes = sorted({c for line in summary for c in line.failures})
     if not codes:
         return ""
-    lines = [{**line, **{f"reason:{c}": line["failures"].get(c, 0) for c in codes}} for line in summary]
+    lines = [{**line.as_row(), **{f"reason:{c}": line.failures.get(c, 0) for c in codes}} for line in summary]
     cols = [("method", "method", None), ("box_label", "box", None), ("budget_label", "budget per image", None),
             ("nfev", "evaluations", None), ("failed_evals", "failed", None),
             *[(f"reason:{c}", c, None) for c in codes]]
@@ -134,9 +135,8 @@ def section_runtime(ctx: Context) -> Section | None:
     for axis, rs, name in (("max_seconds", time_rows, "time"), ("max_evals", eval_rows, "evals")):
         if len({r.budget_label for r in rs}) < 2:
             continue
-        summary = mx.summarize(rs, ctx.eps, by=("method", "budget_label"))
-        for line in summary:
-            line["box_label"] = box_label
+        summary = [dataclasses.replace(line, box_label=box_label)
+                   for line in mx.summarize(rs, ctx.eps, by=("method", "budget_label"))]
         dims = "2d" if boxes and boxes[0].box.dim > 1 else "1d"
         fig = F.runtime(summary, axis=axis, eps_safe_m=ctx.eps, reference=ref,
                         title=f"{'Time' if axis == 'max_seconds' else 'Evaluation'} budget per image, box {box_label}")
