@@ -25,7 +25,7 @@ from ..digest import canonical_json, digest
 from ..space import ParameterBox
 
 __all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FIGURES", "JOB_KINDS", "PENALTY_M", "ROLES", "Block", "BoxSpec", "Budget",
-           "CampaignSpec", "Job", "canonical_json", "default_figures", "derive_seed", "digest", "roll_box",
+           "CampaignSpec", "Job", "box_label", "canonical_json", "default_figures", "derive_seed", "digest", "roll_box",
            "roll_contrast_box"]
 
 #: Job kinds: a worst-case search, or the PnP-solver comparison of one image.
@@ -159,17 +159,30 @@ class BoxSpec:
         return cls(ParameterBox.from_dict(d["box"]), d["label"], float(d["level"]))
 
 
+def box_label(bounds: Mapping[str, tuple[float, float]]) -> str:
+    """The short label of a box (part of its jobs' seeds): ``"±15°, c∈[0.7, 1.4]"`` — a symmetric roll as ``±b°``,
+    another roll range as ``roll∈[lo, hi]°``, contrast as ``c∈[lo, hi]``, any other parameter as ``name∈[lo, hi]``."""
+    parts = []
+    for k, (lo, hi) in bounds.items():
+        if k == "roll_deg":
+            parts.append(f"±{hi:g}°" if lo == -hi else f"roll∈[{lo:g}, {hi:g}]°")
+        else:
+            parts.append(f"{'c' if k == 'contrast' else k}∈[{lo:g}, {hi:g}]")
+    return ", ".join(parts)
+
+
 def roll_box(half_width_deg: float) -> BoxSpec:
     """The 1-D box roll ∈ [−b, b] degrees."""
     b = abs(float(half_width_deg))
-    return BoxSpec(ParameterBox({"roll_deg": (-b, b)}), f"±{b:g}°", b)
+    bounds = {"roll_deg": (-b, b)}
+    return BoxSpec(ParameterBox(bounds), box_label(bounds), b)
 
 
 def roll_contrast_box(half_width_deg: float, contrast: tuple[float, float]) -> BoxSpec:
     """The 2-D box roll ∈ [−b, b] degrees × contrast ∈ [lo, hi]."""
     b = abs(float(half_width_deg))
-    lo, hi = float(contrast[0]), float(contrast[1])
-    return BoxSpec(ParameterBox({"roll_deg": (-b, b), "contrast": (lo, hi)}), f"±{b:g}°, c∈[{lo:g}, {hi:g}]", b)
+    bounds = {"roll_deg": (-b, b), "contrast": (float(contrast[0]), float(contrast[1]))}
+    return BoxSpec(ParameterBox(bounds), box_label(bounds), b)
 
 
 @dataclass(frozen=True)

@@ -104,17 +104,6 @@ def _note_open_goals() -> None:
                     fg=typer.colors.YELLOW, err=True)
 
 
-def box_label(bounds: dict[str, tuple[float, float]]) -> str:
-    """Short label of a box: "±15°, c∈[0.7, 1.4]"."""
-    parts = []
-    for k, (lo, hi) in bounds.items():
-        if k == "roll_deg":
-            parts.append(f"±{hi:g}°" if lo == -hi else f"roll∈[{lo:g}, {hi:g}]°")
-        else:
-            parts.append(f"{'c' if k == 'contrast' else k}∈[{lo:g}, {hi:g}]")
-    return ", ".join(parts)
-
-
 def parse_perturb(items: list[str] | None) -> dict[str, tuple[float, float]]:
     """``--perturb NAME=LO,HI`` (repeatable; a bare ``NAME`` takes the family's plausible default range) →
     ``{name: (lo, hi)}`` in the order given; a one-line error naming the flag and the value on bad input."""
@@ -416,6 +405,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Find each image's worst case over a perturbation box: worst θ, worst error, verdict, survival, report."""
         from vbl_robust.campaigns import BoxSpec, Budget, audit_spec
+        from vbl_robust.campaigns.spec import box_label
         from vbl_robust.space import ParameterBox
 
         quiet = set_verbosity(quiet=quiet, verbose=verbose)
