@@ -106,7 +106,10 @@ def test_the_command_refuses_bad_input_in_one_line(tmp_path):
     for args, message in ((["--perturb", "foo"], "unknown perturbation 'foo'"),
                           (["--perturb", "contrast=-1,2"], "contrast must lie within"),
                           (["--perturb", "roll_deg", "--model", str(tmp_path / "none.pt")], "file not found"),
-                          (["--perturb", "roll_deg", "--model", str(pt)], "pass --trust-model")):
+                          (["--perturb", "roll_deg", "--model", str(pt)], "pass --trust-model"),
+                          (["--perturb", "roll_deg", "--seed", "0"], "--seed 0: the approaches of this seed are an "
+                                                                      "audit's"),
+                          (["--perturb", "roll_deg", "--seed", "777001"], "never trained on")):
         res = runner.invoke(app, ["harden", "--out", str(tmp_path / "h"), *args])
         assert res.exit_code == 2 and message in res.output, (args, res.output)
     assert not (tmp_path / "h").exists()

@@ -134,7 +134,9 @@ def register(app: typer.Typer) -> None:
         epochs: int = typer.Option(2, "--epochs", min=1, help="Epochs per round."),
         n_train: int = typer.Option(300, "--n-train", min=1, help="Synthetic training approaches."),
         n_val: int = typer.Option(60, "--n-val", min=1, help="Synthetic validation approaches (clean)."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the approaches, the candidates and the training."),
+        seed: int | None = typer.Option(None, "--seed", help="Seed of the training approaches (their own airports), "
+                                        "the candidates and the training (default: detect.protocol.HARDEN_SEED); the "
+                                        "audits' seed 0 and the protocol's validation and test seeds are refused."),
         clean: bool = typer.Option(True, "--clean/--no-clean", help="Train on the clean images too (half the views)."),
         imgsz: int = typer.Option(320, "--imgsz", help="Network input size (multiple of 32)."),
         batch: int = typer.Option(16, "--batch", min=1, help="Training batch size (views per optimizer step)."),
@@ -142,12 +144,17 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Fine-tune a detector on the worst of k perturbed views per image, scored by the audit's error (rounds)."""
         from vbl_robust.detect.harden import harden as run_harden
+        from vbl_robust.detect.protocol import HARDEN_FORBIDDEN_SEEDS, HARDEN_SEED
         from vbl_robust.detect.train import VAL_SEED_OFFSET
         from vbl_robust.scenes import generate
         from vbl_robust.space import ParameterBox
 
         from .audit import parse_perturb
 
+        seed = HARDEN_SEED if seed is None else seed
+        if seed in HARDEN_FORBIDDEN_SEEDS:
+            fail(f"--seed {seed}: the approaches of this seed are an audit's or the detector protocol's (never trained "
+                 f"on); choose another (default {HARDEN_SEED})")
         if model is not None and not model.is_file():
             fail(f"--model {model}: file not found")
         if model is not None and not trust_model:

@@ -4,6 +4,9 @@
   schedules, data mixes — compared on their pooled rows (the model card says when each seed was fixed and why).
 - **Test** (:data:`TEST_SEEDS`, fixed before step J's training ended; each seed its own pool of 10 airports): the
   figures of the model card and BENCHMARKS.md, per seed and envelope. No choice is ever made on them.
+- **Hardening** (:data:`HARDEN_SEED`): ``vbl-robust harden`` trains on approaches of their own airports; the seeds
+  of the audits and of the protocol are refused (:data:`HARDEN_FORBIDDEN_SEEDS`), so a before/after audit and the
+  protocol's figures never see a training image.
 - **Gates** (:data:`GATES`: a model below them is not shipped) and **goals** (:data:`GOALS`), as fractions
   (position error in % of the slant distance).
 - **Replacement rule** (:func:`replacement_verdict`): a candidate replaces the shipped model only when more of the
@@ -17,13 +20,19 @@ it (:func:`info_from_protocol`).
 
 from __future__ import annotations
 
-__all__ = ["GATES", "GOALS", "REPLACE_P", "TEST_SEEDS", "VALIDATION_SEEDS", "info_from_protocol",
+__all__ = ["GATES", "GOALS", "HARDEN_FORBIDDEN_SEEDS", "HARDEN_SEED", "REPLACE_P", "TEST_SEEDS", "VALIDATION_SEEDS", "info_from_protocol",
            "pooled_validation", "replacement_verdict"]
 
 #: the validation seeds (the first is the former benchmark set on which v5–v7 were chosen: never quoted)
 VALIDATION_SEEDS = (20_261_122, 20_261_202, 20_261_203, 20_261_204)
 #: the test seeds (figures only)
 TEST_SEEDS = (777_001, 31_337, 4_242)
+#: the approaches ``vbl-robust harden`` trains on by default: their own airports (each seed has its own pool), never
+#: an audit's (the audits' and the paper reproduction's seed 0), a validation or a test seed
+HARDEN_SEED = 20_261_205
+#: seeds hardening refuses to train on: the audit default (its images are the before/after audit's) and the
+#: protocol's validation and test seeds (the figures a hardened model is judged by)
+HARDEN_FORBIDDEN_SEEDS = (0, *VALIDATION_SEEDS, *TEST_SEEDS)
 #: a model below these is not shipped (every test seed; the pooled validation seeds decide ``validated``)
 GATES = {"detection_rate": 0.97, "survival_ippe_lm": 0.90}
 #: what the detector aims at
