@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# Issue 29: harden the shipped detector (v9) against camera roll, then measure it before / after, paired per image.
+#
+# Fixed before any hardening run (2026-12-03, session 32), so that no choice is made on the figures it produces:
+#   training   roll ±30° (the largest 1-D box the audit reads), worst of k = 8 per image (plus the image's previous
+#              worst), 2 rounds × 2 epochs, 300 approaches of detect.protocol.HARDEN_SEED (their own airports) with
+#              their clean views, 60 clean validation approaches; the weights of the last round.
+#   nominal    benchmarks/detector_protocol.py on the four validation seeds (2040 approaches), paired with v9's
+#              committed results (exact McNemar): the goal is p >= 0.05 and no worse than -1 point.
+#   spatial-1d the paper's experiment (roll ±2…±30°, georobust / georobust-av / random / apgd, dense-grid truth) on
+#              the first 50 images of seed 0 with the hardened model; "before" is the paper run's v9 store on the
+#              same images (runs/paper/spatial-1d, or its committed bundle unpacked with reproduce --resume-from).
+#   2-D box    roll ±15° × contrast [0.7, 1.4], the four methods, 200 evaluations with early stop, 50 images of
+#              seed 0, both models.
+#   transfer   brightness [-0.2, 0.2] (never trained on), the same way, both models.
+# Every step resumes when the script is run again (the stores and the harden rounds are resumable); one thread per
+# process; run it alone on the machine (it is CPU-bound for hours).
+#   bash benchmarks/measure_harden.sh
+set -euo pipefail
+export OMP_NUM_THREADS=1 YOLO_OFFLINE=1 YOLO_VERBOSE=False MPLBACKEND=Agg
+VR=${VR:-.venv/bin/vbl-robust}
+PY=${PY:-.venv/bin/python}
+H=${H:-train_runs/harden_roll30}
+OUT=${OUT:-runs/harden}
+N=50
+METHODS=georobust,georobust-av,random,apgd
+mkdir -p "$OUT"
+
+# 1. training (resumes its rounds)
+$VR harden --perturb roll_deg=-30,30 --rounds 2 --k 8 --epochs 2 --n-train 300 --n-val 60 --threads 1 --out "$H"
+W=$($PY -c "import json, sys; print(json.load(open(sys.argv[1]))['weights'])" "$H/round01/round.json")
+HARDENED=(--model "$W" --trust-model --detector twostage)
+
+# 2. nominal accuracy on the validation seeds, paired with v9
+[ -f "$OUT/protocol_validation.json" ] || (cd benchmarks && ../$PY detector_protocol.py --model "../$W" \
+  --split validation --json "../$OUT/protocol_validation.json" \
+  --compare ../results/detector_candidates/protocol_v9_validation.json) | tee "$OUT/nominal.txt"
+
+# 3. spatial-1d, hardened, on the paper run's first 50 images; compared with the paper run's v9 rows
+$VR reproduce spatial-1d --images $N "${HARDENED[@]}" --out "$OUT/spatial1d_hardened" -q
+$VR report "$OUT/spatial1d_hardened" --format md --compare runs/paper/spatial-1d | tee "$OUT/spatial1d_compare.md"
+
+# 4. one 2-D box and 5. the transfer family: both models, the same images and seeds
+for case in "box2d:--roll 15 --contrast 0.7,1.4" "transfer:--roll none --perturb brightness=-0.2,0.2"; do
+  name=${case%%:*}; args=${case#*:}
+  # shellcheck disable=SC2086
+  $VR audit --images $N $args --methods $METHODS --no-landscape --model default --out "$OUT/${name}_v9" -q
+  # shellcheck disable=SC2086
+  $VR audit --images $N $args --methods $METHODS --no-landscape "${HARDENED[@]}" --out "$OUT/${name}_hardened" -q
+  $VR report "$OUT/${name}_hardened" --format md --compare "$OUT/${name}_v9" | tee "$OUT/${name}_compare.md"
+done
