@@ -188,3 +188,49 @@ def test_shipped_model_loads_and_runs():
     x = torch.rand(2, 3, 256, 256)
     conf, kp = d.detect_top(x)
     assert conf.shape == (2,) and kp.shape == (2, 4, 2) and torch.isfinite(kp).all()
+
+
+def test_the_hardened_model_ships_beside_the_default(tiny_pose_pt, tmp_path, monkeypatch):
+    """``ship --as hardened`` / ``--model hardened``: a second shipped model in its own directory; the default's
+    spec, key and files stay as they were."""
+    import vbl_robust.detect.shipped as shipped
+    from vbl_robust.detect.shipped import DetectorSpec, default_model_status
+    from vbl_robust.detect.train import ship
+
+    monkeypatch.setattr(shipped, "MODELS_DIR", tmp_path)
+    default = ship(tiny_pose_pt, detector="twostage", imgsz=64, models_dir=tmp_path, info={"validated": True})
+    monkeypatch.setattr(shipped, "DEFAULT_MODEL", default)
+    before, default_bytes = DetectorSpec("default").key(), default.read_bytes()
+    spec = DetectorSpec.shipped("hardened")
+    assert spec.model_file is None and "it comes from vbl-robust harden" in default_model_status("hardened")
+    with pytest.raises(FileNotFoundError, match="hardened detector model is not installed"):
+        spec.build()
+    hard = ship(tiny_pose_pt, detector="twostage", imgsz=64, models_dir=shipped.shipped_model_dir("hardened"),
+                info={"validated": True, "version": 1, "open_goals": ["a goal"]})
+    assert hard == tmp_path / "hardened" / default.name and default.read_bytes() == default_bytes
+    ident = spec.identity()
+    assert spec.model_file == hard and ident["name"] == "shipped hardened model (runway_yolov8n_pose.pt) v1"
+    assert ident["open_goals"] == ["a goal"] and ident["options"] == {"model": "hardened"}
+    assert spec.key() != before and DetectorSpec("default").key() == before
+    assert DetectorSpec.shipped("default") == DetectorSpec("default")
+    img, _ = runway_image(64)
+    assert len(spec.build().detect(torch.as_tensor(img).permute(2, 0, 1)[None] / 255.0)[0]) == 1
+    with pytest.raises(ValueError, match="shipped models: default, hardened"):
+        DetectorSpec.shipped("robust")
+
+
+def test_the_commands_name_a_missing_hardened_model_in_one_line(tmp_path):
+    from typer.testing import CliRunner
+
+    from vbl_robust.cli import app
+
+    runner = CliRunner()
+    for args, message in ((["audit", "--model", "hardened", "--out", str(tmp_path / "a")],
+                           "--model hardened: the shipped hardened detector model is not installed"),
+                          (["harden", "--perturb", "roll_deg", "--model", "hardened", "--out", str(tmp_path / "h")],
+                           "--model hardened: the shipped hardened detector model is not installed"),
+                          (["ship", str(tmp_path / "c.pt"), "--version", "1", "--epochs", "1", "--protocol",
+                            str(tmp_path / "p.json"), "--as", "robust"], "--as robust: shipped models are")):
+        res = runner.invoke(app, args)
+        assert res.exit_code == 2 and message in res.output, (args, res.output)
+    assert not any(tmp_path.iterdir())

@@ -41,7 +41,13 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
     """
     import dataclasses
 
-    from vbl_robust.detect.shipped import DESIGNS, DetectorSpec
+    from vbl_robust.detect.shipped import (
+        DESIGNS,
+        SHIPPED_MODELS,
+        DetectorSpec,
+        default_model_path,
+        default_model_status,
+    )
 
     if design != "auto" and design not in DESIGNS:
         fail(f"--detector {design}: choose auto, {' or '.join(DESIGNS)}")
@@ -75,9 +81,12 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
         fail("--oracle and --model are exclusive")
     if oracle:
         return DetectorSpec.oracle(oracle_noise)
-    if model is not None and str(model) == "default":
-        _note_open_goals()
-        return DetectorSpec("default", options=opts)
+    if model is not None and str(model) in SHIPPED_MODELS:
+        name = str(model)
+        if name != "default" and default_model_path(name) is None:
+            fail(f"--model {name}: {default_model_status(name)}")
+        _note_open_goals(name)
+        return DetectorSpec.shipped(name, opts)
     if model is not None:
         try:
             spec = DetectorSpec.from_path(model, trust=trust_model)
@@ -95,13 +104,15 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
     return spec
 
 
-def _note_open_goals() -> None:
-    """Tell the user which accuracy goals the shipped model has not reached (also in the report)."""
+def _note_open_goals(name: str = "default") -> None:
+    """Tell the user which accuracy goals the shipped model ``name`` has not reached (also in the report)."""
     from vbl_robust.detect.shipped import default_model_caveats
 
-    for goal in default_model_caveats():
-        typer.secho(f"note: the shipped detector model has an open accuracy goal: {goal} (see its MODEL_CARD.md)",
+    which = "" if name == "default" else f"{name} "
+    for goal in default_model_caveats(name=name):
+        typer.secho(f"note: the shipped {which}detector model has an open accuracy goal: {goal} (see its MODEL_CARD.md)",
                     fg=typer.colors.YELLOW, err=True)
+
 
 
 def parse_perturb(items: list[str] | None) -> dict[str, tuple[float, float]]:

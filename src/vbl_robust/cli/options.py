@@ -14,8 +14,9 @@ LARD = typer.Option(None, "--lard", help="LARD V2 dataset directory (CSV + runwa
                     "synthetic approaches.")
 WIDTH = typer.Option(1024, "--width", help="Synthetic image width (px).")
 HEIGHT = typer.Option(1024, "--height", help="Synthetic image height (px).")
-MODEL = typer.Option(None, "--model", help="Detector: a YOLO-pose .pt or .onnx file, or 'default' for the shipped "
-                     "model (default: the shipped model once it is validated, else the oracle).")
+MODEL = typer.Option(None, "--model", help="Detector: a YOLO-pose .pt or .onnx file, 'default' for the shipped "
+                     "model, or 'hardened' for the shipped model hardened by vbl-robust harden once installed "
+                     "(default: the shipped model once it is validated, else the oracle).")
 TRUST_MODEL = typer.Option(False, "--trust-model", help="Allow loading a .pt pickle from outside the package.")
 DESIGN = typer.Option("auto", "--detector", help="Detector design: auto (the shipped model's own; a user's model as "
                       "one pass), single (one pass: the paper's pipeline) or twostage.")

@@ -86,11 +86,20 @@ def register(app: typer.Typer) -> None:
         force: bool = typer.Option(False, "--force", help="Ship even without --against or when the rule is not met "
                                    "(a first model, or a rule set aside on purpose: say why in the model card)."),
         trust_model: bool = typer.Option(False, "--trust-model", help="The checkpoint is a pickle: confirm you trust it."),
+        name: str = typer.Option("default", "--as", help="Which shipped model it becomes: default (the replacement "
+                                 "rule applies) or hardened (shipped beside the default, replacing none; --against "
+                                 "then only prints the paired comparison)."),
     ) -> None:
-        """Ship a trained checkpoint as the default detector (two-stage, 320 px), default.json from its protocol."""
+        """Ship a trained checkpoint as a shipped detector (two-stage, 320 px): the default, or with --as hardened
+        beside it; its default.json from the checkpoint's protocol."""
         import json
 
         from vbl_robust.detect.protocol import info_from_protocol, replacement_verdict
+        from vbl_robust.detect.shipped import SHIPPED_MODELS, shipped_model_dir
+
+        if name not in SHIPPED_MODELS:
+            fail(f"--as {name}: shipped models are {', '.join(SHIPPED_MODELS)}")
+        replaces = name == "default"
 
         if not checkpoint.is_file():
             fail(f"{checkpoint}: file not found")
@@ -101,12 +110,12 @@ def register(app: typer.Typer) -> None:
             shipped = json.loads(against.read_text()) if against is not None else None
         except (OSError, ValueError) as exc:
             fail(f"--protocol/--against: {exc}")
-        if shipped is None and not force:
+        if shipped is None and replaces and not force:
             fail("--against SHIPPED.json is required (the replacement rule); --force skips it")
         if shipped is not None:
             ok, why = replacement_verdict(result, shipped)
-            typer.echo(f"replacement rule {'met' if ok else 'NOT met'}: {why}")
-            if not ok and not force:
+            typer.echo(f"replacement rule {'met' if ok else 'NOT met'}: {why}" if replaces else f"against it: {why}")
+            if not ok and replaces and not force:
                 fail("not shipped: the candidate cannot be told from the shipped model (--force ships anyway)")
         try:
             info = info_from_protocol(result, version, epochs)
@@ -118,7 +127,7 @@ def register(app: typer.Typer) -> None:
 
         setup_offline()
         typer.echo(json.dumps(info, indent=1))
-        typer.echo(f"shipped {ship_weights(checkpoint, detector='twostage', imgsz=320, info=info)}")
+        typer.echo(f"shipped {ship_weights(checkpoint, detector='twostage', imgsz=320, info=info, models_dir=shipped_model_dir(name))}")
 
     @app.command()
     def harden(
@@ -126,7 +135,8 @@ def register(app: typer.Typer) -> None:
                                           "(repeatable; a bare NAME takes its plausible default range): the box "
                                           "the training views are drawn from."),
         out: Path = typer.Option(Path("train_runs/harden"), "--out", help="Working directory (one roundNN per round)."),
-        model: Path | None = typer.Option(None, "--model", help="The .pt to harden (default: the shipped model)."),
+        model: Path | None = typer.Option(None, "--model", help="The .pt to harden, or a shipped model's name "
+                                          "(default, hardened; default: the shipped default model)."),
         trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading a --model .pt pickle from "
                                          "outside the package."),
         rounds: int = typer.Option(2, "--rounds", min=1, help="Rounds: search the worst views, then fine-tune."),
@@ -145,6 +155,7 @@ def register(app: typer.Typer) -> None:
         """Fine-tune a detector on the worst of k perturbed views per image, scored by the audit's error (rounds)."""
         from vbl_robust.detect.harden import harden as run_harden
         from vbl_robust.detect.protocol import HARDEN_FORBIDDEN_SEEDS, HARDEN_SEED
+        from vbl_robust.detect.shipped import SHIPPED_MODELS, default_model_path, default_model_status
         from vbl_robust.detect.train import VAL_SEED_OFFSET
         from vbl_robust.scenes import generate
         from vbl_robust.space import ParameterBox
@@ -155,6 +166,12 @@ def register(app: typer.Typer) -> None:
         if seed in HARDEN_FORBIDDEN_SEEDS:
             fail(f"--seed {seed}: the approaches of this seed are an audit's or the detector protocol's (never trained "
                  f"on); choose another (default {HARDEN_SEED})")
+        if model is not None and str(model) in SHIPPED_MODELS:  # a shipped model: part of the package, trusted
+            name = str(model)
+            model = default_model_path(name)
+            if model is None:
+                fail(f"--model {name}: {default_model_status(name)}")
+            trust_model = True
         if model is not None and not model.is_file():
             fail(f"--model {model}: file not found")
         if model is not None and not trust_model:

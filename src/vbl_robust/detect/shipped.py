@@ -4,7 +4,9 @@ The shipped model is ``vbl_robust/models/runway_yolov8n_pose.pt`` with ``default
 (``"twostage"`` or ``"single"``), input size, version, and whether it passed its validation gates
 (``"validated": true`` — detection ≥ 97 % and nominal survival ≥ 90 % on the held-out protocol of
 ``benchmarks/bench_detector.py``; below them a robustness figure mostly measures the detector's nominal failures)
-and its ``"open_goals"``, printed by every run and shown in the report. See ``models/MODEL_CARD.md``.
+and its ``"open_goals"``, printed by every run and shown in the report. See ``models/MODEL_CARD.md``. Other
+models ship beside it under their own names (:data:`SHIPPED_MODELS`, the same two files in a directory of their
+own: ``--model hardened``, ``DetectorSpec.shipped("hardened")``).
 
 A :class:`DetectorSpec` names a detector by *how to build it* (kind + path), not by an object, so the same
 spec rebuilds the detector once per process — in the local runner and in every Ray worker — and its identity
@@ -26,12 +28,17 @@ from .pose import PoseDetector
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_MODEL", "DESIGNS", "DETECTOR_KINDS", "MODELS_DIR", "DetectorSpec", "default_detector",
-           "default_model_caveats", "default_model_info", "default_model_path", "default_model_status",
-           "with_design"]
+__all__ = ["DEFAULT_MODEL", "DESIGNS", "DETECTOR_KINDS", "MODELS_DIR", "SHIPPED_MODELS", "DetectorSpec",
+           "default_detector", "default_model_caveats", "default_model_info", "default_model_path",
+           "default_model_status", "shipped_model_dir", "with_design"]
 
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 DEFAULT_MODEL = MODELS_DIR / "runway_yolov8n_pose.pt"
+#: The models shipped with the package, by the name ``--model NAME`` takes: each a directory holding its weights
+#: (``runway_yolov8n_pose.pt``) and ``default.json`` (how the model runs by default: design, input size; its
+#: version, validation and open goals). ``default`` is what every run uses unless told otherwise; ``hardened``
+#: (``vbl-robust harden``) ships beside it and never replaces it, so every published result keeps its model.
+SHIPPED_MODELS = {"default": "", "hardened": "hardened"}  # name -> its directory under MODELS_DIR
 #: Designs of a pose-model detector: one pass on the letterboxed image, or a pass on it and one on a crop.
 DESIGNS = ("single", "twostage")
 DETECTOR_KINDS = ("oracle", "default", "ultralytics", "onnx", "factory")
@@ -39,38 +46,47 @@ DETECTOR_KINDS = ("oracle", "default", "ultralytics", "onnx", "factory")
 CROP_WINDOW_KEYS = ("margin", "min_side")
 
 
-# -- the shipped model ------------------------------------------------------------------------------------------
-def default_model_path() -> Path | None:
-    """The shipped model's weights file if it is installed, else None."""
-    return DEFAULT_MODEL if DEFAULT_MODEL.is_file() else None
+# -- the shipped models -----------------------------------------------------------------------------------------
+def shipped_model_dir(name: str) -> Path:
+    """The directory of the shipped model ``name`` (:data:`SHIPPED_MODELS`; ``ValueError`` for another name)."""
+    if name not in SHIPPED_MODELS:
+        raise ValueError(f"unknown shipped model {name!r}; shipped models: {', '.join(SHIPPED_MODELS)}")
+    return MODELS_DIR / SHIPPED_MODELS[name]
 
 
-def default_model_info() -> dict[str, Any]:
+def default_model_path(name: str = "default") -> Path | None:
+    """The weights file of the shipped model ``name`` (:data:`SHIPPED_MODELS`) if it is installed, else None."""
+    f = DEFAULT_MODEL if name == "default" else shipped_model_dir(name) / DEFAULT_MODEL.name
+    return f if f.is_file() else None
+
+
+def default_model_info(name: str = "default") -> dict[str, Any]:
     """The shipped model's ``default.json`` (design, input size, version, validation), ``{}`` if unreadable."""
-    if default_model_path() is None:
+    if default_model_path(name) is None:
         return {}
     try:
-        info = json.loads((MODELS_DIR / "default.json").read_text())
+        info = json.loads((shipped_model_dir(name) / "default.json").read_text())
     except (OSError, ValueError):
         return {}
     return info if isinstance(info, dict) else {}
 
 
-def default_model_status() -> str:
-    """``""`` when the shipped model is installed and validated (see the module docstring), else why not."""
-    path = default_model_path()
+def default_model_status(name: str = "default") -> str:
+    """``""`` when the shipped model ``name`` is installed and validated (see the module docstring), else why
+    not."""
+    path = default_model_path(name)
+    what = "the shipped detector model" if name == "default" else f"the shipped {name} detector model"
     if path is None:
-        return "the shipped detector model is not installed"
-    if default_model_info().get("validated") is not True:
-        return (f"the shipped detector model ({path.name}) does not meet its validation gates yet "
-                f"(see {path.parent / 'MODEL_CARD.md'})")
+        return f"{what} is not installed" + ("" if name == "default" else " (it comes from vbl-robust harden)")
+    if default_model_info(name).get("validated") is not True:
+        return f"{what} ({path.name}) does not meet its validation gates yet (see {MODELS_DIR / 'MODEL_CARD.md'})"
     return ""
 
 
-def default_model_caveats(info: dict[str, Any] | None = None) -> list[str]:
-    """The shipped model's open accuracy goals (``"open_goals"`` of ``default.json``, or of ``info``), one line
-    each."""
-    goals = (default_model_info() if info is None else info).get("open_goals") or []
+def default_model_caveats(info: dict[str, Any] | None = None, name: str = "default") -> list[str]:
+    """The shipped model's open accuracy goals (``"open_goals"`` of its ``default.json``, or of ``info``), one
+    line each."""
+    goals = (default_model_info(name) if info is None else info).get("open_goals") or []
     return [str(g) for g in goals] if isinstance(goals, list) else [str(goals)]
 
 
@@ -92,20 +108,21 @@ def with_design(detector: PoseDetector, design: str, **window):
 
 
 def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str | None = None,
-                     engine: str = "torch", device: str = "cpu"):
-    """The detector shipped with the package; ``design`` ``"twostage"`` / ``"single"`` (the paper's one pass),
+                     engine: str = "torch", device: str = "cpu", model: str = "default"):
+    """The detector shipped with the package (``model``: which of :data:`SHIPPED_MODELS`); ``design``
+    ``"twostage"`` / ``"single"`` (the paper's one pass),
     None → the shipped default (``default.json``, with its crop window ``"twostage": {"min_side": …}`` when the
     weights were trained on another than :class:`~vbl_robust.detect.TwoStageDetector`'s default); ``engine`` of
     the black-box path (:mod:`.engines`); ``device`` ``auto``/``cpu``/``cuda[:N]`` (:mod:`.device`)."""
     from .engines import with_engine
     from .ultralytics import UltralyticsDetector
 
-    if default_model_path() is None:
-        raise FileNotFoundError(f"{DEFAULT_MODEL}: the shipped model is missing (reinstall vbl-robust)")
-    info = default_model_info()
+    path = default_model_path(model)
+    if path is None:
+        raise FileNotFoundError(f"{shipped_model_dir(model) / DEFAULT_MODEL.name}: {default_model_status(model)}")
+    info = default_model_info(model)
     # the shipped file is part of the installed package: trusted as its code is
-    det = UltralyticsDetector(DEFAULT_MODEL, trust=True, imgsz=imgsz or info.get("imgsz"), chunk=chunk,
-                              device=device)
+    det = UltralyticsDetector(path, trust=True, imgsz=imgsz or info.get("imgsz"), chunk=chunk, device=device)
     design = design or info.get("detector", "single")
     window = dict(info.get("twostage") or {}) if design == "twostage" else {}
     return with_design(with_engine(det, engine, trust=True), design, **window)
@@ -178,10 +195,22 @@ class DetectorSpec:
             return cls("ultralytics", str(p), trust=trust)
         raise ValueError(f"--model {path}: expected a .pt (ultralytics) or .onnx file")
 
+    @classmethod
+    def shipped(cls, name: str = "default", options: dict[str, Any] | None = None) -> DetectorSpec:
+        """A model shipped with the package (:data:`SHIPPED_MODELS`; the default model's spec names none, so its
+        runs' keys stay as they were)."""
+        shipped_model_dir(name)
+        return cls("default", options={**dict(options or {}), **({} if name == "default" else {"model": name})})
+
+    @property
+    def shipped_name(self) -> str | None:
+        """Which shipped model (``kind == "default"``), else None."""
+        return self.options.get("model", "default") if self.kind == "default" else None
+
     @property
     def model_file(self) -> Path | None:
         if self.kind == "default":
-            return default_model_path()
+            return default_model_path(self.shipped_name)
         if self.kind in ("ultralytics", "onnx"):
             return Path(self.path)
         return None
@@ -191,7 +220,8 @@ class DetectorSpec:
         if self.kind == "oracle":
             return "oracle (ground-truth keypoints)"
         if self.kind == "default":
-            return f"shipped model ({self.model_file.name if self.model_file else 'missing'})"
+            which = "" if self.shipped_name == "default" else f"{self.shipped_name} "
+            return f"shipped {which}model ({self.model_file.name if self.model_file else 'missing'})"
         return f"{self.kind}: {self.path}"
 
     def identity(self) -> dict[str, Any]:
@@ -212,7 +242,7 @@ class DetectorSpec:
             ident["precision"] = "fp32"
         if self.kind == "default" and f is not None and (f.parent / "default.json").is_file():
             ident["config_sha256"] = file_sha256(f.parent / "default.json")
-            info = default_model_info()
+            info = default_model_info(self.shipped_name)
             if "version" in info:
                 ident["name"] += f" v{info['version']}"
             if goals := default_model_caveats(info):
