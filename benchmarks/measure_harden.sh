@@ -42,7 +42,8 @@ HARDENED=(--model hardened)
 
 # 3. spatial-1d, hardened, on the paper run's first 50 images; compared with the paper run's v9 rows
 $VR reproduce spatial-1d --images $N "${HARDENED[@]}" --out "$OUT/spatial1d_hardened" -q
-$VR report "$OUT/spatial1d_hardened" --format md --compare runs/paper/spatial-1d | tee "$OUT/spatial1d_compare.md"
+$VR report runs/paper/spatial-1d --compare "$OUT/spatial1d_hardened"   # compare.html beside the hardened run
+$VR report runs/paper/spatial-1d --format md --compare "$OUT/spatial1d_hardened" | tee "$OUT/spatial1d_compare.md"
 
 # 4. one 2-D box and 5. the transfer family: both models, the same images and seeds
 for case in "box2d:--roll 15 --contrast 0.7,1.4" "transfer:--roll none --perturb brightness=-0.2,0.2"; do
@@ -51,5 +52,6 @@ for case in "box2d:--roll 15 --contrast 0.7,1.4" "transfer:--roll none --perturb
   $VR audit --images $N $args --methods $METHODS --no-landscape --model default --out "$OUT/${name}_v9" -q
   # shellcheck disable=SC2086
   $VR audit --images $N $args --methods $METHODS --no-landscape "${HARDENED[@]}" --out "$OUT/${name}_hardened" -q
-  $VR report "$OUT/${name}_hardened" --format md --compare "$OUT/${name}_v9" | tee "$OUT/${name}_compare.md"
+  $VR report "$OUT/${name}_v9" --compare "$OUT/${name}_hardened"
+  $VR report "$OUT/${name}_v9" --format md --compare "$OUT/${name}_hardened" | tee "$OUT/${name}_compare.md"
 done

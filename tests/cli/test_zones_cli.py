@@ -226,7 +226,7 @@ def test_report_markdown_survival_table_from_the_store(gated_run, tmp_path):
     assert "any of them" in rows and "Landscape grid on image" in res.output  # the dense grid's found / true ratios
     # refused: md prints, it writes nothing; --with needs md and the same experiment
     for args, msg in ((["--format", "md", "--out", str(tmp_path)], "--format md prints"),
-                      (["--with", str(out)], "--with and --compare belong to --format md"),
+                      (["--with", str(out)], "--with belongs to --format md"),
                       (["--format", "pdf"], "--format pdf")):
         res = runner.invoke(app, ["report", str(out), *args])
         assert res.exit_code == 2 and msg in res.output, res.output
@@ -260,3 +260,11 @@ def test_report_compare_pairs_two_runs_per_image(gated_run, tmp_path):
     assert checked == 8  # 4 methods x 2 budgets
     res = runner.invoke(app, ["report", str(before), "--format", "md", "--compare", str(tmp_path / "none")])
     assert res.exit_code == 2 and "no results store" in res.output
+    # the HTML page: the curves overlaid, the same table, and the images whose union verdict changed
+    res = runner.invoke(app, ["report", str(before), "--compare", str(after), "--out", str(tmp_path / "cmp")])
+    assert res.exit_code == 0 and "compare.html" in res.output, res.output
+    page = (tmp_path / "cmp" / "compare.html").read_text()
+    assert page.count("data:image/png;base64,") == 1 and (tmp_path / "cmp" / "figures" / "compare_survival.png").is_file()
+    union = {(f"{r.box_label}, {r.budget_label}", r.sample_id) for r in rows if r.worst_m is not None and r.worst_m > 1000}
+    assert page.count('<td class="l">fixed</td>') == len(union) > 0 and '>new breach<' not in page
+    assert f"Images whose verdict changed (any method), {len(union)}" in page

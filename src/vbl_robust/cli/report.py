@@ -24,9 +24,11 @@ def register(app: typer.Typer) -> None:
                                 "completed."),
         others: list[Path] | None = typer.Option(None, "--with", help="--format md: another run of the same "
                                                  "experiment and seed whose methods join the table (repeatable)."),
-        compare: Path | None = typer.Option(None, "--compare", help="--format md: another run of the same "
-                                            "experiment, seed and images (e.g. after `vbl-robust harden`): survival "
-                                            "before (RUN) and after, paired per image, with exact McNemar p."),
+        compare: Path | None = typer.Option(None, "--compare", help="Another run of the same experiment, seed and "
+                                            "images (e.g. after `vbl-robust harden`): survival before (RUN) and "
+                                            "after, paired per image, with exact McNemar p — compare.html with the "
+                                            "curves overlaid and the images that changed (in --out, default: that "
+                                            "run's directory), or with --format md the table."),
     ) -> None:
         """Regenerate a run's self-contained HTML report (figures, tables, provenance) from its store."""
         from vbl_robust.campaigns import ResultStore, export
@@ -39,10 +41,20 @@ def register(app: typer.Typer) -> None:
                 fail("--format md prints to standard output: --out, --csv and --parquet belong to --format html")
             typer.echo(_markdown(run, others or [], compare), nl=False)
             return
-        if others or compare:
-            fail("--with and --compare belong to --format md")
+        if others:
+            fail("--with belongs to --format md")
         if out is not None and out.exists() and not out.is_dir():
             fail(f"--out {out}: is a file; the report goes into a directory (report.html and figures/)")
+        if compare is not None:
+            if csv or parquet:
+                fail("--csv and --parquet export one run: not with --compare")
+            from vbl_robust.report.compare import compare_html
+
+            try:
+                typer.echo(f"compare: {compare_html(run, compare, out)}")
+            except (ValueError, FileNotFoundError) as exc:
+                fail(str(exc))
+            return
         try:
             path = build_report(run, out)
             if csv or parquet:

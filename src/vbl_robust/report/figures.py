@@ -110,6 +110,37 @@ def survival_vs_level(summary: Sequence[Summary], *, title: str, xlabel: str,
     return fig
 
 
+def survival_before_after(lines: Sequence[Any], *, title: str) -> Figure:
+    """Survival (%) per box of two runs paired per image (:class:`vbl_robust.report.compare.PairedLine`): per
+    method the run before (dashed, open markers) and after (solid), boxes at equal spacing in level order; the
+    union of the methods (``method`` "any of them") in black."""
+    fig, ax = _fig()
+    boxes = [b for b, _ in sorted({ln.box: ln.level for ln in lines}.items(), key=lambda kv: (kv[1], kv[0]))]
+    pos = {b: i for i, b in enumerate(boxes)}
+    union = "any of them"
+    for m in [*method_order(ln.method for ln in lines if ln.method != union), union]:
+        rs = sorted((ln for ln in lines if ln.method == m), key=lambda ln: pos[ln.box])
+        if not rs:
+            continue
+        st = style(m) if m != union else {"color": "black", "marker": "D", "label": union}
+        x = [pos[ln.box] for ln in rs]
+        ax.plot(x, [ln.before_pct for ln in rs], linestyle="--", marker=st["marker"], color=st["color"],
+                markerfacecolor="none", linewidth=1.2, alpha=0.8)
+        ax.plot(x, [ln.after_pct for ln in rs], linestyle="-", marker=st["marker"], color=st["color"],
+                label=st["label"], linewidth=1.8)
+    ax.plot([], [], "--", color="grey", label="before")
+    ax.plot([], [], "-", color="grey", label="after")
+    ax.set_xticks(range(len(boxes)))
+    ax.set_xticklabels(boxes, rotation=20, ha="right", fontsize=8)
+    ax.set_ylim(-3, 103)
+    ax.set_ylabel(f"survival rate S_rate (%)   [N = {max((ln.n for ln in lines), default=0)} images]")
+    ax.set_xlabel("perturbation box")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    return fig
+
+
 def runtime(summary: Sequence[Summary], *, axis: str, title: str, eps_safe_m: float,
             reference: Mapping[str, float] | None = None) -> Figure:
     """Two panels against the per-image budget (``axis`` "max_seconds" or "max_evals"): survival rate and

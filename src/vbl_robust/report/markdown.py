@@ -211,49 +211,16 @@ def zones_markdown(jobs: Sequence) -> str:
 
 def compare_markdown(before: str | Path, after: str | Path) -> str:
     """Two runs of the same experiment and seed on the same images (e.g. a model before and after ``harden``),
-    paired per image: per method and box, survival % before and after on the images both runs completed, the
-    images only one of them survives (fixed: breached before, not after; new: the other way) and the exact McNemar
-    p-value of that difference (:func:`vbl_robust.detect.evaluate.paired_survival`); then the union of all
-    methods ("any of them") per box. ``ValueError`` when the runs are not comparable."""
-    from ..detect.evaluate import paired_survival
+    paired per image (:func:`vbl_robust.report.compare.paired_comparison`): per method and box, survival % before
+    and after, the images fixed and newly breached and the exact McNemar p, then the union of all methods ("any of
+    them") per box. ``ValueError`` when the runs are not comparable."""
+    from .compare import paired_comparison
 
-    spec, rows_a, _ = _read(before)
-    _, rows_b = _read_alike(before, spec, rows_a, after)
-    eps = spec.eps_safe_m
-
-    several = len({r.budget_label for r in rows_a}) > 1
-
-    def where(r) -> str:  # the box, and the budget where the run has several
-        return f"{r.box_label}, {r.budget_label}" if several else str(r.box_label)
-
-    def survived(rows) -> dict[tuple[str, str, str], bool]:
-        return {(r.method, where(r), r.sample_id): not (r.worst_m is not None and r.worst_m > eps) for r in rows}
-
-    sa, sb = survived(rows_a), survived(rows_b)
-    keys = [(m, b) for m, b in dict.fromkeys((r.method, where(r)) for r in rows_a) if any(k[:2] == (m, b) for k in sb)]
-    boxes = list(dict.fromkeys(b for _, b in keys))
-    table = []
-    for m, b in keys:
-        shared = sorted(k[2] for k in sa if k[:2] == (m, b) and k in sb)
-        if not shared:
-            continue
-        a = [sa[(m, b, s)] for s in shared]
-        c = paired_survival([sb[(m, b, s)] for s in shared], a)
-        table.append([m, b, str(len(shared)), f"{100 * np.mean(a):.1f}", f"{100 * (c['both'] + c['only_a']) / c['n']:.1f}",
-                      str(c["only_a"]), str(c["only_b"]), f"{c['p_value']:.4f}"])
-    if not table:
-        raise ValueError(f"{before} and {after}: no method and box with images both runs completed")
-    for b in boxes:  # an image survives a box when no method found a breach there (images every method covers)
-        ms = [m for m, bb in keys if bb == b]
-        shared = sorted(s for s in {k[2] for k in sa} if all((m, b, s) in sa and (m, b, s) in sb for m in ms))
-        if len(ms) > 1 and shared:
-            a = [all(sa[(m, b, s)] for m in ms) for s in shared]
-            z = [all(sb[(m, b, s)] for m in ms) for s in shared]
-            c = paired_survival(z, a)
-            table.append(["any of them", b, str(len(a)), f"{100 * np.mean(a):.1f}", f"{100 * np.mean(z):.1f}",
-                          str(c["only_a"]), str(c["only_b"]), f"{c['p_value']:.4f}"])
-    out = [f"before: {before}; after: {after} ({spec.name}, seed {spec.seed}, ε_safe = {eps:g} m); paired per image: "
-           "fixed = breached before and not after, new = the other way, p = exact McNemar", ""]
+    c = paired_comparison(before, after)
+    out = [f"before: {before} ({c.detectors[0]}); after: {after} ({c.detectors[1]}) ({c.spec.name}, seed "
+           f"{c.spec.seed}, ε_safe = {c.spec.eps_safe_m:g} m); paired per image: fixed = breached before and not "
+           "after, new = the other way, p = exact McNemar", ""]
     out += _table(["method", "box", "images", "survival before %", "survival after %", "fixed", "new breaches", "p"],
-                  table)
+                  [[ln.method, ln.box, str(ln.n), f"{ln.before_pct:.1f}", f"{ln.after_pct:.1f}", str(ln.fixed),
+                    str(ln.new), f"{ln.p_value:.4f}"] for ln in c.lines])
     return "\n".join(out) + "\n"

@@ -1,0 +1,192 @@
+"""Two runs of the same experiment, seed and images paired per image — a model before and after
+``vbl-robust harden`` (``vbl-robust report BEFORE --compare AFTER``).
+
+Read from the two stores, nothing evaluated. An image *survives* a (method, box) when the worst error found is
+≤ ε_safe; the union "any of them" survives a box when no method found a breach there (on the images every method
+of both runs completed). Per method and box: survival before and after on the images both runs completed, the
+images only one run survives — *fixed* (breached before, not after) and *new breaches* (the other way) — and the
+exact McNemar p-value of that difference (:func:`vbl_robust.detect.evaluate.paired_survival`). Per image: the
+union's changes with the worst error over the methods before and after.
+
+:func:`paired_comparison` computes it; :func:`compare_html` draws it (survival per box before and after
+overlaid, the table, the per-image changes) and :func:`vbl_robust.report.markdown.compare_markdown` prints it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..campaigns import metrics as mx
+from ..campaigns.spec import CampaignSpec
+from ..campaigns.store import JobRow, ResultStore
+
+__all__ = ["ANY", "Change", "Comparison", "PairedLine", "compare_html", "paired_comparison"]
+
+#: The union of the methods.
+ANY = "any of them"
+
+
+@dataclass(frozen=True)
+class PairedLine:
+    """One method (or :data:`ANY`) at one box: ``n`` images both runs completed, survival % before and after,
+    images fixed and newly breached, exact McNemar p."""
+
+    method: str
+    box: str
+    level: float
+    n: int
+    before_pct: float
+    after_pct: float
+    fixed: int
+    new: int
+    p_value: float
+
+
+@dataclass(frozen=True)
+class Change:
+    """An image whose union verdict at a box changed: the worst error over the methods before and after (metres;
+    None when no method evaluated anything) and ``change`` "fixed" or "new breach"."""
+
+    sample_id: str
+    box: str
+    before_m: float | None
+    after_m: float | None
+    change: str
+
+
+@dataclass(frozen=True)
+class Comparison:
+    before: str
+    after: str
+    spec: CampaignSpec
+    detectors: tuple[str, str]
+    lines: tuple[PairedLine, ...]
+    changes: tuple[Change, ...]
+
+
+def _read(run: str | Path) -> tuple[CampaignSpec, list[JobRow], str]:
+    with ResultStore.open_existing(run) as store:
+        camp = store.campaign()
+        if camp is None:
+            raise ValueError(f"{run}: the results store holds no campaign yet")
+        spec = CampaignSpec.from_dict(camp["spec"])
+        runs = store.runs()
+        det = str(((runs[-1] if runs else {}).get("detector") or {}).get("name", "?"))
+        return spec, mx.main_rows(store, spec, with_trace=False), det
+
+
+def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
+    """The comparison of the module docstring; ``ValueError`` when the runs are not the same experiment and seed,
+    their images differ, or no method and box has images both runs completed."""
+    from ..detect.evaluate import paired_survival
+
+    spec, rows_a, det_a = _read(before)
+    spec_b, rows_b, det_b = _read(after)
+    if (spec_b.name, spec_b.seed) != (spec.name, spec.seed):
+        raise ValueError(f"{after}: experiment {spec_b.name} seed {spec_b.seed}, not {spec.name} seed {spec.seed}")
+    index = {r.sample_index: r.sample_id for r in rows_a}
+    clash = sorted({r.sample_index for r in rows_b if index.get(r.sample_index, r.sample_id) != r.sample_id})
+    if clash:
+        raise ValueError(f"{after}: images {clash[:5]} differ from {before}'s (another image set)")
+    eps = spec.eps_safe_m
+    several = len({r.budget_label for r in rows_a}) > 1
+
+    def where(r: JobRow) -> str:  # the box, and the budget where the run has several
+        return f"{r.box_label}, {r.budget_label}" if several else str(r.box_label)
+
+    def index_rows(rows: Sequence[JobRow]) -> dict[tuple[str, str, str], JobRow]:
+        return {(r.method, where(r), r.sample_id): r for r in rows}
+
+    def ok(r: JobRow) -> bool:
+        return not (r.worst_m is not None and r.worst_m > eps)
+
+    ia, ib = index_rows(rows_a), index_rows(rows_b)
+    level = {where(r): float(r.box_level or 0.0) for r in rows_a}
+    keys = [k for k in dict.fromkeys((r.method, where(r)) for r in rows_a) if any(j[:2] == k for j in ib)]
+    lines: list[PairedLine] = []
+    for m, b in keys:
+        shared = sorted(j[2] for j in ia if j[:2] == (m, b) and j in ib)
+        if shared:
+            a = [ok(ia[(m, b, s)]) for s in shared]
+            z = [ok(ib[(m, b, s)]) for s in shared]
+            lines.append(_line(m, b, level[b], a, z, paired_survival(z, a)))
+    if not lines:
+        raise ValueError(f"{before} and {after}: no method and box with images both runs completed")
+    changes: list[Change] = []
+    for b in dict.fromkeys(b for _, b in keys):
+        ms = [m for m, bb in keys if bb == b]
+        shared = sorted(s for s in {j[2] for j in ia} if all((m, b, s) in ia and (m, b, s) in ib for m in ms))
+        if len(ms) < 2 or not shared:
+            continue
+        a = [all(ok(ia[(m, b, s)]) for m in ms) for s in shared]
+        z = [all(ok(ib[(m, b, s)]) for m in ms) for s in shared]
+        lines.append(_line(ANY, b, level[b], a, z, paired_survival(z, a)))
+        for s, x, y in zip(shared, a, z, strict=True):
+            if x != y:
+                changes.append(Change(s, b, _worst(ia, ms, b, s), _worst(ib, ms, b, s),
+                                      "fixed" if y else "new breach"))
+    return Comparison(str(before), str(after), spec, (det_a, det_b), tuple(lines), tuple(changes))
+
+
+def _line(method: str, box: str, level: float, a: Sequence[bool], z: Sequence[bool], c: dict) -> PairedLine:
+    return PairedLine(method, box, level, len(a), 100.0 * float(np.mean(a)), 100.0 * float(np.mean(z)),
+                      c["only_a"], c["only_b"], c["p_value"])
+
+
+def _worst(rows: dict, methods: Sequence[str], box: str, sid: str) -> float | None:
+    vals = [rows[(m, box, sid)].worst_m for m in methods if rows[(m, box, sid)].worst_m is not None]
+    return max(vals) if vals else None
+
+
+def compare_html(before: str | Path, after: str | Path, out: str | Path | None = None) -> Path:
+    """Write ``compare.html`` (self-contained) and ``figures/compare_survival.png`` into ``out`` (default: the
+    ``after`` run's directory); returns the HTML path."""
+    import matplotlib.pyplot as plt
+
+    from . import figures as F
+    from .html import esc, figure_png, img, page, table
+
+    c = paired_comparison(before, after)
+    after_dir = Path(after) if Path(after).is_dir() else Path(after).parent
+    out_dir = Path(out) if out is not None else after_dir
+    fig = F.survival_before_after(c.lines, title=f"{c.spec.name}: survival before and after")
+    png = figure_png(fig)
+    plt.close(fig)
+    (out_dir / "figures").mkdir(parents=True, exist_ok=True)
+    (out_dir / "figures" / "compare_survival.png").write_bytes(png)
+    rows = [{"method": ln.method if ln.method == ANY else F.style(ln.method)["label"], "box": ln.box, "n": ln.n,
+             "before": ln.before_pct, "after": ln.after_pct, "gain": ln.after_pct - ln.before_pct, "fixed": ln.fixed,
+             "new": ln.new, "p": f"{ln.p_value:.4f}"} for ln in sorted(c.lines, key=_order)]
+    changes = [{"sample_id": ch.sample_id, "box": ch.box, "before": ch.before_m, "after": ch.after_m,
+                "change": ch.change} for ch in c.changes]
+    eps = c.spec.eps_safe_m
+    body = [
+        f"<h1>vbl-robust — before and after <small>({esc(c.spec.name)}, seed {c.spec.seed})</small></h1>",
+        f"<p>Before: <b>{esc(c.detectors[0])}</b> (<code>{esc(c.before)}</code>); after: <b>{esc(c.detectors[1])}"
+        f"</b> (<code>{esc(c.after)}</code>). Paired per image on the images both runs completed; ε_safe = "
+        f"{eps:g} m. <i>Fixed</i>: breached before, not after; <i>new</i>: the other way; p: exact McNemar.</p>",
+        img(png, "compare_survival", "Survival per box, before (dashed, open markers) and after (solid); black: "
+            "the union of the methods (an image survives when no method breaches it)."),
+        "<h2>Paired survival</h2>",
+        table(rows, [("method", "method", None), ("box", "box", None), ("n", "images", None),
+                     ("before", "survival before %", None), ("after", "survival after %", None),
+                     ("gain", "change (points)", None), ("fixed", "fixed", None), ("new", "new breaches", None),
+                     ("p", "p", None)], left=("method", "box")),
+        f"<h2>Images whose verdict changed (any method), {len(changes)}</h2>",
+        table(changes, [("sample_id", "image", None), ("box", "box", None), ("before", "worst before (m)", None),
+                        ("after", "worst after (m)", None), ("change", "change", None)],
+              row_class=lambda r: "breach" if r["change"] == "new breach" else "",
+              left=("sample_id", "box", "change")) if changes else "<p>None.</p>",
+    ]
+    path = out_dir / "compare.html"
+    path.write_text(page(f"vbl-robust compare {c.spec.name}", "\n".join(body)), encoding="utf-8")
+    return path
+
+
+def _order(ln: PairedLine) -> tuple[Any, ...]:
+    return (ln.method == ANY, ln.method, ln.level, ln.box)
