@@ -25,7 +25,7 @@ from ..campaigns import metrics as mx
 from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import JobRow, ResultStore
 
-__all__ = ["ANY", "Change", "Comparison", "PairedLine", "compare_html", "paired_comparison"]
+__all__ = ["ANY", "Change", "Comparison", "PairedLine", "check_alike", "compare_html", "paired_comparison"]
 
 #: The union of the methods.
 ANY = "any of them"
@@ -80,6 +80,19 @@ def _read(run: str | Path) -> tuple[CampaignSpec, list[JobRow], str]:
         return spec, mx.main_rows(store, spec, with_trace=False), det
 
 
+def check_alike(run: str | Path, spec: CampaignSpec, rows: Sequence[JobRow], other: str | Path,
+                other_spec: CampaignSpec, other_rows: Sequence[JobRow]) -> None:
+    """``ValueError`` unless ``other`` is ``run``'s experiment and seed on its images (the same id at every
+    image index both hold)."""
+    if (other_spec.name, other_spec.seed) != (spec.name, spec.seed):
+        raise ValueError(f"{other}: experiment {other_spec.name} seed {other_spec.seed}, not {spec.name} seed "
+                         f"{spec.seed}")
+    index = {r.sample_index: r.sample_id for r in rows}
+    clash = sorted({r.sample_index for r in other_rows if index.get(r.sample_index, r.sample_id) != r.sample_id})
+    if clash:
+        raise ValueError(f"{other}: images {clash[:5]} differ from {run}'s (another image set)")
+
+
 def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
     """The comparison of the module docstring; ``ValueError`` when the runs are not the same experiment and seed,
     their images differ, or no method and box has images both runs completed."""
@@ -87,12 +100,7 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
 
     spec, rows_a, det_a = _read(before)
     spec_b, rows_b, det_b = _read(after)
-    if (spec_b.name, spec_b.seed) != (spec.name, spec.seed):
-        raise ValueError(f"{after}: experiment {spec_b.name} seed {spec_b.seed}, not {spec.name} seed {spec.seed}")
-    index = {r.sample_index: r.sample_id for r in rows_a}
-    clash = sorted({r.sample_index for r in rows_b if index.get(r.sample_index, r.sample_id) != r.sample_id})
-    if clash:
-        raise ValueError(f"{after}: images {clash[:5]} differ from {before}'s (another image set)")
+    check_alike(before, spec, rows_a, after, spec_b, rows_b)
     eps = spec.eps_safe_m
     several = len({r.budget_label for r in rows_a}) > 1
 

@@ -56,13 +56,10 @@ def _read(run: str | Path):
 
 def _read_alike(run: str | Path, spec: CampaignSpec, rows: Sequence, other: str | Path):
     """``other``'s spec and main rows, ``ValueError`` unless it is ``run``'s experiment and seed on its images."""
+    from .compare import check_alike
+
     ospec, more, _ = _read(other)
-    if (ospec.name, ospec.seed) != (spec.name, spec.seed):
-        raise ValueError(f"{other}: experiment {ospec.name} seed {ospec.seed}, not {spec.name} seed {spec.seed}")
-    index = {r.sample_index: r.sample_id for r in rows}
-    clash = sorted({r.sample_index for r in more if index.get(r.sample_index, r.sample_id) != r.sample_id})
-    if clash:
-        raise ValueError(f"{other}: images {clash[:5]} differ from {run}'s (another image set)")
+    check_alike(run, spec, rows, other, ospec, more)
     return ospec, more
 
 
