@@ -152,6 +152,8 @@ def test_the_summary_table_never_cuts_a_method_name(tmp_path):
     (["--executor", "ray", "--address", "ray://nohost"], "--address ray://nohost: expected host:port"),
     (["--executor", "dask"], "--executor must be one of local, ray, got 'dask'"),
     (["--sustain", "5"], "--sustain 5 applies to --sequences only"),
+    (["--frames", "5"], "--frames 5 applies to --sequences only"),
+    (["--rate", "2.5"], "--rate 2.5 applies to --sequences only"),
 ])
 def test_a_configuration_error_is_refused_before_any_work(tmp_path, args, message):
     """Not "every image unsafe" with exit 0: one line naming the setting and value, exit 2, nothing stored."""

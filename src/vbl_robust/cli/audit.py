@@ -405,9 +405,10 @@ def register(app: typer.Typer) -> None:
                                              "one θ is held over each sequence (see --sustain)."),
         sustain: int = typer.Option(1, "--sustain", min=1, help="With --sequences: frames the error must hold "
                                     "(the worst error sustained over K consecutive frames)."),
-        frames: int = typer.Option(20, "--frames", min=1, help="With --sequences N: frames per sequence."),
-        rate: float = typer.Option(10.0, "--rate", help="With --sequences: frame rate in Hz (generated sequences; "
-                                   "LARD data without times)."),
+        frames: int | None = typer.Option(None, "--frames", min=1, help="With --sequences N: frames per sequence "
+                                          "(default 20)."),
+        rate: float | None = typer.Option(None, "--rate", help="With --sequences: frame rate in Hz (generated "
+                                          "sequences; LARD data without times; default 10)."),
         refine_zones: int = typer.Option(0, "--refine-zones", min=0, help="After the search: spend this many more "
                                          "evaluations per main DIRECT-family/grid job inside its undecided zones "
                                          "(GeoRobust per zone, largest first) and report how the breached / "
@@ -438,8 +439,12 @@ def register(app: typer.Typer) -> None:
             check_executor(executor, address)
         except ValueError as exc:
             fail(str(exc))
-        if sequences is None and sustain != 1:
-            fail(f"--sustain {sustain} applies to --sequences only")
+        if sequences is None:
+            for flag, value in (("--sustain", None if sustain == 1 else sustain), ("--frames", frames),
+                                ("--rate", rate)):
+                if value is not None:
+                    fail(f"{flag} {value:g} applies to --sequences only")
+        frames, rate = frames or 20, 10.0 if rate is None else rate
         try:
             box = ParameterBox(bounds)
             budget = Budget(max_evals=max_evals or None, max_seconds=max_seconds, stop_at_breach=early_stop)
