@@ -1,6 +1,7 @@
 """Sequence audits as campaigns: ``vbl-robust audit --sequences`` writes a results store, resumes, and ``zones``,
 ``report`` and ``--refine-zones`` work on it (oracle detectors, tiny images)."""
 
+import csv
 import json
 import sqlite3
 
@@ -34,8 +35,11 @@ def test_audit_sequences_writes_a_store_with_the_frames_and_resumes(tmp_path):
     out = tmp_path / "run"
     args = ["audit", "--sequences", "2", "--frames", "5", "--rate", "5", "--sustain", "2", "--roll", "5",
             "--methods", "grid,random", "--max-evals", "5", "--out", str(out), *SMALL]
-    res = runner.invoke(app, args)
+    res = runner.invoke(app, [*args, "--csv", str(tmp_path / "jobs.csv")])
     assert res.exit_code == 0, res.output
+    lines = list(csv.DictReader(open(tmp_path / "jobs.csv")))  # one line per job with its breach facts
+    assert len(lines) == 4 and all(ln["longest_run_frames"] == "0" and ln["breach_start_m"] == "" for ln in lines)
+    assert all(float(ln["nominal_sustained_m"]) < 1000 for ln in lines)
     rows = _rows(out)
     assert sorted((r.sample_id, r.method) for r in rows.values()) == [
         ("synth_q0_0000", "grid"), ("synth_q0_0000", "random"), ("synth_q0_0001", "grid"), ("synth_q0_0001", "random")]

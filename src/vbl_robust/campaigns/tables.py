@@ -1,7 +1,8 @@
 """Flat exports of a store's job rows: CSV (standard library) and Parquet (pyarrow).
 
 One line per job with the identifying columns, the worst error and point (one column per parameter, real
-units), verdict, counts and timings; traces and evaluated points stay in the store. A run that reads smaller
+units), verdict, counts and timings (a sequence campaign's main jobs also their breach facts along the approach,
+:data:`SEQUENCE_COLUMNS`); traces, evaluated points and per-frame errors stay in the store. A run that reads smaller
 budgets off its trace (runtime experiments) is followed by one line per read budget, derived from it
 (:func:`~vbl_robust.campaigns.metrics.read_off_rows`; column ``read_from`` = the run's budget label).
 """
@@ -22,6 +23,12 @@ COLUMNS = (
     "reason", "worst_m", "verdict", "nfev", "nit", "n_failed", "failures", "worst_reason", "search_status",
     "search_s", "job_s", "upper_bound", "bound_estimate", "run_id", "key", "read_from",
 )
+
+
+#: Columns of a sequence campaign's main jobs (after the parameters): the breach facts of the worst θ and the
+#: unperturbed θ's sustained error, from the job's ``sequence`` payload (:func:`.work.sequence_details`).
+SEQUENCE_COLUMNS = ("longest_run_frames", "longest_run_s", "breached_frames", "failed_frames", "breach_start_m",
+                    "breach_start_frame", "first_breach_m", "nominal_sustained_m", "nominal_breached_frames")
 
 
 def _plain(v: Any) -> Any:
@@ -46,7 +53,7 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
         stored = [x for r in stored for x in
                   ([r] + ([read_off(full[r.key], b, eps, penalty) for b in r.budget.read_budgets()]
                           if r.key in full else []))]
-    rows, params = [], []
+    rows, params, sequences = [], [], False
     for r in stored:
         s = samples.get(r.sample_id, {})
         b = {} if r.budget is None else r.budget.to_dict()
@@ -58,8 +65,14 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
             if col not in params:
                 params.append(col)
             d[col] = v
+        seq = None if r.read_from else (r.payload or {}).get("sequence")
+        if seq is not None:
+            sequences = True
+            d.update({c: seq["worst"].get(c) for c in SEQUENCE_COLUMNS[:7]},
+                     nominal_sustained_m=seq["nominal"].get("sustained_m"),
+                     nominal_breached_frames=seq["nominal"].get("breached_frames"))
         rows.append(d)
-    return rows, [*COLUMNS, *params]
+    return rows, [*COLUMNS, *params, *(SEQUENCE_COLUMNS if sequences else ())]
 
 
 def export(store: ResultStore, path: str | Path) -> Path:
