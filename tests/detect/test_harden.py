@@ -86,8 +86,10 @@ def test_harden_trains_on_the_worst_views_and_resumes(tmp_path, sample):
     assert any(w is not None for w in first["worst"]) and first["breaches"] == sum(v > 1000 for v in first["values"])
     import yaml
 
-    started = yaml.safe_load((tmp_path / "h/round01/stage00/args.yaml").read_text())["model"]
-    assert started == str(rounds[0].weights)  # round 1 fine-tunes round 0's weights
+    args = yaml.safe_load((tmp_path / "h/round01/stage00/args.yaml").read_text())
+    assert args["model"] == str(rounds[0].weights)  # round 1 fine-tunes round 0's weights
+    # with the shipped model's recipe (detect.train.FINE_TUNE), not ultralytics' defaults
+    assert (args["optimizer"], args["lr0"], args["lrf"], args["cos_lr"], args["pose"]) == ("AdamW", 1e-4, 0.1, True, 36.0)
     stamp = rounds[1].weights.stat().st_mtime_ns
     again = harden(tmp_path / "h", box, **kw)
     assert [r.weights for r in again] == [r.weights for r in rounds] and again[1].weights.stat().st_mtime_ns == stamp

@@ -109,7 +109,9 @@ def harden(out_dir: str | Path, box: ParameterBox, *, train_samples: Sequence[Sa
            **train_options) -> list[Round]:
     """Rounds of worst-of-k training (module docstring): each round scores ``k`` candidates per training image on
     the current model (two-stage, ``imgsz``), renders the worst trainable one, and fine-tunes on those views (and
-    the clean images when ``clean``) for ``epochs``, validating on the clean ``val_samples``. ``init_weights``:
+    the clean images when ``clean``) for ``epochs`` with the shipped model's recipe
+    (:data:`~vbl_robust.detect.train.FINE_TUNE`; ``train_options`` override it), validating on the clean
+    ``val_samples``. ``init_weights``:
     the model to harden (None: the shipped one). Resumable: a finished round (``roundNN/round.json``) is read
     back, an interrupted one resumes its training. Returns the rounds; ``Round.breaches`` counts the training
     images whose worst θ broke the round's starting model (``L > eps_m``, default ε_safe)."""
@@ -117,7 +119,7 @@ def harden(out_dir: str | Path, box: ParameterBox, *, train_samples: Sequence[Sa
 
     from ..constants import EPS_SAFE_M
     from .shipped import DEFAULT_MODEL, default_detector, with_design
-    from .train import train
+    from .train import FINE_TUNE, train
     from .ultralytics import UltralyticsDetector
 
     if rounds < 1 or epochs < 1:
@@ -149,7 +151,7 @@ def harden(out_dir: str | Path, box: ParameterBox, *, train_samples: Sequence[Sa
             stage = rdir / "stage00"
             res = train(rdir, samples=[*train_samples, *views] if clean else views, val_samples=val_samples,
                         init_weights=current if current is not None else DEFAULT_MODEL, epochs=epochs, seed=seed,
-                        imgsz=imgsz, resume=stage.exists(), **train_options)
+                        imgsz=imgsz, resume=stage.exists(), **{**FINE_TUNE, **train_options})
             rnd = Round(r, rdir, res.best, tuple(worst), tuple(values),
                         int(sum(v > eps for v in values if np.isfinite(v))))
             record.write_text(json.dumps(rnd.to_dict(), indent=1) + "\n")

@@ -58,6 +58,14 @@ MIN_BOX_FRACTION = 0.075
 #: synthetic validation samples come from ``generate(n_val, seed + VAL_SEED_OFFSET)``
 VAL_SEED_OFFSET = 1_000_003
 
+#: The recipe of the shipped model's last training steps (training log Q and R → v9, ``models/MODEL_CARD.md``):
+#: AdamW, learning rate 1e-4 → 1e-5 cosine after a tenth of an epoch's warm-up, labelled boxes ≥ 24 px, keypoint
+#: gain 36, threshold-width loss 0.5, appearance jitter, one crop per view. A fine-tune of that model
+#: (``vbl-robust harden``) keeps it, so that what changes in the model is the fine-tune's data, not a new recipe
+#: (ultralytics' own defaults — another optimizer, a higher rate, keypoint gain 12 — would retrain it).
+FINE_TUNE = dict(optimizer="AdamW", lr0=1e-4, lrf=0.1, cos_lr=True, warmup_epochs=0.1, min_box=24.0, pose=36.0,
+                 width_loss=0.5, appearance={}, crops_per_sample=1, workers=0)
+
 
 @dataclass
 class CropJitter:
