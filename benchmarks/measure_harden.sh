@@ -4,7 +4,8 @@
 # Fixed before any hardening run (2026-12-03, session 32), so that no choice is made on the figures it produces:
 #   training   roll ±30° (the largest 1-D box the audit reads), worst of k = 8 per image (plus the image's previous
 #              worst), 2 rounds × 2 epochs, 300 approaches of detect.protocol.HARDEN_SEED (their own airports) with
-#              their clean views, 60 clean validation approaches; the weights of the last round.
+#              their clean views, 60 clean validation approaches, v9's own recipe (detect.train.FINE_TUNE); the
+#              weights of the last round.
 #   nominal    benchmarks/detector_protocol.py on every seed (the model card's figures need the test seeds); the
 #              four validation seeds (2040 approaches) paired with v9's committed results (exact McNemar): the goal
 #              is p >= 0.05 and no worse than -1 point. Then shipped beside v9 (ship --as hardened; it replaces
