@@ -669,6 +669,52 @@ class ResultStore:
         sql += " ORDER BY sample_index, rowid"
         return [_from_columns(dict(zip(cols, r, strict=True))) for r in self._con.execute(sql, args)]
 
+    def merge(self, other: ResultStore, *, source: str = "") -> tuple[int, int]:
+        """Copy into this store the job rows of ``other`` that it lacks, with their samples, image digests and runs —
+        parts of one campaign computed elsewhere (another machine, a GPU, a cluster without a shared disk).
+
+        ``other`` must hold the same campaign and detector (checked as a resuming run is: ``ValueError``); a sample
+        both hold must have the same fingerprint and index. This store, when new, is bound to ``other``'s campaign.
+        Each run of ``other`` that brought rows is recorded here anew (its provenance kept, ``config["merged_from"]``
+        = ``source``), and the copied rows point to it. Rows already here (the same key: the same job, context and
+        sample) are kept as they are. Returns (rows copied, rows already here). The caller holds the writer lock."""
+        theirs = other.campaign()
+        if theirs is None or other.count() == 0:
+            raise ValueError(f"{other.path}: holds no job rows to merge")
+        mine = self.campaign()
+        if mine is None or self.count() == 0:
+            self.bind_campaign(theirs["name"], theirs["spec"], theirs["detector"])
+        else:
+            self._check_same(mine, theirs["spec"], theirs["detector"])
+        here = self.samples()
+        clash = [sid for sid, s in other.samples().items() if sid in here
+                 and (here[sid]["fingerprint"], here[sid]["sample_index"]) != (s["fingerprint"], s["sample_index"])]
+        if clash:
+            raise ValueError(f"{other.path}: samples {clash[:5]} differ from this store's (another image set)")
+        have = self.done_keys()
+        rows = [r for r in other.jobs(with_points=True) if r.key not in have]
+        runs = {r["run_id"]: r for r in other.runs()}
+        cols = ("started_at", "finished_at", "status", "code_version", "model_sha256", "detector_json", "dataset_id",
+                "dataset_json", "config_json", "seed", "executor", "host", "jobs_total", "jobs_skipped", "jobs_done",
+                "seconds")
+        new_id: dict[int | None, int | None] = {None: None}
+        with self._tx():
+            for rid in sorted({r.run_id for r in rows if r.run_id is not None}):
+                run = dict(runs.get(rid) or {"started_at": now_iso(), "status": "unknown"})
+                run["config"] = {**(run.get("config") or {}), "merged_from": source or str(other.path)}
+                vals = [_dumps(run.get(c.removesuffix("_json"))) if c.endswith("_json") else run.get(c) for c in cols]
+                cur = self._con.execute(f"INSERT INTO runs ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})",
+                                        vals)
+                new_id[rid] = int(cur.lastrowid)
+            self._con.executemany(
+                f"INSERT OR IGNORE INTO jobs ({', '.join(JOB_COLUMNS)}) VALUES ({', '.join('?' * len(JOB_COLUMNS))})",
+                [_to_columns(r.replace(run_id=new_id.get(r.run_id))) for r in rows])
+            self._con.executemany("INSERT OR IGNORE INTO contents (sample_id, path, size, mtime_ns, sha256) "
+                                  "VALUES (?, ?, ?, ?, ?)",
+                                  other._con.execute("SELECT sample_id, path, size, mtime_ns, sha256 FROM contents"))
+        self.add_samples(other.samples().values())
+        return len(rows), other.count() - len(rows)
+
     # -- helpers ------------------------------------------------------------------------------------------
     def _tx(self) -> _Transaction:
         return _Transaction(self._con)

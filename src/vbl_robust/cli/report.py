@@ -1,7 +1,8 @@
 """``vbl-robust report RUN``: rebuild the HTML report (and exports) of a run directory from its results store, or
 print its tables as Markdown (``--format md``, :mod:`vbl_robust.report.markdown`);
 ``vbl-robust bundle ROOT --out DIR``: the committable bundle of a set of experiment runs
-(:mod:`vbl_robust.campaigns.bundle`)."""
+(:mod:`vbl_robust.campaigns.bundle`); ``vbl-robust merge SRC… --into RUN``: jobs computed elsewhere joined into one
+run (:meth:`vbl_robust.campaigns.store.ResultStore.merge`)."""
 
 from __future__ import annotations
 
@@ -88,6 +89,29 @@ def register(app: typer.Typer) -> None:
         for name, t in totals.items():
             typer.echo(f"{name}: {t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} images")
         typer.echo(f"bundle: {out}")
+
+
+    @app.command()
+    def merge(
+        sources: list[Path] = typer.Argument(..., help="Run directories (or .sqlite files) computed elsewhere."),
+        into: Path = typer.Option(..., "--into", help="The run directory (or .sqlite file) they join; created when "
+                                  "missing."),
+    ) -> None:
+        """Copy into one run the jobs that other runs of the same campaign and detector computed (another machine,
+        a GPU, a cluster without a shared disk): rows it lacks, their samples and runs; rows it holds stay. Refused
+        while a run writes it."""
+        from vbl_robust.campaigns.store import ResultStore, WriterLock
+
+        dst = into / "results.sqlite" if into.is_dir() or not into.suffix else into
+        try:
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            with WriterLock(dst), ResultStore(dst) as store:
+                for src in sources:
+                    with ResultStore.open_existing(src) as other:
+                        new, had = store.merge(other, source=str(src))
+                    typer.echo(f"{src}: {new} job rows merged, {had} already in {dst}")
+        except (ValueError, FileNotFoundError, OSError) as exc:
+            fail(str(exc))
 
 
 def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:

@@ -1,0 +1,68 @@
+"""``ResultStore.merge`` / ``vbl-robust merge``: parts of one campaign computed elsewhere joined into one run."""
+
+import pytest
+from typer.testing import CliRunner
+
+from vbl_robust.campaigns import (
+    Block,
+    Budget,
+    CampaignSpec,
+    DetectorSpec,
+    ResultStore,
+    roll_box,
+    run_campaign,
+)
+from vbl_robust.campaigns.bundle import compare_runs
+from vbl_robust.campaigns.store import WriterLock
+from vbl_robust.cli import app
+from vbl_robust.scenes import generate
+
+DET = DetectorSpec.oracle(1.0)
+
+
+def _spec(seed=3):
+    return CampaignSpec("merge-test", (Block(boxes=(roll_box(5), roll_box(10)), methods=("georobust", "random"),
+                                             budgets=(Budget(max_evals=8),)),), seed=seed)
+
+
+def _run(out, samples, spec=None):
+    with ResultStore(out / "results.sqlite") as store:
+        return run_campaign(spec or _spec(), samples, store, detector=DET)
+
+
+def test_two_parts_merge_into_the_whole_run(tmp_path):
+    samples = list(generate(3, seed=0, width=96, height=96))
+    _run(tmp_path / "whole", samples)
+    _run(tmp_path / "part1", samples[:2])        # one machine: the first two images
+    _run(tmp_path / "part2", samples)            # another: all three, resuming nothing
+    res = CliRunner().invoke(app, ["merge", str(tmp_path / "part1"), str(tmp_path / "part2"),
+                                   "--into", str(tmp_path / "joined")])
+    assert res.exit_code == 0, res.output
+    assert "part1: 8 job rows merged, 0 already" in res.output and "part2: 4 job rows merged, 8 already" in res.output
+    check = compare_runs(tmp_path / "joined", tmp_path / "whole")
+    assert check["rows"] == check["common"] == 12 and check["differ"] == []
+    with ResultStore.open_existing(tmp_path / "joined") as st:
+        runs = st.runs()
+        rows = st.jobs()
+        assert len(st.samples()) == 3
+    assert [r["config"]["merged_from"] for r in runs] == [str(tmp_path / "part1"), str(tmp_path / "part2")]
+    assert {r.run_id for r in rows} == {runs[0]["run_id"], runs[1]["run_id"]}
+    assert _run(tmp_path / "joined", samples).done == 0  # the joined run resumes: nothing left to do
+
+
+def test_merge_refuses_another_campaign_a_held_store_and_an_empty_source(tmp_path):
+    samples = list(generate(2, seed=0, width=96, height=96))
+    _run(tmp_path / "a", samples)
+    _run(tmp_path / "b", samples, _spec(seed=4))
+    with ResultStore(tmp_path / "a" / "results.sqlite") as a, ResultStore.open_existing(tmp_path / "b") as b:
+        before = a.count()
+        with pytest.raises(ValueError, match="other settings"):
+            a.merge(b)
+        assert a.count() == before
+    runner = CliRunner()
+    with WriterLock(tmp_path / "a" / "results.sqlite"):  # a run is writing it
+        res = runner.invoke(app, ["merge", str(tmp_path / "b"), "--into", str(tmp_path / "a")])
+    assert res.exit_code == 2 and "in use by PID" in res.output
+    ResultStore(tmp_path / "e" / "results.sqlite").close()
+    res = runner.invoke(app, ["merge", str(tmp_path / "e"), "--into", str(tmp_path / "a")])
+    assert res.exit_code == 2 and "holds no job rows to merge" in res.output
