@@ -51,6 +51,10 @@ def test_local_run_records_rows_and_a_rerun_skips_them(tmp_path, small_samples, 
         assert r.worst_reason == r.points.reasons[i]
     assert [r["status"] for r in runs] == ["finished", "finished"]
     assert runs[0]["dataset"]["source"] == {"kind": "test"} and runs[0]["config"]["user"] == {"x": 1}
+    from importlib.metadata import version
+
+    libraries = runs[0]["config"]["libraries"]  # the versions that can move a result's last digits
+    assert libraries["torch"] == version("torch") and libraries["opencv-python"] == version("opencv-python")
     assert runs[0]["code_version"] and runs[1]["jobs_skipped"] == 6
 
 

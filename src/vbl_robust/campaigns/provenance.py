@@ -1,4 +1,4 @@
-"""Provenance of a run: code version, dataset identity, sample fingerprints.
+"""Provenance of a run: code version, library versions, dataset identity, sample fingerprints.
 
 The detector identity (model file SHA-256, design) is :meth:`DetectorSpec.identity`, defined with the shipped
 model's rules in :mod:`vbl_robust.detect.shipped` and re-exported here.
@@ -37,6 +37,26 @@ def code_version() -> str:
     except (OSError, subprocess.SubprocessError):
         pass
     return vbl_robust.__version__
+
+
+#: The libraries whose versions can move a result (the network, the warps, the PnP solvers, the inference engines).
+NUMERIC_LIBRARIES = ("torch", "torchvision", "opencv-python", "opencv-python-headless", "numpy", "scipy", "kornia",
+                     "ultralytics", "onnxruntime", "openvino")
+
+
+@cache
+def library_versions() -> dict[str, str]:
+    """The installed versions of :data:`NUMERIC_LIBRARIES` (those installed): a run's provenance, since a result
+    computed elsewhere (another machine, a GPU image) may differ in the last digits with them."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for name in NUMERIC_LIBRARIES:
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            continue
+    return out
 
 
 def sample_fingerprint(sample: Any) -> str:

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..constants import Verdict
-from .provenance import DetectorSpec, code_version, dataset_identity, sample_fingerprint
+from .provenance import DetectorSpec, code_version, dataset_identity, library_versions, sample_fingerprint
 from .spec import CampaignSpec, Job
 from .store import JobRow, JobStatus, ResultStore, WriterLock
 from .work import SampleTask, Settings, detector_for, run_sample_task
@@ -188,7 +188,8 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
         "code_version": code_version(), "model_sha256": det_identity["sha256"], "detector": det_identity,
         "dataset_id": dataset["sha256"], "dataset": dataset, "seed": spec.seed, "executor": executor,
         "config": {"campaign": spec.to_dict(), "user": config or {}, "executor": executor, "address": address,
-                   "workers": workers if executor == "local" else None, "clock": spec.clock},
+                   "workers": workers if executor == "local" else None, "clock": spec.clock,
+                   "libraries": library_versions()},
         "host": platform.node(), "jobs_total": len(jobs), "jobs_skipped": skipped,
     })
     logger.info("campaign %s: %d jobs, %d already done, %d to run (%s executor)", spec.name, len(jobs), skipped,
