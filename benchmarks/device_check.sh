@@ -12,6 +12,13 @@
 #       ±10° × contrast [0.7, 1.4], georobust / random / apgd, 40 evaluations each, no early stop) on cuda and on
 #       the CPU (torch engine, one worker, wall clock), and whether their rows agree
 #       (vbl_robust.campaigns.bundle.compare_runs). Logs and both stores come back in $OUT.
+#   there, once the check passed:  device run: command "bash benchmarks/device_check.sh --paper 480", carry [".whl"]
+#       resumes the paper run's experiments without time budgets (spatial-2d, distance-profile, convergence, then
+#       spatial-1d: the ones the CPU run reaches last first) from the committed bundle on cuda, 12 workers, for
+#       480 s, with the run's own CPU-process clock setting (part of the job keys), and sends each store back packed
+#       ($OUT/<experiment>.sqlite.xz); here, with the CPU run stopped:
+#       vbl-robust merge /work/.device/…/<experiment>.sqlite.xz --into runs/paper/<experiment>
+#       (each run's provenance records its device and library versions).
 set -uo pipefail
 if [ "${1:-}" = "--fetch" ]; then
   grep -qx '/.whl/' .git/info/exclude 2>/dev/null || echo '/.whl/' >> .git/info/exclude
@@ -23,6 +30,7 @@ if [ "${1:-}" = "--fetch" ]; then
   exit
 fi
 OUT=${OUT:-/tmp/device_check}
+VR=(python3 -c "from vbl_robust.cli import main; main()")
 mkdir -p "$OUT"
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl \
   || exit 1
@@ -31,8 +39,22 @@ export OMP_NUM_THREADS=1
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv | tee "$OUT/gpu.txt"
 python3 -c "import torch, cv2; print('torch', torch.__version__, 'cuda', torch.cuda.is_available(), 'opencv', cv2.__version__)" \
   | tee -a "$OUT/gpu.txt"
+if [ "${1:-}" = "--paper" ]; then
+  end=$((SECONDS + ${2:-480}))
+  for e in spatial-2d distance-profile convergence spatial-1d; do
+    left=$((end - SECONDS)); [ "$left" -gt 30 ] || break
+    timeout -s INT "$left" "${VR[@]}" reproduce "$e" --out "/tmp/paper/$e" --resume-from results/paper \
+      --device cuda --clock process --workers "${WORKERS:-12}" --no-report -q 2>&1 | tail -3 | tee -a "$OUT/paper.txt"
+    [ -f "/tmp/paper/$e/results.sqlite" ] && python3 -c "
+import sys; from pathlib import Path
+from vbl_robust.campaigns.bundle import pack_store
+from vbl_robust.campaigns.store import ResultStore
+with ResultStore.open_existing(sys.argv[1]) as st: print(pack_store(st, Path(sys.argv[2])), st.count(), 'jobs')
+" "/tmp/paper/$e" "$OUT/$e.sqlite.xz" | tee -a "$OUT/paper.txt"
+  done
+  exit
+fi
 timeout 240 python3 benchmarks/bench_device.py --quick 2>&1 | tee "$OUT/bench_device.txt"
-VR=(python3 -c "from vbl_robust.cli import main; main()")
 AUDIT=(audit --model default --images 2 --roll 10 --contrast 0.7,1.4 --methods georobust,random,apgd --max-evals 40
        --no-early-stop --no-landscape --workers 1 --clock wall -q)
 timeout 120 "${VR[@]}" "${AUDIT[@]}" --device cuda --out "$OUT/audit_cuda" 2>&1 | tee "$OUT/audit_cuda.txt"

@@ -12,7 +12,7 @@ from vbl_robust.campaigns import (
     roll_box,
     run_campaign,
 )
-from vbl_robust.campaigns.bundle import compare_runs
+from vbl_robust.campaigns.bundle import compare_runs, pack_store
 from vbl_robust.campaigns.store import WriterLock
 from vbl_robust.cli import app
 from vbl_robust.scenes import generate
@@ -35,17 +35,18 @@ def test_two_parts_merge_into_the_whole_run(tmp_path):
     _run(tmp_path / "whole", samples)
     _run(tmp_path / "part1", samples[:2])        # one machine: the first two images
     _run(tmp_path / "part2", samples)            # another: all three, resuming nothing
-    res = CliRunner().invoke(app, ["merge", str(tmp_path / "part1"), str(tmp_path / "part2"),
-                                   "--into", str(tmp_path / "joined")])
+    with ResultStore.open_existing(tmp_path / "part1") as st:  # as a GPU machine sends it back: packed
+        packed = pack_store(st, tmp_path / "part1.sqlite.xz")
+    res = CliRunner().invoke(app, ["merge", str(packed), str(tmp_path / "part2"), "--into", str(tmp_path / "joined")])
     assert res.exit_code == 0, res.output
-    assert "part1: 8 job rows merged, 0 already" in res.output and "part2: 4 job rows merged, 8 already" in res.output
+    assert "part1.sqlite.xz: 8 job rows merged, 0 already" in res.output and "part2: 4 job rows merged, 8 already" in res.output
     check = compare_runs(tmp_path / "joined", tmp_path / "whole")
     assert check["rows"] == check["common"] == 12 and check["differ"] == []
     with ResultStore.open_existing(tmp_path / "joined") as st:
         runs = st.runs()
         rows = st.jobs()
         assert len(st.samples()) == 3
-    assert [r["config"]["merged_from"] for r in runs] == [str(tmp_path / "part1"), str(tmp_path / "part2")]
+    assert [r["config"]["merged_from"] for r in runs] == [str(packed), str(tmp_path / "part2")]
     assert {r.run_id for r in rows} == {runs[0]["run_id"], runs[1]["run_id"]}
     assert _run(tmp_path / "joined", samples).done == 0  # the joined run resumes: nothing left to do
 
@@ -66,3 +67,6 @@ def test_merge_refuses_another_campaign_a_held_store_and_an_empty_source(tmp_pat
     ResultStore(tmp_path / "e" / "results.sqlite").close()
     res = runner.invoke(app, ["merge", str(tmp_path / "e"), "--into", str(tmp_path / "a")])
     assert res.exit_code == 2 and "holds no job rows to merge" in res.output
+    (tmp_path / "bad.sqlite.xz").write_bytes(b"not xz")
+    res = runner.invoke(app, ["merge", str(tmp_path / "bad.sqlite.xz"), "--into", str(tmp_path / "a")])
+    assert res.exit_code == 2 and len(res.output.strip().splitlines()) == 1, res.output

@@ -93,24 +93,35 @@ def register(app: typer.Typer) -> None:
 
     @app.command()
     def merge(
-        sources: list[Path] = typer.Argument(..., help="Run directories (or .sqlite files) computed elsewhere."),
+        sources: list[Path] = typer.Argument(..., help="Run directories, .sqlite files, or packed stores "
+                                             "(.sqlite.xz, as `bundle --stores` writes them) computed elsewhere."),
         into: Path = typer.Option(..., "--into", help="The run directory (or .sqlite file) they join; created when "
                                   "missing."),
     ) -> None:
         """Copy into one run the jobs that other runs of the same campaign and detector computed (another machine,
         a GPU, a cluster without a shared disk): rows it lacks, their samples and runs; rows it holds stay. Refused
         while a run writes it."""
+        import lzma
+        import tempfile
+
+        from vbl_robust.campaigns.bundle import restore_store
         from vbl_robust.campaigns.store import ResultStore, WriterLock
 
         dst = into / "results.sqlite" if into.is_dir() or not into.suffix else into
         try:
             dst.parent.mkdir(parents=True, exist_ok=True)
-            with WriterLock(dst), ResultStore(dst) as store:
-                for src in sources:
-                    with ResultStore.open_existing(src) as other:
+            with WriterLock(dst), ResultStore(dst) as store, tempfile.TemporaryDirectory() as tmp:
+                for i, src in enumerate(sources):
+                    path = src
+                    if src.name.endswith(".xz"):  # a packed store: unpacked beside, never in place
+                        if not src.is_file():
+                            raise FileNotFoundError(f"{src}: no such packed store")
+                        path = Path(tmp) / str(i)
+                        restore_store(src, path)
+                    with ResultStore.open_existing(path) as other:
                         new, had = store.merge(other, source=str(src))
                     typer.echo(f"{src}: {new} job rows merged, {had} already in {dst}")
-        except (ValueError, FileNotFoundError, OSError) as exc:
+        except (ValueError, FileNotFoundError, OSError, EOFError, lzma.LZMAError) as exc:
             fail(str(exc))
 
 
