@@ -84,6 +84,7 @@ def test_harden_trains_on_the_worst_views_and_resumes(tmp_path, sample):
     first = json.loads((tmp_path / "h/round00/round.json").read_text())
     assert len(first["worst"]) == 4 and all(w is None or len(w) == 2 for w in first["worst"])
     assert any(w is not None for w in first["worst"]) and first["breaches"] == sum(v > 1000 for v in first["values"])
+    assert first["search_s"] > 0 and first["train_s"] > 0  # recorded: the training time goes into the model card
     import yaml
 
     args = yaml.safe_load((tmp_path / "h/round01/stage00/args.yaml").read_text())

@@ -185,5 +185,6 @@ def register(app: typer.Typer) -> None:
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         for r in rs:
+            took = "" if r.train_s is None else f" (search {r.search_s:.0f} s, training {r.train_s:.0f} s)"
             typer.echo(f"round {r.index}: {r.breaches} of {len(r.worst)} training images breached by their worst "
-                       f"view; weights {r.weights}")
+                       f"view; weights {r.weights}{took}")

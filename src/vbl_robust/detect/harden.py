@@ -89,7 +89,9 @@ def worst_of_k(sample: Sample, detector, box: ParameterBox, k: int, rng: np.rand
 @dataclass(frozen=True)
 class Round:
     """One hardening round: its directory, the weights it produced, and what its training views were: per
-    training image the worst θ found (None: no trainable candidate) and its error on the round's starting model."""
+    training image the worst θ found (None: no trainable candidate) and its error on the round's starting model;
+    the seconds its search for the worst views and its training took (of this call: a resumed round's training
+    counts from its resumption)."""
 
     index: int
     directory: Path
@@ -97,10 +99,13 @@ class Round:
     worst: tuple[list[float] | None, ...]
     values: tuple[float, ...]
     breaches: int
+    search_s: float | None = None
+    train_s: float | None = None
 
     def to_dict(self) -> dict:
         return {"index": self.index, "weights": str(self.weights), "worst": list(self.worst),
-                "values": list(self.values), "breaches": self.breaches}
+                "values": list(self.values), "breaches": self.breaches, "search_s": self.search_s,
+                "train_s": self.train_s}
 
 
 def harden(out_dir: str | Path, box: ParameterBox, *, train_samples: Sequence[Sample],
@@ -116,6 +121,7 @@ def harden(out_dir: str | Path, box: ParameterBox, *, train_samples: Sequence[Sa
     back, an interrupted one resumes its training. Returns the rounds; ``Round.breaches`` counts the training
     images whose worst θ broke the round's starting model (``L > eps_m``, default ε_safe)."""
     import json
+    import time
 
     from ..constants import EPS_SAFE_M
     from .shipped import DEFAULT_MODEL, default_detector, with_design
@@ -135,10 +141,12 @@ def harden(out_dir: str | Path, box: ParameterBox, *, train_samples: Sequence[Sa
         record = rdir / "round.json"
         if record.exists():  # finished earlier: read back
             d = json.loads(record.read_text())
-            rnd = Round(r, rdir, Path(d["weights"]), tuple(d["worst"]), tuple(d["values"]), d["breaches"])
+            rnd = Round(r, rdir, Path(d["weights"]), tuple(d["worst"]), tuple(d["values"]), d["breaches"],
+                        d.get("search_s"), d.get("train_s"))
         else:
             det = (default_detector(design="twostage") if current is None
                    else with_design(UltralyticsDetector(current, trust=True, imgsz=imgsz), "twostage"))
+            t0 = time.perf_counter()
             worst: list[list[float] | None] = []
             values: list[float] = []
             views: list[Sample] = []
@@ -148,12 +156,13 @@ def harden(out_dir: str | Path, box: ParameterBox, *, train_samples: Sequence[Sa
                 values.append(w.value)
                 if w.theta is not None:
                     views.append(perturbed_sample(s, perturbation, w.theta, tag=f"r{r}"))
+            t1 = time.perf_counter()
             stage = rdir / "stage00"
             res = train(rdir, samples=[*train_samples, *views] if clean else views, val_samples=val_samples,
                         init_weights=current if current is not None else DEFAULT_MODEL, epochs=epochs, seed=seed,
                         imgsz=imgsz, resume=stage.exists(), **{**FINE_TUNE, **train_options})
             rnd = Round(r, rdir, res.best, tuple(worst), tuple(values),
-                        int(sum(v > eps for v in values if np.isfinite(v))))
+                        int(sum(v > eps for v in values if np.isfinite(v))), t1 - t0, time.perf_counter() - t1)
             record.write_text(json.dumps(rnd.to_dict(), indent=1) + "\n")
         for i, th in enumerate(rnd.worst):
             if th is not None:
