@@ -44,15 +44,17 @@ def _floats(text: str | None, name: str) -> tuple[float, ...] | None:
 
 
 def _estimate(exps: list, opts: Any, seed: int, images: int | None, det: Any, probe_samples: list, workers: int,
-              group: str, probe_seconds: float) -> None:
-    """Print each experiment's expected duration and its upper bound (:mod:`vbl_robust.campaigns.estimate`)."""
+              group: str, probe_seconds: float, clock: str = "wall") -> None:
+    """Print each experiment's expected duration and its upper bound (:mod:`vbl_robust.campaigns.estimate`), the
+    probe's rates measured on the run's ``clock`` (process: CPU seconds, the durations of an idle machine)."""
     from vbl_robust.campaigns.estimate import Probe, expected_seconds, planned_work, probe
 
     specs = [exp.build(seed, opts) for exp in exps]
-    pr = probe(det, specs, probe_samples, seconds=probe_seconds)
-    typer.echo(f"probe: {pr.rate:.1f} evaluations/s black box, {pr.grad_rate:.1f} with a gradient ({det.name}, one "
-               f"thread); breach shares of {len(pr.breach)} early-stopping boxes on {len(probe_samples)} probe "
-               f"images; {workers} worker(s)")
+    pr = probe(det, specs, probe_samples, seconds=probe_seconds, clock=clock)
+    unit = "CPU second (process clock: the rate of an idle core)" if clock == "process" else "s"
+    typer.echo(f"probe: {pr.rate:.1f} evaluations per {unit} black box, {pr.grad_rate:.1f} with a gradient "
+               f"({det.name}, one thread); breach shares of {len(pr.breach)} early-stopping boxes on "
+               f"{len(probe_samples)} probe images; {workers} worker(s)")
     total = bound = 0.0
     for exp, spec in zip(exps, specs, strict=True):
         n = images or exp.images
@@ -176,9 +178,9 @@ def register(app: typer.Typer) -> None:
         if estimate:
             from vbl_robust.campaigns.estimate import PROBE_IMAGES
 
-            _estimate(exps, opts, seed, images, det, load(PROBE_IMAGES, seed, lard, width, height)[0],
-                      run_settings(exps[0].build(seed, opts), clock, device, workers)[1], experiment if group else "",
-                      probe_seconds)
+            run_spec, n_workers = run_settings(exps[0].build(seed, opts), clock, device, workers)
+            _estimate(exps, opts, seed, images, det, load(PROBE_IMAGES, seed, lard, width, height)[0], n_workers,
+                      experiment if group else "", probe_seconds, run_spec.clock)
             return
         root = out or Path("runs") / (experiment if group else exps[0].name)
         if resume_from is not None and not resume_from.is_dir():
