@@ -95,6 +95,16 @@ def test_estimate_prints_an_upper_bound_per_experiment():
     assert all(name in paper.output for name in PAPER) and "families" not in paper.output and len(PAPER) == 7
 
 
+def test_estimate_of_a_run_under_way_counts_its_jobs_left_at_their_pace(tmp_path):
+    out = tmp_path / "pnp"
+    res = runner.invoke(app, ["reproduce", "pnp-validation", "--oracle", "--images", "2", "--out", str(out),
+                              "--no-report", "-q"])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["reproduce", "pnp-validation", "--estimate", "--oracle", "--images", "5", "--out",
+                              str(out), "--probe-seconds", "0.2"])
+    assert res.exit_code == 0 and "(under way: 3 jobs left, ≈ " in res.output, res.output
+
+
 def test_bad_clock_and_workers_are_refused_before_any_work(tmp_path):
     for args, message in ((["--clock", "gpu"], "--clock must be auto, process or wall, got 'gpu'"),
                           (["--workers", "-1"], "--workers must be >= 0")):

@@ -13,6 +13,9 @@ Two numbers per campaign:
 
 Evaluations cost the measured rate of the black-box path, or of the gradient path for the methods that need a
 gradient (APGD); ``workers`` processes share the jobs.
+
+A campaign already under way has a better number: :func:`measured_remaining`, its jobs left at the pace its stored
+jobs took.
 """
 
 from __future__ import annotations
@@ -103,6 +106,34 @@ def probe_rate(det: Any, seconds: float = 5.0, *, gradient: bool = False, clock:
         call(batch)
         n += batch
     return n / (now() - c0)
+
+
+def measured_remaining(spec: CampaignSpec, n_images: int, rows: Sequence[Any], pr: Probe,
+                       workers: int = 1) -> tuple[int, float]:
+    """``(jobs left, seconds left)`` of a campaign whose store already holds ``rows``: per (method, role) the jobs
+    not stored yet times the stored jobs' mean worker seconds (``job_s``: the pace measured on this machine, as it
+    was used); a (method, role) with nothing stored yet at the probe's expectation (its share of
+    :func:`expected_seconds`). ``workers`` processes share the jobs."""
+    from collections import Counter
+
+    jobs = _jobs(spec, n_images)
+    planned = Counter((j.method, j.role) for j in jobs)
+    done = Counter((r.method, r.role) for r in rows)
+    paces: dict[tuple[str, str], list[float]] = {}
+    for r in rows:
+        if r.job_s is not None and r.job_s > 0:
+            paces.setdefault((r.method, r.role), []).append(float(r.job_s))
+    left_jobs, seconds, unmeasured = 0, 0.0, 0
+    for key, n in planned.items():
+        left = max(0, n - done[key])
+        left_jobs += left
+        if key in paces:
+            seconds += left * float(np.mean(paces[key]))
+        else:
+            unmeasured += left
+    if unmeasured:
+        seconds += expected_seconds(spec, n_images, pr, 1) * unmeasured / max(1, len(jobs))
+    return left_jobs, seconds / max(1, workers)
 
 
 def stopping_boxes(specs: Sequence[CampaignSpec]) -> dict[str, Any]:

@@ -44,10 +44,11 @@ def _floats(text: str | None, name: str) -> tuple[float, ...] | None:
 
 
 def _estimate(exps: list, opts: Any, seed: int, images: int | None, det: Any, probe_samples: list, workers: int,
-              group: str, probe_seconds: float, clock: str = "wall") -> None:
+              group: str, probe_seconds: float, clock: str = "wall", root: Path | None = None) -> None:
     """Print each experiment's expected duration and its upper bound (:mod:`vbl_robust.campaigns.estimate`), the
     probe's rates measured on the run's ``clock`` (process: CPU seconds, the durations of an idle machine)."""
-    from vbl_robust.campaigns.estimate import Probe, expected_seconds, planned_work, probe
+    from vbl_robust.campaigns.estimate import Probe, expected_seconds, measured_remaining, planned_work, probe
+    from vbl_robust.campaigns.store import ResultStore
 
     specs = [exp.build(seed, opts) for exp in exps]
     pr = probe(det, specs, probe_samples, seconds=probe_seconds, clock=clock)
@@ -62,8 +63,15 @@ def _estimate(exps: list, opts: Any, seed: int, images: int | None, det: Any, pr
         t = expected_seconds(spec, n, pr, workers)
         ub = expected_seconds(spec, n, Probe(pr.rate, pr.grad_rate), workers)
         total, bound = total + t, bound + ub
+        run = None if root is None else (root / exp.name if group else root)
+        left = ""
+        if run is not None and (run / "results.sqlite").is_file():  # under way: its own pace
+            with ResultStore.open_existing(run) as store:
+                rows = store.jobs(with_trace=False)
+            jobs_left, secs = measured_remaining(spec, n, rows, pr, workers)
+            left = f"  (under way: {jobs_left} jobs left, ≈ {secs / 3600:.2f} h at its stored jobs' pace)"
         typer.echo(f"{exp.name:18s} {n:5d} images  ≤ {evals:9d} evaluations  ≈ {t / 3600:6.2f} h expected  "
-                   f"≤ {ub / 3600:6.2f} h")
+                   f"≤ {ub / 3600:6.2f} h{left}")
     typer.echo(f"{group or exps[0].name:18s} ≈ {total / 3600:.2f} h expected, ≤ {bound / 3600:.2f} h (upper bound: "
                "every budget spent, no early stop)")
 
@@ -175,14 +183,14 @@ def register(app: typer.Typer) -> None:
         method_opts = parse_method_options(method_option)
         _check_method_options(method_opts, [exp.build(seed, opts) for exp in exps])
         det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
+        root = out or Path("runs") / (experiment if group else exps[0].name)
         if estimate:
             from vbl_robust.campaigns.estimate import PROBE_IMAGES
 
             run_spec, n_workers = run_settings(exps[0].build(seed, opts), clock, device, workers)
             _estimate(exps, opts, seed, images, det, load(PROBE_IMAGES, seed, lard, width, height)[0], n_workers,
-                      experiment if group else "", probe_seconds, run_spec.clock)
+                      experiment if group else "", probe_seconds, run_spec.clock, root)
             return
-        root = out or Path("runs") / (experiment if group else exps[0].name)
         if resume_from is not None and not resume_from.is_dir():
             fail(f"--resume-from {resume_from}: not a directory")
         for exp in exps:
