@@ -538,21 +538,19 @@ class ResultStore:
             created = have["created_at"] if bound else now_iso()
             self._con.execute("INSERT OR REPLACE INTO campaign VALUES (1, ?, ?, ?, ?)", (name, spec_j, det_j, created))
 
-    def _check_same(self, have: Mapping[str, Any], spec: dict[str, Any], detector: Mapping[str, Any]) -> None:
+    def _check_same(self, have: Mapping[str, Any], spec: dict[str, Any], detector: Mapping[str, Any], *,
+                    hint: str = "rerun with the same options to resume, or use another --out") -> None:
         def shown(d: Mapping[str, Any]) -> str:
             return json.dumps({k: v for k, v in d.items() if k not in PRESENTATION_KEYS}, sort_keys=True)
 
         if shown(have["spec"]) != shown(spec):
             diff = _first_difference(have["spec"], spec)
-            raise ValueError(
-                f"{self.path}: holds campaign {have['name']!r} with other settings ({diff}); "
-                "rerun with the same options to resume, or use another --out"
-            )
+            raise ValueError(f"{self.path}: holds campaign {have['name']!r} with other settings ({diff}); {hint}")
         if have["detector"].get("sha256") != detector.get("sha256") or have["detector"].get("kind") != detector.get("kind"):
             raise ValueError(
                 f"{self.path}: holds results of detector {have['detector'].get('name')!r} "
-                f"(sha256 {str(have['detector'].get('sha256'))[:12]}…), not of {detector.get('name')!r}; use another --out"
-            )
+                f"(sha256 {str(have['detector'].get('sha256'))[:12]}…), not of {detector.get('name')!r}; "
+                + ("use another --out" if hint.startswith("rerun") else hint))
 
     def begin_run(self, provenance: Mapping[str, Any]) -> int:
         """Insert a run row (status "running") and return its id."""
@@ -669,6 +667,24 @@ class ResultStore:
         sql += " ORDER BY sample_index, rowid"
         return [_from_columns(dict(zip(cols, r, strict=True))) for r in self._con.execute(sql, args)]
 
+    def check_mergeable(self, other: ResultStore, campaign: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """``ValueError`` unless ``other`` holds job rows of this store's campaign and detector (or of ``campaign``,
+        when given: several sources checked against the first before anything is written) on samples that agree
+        with this store's; returns ``other``'s campaign."""
+        theirs = other.campaign()
+        if theirs is None or other.count() == 0:
+            raise ValueError(f"{other.path}: holds no job rows to merge")
+        mine = campaign if campaign is not None else (self.campaign() if self.count() else None)
+        if mine is not None:
+            self._check_same(mine, theirs["spec"], theirs["detector"],
+                             hint=f"{other.path} belongs to another campaign or detector: merge only runs of one")
+        here = self.samples()
+        clash = [sid for sid, s in other.samples().items() if sid in here
+                 and (here[sid]["fingerprint"], here[sid]["sample_index"]) != (s["fingerprint"], s["sample_index"])]
+        if clash:
+            raise ValueError(f"{other.path}: samples {clash[:5]} differ from {self.path}'s (another image set)")
+        return theirs
+
     def merge(self, other: ResultStore, *, source: str = "") -> tuple[int, int]:
         """Copy into this store the job rows of ``other`` that it lacks, with their samples, image digests and runs —
         parts of one campaign computed elsewhere (another machine, a GPU, a cluster without a shared disk).
@@ -678,19 +694,9 @@ class ResultStore:
         Each run of ``other`` that brought rows is recorded here anew (its provenance kept, ``config["merged_from"]``
         = ``source``), and the copied rows point to it. Rows already here (the same key: the same job, context and
         sample) are kept as they are. Returns (rows copied, rows already here). The caller holds the writer lock."""
-        theirs = other.campaign()
-        if theirs is None or other.count() == 0:
-            raise ValueError(f"{other.path}: holds no job rows to merge")
-        mine = self.campaign()
-        if mine is None or self.count() == 0:
+        theirs = self.check_mergeable(other)
+        if self.campaign() is None or self.count() == 0:
             self.bind_campaign(theirs["name"], theirs["spec"], theirs["detector"])
-        else:
-            self._check_same(mine, theirs["spec"], theirs["detector"])
-        here = self.samples()
-        clash = [sid for sid, s in other.samples().items() if sid in here
-                 and (here[sid]["fingerprint"], here[sid]["sample_index"]) != (s["fingerprint"], s["sample_index"])]
-        if clash:
-            raise ValueError(f"{other.path}: samples {clash[:5]} differ from this store's (another image set)")
         have = self.done_keys()
         rows = [r for r in other.jobs(with_points=True) if r.key not in have]
         runs = {r["run_id"]: r for r in other.runs()}

@@ -111,6 +111,7 @@ def register(app: typer.Typer) -> None:
         try:
             dst.parent.mkdir(parents=True, exist_ok=True)
             with WriterLock(dst), ResultStore(dst) as store, tempfile.TemporaryDirectory() as tmp:
+                paths = []
                 for i, src in enumerate(sources):
                     path = src
                     if src.name.endswith(".xz"):  # a packed store: unpacked beside, never in place
@@ -118,6 +119,13 @@ def register(app: typer.Typer) -> None:
                             raise FileNotFoundError(f"{src}: no such packed store")
                         path = Path(tmp) / str(i)
                         restore_store(src, path)
+                    paths.append(path)
+                first = None
+                for path in paths:  # every source checked before anything is written
+                    with ResultStore.open_existing(path) as other:
+                        first = first or store.check_mergeable(other)
+                        store.check_mergeable(other, first)
+                for src, path in zip(sources, paths, strict=True):
                     with ResultStore.open_existing(path) as other:
                         new, had = store.merge(other, source=str(src))
                     typer.echo(f"{src}: {new} job rows merged, {had} already in {dst}")
