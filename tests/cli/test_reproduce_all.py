@@ -59,6 +59,8 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
         assert not (bundle / name / "figures").exists() and not (bundle / name / "results.sqlite").exists()
         assert (bundle / name / "results.sqlite.xz").stat().st_size > 0
         assert f"| {name} | {n_jobs} / {n_jobs} |" in status
+        t = prov["totals"]  # the searches' hours on the campaign's clock beside the wall and worker hours
+        assert f"| {t['search_s'] / 3600:.2f} | {t['clock']} |" in status
     # a smaller run reproduces the bundle's rows (the issue's check: reproduce EXPERIMENT --images 3)
     from vbl_robust.campaigns.bundle import compare_runs
 

@@ -133,17 +133,19 @@ def write_experiment(run: Path, out: Path, stores: bool = False) -> dict[str, An
 
 
 def status_markdown(totals: dict[str, dict[str, Any]]) -> str:
-    """The per-experiment status table of a bundle (Markdown)."""
-    lines = ["| experiment | jobs done / planned | images | wall (h) | worker (h) | clock | workers |",
-             "|---|---|---|---|---|---|---|"]
+    """The per-experiment status table of a bundle (Markdown): wall hours of its runs; worker hours (each job's wall
+    time in its worker, waits for a shared core included); search hours on the campaign's clock (on the process
+    clock: the CPU hours the searches took, what an idle machine would need)."""
+    lines = ["| experiment | jobs done / planned | images | wall (h) | worker (h) | searches (h, on the clock) | clock "
+             "| workers |", "|---|---|---|---|---|---|---|---|"]
     for name, t in totals.items():
         lines.append(f"| {name} | {t['jobs_done']} / {t['jobs_planned']} | {t['images_with_jobs']} of "
-                     f"{t['images']} | {t['wall_s'] / 3600:.2f} | {t['worker_s'] / 3600:.2f} | {t['clock']} | "
-                     f"{', '.join(map(str, t['workers'])) or '–'} |")
-    wall = sum(t["wall_s"] for t in totals.values()) / 3600
-    worker = sum(t["worker_s"] for t in totals.values()) / 3600
+                     f"{t['images']} | {t['wall_s'] / 3600:.2f} | {t['worker_s'] / 3600:.2f} | "
+                     f"{t.get('search_s', 0.0) / 3600:.2f} | {t['clock']} | {', '.join(map(str, t['workers'])) or '–'} |")
+    hours = {k: sum(t.get(k, 0.0) for t in totals.values()) / 3600 for k in ("wall_s", "worker_s", "search_s")}
     lines.append(f"| **all** | {sum(t['jobs_done'] for t in totals.values())} / "
-                 f"{sum(t['jobs_planned'] for t in totals.values())} | | {wall:.2f} | {worker:.2f} | | |")
+                 f"{sum(t['jobs_planned'] for t in totals.values())} | | {hours['wall_s']:.2f} | {hours['worker_s']:.2f} "
+                 f"| {hours['search_s']:.2f} | | |")
     return "\n".join(lines) + "\n"
 
 
