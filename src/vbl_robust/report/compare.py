@@ -129,11 +129,12 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
     for b in dict.fromkeys(b for _, b in keys):
         ms = [m for m, bb in keys if bb == b]
         shared = sorted(s for s in {j[2] for j in ia} if all((m, b, s) in ia and (m, b, s) in ib for m in ms))
-        if len(ms) < 2 or not shared:
+        if not shared:
             continue
         a = [all(ok(ia[(m, b, s)]) for m in ms) for s in shared]
         z = [all(ok(ib[(m, b, s)]) for m in ms) for s in shared]
-        lines.append(_line(ANY, b, level[b], a, z, paired_survival(z, a)))
+        if len(ms) > 1:  # one method's own line is already there
+            lines.append(_line(ANY, b, level[b], a, z, paired_survival(z, a)))
         for s, x, y in zip(shared, a, z, strict=True):
             if x != y:
                 changes.append(Change(s, b, _worst(ia, ms, b, s), _worst(ib, ms, b, s),
