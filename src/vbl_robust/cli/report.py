@@ -121,10 +121,9 @@ def register(app: typer.Typer) -> None:
                         restore_store(src, path)
                     paths.append(path)
                 first = None
-                for path in paths:  # every source checked before anything is written
+                for path in paths:  # every source checked (against the first) before anything is written
                     with ResultStore.open_existing(path) as other:
-                        first = first or store.check_mergeable(other)
-                        store.check_mergeable(other, first)
+                        first = store.check_mergeable(other, first)
                 for src, path in zip(sources, paths, strict=True):
                     with ResultStore.open_existing(path) as other:
                         new, had = store.merge(other, source=str(src))
