@@ -1,6 +1,7 @@
 """Detectors and a campaign script for the runner tests (importable by name: DetectorSpec kind "factory").
 
-Run as a script, it is the campaign the kill test interrupts: ``python campaign_helpers.py OUT N DELAY``.
+Run as a script, it is the campaign the kill test interrupts: ``python campaign_helpers.py OUT N DELAY [term]``
+(``term``: SIGTERM handled as the ``vbl-robust`` command handles it, :func:`vbl_robust.cli.common.stop_on_sigterm`).
 """
 
 from __future__ import annotations
@@ -58,4 +59,8 @@ def main(out: str, n: int, delay: float) -> None:
 
 
 if __name__ == "__main__":
+    if sys.argv[4:] == ["term"]:
+        from vbl_robust.cli.common import stop_on_sigterm
+
+        stop_on_sigterm()
     main(sys.argv[1], int(sys.argv[2]), float(sys.argv[3]))

@@ -15,10 +15,18 @@ N_SAMPLES = 3
 N_JOBS = N_SAMPLES * 2 * 2  # samples x boxes x methods of campaign_helpers.kill_campaign_spec
 
 
-def start(out: Path) -> subprocess.Popen:
+def start(out: Path, *extra: str) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.Popen([sys.executable, str(HERE / "campaign_helpers.py"), str(out), str(N_SAMPLES), "0.1"],
+    return subprocess.Popen([sys.executable, str(HERE / "campaign_helpers.py"), str(out), str(N_SAMPLES), "0.1", *extra],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+
+
+def wait_for_rows(proc: subprocess.Popen, out: Path, n: int) -> None:
+    deadline = time.monotonic() + 120
+    while len(committed(out)) < n:
+        assert proc.poll() is None, f"campaign ended before it could be killed: {proc.stdout.read().decode()[-2000:]}"
+        assert time.monotonic() < deadline, "campaign made no progress"
+        time.sleep(0.05)
 
 
 def committed(out: Path) -> dict[str, float]:
@@ -37,11 +45,7 @@ def committed(out: Path) -> dict[str, float]:
 def test_sigkill_mid_run_then_rerun_loses_nothing_and_duplicates_nothing(tmp_path):
     out = tmp_path / "results.sqlite"
     proc = start(out)
-    deadline = time.monotonic() + 120
-    while len(committed(out)) < 3:
-        assert proc.poll() is None, f"campaign ended before it could be killed: {proc.stdout.read().decode()[-2000:]}"
-        assert time.monotonic() < deadline, "campaign made no progress"
-        time.sleep(0.05)
+    wait_for_rows(proc, out, 3)
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=30)
     before = committed(out)
@@ -57,3 +61,20 @@ def test_sigkill_mid_run_then_rerun_loses_nothing_and_duplicates_nothing(tmp_pat
     runs = con.execute("SELECT status, jobs_skipped, jobs_done FROM runs ORDER BY run_id").fetchall()
     assert runs[0][0] == "running"  # the killed run never finished
     assert runs[1] == ("finished", len(before), N_JOBS - len(before))
+
+
+@pytest.mark.slow
+def test_sigterm_ends_the_run_as_an_interruption_with_its_wall_time(tmp_path):
+    """``kill PID`` (SIGTERM) under the CLI's handler: the run records its end (status, jobs, seconds) before the
+    process exits, so a bundle's wall time and the run list stay true."""
+    out = tmp_path / "results.sqlite"
+    proc = start(out, "term")
+    wait_for_rows(proc, out, 2)
+    proc.send_signal(signal.SIGTERM)
+    output = proc.communicate(timeout=60)[0].decode()
+    assert proc.returncode != 0 and "KeyboardInterrupt" in output
+    kept = committed(out)
+    con = sqlite3.connect(out)
+    status, done, seconds = con.execute("SELECT status, jobs_done, seconds FROM runs").fetchone()
+    con.close()
+    assert status == "interrupted" and done == len(kept) and 2 <= done < N_JOBS and seconds > 0

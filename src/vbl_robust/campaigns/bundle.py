@@ -46,18 +46,27 @@ def run_dirs(root: Path, names: Sequence[str] | None = None) -> list[Path]:
     return [root / n for n in names if (root / n / STORE).is_file()]
 
 
-def _wall_seconds(run: dict[str, Any]) -> float:
-    """A run's wall seconds; for a run still going (no ``seconds`` yet), the time since it started."""
+def _wall_seconds(run: dict[str, Any], last_job: dict[int, str]) -> float:
+    """A run's wall seconds. A run without ``seconds`` is still going or was killed before it could record its end
+    (SIGKILL, a session's end): its wall time runs from its start to its last stored job (``last_job``: run id →
+    ISO time of its newest job), not to now — a killed run's idle years must not count."""
     if run.get("seconds") is not None:
         return float(run["seconds"])
     started = dt.datetime.fromisoformat(run["started_at"])
-    return max(0.0, (dt.datetime.now(dt.UTC) - started).total_seconds())
+    last = last_job.get(run["run_id"])
+    if last is None:
+        return 0.0
+    return max(0.0, (dt.datetime.fromisoformat(last) - started).total_seconds())
 
 
 def provenance(store: ResultStore) -> dict[str, Any]:
     """The store's campaign spec, runs and totals (see the module docstring)."""
     runs = store.runs()
     jobs = store.jobs(with_trace=False)
+    last_job: dict[int, str] = {}
+    for r in jobs:
+        if r.run_id is not None and r.finished_at is not None:
+            last_job[r.run_id] = max(last_job.get(r.run_id, r.finished_at), r.finished_at)
     planned = max((int(r["jobs_total"] or 0) for r in runs), default=0)
     campaign = store.campaign()
     return {
@@ -68,7 +77,7 @@ def provenance(store: ResultStore) -> dict[str, Any]:
             "jobs_planned": planned,
             "images": len(store.samples()),
             "images_with_jobs": len({r.sample_id for r in jobs}),
-            "wall_s": sum(_wall_seconds(r) for r in runs),
+            "wall_s": sum(_wall_seconds(r, last_job) for r in runs),
             "worker_s": sum(float(r.job_s or 0.0) for r in jobs),
             "search_s": sum(float(r.search_s or 0.0) for r in jobs),
             "clock": (campaign or {}).get("spec", {}).get("clock", "wall"),

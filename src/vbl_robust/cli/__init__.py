@@ -10,7 +10,7 @@ import warnings
 
 import typer
 
-from .common import set_verbosity
+from .common import set_verbosity, stop_on_sigterm
 
 app = typer.Typer(
     name="vbl-robust",
@@ -56,4 +56,5 @@ for _name in _COMMAND_MODULES:
 
 
 def main() -> None:  # pragma: no cover - console entry
+    stop_on_sigterm()
     app()

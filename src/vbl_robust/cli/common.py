@@ -11,6 +11,19 @@ import typer
 _GLOBAL = {"quiet": False, "verbose": False}
 
 
+def stop_on_sigterm() -> None:
+    """Make SIGTERM (``kill PID``, a scheduler's or a session's stop) end the command as Ctrl-C does: a campaign
+    records its run as interrupted with its wall time, its finished jobs stay, and the command exits with one line.
+    A second SIGTERM kills at once (the default action is restored by the first)."""
+    import signal
+
+    def _interrupt(signum: int, frame: object) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _interrupt)
+
+
 def set_verbosity(*, quiet: bool = False, verbose: bool = False, before_command: bool = False) -> bool:
     """Apply ``-v`` (INFO logging) and ``-q`` given before the command (``before_command``: what they say for this
     invocation) or after it (added to that); returns whether to be quiet."""

@@ -1,0 +1,32 @@
+"""``campaigns.bundle.provenance``: the wall time of runs, including those killed before they recorded their end."""
+
+import sqlite3
+
+from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, ResultStore, roll_box, run_campaign
+from vbl_robust.campaigns.bundle import provenance
+from vbl_robust.scenes import generate
+
+
+def test_a_killed_run_counts_up_to_its_last_stored_job_not_up_to_now(tmp_path):
+    spec = CampaignSpec("wall-test", (Block(boxes=(roll_box(5),), methods=("random",),
+                                            budgets=(Budget(max_evals=4),)),), seed=1)
+    path = tmp_path / "results.sqlite"
+    with ResultStore(path) as store:
+        run_campaign(spec, list(generate(2, seed=0, width=96, height=96)), store, detector=DetectorSpec.oracle(1.0))
+    # as a SIGKILL leaves it: the run never recorded its end; it began on 1 Dec, its last job ended 90 min later
+    con = sqlite3.connect(path)
+    with con:
+        con.execute("UPDATE runs SET status = 'running', finished_at = NULL, seconds = NULL, "
+                    "started_at = '2026-12-01T10:00:00+00:00'")
+        con.execute("UPDATE jobs SET finished_at = '2026-12-01T11:00:00+00:00'")
+        con.execute("UPDATE jobs SET finished_at = '2026-12-01T11:30:00+00:00' WHERE rowid = (SELECT max(rowid) FROM jobs)")
+    con.close()
+    with ResultStore.open_existing(tmp_path) as store:
+        assert provenance(store)["totals"]["wall_s"] == 5400.0
+    # a run that recorded its end keeps its own seconds
+    con = sqlite3.connect(path)
+    with con:
+        con.execute("UPDATE runs SET status = 'finished', seconds = 12.5")
+    con.close()
+    with ResultStore.open_existing(tmp_path) as store:
+        assert provenance(store)["totals"]["wall_s"] == 12.5
