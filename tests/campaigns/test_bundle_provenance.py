@@ -2,7 +2,15 @@
 
 import sqlite3
 
-from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, ResultStore, roll_box, run_campaign
+from vbl_robust.campaigns import (
+    Block,
+    Budget,
+    CampaignSpec,
+    DetectorSpec,
+    ResultStore,
+    roll_box,
+    run_campaign,
+)
 from vbl_robust.campaigns.bundle import provenance
 from vbl_robust.scenes import generate
 
