@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 
 from vbl_robust.campaigns import metrics as mx
 from vbl_robust.campaigns.pnpcheck import TRUNCATED
-from vbl_robust.campaigns.spec import CampaignSpec
+from vbl_robust.campaigns.spec import CampaignSpec, roll_box
 from vbl_robust.campaigns.store import JobRow, JobStatus, Points, ResultStore
 from vbl_robust.cli import app
 from vbl_robust.report import claims as C
@@ -188,6 +188,37 @@ def test_comparisons_skip_unknown_budgets():
     assert C.at_most([nan, 70], [0, nan]) is None and C.at_most([nan, 10], [0, 20]) is True
     assert C.behind([50, 60], [50, 50]) is True and C.behind([50, 50], [50, 50]) is False
     assert C.behind([60, 40], [50, 50]) is False and C.behind([nan], [1]) is None
+
+
+def _verdict_row(method, half_width, sid, worst, status=JobStatus.DONE, nfev=4):
+    return JobRow(f"{method}-{half_width}-{sid}", "e", "search", "main", method, sid, 0, status,
+                  box=roll_box(half_width), worst_m=worst, nfev=nfev)
+
+
+def test_exceptions_give_paired_counts_and_mcnemar_where_a_comparison_fails():
+    eps = 1000.0
+    rows = []
+    for i in range(10):  # ±5°: georobust survives images 0-7, random 0-5 -> only georobust on 6, 7, exact p = 0.5
+        rows += [_verdict_row("georobust", 5, f"s{i}", 10.0 if i < 8 else 3000.0),
+                 _verdict_row("random", 5, f"s{i}", 10.0 if i < 6 else 3000.0),
+                 # ±10°: random survives more -> georobust ≤ random holds there, no exception
+                 _verdict_row("georobust", 10, f"s{i}", 3000.0),
+                 _verdict_row("random", 10, f"s{i}", 10.0 if i < 2 else 3000.0)]
+    text = C.exceptions(rows, eps, "georobust", "random", ["±5°", "±10°"])
+    assert text == " (where not: ±5°: 2 only georobust survives, 0 only random of 10 images, exact McNemar p = 0.5)"
+    assert C.exceptions(rows, eps, "random", "georobust", ["±5°", "±10°"]).startswith(" (where not: ±10°: 2 only random")
+    assert C.exceptions(rows, eps, "georobust", "apgd", ["±5°"]) == ""  # no paired images: nothing to say
+
+
+def test_survived_is_the_one_survival_rule():
+    eps = 1000.0
+    assert mx.survived(_verdict_row("r", 5, "s", 1000.0), eps) and not mx.survived(_verdict_row("r", 5, "s", 1000.5), eps)
+    assert not mx.survived(_verdict_row("r", 5, "s", math.nan), eps)
+    assert not mx.survived(_verdict_row("r", 5, "s", 5000.0, status=JobStatus.FAILED, nfev=0), eps)
+    assert mx.survived(_verdict_row("r", 5, "s", None, nfev=0), eps)  # no evaluation within its time: nothing found
+    rows = [_verdict_row("r", 5, f"s{i}", w) for i, w in enumerate((10.0, math.inf, None, 2000.0))]
+    rows[2] = rows[2].replace(nfev=0)
+    assert mx.summarize(rows, eps)[0].survival == 50.0
 
 
 def test_times_differ():

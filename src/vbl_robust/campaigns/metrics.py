@@ -38,6 +38,21 @@ def survival_rate(worst: Sequence[float], eps_safe_m: float) -> float:
     return float(100.0 * np.mean(np.isfinite(w) & (w <= eps_safe_m)))
 
 
+def empty_row(row: JobRow) -> bool:
+    """A search that completed no evaluation within its time budget: it found nothing (:func:`survived`) and has no
+    worst error to count in the statistics."""
+    return row.status is JobStatus.DONE and row.nfev == 0 and row.worst_m is None
+
+
+def survived(row: JobRow, eps_safe_m: float) -> bool:
+    """Whether the image survived this job: its worst error is finite and ≤ ``eps_safe_m``, or the job completed
+    no evaluation (:func:`empty_row`); a failed job (worst = the penalty) never survives. The one definition behind
+    every survival rate (:func:`summarize`) and paired comparison (claims, ``report --compare``)."""
+    if empty_row(row):
+        return True
+    return row.worst_m is not None and math.isfinite(row.worst_m) and row.worst_m <= eps_safe_m
+
+
 def _stats(values: Sequence[float]) -> dict[str, float]:
     v = np.asarray(values, dtype=np.float64)
     if v.size == 0:
@@ -129,7 +144,7 @@ def summarize(rows: Iterable[JobRow], eps_safe_m: float,
     for key, rs in groups.items():
         # a search that completed no evaluation within its time budget found nothing: a survivor, and not part
         # of the worst-error statistics
-        empty = [r.status is JobStatus.DONE and r.nfev == 0 and r.worst_m is None for r in rs]
+        empty = [empty_row(r) for r in rs]
         worst = [-math.inf if e else r.worst_m for r, e in zip(rs, empty, strict=True)]
         s = _stats([w for w, e in zip(worst, empty, strict=True) if not e])
         known = [r.n_failed for r in rs if r.n_failed is not None]
@@ -139,7 +154,7 @@ def summarize(rows: Iterable[JobRow], eps_safe_m: float,
             box_level=group.get("box_level", rs[0].box_level),
             max_evals=budget_value(rs[0], "max_evals"), max_seconds=budget_value(rs[0], "max_seconds"),
             max_iters=budget_value(rs[0], "max_iters"),
-            n=len(rs), survival=survival_rate([0.0 if w == -math.inf else w for w in worst], eps_safe_m),
+            n=len(rs), survival=100.0 * float(np.mean([survived(r, eps_safe_m) for r in rs])),
             n_empty=sum(empty), median_worst_m=s["median"], mean_worst_m=s["mean"],
             breaches=sum(r.verdict is Verdict.BREACH for r in rs),
             certified=sum(r.verdict is Verdict.CERTIFIED for r in rs),

@@ -111,7 +111,7 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
         return {(r.method, where(r), r.sample_id): r for r in rows}
 
     def ok(r: JobRow) -> bool:
-        return not (r.worst_m is not None and r.worst_m > eps)
+        return mx.survived(r, eps)
 
     ia, ib = index_rows(rows_a), index_rows(rows_b)
     level = {where(r): float(r.box_level or 0.0) for r in rows_a}
