@@ -69,7 +69,7 @@ def evaluate(det, seed: int, n: int) -> tuple[list[dict], list[bool]]:
 def compare(new: dict, old: dict, split: str = "validation") -> str:
     """Paired comparison of two protocol JSONs (``--json``) on the approaches of ``split`` both evaluated:
     per seed and pooled, the approaches only one model survives and the exact McNemar p-value
-    (:func:`vbl_robust.detect.evaluate.paired_survival`)."""
+    (:func:`vbl_robust.campaigns.metrics.paired_survival`)."""
     from vbl_robust.detect.evaluate import paired_seeds
 
     try:

@@ -53,7 +53,7 @@ def test_second_names_a_pass_2_network_of_its_own(script):
 def test_paired_survival_counts_the_discordant_approaches_and_tests_them():
     from scipy.stats import binomtest
 
-    from vbl_robust.detect.evaluate import paired_survival
+    from vbl_robust.campaigns.metrics import paired_survival
 
     a = [True] * 50 + [True] * 7 + [False] * 2 + [False] * 1
     b = [True] * 50 + [False] * 7 + [True] * 2 + [False] * 1

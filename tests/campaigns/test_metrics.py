@@ -26,6 +26,31 @@ def test_survival_rate_counts_failures_as_breaches():
     assert math.isnan(mx.survival_rate([], 1000.0))
 
 
+def test_survived_is_the_one_survival_rule():
+    eps = 1000.0
+    assert mx.survived(row(worst_m=1000.0, nfev=4), eps) and not mx.survived(row(worst_m=1000.5, nfev=4), eps)
+    assert not mx.survived(row(worst_m=math.nan, nfev=4), eps)
+    assert not mx.survived(row(worst_m=5000.0, status="failed", nfev=0), eps)  # a failed job never survives
+    assert mx.survived(row(worst_m=None, nfev=0), eps)  # no evaluation within its time budget: nothing found
+    rows = [row(key=f"k{i}", worst_m=w, nfev=0 if w is None else 4) for i, w in enumerate((10.0, math.inf, None, 2e3))]
+    assert mx.summarize(rows, eps)[0].survival == 50.0
+
+
+def test_against_reference_counts_found_missed_and_beyond_the_grid():
+    eps, box = 1000.0, roll_box(5)
+    # grid breaks images 0-3; georobust breaks 0-2 (misses 3) and 4 (between grid nodes); 5-9 survive both
+    grid = [row(key=f"g{i}", method=mx.REFERENCE_METHOD, sample_id=f"s{i}", box=box, nfev=9,
+                worst_m=3000.0 if i < 4 else 10.0) for i in range(10)]
+    geo = [row(key=f"m{i}", sample_id=f"s{i}", box=box, budget=Budget(max_evals=8), nfev=8,
+               worst_m=3000.0 if i in (0, 1, 2, 4) else 10.0) for i in range(10)]
+    other = [row(key="o", sample_id="s99", box=box, budget=Budget(max_evals=8), nfev=8, worst_m=3000.0)]  # no grid
+    (line,) = mx.against_reference(geo + other, grid, eps)
+    assert (line["method"], line["box_label"], line["budget_label"]) == ("georobust", "±5°", "8 evals")
+    assert (line["n"], line["grid_breaches"], line["found"], line["missed"], line["beyond_grid"]) == (10, 4, 3, 1, 1)
+    assert line["found_pct"] == 75.0 and line["p_value"] == 1.0
+    assert mx.against_reference(other, grid, eps) == []  # no image in common
+
+
 def test_phi_crit_is_the_first_budget_below_ten_percent():
     budgets = [5, 10, 15, 20]
     # 10 images breaching at 5,5,10,10,10,10,10,10,15 and one never: survival 80, 20, 10, 10 -> never < 10

@@ -96,6 +96,22 @@ def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
     assert row.verdict == {(True, True): C.HOLDS, (False, False): C.FAILS}.get((lowest, no_better), C.PARTLY)
 
 
+def test_the_report_shows_each_method_against_the_grid(root):
+    store, spec = _open(root, "spatial-1d")
+    with store:
+        main = [r for r in mx.main_rows(store, spec) if r.chain is None]
+        boxes = list({r.box.label: r.box for r in main}.values())
+        ref = mx.reference_rows(store.jobs(kind="search", role="reference", with_points=True), boxes,
+                                spec.eps_safe_m, spec.penalty_m)
+    lines = mx.against_reference(main, ref, spec.eps_safe_m)
+    assert {ln["method"] for ln in lines} == {"georobust", "georobust-av", "random", "apgd"}
+    assert all(ln["n"] == N_IMAGES and ln["found"] + ln["missed"] == ln["grid_breaches"] for ln in lines)
+    res = CliRunner().invoke(app, ["report", str(root / "spatial-1d")])
+    assert res.exit_code == 0, res.output
+    page = (root / "spatial-1d" / "report.html").read_text()
+    assert "Is the worst case really found?" in page and "beyond the grid" in page
+
+
 def test_roughness_row_reads_the_complete_runtime_grid(root, claims):
     store, spec = _open(root, "runtime-1d")
     with store:
@@ -208,17 +224,6 @@ def test_exceptions_give_paired_counts_and_mcnemar_where_a_comparison_fails():
     assert text == " (where not: ±5°: 2 only georobust survives, 0 only random of 10 images, exact McNemar p = 0.5)"
     assert C.exceptions(rows, eps, "random", "georobust", ["±5°", "±10°"]).startswith(" (where not: ±10°: 2 only random")
     assert C.exceptions(rows, eps, "georobust", "apgd", ["±5°"]) == ""  # no paired images: nothing to say
-
-
-def test_survived_is_the_one_survival_rule():
-    eps = 1000.0
-    assert mx.survived(_verdict_row("r", 5, "s", 1000.0), eps) and not mx.survived(_verdict_row("r", 5, "s", 1000.5), eps)
-    assert not mx.survived(_verdict_row("r", 5, "s", math.nan), eps)
-    assert not mx.survived(_verdict_row("r", 5, "s", 5000.0, status=JobStatus.FAILED, nfev=0), eps)
-    assert mx.survived(_verdict_row("r", 5, "s", None, nfev=0), eps)  # no evaluation within its time: nothing found
-    rows = [_verdict_row("r", 5, f"s{i}", w) for i, w in enumerate((10.0, math.inf, None, 2000.0))]
-    rows[2] = rows[2].replace(nfev=0)
-    assert mx.summarize(rows, eps)[0].survival == 50.0
 
 
 def test_times_differ():

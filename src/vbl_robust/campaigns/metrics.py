@@ -53,6 +53,27 @@ def survived(row: JobRow, eps_safe_m: float) -> bool:
     return row.worst_m is not None and math.isfinite(row.worst_m) and row.worst_m <= eps_safe_m
 
 
+def paired_survival(a: Sequence[bool], b: Sequence[bool]) -> dict:
+    """Paired comparison of two survival vectors on the *same* items (``a[i]``, ``b[i]``: did approach or image i
+    survive with A / B — two detectors, two searches, a search and the dense grid).
+
+    Returns the counts (``n``, ``both``, ``only_a``, ``only_b``, ``neither``), ``gain`` = only_a − only_b and the
+    exact two-sided McNemar p-value: under "A and B survive alike", each discordant approach is A's with
+    probability ½, so the p-value is the binomial test of ``only_a`` successes in ``only_a + only_b`` trials
+    (``scipy.stats.binomtest``; 1.0 when there is no discordant approach). The overall counts hide how many
+    approaches swapped sides: two models 3 approaches apart with 40 discordant ones cannot be told apart.
+    """
+    from scipy.stats import binomtest
+
+    a, b = np.asarray(a, bool), np.asarray(b, bool)
+    if a.shape != b.shape or a.ndim != 1:
+        raise ValueError(f"paired_survival: need two equal-length 1-D vectors, got shapes {a.shape} and {b.shape}")
+    only_a, only_b = int(np.sum(a & ~b)), int(np.sum(~a & b))
+    p = binomtest(only_a, only_a + only_b, 0.5).pvalue if only_a + only_b else 1.0
+    return dict(n=int(a.size), both=int(np.sum(a & b)), only_a=only_a, only_b=only_b, neither=int(np.sum(~a & ~b)),
+                gain=only_a - only_b, p_value=float(p))
+
+
 def _stats(values: Sequence[float]) -> dict[str, float]:
     v = np.asarray(values, dtype=np.float64)
     if v.size == 0:
@@ -229,6 +250,29 @@ def reference_rows(ref_rows: Iterable[JobRow], boxes: Sequence[BoxSpec], eps_saf
                     continue
             out.append(r.replace(method=REFERENCE_METHOD, box=b, worst_m=w, worst_x=None, points=None, trace=(),
                                  verdict=Verdict.BREACH if w > eps_safe_m else Verdict.NO_BREACH_FOUND))
+    return out
+
+
+def against_reference(rows: Iterable[JobRow], ref_rows: Iterable[JobRow], eps_safe_m: float) -> list[dict[str, Any]]:
+    """Per method, box and budget of ``rows``: its verdicts against the dense grid's (``ref_rows``, the pseudo-rows
+    of :func:`reference_rows`) on the images both have — ``grid_breaches`` (images the grid breaks), ``found`` (of
+    those, the ones the method breaks too), ``missed`` (the method survives where the grid breaks),
+    ``beyond_grid`` (the method breaks an image the grid does not: a breach between grid nodes), ``found_pct`` and
+    the exact McNemar ``p_value`` of method vs grid (:func:`paired_survival`). Is the worst case really found?"""
+    rows = list(rows)
+    truth = {(r.box_label, r.sample_id): survived(r, eps_safe_m) for r in ref_rows}
+    ok = {(r.method, r.box_label, r.budget_label, r.sample_id): survived(r, eps_safe_m) for r in rows}
+    out = []
+    for m, b, budget in dict.fromkeys((r.method, r.box_label, r.budget_label) for r in rows):
+        ids = [sid for (mm, bb, bu, sid) in ok if (mm, bb, bu) == (m, b, budget) and (b, sid) in truth]
+        if not ids:
+            continue
+        t = paired_survival([truth[(b, i)] for i in ids], [ok[(m, b, budget, i)] for i in ids])
+        breaches = t["neither"] + t["only_b"]
+        out.append({"method": m, "box_label": b, "budget_label": budget, "n": t["n"], "grid_breaches": breaches,
+                    "found": t["neither"], "missed": t["only_b"], "beyond_grid": t["only_a"],
+                    "found_pct": 100.0 * t["neither"] / breaches if breaches else math.nan,
+                    "p_value": t["p_value"]})
     return out
 
 

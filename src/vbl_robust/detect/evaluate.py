@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..campaigns.metrics import paired_survival
 from ..constants import CONF_THRESHOLD
 from ..data.sample import Sample
 from ..perturb.views import to_tensor
@@ -164,27 +165,6 @@ def score(r: EvalResult, method: str = "ippe_lm") -> tuple[float, float]:
     """Model-comparison key (higher is better): (nominal survival, − median position error % of slant)."""
     e = r.pos_err_m[method]
     return float(np.mean(e <= SURVIVAL_M)), -float(np.median(100.0 * e / r.slant_m))
-
-
-def paired_survival(a: Sequence[bool], b: Sequence[bool]) -> dict:
-    """Paired comparison of two detectors' nominal survival on the *same* approaches (``a[i]``, ``b[i]``: did
-    approach i survive with detector A / B).
-
-    Returns the counts (``n``, ``both``, ``only_a``, ``only_b``, ``neither``), ``gain`` = only_a − only_b and the
-    exact two-sided McNemar p-value: under "A and B survive alike", each discordant approach is A's with
-    probability ½, so the p-value is the binomial test of ``only_a`` successes in ``only_a + only_b`` trials
-    (``scipy.stats.binomtest``; 1.0 when there is no discordant approach). The overall counts hide how many
-    approaches swapped sides: two models 3 approaches apart with 40 discordant ones cannot be told apart.
-    """
-    from scipy.stats import binomtest
-
-    a, b = np.asarray(a, bool), np.asarray(b, bool)
-    if a.shape != b.shape or a.ndim != 1:
-        raise ValueError(f"paired_survival: need two equal-length 1-D vectors, got shapes {a.shape} and {b.shape}")
-    only_a, only_b = int(np.sum(a & ~b)), int(np.sum(~a & b))
-    p = binomtest(only_a, only_a + only_b, 0.5).pvalue if only_a + only_b else 1.0
-    return dict(n=int(a.size), both=int(np.sum(a & b)), only_a=only_a, only_b=only_b, neither=int(np.sum(~a & ~b)),
-                gain=only_a - only_b, p_value=float(p))
 
 
 def paired_seeds(new: dict, old: dict, split: str = "validation") -> tuple[list[tuple[str, dict]], dict]:

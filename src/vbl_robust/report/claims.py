@@ -113,14 +113,12 @@ def behind(a: Sequence[float], b: Sequence[float]) -> bool | None:
 def exceptions(rows: Sequence[JobRow], eps_safe_m: float, low: str, high: str, labels: Sequence[str]) -> str:
     """Where method ``low``'s survival is above ``high``'s although a claim wants it ≤ (the boxes of ``labels``, on
     the images both have a row for): ``" (where not: ±20°: 2 only georobust survives, 1 only random of 77 images,
-    exact McNemar p = 1)"``; "" where it holds everywhere (:func:`~vbl_robust.detect.evaluate.paired_survival`)."""
-    from ..detect.evaluate import paired_survival
-
+    exact McNemar p = 1)"``; "" where it holds everywhere (:func:`~vbl_robust.campaigns.metrics.paired_survival`)."""
     ok = {(r.method, r.box_label, r.sample_id): mx.survived(r, eps_safe_m) for r in rows}
     out = []
     for lab in labels:
         ids = [sid for (m, b, sid) in ok if m == low and b == lab and (high, lab, sid) in ok]
-        t = paired_survival([ok[(low, lab, i)] for i in ids], [ok[(high, lab, i)] for i in ids])
+        t = mx.paired_survival([ok[(low, lab, i)] for i in ids], [ok[(high, lab, i)] for i in ids])
         if t["only_a"] > t["only_b"]:
             out.append(f"{lab}: {t['only_a']} only {low} survives, {t['only_b']} only {high} of {t['n']} images, "
                        f"exact McNemar p = {t['p_value']:.2g}")

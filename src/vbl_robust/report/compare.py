@@ -5,7 +5,7 @@ Read from the two stores, nothing evaluated. An image *survives* a (method, box)
 ≤ ε_safe; the union "any of them" survives a box when no method found a breach there (on the images every method
 of both runs completed). Per method and box: survival before and after on the images both runs completed, the
 images only one run survives — *fixed* (breached before, not after) and *new breaches* (the other way) — and the
-exact McNemar p-value of that difference (:func:`vbl_robust.detect.evaluate.paired_survival`). Per image: the
+exact McNemar p-value of that difference (:func:`vbl_robust.campaigns.metrics.paired_survival`). Per image: the
 union's changes with the worst error over the methods before and after.
 
 :func:`paired_comparison` computes it; :func:`compare_html` draws it (survival per box before and after
@@ -96,8 +96,6 @@ def check_alike(run: str | Path, spec: CampaignSpec, rows: Sequence[JobRow], oth
 def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
     """The comparison of the module docstring; ``ValueError`` when the runs are not the same experiment and seed,
     their images differ, or no method and box has images both runs completed."""
-    from ..detect.evaluate import paired_survival
-
     spec, rows_a, det_a = _read(before)
     spec_b, rows_b, det_b = _read(after)
     check_alike(before, spec, rows_a, after, spec_b, rows_b)
@@ -122,7 +120,7 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
         if shared:
             a = [ok(ia[(m, b, s)]) for s in shared]
             z = [ok(ib[(m, b, s)]) for s in shared]
-            lines.append(_line(m, b, level[b], a, z, paired_survival(z, a)))
+            lines.append(_line(m, b, level[b], a, z, mx.paired_survival(z, a)))
     if not lines:
         raise ValueError(f"{before} and {after}: no method and box with images both runs completed")
     changes: list[Change] = []
@@ -134,7 +132,7 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
         a = [all(ok(ia[(m, b, s)]) for m in ms) for s in shared]
         z = [all(ok(ib[(m, b, s)]) for m in ms) for s in shared]
         if len(ms) > 1:  # one method's own line is already there
-            lines.append(_line(ANY, b, level[b], a, z, paired_survival(z, a)))
+            lines.append(_line(ANY, b, level[b], a, z, mx.paired_survival(z, a)))
         for s, x, y in zip(shared, a, z, strict=True):
             if x != y:
                 changes.append(Change(s, b, _worst(ia, ms, b, s), _worst(ib, ms, b, s),

@@ -115,7 +115,24 @@ def section_survival_level(ctx: Context) -> Section | None:
                              "Survival rate S_rate: share of images whose worst error found stays ≤ ε_safe. Lower "
                              "means the search found more breaches (a stronger search)."))
     s.html.append(_summary_table(summary + ref))
+    s.html.append(_against_grid_table(mx.against_reference(rows, reference(ctx, boxes), ctx.eps), ctx.spec.unit))
     return s
+
+
+def _against_grid_table(lines: Sequence[Mapping[str, Any]], unit: str = "image") -> str:
+    """Each method's verdicts against the dense grid's on the same images (:func:`~vbl_robust.campaigns.metrics.
+    against_reference`); "" without a grid."""
+    if not lines:
+        return ""
+    cols = [("method", "method", None), ("box_label", "box", None), ("budget_label", f"budget per {unit}", None),
+            ("n", f"{unit}s", None), ("grid_breaches", "grid breaches", None), ("found", "found", None),
+            ("missed", "missed", None), ("beyond_grid", "beyond the grid", None), ("found_pct", "found %", None),
+            ("p_value", "McNemar p", lambda v: f"{v:.2g}")]
+    return (f"<p>Is the worst case really found? Each method against the dense grid on the same {unit}s: of the "
+            f"{unit}s the grid breaks, how many the method breaks too (found) or not (missed); beyond the grid: "
+            f"{unit}s the method breaks and the grid does not (a breach between its nodes); exact McNemar p of "
+            "method vs grid (small: the difference is not chance).</p>"
+            + table(lines, cols, left=("method", "box_label", "budget_label")))
 
 
 def section_runtime(ctx: Context) -> Section | None:
