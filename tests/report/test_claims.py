@@ -78,13 +78,19 @@ def test_pnp_row_is_pnp_summary_of_the_store(root, claims):
     assert row.verdict == C.combine(parts) and row.truth == ""
 
 
-def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
+def _spatial_1d_rows(root):
+    """The spatial-1d store's spec, main rows (no chain) and the dense grid's pseudo-rows per box."""
     store, spec = _open(root, "spatial-1d")
     with store:
         main = [r for r in mx.main_rows(store, spec) if r.chain is None]
         boxes = list({r.box.label: r.box for r in main}.values())
         ref = mx.reference_rows(store.jobs(kind="search", role="reference", with_points=True), boxes,
                                 spec.eps_safe_m, spec.penalty_m)
+    return spec, main, ref
+
+
+def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
+    spec, main, ref = _spatial_1d_rows(root)
     surv, true = _survival(main, spec.eps_safe_m), _survival(ref, spec.eps_safe_m)[mx.REFERENCE_METHOD]
     row = claims[1]
     for m in ("georobust", "georobust-av", "random", "apgd"):
@@ -97,12 +103,7 @@ def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
 
 
 def test_the_report_shows_each_method_against_the_grid(root):
-    store, spec = _open(root, "spatial-1d")
-    with store:
-        main = [r for r in mx.main_rows(store, spec) if r.chain is None]
-        boxes = list({r.box.label: r.box for r in main}.values())
-        ref = mx.reference_rows(store.jobs(kind="search", role="reference", with_points=True), boxes,
-                                spec.eps_safe_m, spec.penalty_m)
+    spec, main, ref = _spatial_1d_rows(root)
     lines = mx.against_reference(main, ref, spec.eps_safe_m)
     assert {ln["method"] for ln in lines} == {"georobust", "georobust-av", "random", "apgd"}
     assert all(ln["n"] == N_IMAGES and ln["found"] + ln["missed"] == ln["grid_breaches"] for ln in lines)
