@@ -78,13 +78,16 @@ def test_pnp_row_is_pnp_summary_of_the_store(root, claims):
     assert row.verdict == C.combine(parts) and row.truth == ""
 
 
+def boxes_of(rows):
+    return list({r.box.label: r.box for r in rows}.values())
+
+
 def _spatial_1d_rows(root):
     """The spatial-1d store's spec, main rows (no chain) and the dense grid's pseudo-rows per box."""
     store, spec = _open(root, "spatial-1d")
     with store:
         main = [r for r in mx.main_rows(store, spec) if r.chain is None]
-        boxes = list({r.box.label: r.box for r in main}.values())
-        ref = mx.reference_rows(store.jobs(kind="search", role="reference", with_points=True), boxes,
+        ref = mx.reference_rows(store.jobs(kind="search", role="reference", with_points=True), boxes_of(main),
                                 spec.eps_safe_m, spec.penalty_m)
     return spec, main, ref
 
@@ -95,7 +98,15 @@ def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
     row = claims[1]
     for m in ("georobust", "georobust-av", "random", "apgd"):
         assert f"{m} {'/'.join(fmt_num(v) for v in surv[m])}" in row.ours
-    assert row.truth.endswith(f"{mx.REFERENCE_METHOD} {'/'.join(fmt_num(v) for v in true)}")
+    assert f"{mx.REFERENCE_METHOD} {'/'.join(fmt_num(v) for v in true)}" in row.truth
+    last = max(boxes_of(main), key=lambda b: b.level).label
+    found = [ln for ln in mx.against_reference(main, ref, spec.eps_safe_m) if ln["box_label"] == last]
+    assert found
+    for ln in found:
+        if ln["grid_breaches"]:
+            assert f"{ln['method']} {ln['found']}/{ln['grid_breaches']}" in row.truth
+        else:
+            assert "breaches at" not in row.truth
     g, r, a = surv["georobust"], surv["random"], surv["apgd"]
     lowest = all(x <= min(y, z) for x, y, z in zip(g, r, a, strict=True))
     no_better = all(z >= y for y, z in zip(r, a, strict=True))

@@ -12,6 +12,7 @@ every part holds → "holds", some → "partly", none → "does not hold", none 
 1. PnP: per source (truncated ground truth, detector) ippe_lm's median relative error ≤ 1.25 × iterative's
    (:data:`ABOUT_AS_ACCURATE`; the paper calls BPnP's 6.8 % vs 5.9 %, 1.15×, "close").
 2. spatial-1d: GeoRobust's survival ≤ random's and APGD's at every budget; APGD's ≥ random's at every budget.
+   The truth column adds, at the largest budget, how many of the grid's breaches each method found.
 3. runtime-1d: median time to the first breach per method (its run at the largest time budget, images where it
    breaches; ∞ if none): the slowest and the fastest differ by ≥ 2× (:data:`TIME_FACTOR`).
 4. spatial-2d: APGD's survival ≥ random's at every box, > at some; GeoRobust's ≤ 5 % at the largest box.
@@ -298,6 +299,12 @@ def _spatial_1d(e: _Exp) -> Row:
     labels, s = _survival(rows, e.eps)
     geo, rnd, apgd = s["georobust"], s["random"], s["apgd"]
     truth = _text(s, labels, mx.REFERENCE_METHOD) if mx.REFERENCE_METHOD in s else ""
+    found = [ln for ln in mx.against_reference([r for r in rows if r.method in PAPER_METHODS],
+                                               [r for r in rows if r.method == mx.REFERENCE_METHOD], e.eps)
+             if ln["box_label"] == labels[-1] and ln["grid_breaches"]]
+    if found:
+        truth += (f"; of the grid's breaches at {labels[-1]} found: "
+                  + ", ".join(f"{ln['method']} {ln['found']}/{ln['grid_breaches']}" for ln in found))
     why = [exceptions(rows, e.eps, low, high, labels) for low, high in
            (("georobust", "random"), ("georobust", "apgd"), ("random", "apgd"))]
     return (_text(s, labels, *PAPER_METHODS), truth,
