@@ -58,9 +58,11 @@ def test_sigkill_mid_run_then_rerun_loses_nothing_and_duplicates_nothing(tmp_pat
     assert all(after[k] == v for k, v in before.items())  # committed rows untouched
     con = sqlite3.connect(out)
     assert con.execute("SELECT COUNT(*), COUNT(DISTINCT key) FROM jobs").fetchone() == (N_JOBS, N_JOBS)
-    runs = con.execute("SELECT status, jobs_skipped, jobs_done FROM runs ORDER BY run_id").fetchall()
-    assert runs[0][0] == "running"  # the killed run never finished
-    assert runs[1] == ("finished", len(before), N_JOBS - len(before))
+    runs = con.execute("SELECT status, jobs_skipped, jobs_done, finished_at, seconds FROM runs ORDER BY run_id").fetchall()
+    last_job = con.execute("SELECT max(finished_at) FROM jobs WHERE run_id = 1").fetchone()[0]
+    # the killed run never recorded its end: the next run closed it at its last stored job
+    assert runs[0][:4] == ("killed", 0, len(before), last_job) and 0 < runs[0][4] < 180
+    assert runs[1][:3] == ("finished", len(before), N_JOBS - len(before))
 
 
 @pytest.mark.slow

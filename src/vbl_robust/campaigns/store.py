@@ -553,7 +553,11 @@ class ResultStore:
                 + ("use another --out" if hint.startswith("rerun") else hint))
 
     def begin_run(self, provenance: Mapping[str, Any]) -> int:
-        """Insert a run row (status "running") and return its id."""
+        """Insert a run row (status "running") and return its id. Called under the store's writer lock
+        (:func:`~vbl_robust.campaigns.runner.run_campaign`), so an earlier run still marked "running" has ended
+        without recording it (SIGKILL, a machine's or session's end): it is closed first as "killed", finished at
+        its last stored job, its seconds up to that job (:meth:`close_killed_runs`)."""
+        self.close_killed_runs()
         cols = ("started_at", "status", "code_version", "model_sha256", "detector_json", "dataset_id", "dataset_json",
                 "config_json", "seed", "executor", "host", "jobs_total", "jobs_skipped")
         p = dict(provenance)
@@ -563,6 +567,19 @@ class ResultStore:
         with self._tx():
             cur = self._con.execute(f"INSERT INTO runs ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})", vals)
         return int(cur.lastrowid)
+
+    def close_killed_runs(self) -> int:
+        """Mark every run still "running" as "killed": finished at its last stored job (its start if none), its
+        jobs done and its seconds up to then. Only a writer holding the store's lock may call it (a run in progress
+        elsewhere would be closed too); returns how many runs it closed."""
+        last = "(SELECT max(j.finished_at) FROM jobs j WHERE j.run_id = runs.run_id)"
+        with self._tx():
+            cur = self._con.execute(
+                f"UPDATE runs SET status = 'killed', finished_at = coalesce({last}, started_at), "
+                "jobs_done = (SELECT count(*) FROM jobs j WHERE j.run_id = runs.run_id), "
+                f"seconds = max(0.0, 86400.0 * (julianday(coalesce({last}, started_at)) - julianday(started_at))) "
+                "WHERE status = 'running'")
+        return cur.rowcount
 
     def end_run(self, run_id: int, status: str, jobs_done: int, seconds: float) -> None:
         with self._tx():
