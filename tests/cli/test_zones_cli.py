@@ -232,6 +232,12 @@ def test_report_markdown_survival_table_from_the_store(gated_run, tmp_path):
         assert res.exit_code == 2 and msg in res.output, res.output
 
 
+def union_all_of(lines, where):
+    """(images, fixed) of the union's line over every image at ``where`` in a compare table."""
+    (line,) = [ln for ln in lines if ln[0] == "any of them" and ln[1] == where and ln[2] == "all"]
+    return int(line[3]), int(line[6])
+
+
 def test_report_compare_pairs_two_runs_per_image(gated_run, tmp_path):
     """Before: the gated detector (breaches wherever roll > 4°); after: the same campaign on the plain oracle (no
     breach). Every image a method breached before is "fixed", none is new; the counts pair per image."""
@@ -249,15 +255,24 @@ def test_report_compare_pairs_two_runs_per_image(gated_run, tmp_path):
     lines = [[c.strip() for c in ln.strip().strip("|").split("|")] for ln in res.output.splitlines()
              if ln.startswith("| ")][1:]
     checked = 0
-    for method, where, n, surv_before, surv_after, fixed, new, _p in lines:
+    union_env: dict[str, dict[str, tuple[int, int]]] = {}
+    for method, where, envelope, n, surv_before, surv_after, fixed, new, _p in lines:
         if method == "any of them":
+            if envelope != "all":
+                union_env.setdefault(where, {})[envelope] = (int(n), int(fixed))
             continue
+        assert envelope == "all"
         hits = {r.sample_id for r in rows if r.method == method and f"{r.box_label}, {r.budget_label}" == where
                 and r.worst_m is not None and r.worst_m > 1000}
         assert (n, fixed, new, surv_after) == ("2", str(len(hits)), "0", "100.0"), (method, where)
         assert surv_before == f"{100 * (2 - len(hits)) / 2:.1f}"
         checked += 1
     assert checked == 8  # 4 methods x 2 budgets
+    # the union per approach envelope splits the union over every image
+    assert len(union_env) == 2  # one box, two budgets
+    for where, per_env in union_env.items():
+        assert set(per_env) <= {"far", "medium", "close"}
+        assert tuple(map(sum, zip(*per_env.values(), strict=True))) == union_all_of(lines, where)
     res = runner.invoke(app, ["report", str(before), "--format", "md", "--compare", str(tmp_path / "none")])
     assert res.exit_code == 2 and "no results store" in res.output
     # the HTML page: the curves overlaid, the same table, and the images whose union verdict changed

@@ -6,7 +6,9 @@ Read from the two stores, nothing evaluated. An image *survives* a (method, box)
 of both runs completed). Per method and box: survival before and after on the images both runs completed, the
 images only one run survives — *fixed* (breached before, not after) and *new breaches* (the other way) — and the
 exact McNemar p-value of that difference (:func:`vbl_robust.campaigns.metrics.paired_survival`). Per image: the
-union's changes with the worst error over the methods before and after.
+union's changes with the worst error over the methods before and after. The union is also given per approach
+envelope (far / medium / close, where the images carry one): far approaches fail more often without any
+perturbation, so a change there reads differently.
 
 :func:`paired_comparison` computes it; :func:`compare_html` draws it (survival per box before and after
 overlaid, the table, the per-image changes) and :func:`vbl_robust.report.markdown.compare_markdown` prints it.
@@ -25,16 +27,20 @@ from ..campaigns import metrics as mx
 from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import JobRow, ResultStore
 
-__all__ = ["ANY", "Change", "Comparison", "PairedLine", "check_alike", "compare_html", "paired_comparison"]
+__all__ = ["ALL", "ANY", "Change", "Comparison", "PairedLine", "check_alike", "compare_html", "line_order",
+           "paired_comparison"]
 
 #: The union of the methods.
 ANY = "any of them"
+#: ``PairedLine.envelope`` of a line over every image.
+ALL = "all"
 
 
 @dataclass(frozen=True)
 class PairedLine:
     """One method (or :data:`ANY`) at one box: ``n`` images both runs completed, survival % before and after,
-    images fixed and newly breached, exact McNemar p."""
+    images fixed and newly breached, exact McNemar p; ``envelope`` the approach envelope the line is restricted to
+    (:data:`ALL`: every image)."""
 
     method: str
     box: str
@@ -45,6 +51,7 @@ class PairedLine:
     fixed: int
     new: int
     p_value: float
+    envelope: str = "all"
 
 
 @dataclass(frozen=True)
@@ -69,7 +76,7 @@ class Comparison:
     changes: tuple[Change, ...]
 
 
-def _read(run: str | Path) -> tuple[CampaignSpec, list[JobRow], str]:
+def _read(run: str | Path) -> tuple[CampaignSpec, list[JobRow], str, dict[str, str]]:
     with ResultStore.open_existing(run) as store:
         camp = store.campaign()
         if camp is None:
@@ -77,7 +84,8 @@ def _read(run: str | Path) -> tuple[CampaignSpec, list[JobRow], str]:
         spec = CampaignSpec.from_dict(camp["spec"])
         runs = store.runs()
         det = str(((runs[-1] if runs else {}).get("detector") or {}).get("name", "?"))
-        return spec, mx.main_rows(store, spec, with_trace=False), det
+        envelopes = {sid: str(rec["envelope"]) for sid, rec in store.samples().items() if rec.get("envelope")}
+        return spec, mx.main_rows(store, spec, with_trace=False), det, envelopes
 
 
 def check_alike(run: str | Path, spec: CampaignSpec, rows: Sequence[JobRow], other: str | Path,
@@ -96,8 +104,8 @@ def check_alike(run: str | Path, spec: CampaignSpec, rows: Sequence[JobRow], oth
 def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
     """The comparison of the module docstring; ``ValueError`` when the runs are not the same experiment and seed,
     their images differ, or no method and box has images both runs completed."""
-    spec, rows_a, det_a = _read(before)
-    spec_b, rows_b, det_b = _read(after)
+    spec, rows_a, det_a, envelope = _read(before)
+    spec_b, rows_b, det_b, _ = _read(after)
     check_alike(before, spec, rows_a, after, spec_b, rows_b)
     eps = spec.eps_safe_m
     several = len({r.budget_label for r in rows_a}) > 1
@@ -133,6 +141,10 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
         z = [all(ok(ib[(m, b, s)]) for m in ms) for s in shared]
         if len(ms) > 1:  # one method's own line is already there
             lines.append(_line(ANY, b, level[b], a, z, mx.paired_survival(z, a)))
+        for env in sorted({envelope[s] for s in shared if s in envelope}):
+            idx = [i for i, s in enumerate(shared) if envelope.get(s) == env]
+            ae, ze = [a[i] for i in idx], [z[i] for i in idx]
+            lines.append(_line(ANY if len(ms) > 1 else ms[0], b, level[b], ae, ze, mx.paired_survival(ze, ae), env))
         for s, x, y in zip(shared, a, z, strict=True):
             if x != y:
                 changes.append(Change(s, b, _worst(ia, ms, b, s), _worst(ib, ms, b, s),
@@ -140,9 +152,10 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
     return Comparison(str(before), str(after), spec, (det_a, det_b), tuple(lines), tuple(changes))
 
 
-def _line(method: str, box: str, level: float, a: Sequence[bool], z: Sequence[bool], c: dict) -> PairedLine:
+def _line(method: str, box: str, level: float, a: Sequence[bool], z: Sequence[bool], c: dict,
+          envelope: str = ALL) -> PairedLine:
     return PairedLine(method, box, level, len(a), 100.0 * float(np.mean(a)), 100.0 * float(np.mean(z)),
-                      c["only_a"], c["only_b"], c["p_value"])
+                      c["only_a"], c["only_b"], c["p_value"], envelope)
 
 
 def _worst(rows: dict, methods: Sequence[str], box: str, sid: str) -> float | None:
@@ -161,14 +174,15 @@ def compare_html(before: str | Path, after: str | Path, out: str | Path | None =
     c = paired_comparison(before, after)
     after_dir = Path(after) if Path(after).is_dir() else Path(after).parent
     out_dir = Path(out) if out is not None else after_dir
-    fig = F.survival_before_after(c.lines, title=f"{c.spec.name}: survival before and after")
+    fig = F.survival_before_after([ln for ln in c.lines if ln.envelope == ALL], title=f"{c.spec.name}: survival before and after")
     png = figure_png(fig)
     plt.close(fig)
     (out_dir / "figures").mkdir(parents=True, exist_ok=True)
     (out_dir / "figures" / "compare_survival.png").write_bytes(png)
-    rows = [{"method": ln.method if ln.method == ANY else F.style(ln.method)["label"], "box": ln.box, "n": ln.n,
+    rows = [{"method": ln.method if ln.method == ANY else F.style(ln.method)["label"], "box": ln.box,
+             "envelope": ln.envelope, "n": ln.n,
              "before": ln.before_pct, "after": ln.after_pct, "gain": ln.after_pct - ln.before_pct, "fixed": ln.fixed,
-             "new": ln.new, "p": f"{ln.p_value:.4f}"} for ln in sorted(c.lines, key=_order)]
+             "new": ln.new, "p": f"{ln.p_value:.4f}"} for ln in sorted(c.lines, key=line_order)]
     changes = [{"sample_id": ch.sample_id, "box": ch.box, "before": ch.before_m, "after": ch.after_m,
                 "change": ch.change} for ch in c.changes]
     eps = c.spec.eps_safe_m
@@ -180,10 +194,11 @@ def compare_html(before: str | Path, after: str | Path, out: str | Path | None =
         img(png, "compare_survival", "Survival per box, before (dashed, open markers) and after (solid); black: "
             "the union of the methods (an image survives when no method breaches it)."),
         "<h2>Paired survival</h2>",
-        table(rows, [("method", "method", None), ("box", "box", None), ("n", "images", None),
+        table(rows, [("method", "method", None), ("box", "box", None), ("envelope", "envelope", None),
+                     ("n", "images", None),
                      ("before", "survival before %", None), ("after", "survival after %", None),
                      ("gain", "change (points)", None), ("fixed", "fixed", None), ("new", "new breaches", None),
-                     ("p", "p", None)], left=("method", "box")),
+                     ("p", "p", None)], left=("method", "box", "envelope")),
         f"<h2>Images whose verdict changed (any method), {len(changes)}</h2>",
         table(changes, [("sample_id", "image", None), ("box", "box", None), ("before", "worst before (m)", None),
                         ("after", "worst after (m)", None), ("change", "change", None)],
@@ -195,5 +210,6 @@ def compare_html(before: str | Path, after: str | Path, out: str | Path | None =
     return path
 
 
-def _order(ln: PairedLine) -> tuple[Any, ...]:
-    return (ln.method == ANY, ln.method, ln.level, ln.box)
+def line_order(ln: PairedLine) -> tuple[Any, ...]:
+    """Table order: each method's lines, then the union's over every image, then the union's per envelope."""
+    return (ln.method == ANY, ln.envelope != ALL, ln.envelope, ln.method, ln.level, ln.box)

@@ -210,14 +210,15 @@ def compare_markdown(before: str | Path, after: str | Path) -> str:
     """Two runs of the same experiment and seed on the same images (e.g. a model before and after ``harden``),
     paired per image (:func:`vbl_robust.report.compare.paired_comparison`): per method and box, survival % before
     and after, the images fixed and newly breached and the exact McNemar p, then the union of all methods ("any of
-    them") per box. ``ValueError`` when the runs are not comparable."""
-    from .compare import paired_comparison
+    them") per box, over every image and per approach envelope. ``ValueError`` when the runs are not comparable."""
+    from .compare import line_order, paired_comparison
 
     c = paired_comparison(before, after)
     out = [f"before: {before} ({c.detectors[0]}); after: {after} ({c.detectors[1]}) ({c.spec.name}, seed "
            f"{c.spec.seed}, ε_safe = {c.spec.eps_safe_m:g} m); paired per image: fixed = breached before and not "
            "after, new = the other way, p = exact McNemar", ""]
-    out += _table(["method", "box", "images", "survival before %", "survival after %", "fixed", "new breaches", "p"],
-                  [[ln.method, ln.box, str(ln.n), f"{ln.before_pct:.1f}", f"{ln.after_pct:.1f}", str(ln.fixed),
-                    str(ln.new), f"{ln.p_value:.4f}"] for ln in c.lines])
+    out += _table(["method", "box", "envelope", "images", "survival before %", "survival after %", "fixed",
+                   "new breaches", "p"],
+                  [[ln.method, ln.box, ln.envelope, str(ln.n), f"{ln.before_pct:.1f}", f"{ln.after_pct:.1f}",
+                    str(ln.fixed), str(ln.new), f"{ln.p_value:.4f}"] for ln in sorted(c.lines, key=line_order)])
     return "\n".join(out) + "\n"
