@@ -1,7 +1,8 @@
 """Detectors and a campaign script for the runner tests (importable by name: DetectorSpec kind "factory").
 
 Run as a script, it is the campaign the kill test interrupts: ``python campaign_helpers.py OUT N DELAY [term]``
-(``term``: SIGTERM handled as the ``vbl-robust`` command handles it, :func:`vbl_robust.cli.common.stop_on_sigterm`).
+(``term``: SIGTERM handled as the ``vbl-robust`` command handles it, :func:`vbl_robust.cli.common.stop_on_sigterm`);
+``python campaign_helpers.py OUT N 0 workers-fail``: two worker processes whose detector cannot be built.
 """
 
 from __future__ import annotations
@@ -26,6 +27,17 @@ class RefusedDetector(OracleDetector):
         raise ValueError("refused model: pass --trust-model")
 
 
+class FailsInWorkers(OracleDetector):
+    """Built in the main process, refused in a worker process (like a model cache a worker cannot read)."""
+
+    def __init__(self, **kw):
+        import multiprocessing
+
+        if multiprocessing.parent_process() is not None:
+            raise RuntimeError("no model in this worker")
+        super().__init__(**kw)
+
+
 class SlowOracle(OracleDetector):
     """The oracle, sleeping ``delay`` seconds per batch (so a campaign is reliably killed mid-run)."""
 
@@ -45,7 +57,7 @@ def kill_campaign_spec():
     return CampaignSpec("kill-test", (blk,), seed=5)
 
 
-def main(out: str, n: int, delay: float) -> None:
+def main(out: str, n: int, delay: float, mode: str = "") -> None:
     import torch
 
     from vbl_robust.campaigns import DetectorSpec, ResultStore, run_campaign
@@ -53,9 +65,13 @@ def main(out: str, n: int, delay: float) -> None:
 
     torch.set_num_threads(1)
     samples = generate(n, seed=3, width=96, height=96)
-    det = DetectorSpec("factory", "campaign_helpers:SlowOracle", options={"delay": delay, "noise_px": 0.5})
+    if mode == "workers-fail":
+        det, workers = DetectorSpec("factory", "campaign_helpers:FailsInWorkers"), 2
+    else:
+        det, workers = DetectorSpec("factory", "campaign_helpers:SlowOracle", options={"delay": delay, "noise_px": 0.5}), 1
     with ResultStore(out) as store:
-        run_campaign(kill_campaign_spec(), samples, store, detector=det)
+        summary = run_campaign(kill_campaign_spec(), samples, store, detector=det, workers=workers)
+    print(f"status={summary.status} done={summary.done}")
 
 
 if __name__ == "__main__":
@@ -63,4 +79,4 @@ if __name__ == "__main__":
         from vbl_robust.cli.common import stop_on_sigterm
 
         stop_on_sigterm()
-    main(sys.argv[1], int(sys.argv[2]), float(sys.argv[3]))
+    main(sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), *sys.argv[4:5])

@@ -15,9 +15,9 @@ N_SAMPLES = 3
 N_JOBS = N_SAMPLES * 2 * 2  # samples x boxes x methods of campaign_helpers.kill_campaign_spec
 
 
-def start(out: Path, *extra: str) -> subprocess.Popen:
+def start(out: Path, *extra: str, n: int = N_SAMPLES) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.Popen([sys.executable, str(HERE / "campaign_helpers.py"), str(out), str(N_SAMPLES), "0.1", *extra],
+    return subprocess.Popen([sys.executable, str(HERE / "campaign_helpers.py"), str(out), str(n), "0.1", *extra],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
 
 
@@ -80,3 +80,18 @@ def test_sigterm_ends_the_run_as_an_interruption_with_its_wall_time(tmp_path):
     status, done, seconds = con.execute("SELECT status, jobs_done, seconds FROM runs").fetchone()
     con.close()
     assert status == "interrupted" and done == len(kept) and 2 <= done < N_JOBS and seconds > 0
+
+
+@pytest.mark.slow
+def test_workers_that_cannot_start_end_the_run_in_one_line_and_the_process_exits(tmp_path):
+    """Every worker fails to build its detector: the run ends "incomplete" with the workers' reason in one line (no
+    traceback), and the process exits although the task queue still holds more than a pipe's worth of samples."""
+    proc = start(tmp_path / "results.sqlite", "workers-fail", n=150)
+    try:
+        out = proc.communicate(timeout=120)[0].decode()
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, out[-2000:]
+    assert "status=incomplete done=0" in out
+    assert "a worker could not start: RuntimeError: no model in this worker" in out
+    assert "Traceback" not in out

@@ -46,6 +46,41 @@ def test_export_is_cached_by_the_checkpoint_hash(cache, tiny_pose_pt):
         exported_onnx(tiny_pose_pt, trust=False, imgsz=96)  # a .pt is a pickle: never unpickled untrusted
 
 
+def test_processes_needing_one_export_at_once_export_it_once(tmp_path, monkeypatch, tiny_pose_pt):
+    """A campaign's workers on a fresh machine all ask for the export at once: one exports, the others wait for
+    it and load the whole file (two exports into one temporary file once broke a reproduction run)."""
+    import threading
+    import time
+
+    import vbl_robust.detect.onnx as onnx_mod
+
+    monkeypatch.setenv("VBL_ROBUST_CACHE", str(tmp_path))
+    calls = []
+
+    def slow_export(pt_path, out, *, trust, imgsz):
+        calls.append(out)
+        time.sleep(0.3)
+        out.write_bytes(b"onnx")
+        return out
+
+    monkeypatch.setattr(onnx_mod, "export_onnx", slow_export)
+    got = []
+    threads = [threading.Thread(target=lambda: got.append(exported_onnx(tiny_pose_pt, trust=True, imgsz=64)))
+               for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(calls) == 1 and len(got) == 3 and len(set(got)) == 1 and got[0].read_bytes() == b"onnx"
+
+
+def test_export_leaves_only_the_model_behind(tmp_path, tiny_pose_pt):
+    from vbl_robust.detect.onnx import export_onnx
+
+    export_onnx(tiny_pose_pt, tmp_path / "m.onnx", trust=True)
+    assert [p.name for p in tmp_path.iterdir()] == ["m.onnx"]
+
+
 @pytest.mark.parametrize("engine", ["onnxruntime", "openvino"])
 def test_engine_agrees_with_torch_within_1e_3_px(cache, pt, engine):
     pytest.importorskip(engine)

@@ -262,7 +262,11 @@ def _pool_worker(tasks: Any, results: Any, detector: DetectorSpec, settings: Set
 
     warnings.filterwarnings("ignore", message=TORCH_JIT_WARNING, category=FutureWarning)
     torch.set_num_threads(1)
-    det = detector_for(detector)
+    try:
+        det = detector_for(detector)
+    except Exception as exc:  # noqa: BLE001 - reported to the parent as one line, not a traceback
+        results.put(("error", f"{type(exc).__name__}: {exc}"))
+        return
     while (task := tasks.get()) is not None:
         for rows in run_sample_task(task, det, settings, run_id):
             results.put(("rows", rows))
@@ -288,19 +292,22 @@ def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Se
              for _ in range(workers)]
     for p in procs:
         p.start()
-    left = len(tasks)
+    left, errors = len(tasks), []
     try:
         while left:
             try:
                 kind, rows = result_q.get(timeout=1.0)
             except queue.Empty:
                 if not any(p.is_alive() for p in procs):
-                    logger.error("every worker process ended with %d sample(s) unfinished; their jobs stay pending "
-                                 "(rerun to resume)", left)
+                    why = f" (a worker could not start: {errors[0]})" if errors else ""
+                    logger.error("every worker process ended with %d sample(s) unfinished%s; their jobs stay "
+                                 "pending (rerun to resume)", left, why)
                     return
                 continue
             if kind == "done":
                 left -= 1
+            elif kind == "error":
+                errors.append(rows)
             else:
                 yield rows
     finally:
@@ -308,6 +315,9 @@ def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Se
             if p.is_alive():
                 p.terminate()
             p.join(timeout=5)
+        for q in (task_q, result_q):  # items no worker will read must not hold this process at exit
+            q.cancel_join_thread()
+            q.close()
 
 
 # -- Ray -------------------------------------------------------------------------------------------------------

@@ -58,13 +58,22 @@ def cache_dir() -> Path:
 
 
 def exported_onnx(pt_path: str | Path, *, trust: bool, imgsz: int) -> Path:
-    """The ONNX export of a ``.pt`` (made once, cached by the checkpoint's SHA-256 and the input size)."""
+    """The ONNX export of a ``.pt`` (made once, cached by the checkpoint's SHA-256 and the input size).
+
+    Processes that need the same export at once (a campaign's workers on a fresh machine) take turns on a file
+    lock (``filelock``): one exports, the others then find the file."""
+    from filelock import FileLock
+
     from .onnx import export_onnx
 
     out = cache_dir() / "onnx" / f"{file_sha256(pt_path)[:24]}_{int(imgsz)}.onnx"
-    if not out.is_file():
-        logger.info("exporting %s to ONNX (once) → %s", pt_path, out)
-        export_onnx(pt_path, out, trust=trust, imgsz=int(imgsz))
+    if out.is_file():
+        return out
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with FileLock(str(out.with_suffix(".lock"))):
+        if not out.is_file():
+            logger.info("exporting %s to ONNX (once) → %s", pt_path, out)
+            export_onnx(pt_path, out, trust=trust, imgsz=int(imgsz))
     return out
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import ast
 import logging
 import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -35,15 +36,17 @@ def export_onnx(pt_path: str | Path, out_path: str | Path, *, trust: bool = Fals
     size = imgsz or (ckpt.get("train_args") or {}).get("imgsz", 640)
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    # ultralytics writes next to the .pt: export from a temporary copy so the source directory is untouched
-    tmp = out_path.parent / f".{out_path.stem}_export.pt"
-    shutil.copyfile(pt_path, tmp)
+    # ultralytics writes next to the .pt: export from a copy in a directory of this call's own, so the source
+    # directory is untouched and two exports at once never share a file; the result is moved in whole (atomic)
+    work = Path(tempfile.mkdtemp(prefix=f".{out_path.stem}_", dir=out_path.parent))
     try:
+        tmp = work / "export.pt"
+        shutil.copyfile(pt_path, tmp)
         f = YOLO(str(tmp), task="pose").export(format="onnx", imgsz=size, dynamic=True, simplify=True,
                                                verbose=False)
         Path(f).replace(out_path)
     finally:
-        tmp.unlink(missing_ok=True)
+        shutil.rmtree(work, ignore_errors=True)
     return out_path
 
 
