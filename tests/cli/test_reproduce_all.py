@@ -61,15 +61,26 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
         assert f"| {name} | {n_jobs} / {n_jobs} |" in status
         t = prov["totals"]  # the searches' hours on the campaign's clock beside the wall and worker hours
         assert f"| {t['search_s'] / 3600:.2f} | {t['clock']} |" in status
-    # a smaller run reproduces the bundle's rows (the issue's check: reproduce EXPERIMENT --images 3)
+    # a smaller run reproduces the bundle's rows (the issue's check: reproduce EXPERIMENT --images 3), checked
+    # against the bundle's job table (what stays committed) and against the store
     from vbl_robust.campaigns.bundle import compare_runs
 
     again = tmp_path / "again"
-    assert runner.invoke(app, ["reproduce", "spatial-1d", "--out", str(again), "--workers", "1", *SMALL]).exit_code == 0
+    res = runner.invoke(app, ["reproduce", "spatial-1d", "--out", str(again), "--workers", "1", "--check-against",
+                              str(bundle), *SMALL])
+    assert res.exit_code == 0, res.output
+    assert (f"spatial-1d: checked against {bundle / 'spatial-1d'}: {n_jobs_s1} rows, {n_jobs_s1} found there, "
+            "0 differ") in res.output
     assert compare_runs(again, out / "spatial-1d") == {"rows": n_jobs_s1, "common": n_jobs_s1, "differ": []}
-    other = tmp_path / "other"  # another seed: other searches, no common row
-    assert runner.invoke(app, ["reproduce", "spatial-1d", "--out", str(other), "--seed", "1", *SMALL]).exit_code == 0
-    assert compare_runs(other, out / "spatial-1d")["common"] == 0
+    runtime = compare_runs(out / "runtime-1d", bundle / "runtime-1d")  # read-off and time-budget rows too
+    assert runtime["differ"] == [] and runtime["rows"] == pq.read_table(bundle / "runtime-1d" / "jobs.parquet").num_rows
+    other = tmp_path / "other"  # another seed: other searches, no common row, exit code 1
+    res = runner.invoke(app, ["reproduce", "spatial-1d", "--out", str(other), "--seed", "1", "--check-against",
+                              str(bundle / "spatial-1d" / "jobs.parquet"), *SMALL])
+    assert res.exit_code == 1 and f"{n_jobs_s1} rows, 0 found there, {n_jobs_s1} differ (first: " in res.output
+    res = runner.invoke(app, ["reproduce", "spatial-1d", "--out", str(tmp_path / "none"), "--check-against",
+                              str(tmp_path / "nothing"), *SMALL])  # refused before any work
+    assert res.exit_code == 2 and "--check-against" in res.output and not (tmp_path / "none").exists(), res.output
     # a fresh checkout resumes from the bundle's packed stores: nothing is run again
     fresh = tmp_path / "fresh"
     resumed = runner.invoke(app, ["reproduce", "all", "--out", str(fresh), "--resume-from", str(bundle), *SMALL])

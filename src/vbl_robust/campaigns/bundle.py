@@ -187,25 +187,45 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
     return totals
 
 
+def _table_rows(source: Path) -> dict[tuple[str, str], dict[str, Any]]:
+    """The flat job rows (:func:`~vbl_robust.campaigns.tables.flat_rows`) of a run directory or store, or of a
+    bundle's job table (an experiment directory of the bundle holding ``jobs.parquet``, or that file), by
+    ``(key, budget_label)`` (a read-off budget shares its run's key)."""
+    from .tables import flat_rows
+
+    source = Path(source)
+    table = source / "jobs.parquet" if source.is_dir() and not (source / STORE).is_file() else source
+    if table.suffix == ".parquet":
+        if not table.is_file():
+            raise ValueError(f"{source}: neither a results store nor a bundle's jobs.parquet")
+        import pyarrow.parquet as pq
+
+        rows = pq.read_table(table).to_pylist()
+    else:
+        with ResultStore.open_existing(source) as store:
+            rows = flat_rows(store)[0]
+    return {(r["key"], r["budget_label"]): r for r in rows}
+
+
 def compare_runs(small: Path, big: Path, rel: float = 1e-3) -> dict[str, Any]:
-    """Check that a smaller run reproduces a larger one's rows (``reproduce EXPERIMENT --images 3`` against the
-    bundle's run): every job of ``small`` must be in ``big`` under the same key, with the same status, verdict,
-    worst θ, evaluation and iteration counts, and worst error within ``rel`` (relative). Rows read off a time
-    budget are not compared (timings differ run to run). Returns ``{"rows", "common", "differ": [keys…]}``."""
-    with ResultStore.open_existing(small) as a, ResultStore.open_existing(big) as b:
-        rows_a = {r.key: r for r in a.jobs(with_trace=False)}
-        rows_b = {r.key: r for r in b.jobs(with_trace=False)}
+    """Check that a smaller run reproduces a larger one's rows (``reproduce EXPERIMENT --images 3
+    --check-against``): every row of ``small`` (a run directory or store) must be in ``big`` (a run directory or
+    store, or a bundle's job table: :func:`_table_rows`) under the same key and budget, with the same status,
+    verdict, evaluation and iteration counts and worst point, and the worst error within ``rel`` (relative). Rows
+    of a time budget are counted but not compared (timings differ run to run). Returns
+    ``{"rows", "common", "differ": [keys…]}`` (``differ`` also lists the rows ``big`` lacks)."""
+    rows_a, rows_b = _table_rows(small), _table_rows(big)
     differ = []
-    for key, r in rows_a.items():
-        s = rows_b.get(key)
+    for (key, budget), r in rows_a.items():
+        s = rows_b.get((key, budget))
         if s is None:
             differ.append(key)
             continue
-        if r.budget is not None and r.budget.max_seconds is not None:
+        if r["max_seconds"] is not None:
             continue
-        same = ((r.status, r.verdict, r.nfev, r.nit, r.worst_x) == (s.status, s.verdict, s.nfev, s.nit, s.worst_x)
-                and (r.worst_m == s.worst_m or (r.worst_m is not None and s.worst_m is not None
-                                                and abs(r.worst_m - s.worst_m) <= rel * max(1.0, abs(s.worst_m)))))
-        if not same:
+        exact = ["status", "verdict", "nfev", "nit", *(c for c in r if c.startswith("worst_") and c != "worst_m")]
+        a, b = r["worst_m"], s["worst_m"]
+        close = a == b or (a is not None and b is not None and abs(a - b) <= rel * max(1.0, abs(b)))
+        if not close or any(r[c] != s.get(c) for c in exact):
             differ.append(key)
     return {"rows": len(rows_a), "common": sum(k in rows_b for k in rows_a), "differ": differ}

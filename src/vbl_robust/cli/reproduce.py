@@ -89,6 +89,32 @@ def write_index(out: Path, names: list[str], extra: str = "") -> Path:
     return out / "index.html"
 
 
+def _reference(root: Path, name: str) -> Path:
+    """``--check-against``: where experiment ``name``'s earlier rows are (``root/name`` or ``root`` itself: a run
+    directory with a results store, a bundle's experiment directory with ``jobs.parquet``, or that file); refused
+    before any work when there is none."""
+    from vbl_robust.campaigns.bundle import STORE
+
+    for p in (root / name, root):
+        if (p.is_dir() and ((p / STORE).is_file() or (p / "jobs.parquet").is_file())) or (
+                p.is_file() and p.suffix == ".parquet"):
+            return p
+    fail(f"--check-against {root}: no results store or jobs.parquet of {name} there (nor in {root / name})")
+    raise AssertionError  # unreachable: fail exits
+
+
+def _check(name: str, run: Path, reference: Path) -> bool:
+    """Print how the rows of ``run`` compare with ``reference``'s (:func:`~vbl_robust.campaigns.bundle.compare_runs`);
+    True when a row differs or is missing there."""
+    from vbl_robust.campaigns.bundle import compare_runs
+
+    c = compare_runs(run, reference)
+    first = f" (first: {', '.join(c['differ'][:3])})" if c["differ"] else ""
+    typer.echo(f"{name}: checked against {reference}: {c['rows']} rows, {c['common']} found there, "
+               f"{len(c['differ'])} differ{first}")
+    return bool(c["differ"])
+
+
 def register(app: typer.Typer) -> None:
     from vbl_robust.campaigns.experiments import EXPERIMENTS, PAPER
 
@@ -144,6 +170,12 @@ def register(app: typer.Typer) -> None:
         resume_from: Path | None = typer.Option(None, "--resume-from", help="A bundle written with `vbl-robust "
                                                 "bundle --stores`: its stores seed the run directories under --out "
                                                 "that have none yet, so the run goes on where the bundle's ended."),
+        check_against: Path | None = typer.Option(None, "--check-against", help="After each experiment, check "
+                                                  "that its rows are those of an earlier run or bundle of it (a run "
+                                                  "directory or a `vbl-robust bundle` output; for paper/all the "
+                                                  "directory holding one per experiment): same keys, verdicts, "
+                                                  "counts and worst points, worst errors within 1e-3 relative; rows "
+                                                  "of time budgets are not compared. Exit code 1 when one differs."),
         address: str | None = o.ADDRESS,
         csv: Path | None = o.CSV,
         parquet: Path | None = o.PARQUET,
@@ -193,6 +225,8 @@ def register(app: typer.Typer) -> None:
             return
         if resume_from is not None and not resume_from.is_dir():
             fail(f"--resume-from {resume_from}: not a directory")
+        references = {exp.name: _reference(check_against, exp.name) for exp in exps} if check_against else {}
+        differ = False
         for exp in exps:
             spec = exp.build(seed, opts)
             spec = with_method_options(spec, method_opts, strict=False)  # checked over all experiments above
@@ -213,8 +247,12 @@ def register(app: typer.Typer) -> None:
                                         source=source, config=config, quiet=quiet, workers=n_workers, wait=wait,
                                         retry_failed=retry_failed)
             finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
+            if references:
+                differ |= _check(exp.name, out_dir, references[exp.name])
         if group:
             from vbl_robust.report.claims import claims_html, claims_of, write_claims
 
             typer.echo(f"claims: {write_claims(root)}")
             typer.echo(f"index: {write_index(root, [e.name for e in exps], claims_html(claims_of(root), str(root)))}")
+        if differ:
+            raise typer.Exit(1)
