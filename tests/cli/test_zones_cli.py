@@ -122,7 +122,9 @@ def test_zones_command_json_and_csv(gated_run, tmp_path):
     z = job["zones"][0]
     assert set(z) == {"class", "value", "bound", "fraction", "bounds", "center"}
     assert set(z["bounds"]) == {"roll_deg", "contrast"} and z["bounds"]["roll_deg"][0] <= z["center"]["roll_deg"]
-    assert "skipped random" in res.stderr
+    assert "note: skipped 4 random job(s): keeps no cover of the box (no zones)" in res.stderr  # one line per reason
+    assert len(res.stderr.splitlines()) == len({(s["method"], s["note"]) for s in body["skipped"]}) + len(
+        {j["method"] for j in body["jobs"] if j.get("note")})
 
     res = runner.invoke(app, ["zones", str(out), "--lipschitz", "1,1", "--format", "csv", "--role", "landscape",
                               "--out", str(tmp_path / "z.csv"), "--plot", str(tmp_path / "plots")])

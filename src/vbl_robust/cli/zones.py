@@ -61,12 +61,8 @@ def register(app: typer.Typer) -> None:
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         done = [j for j in jobs if j.zones is not None]
-        for j in jobs:
-            if j.zones is None:
-                typer.secho(f"note: skipped {j.method} on {j.sample_id} ({j.box_label}): {j.note}", err=True,
-                            fg=typer.colors.YELLOW)
-            elif j.note:
-                typer.secho(f"note: {j.method} on {j.sample_id}: {j.note}", err=True, fg=typer.colors.YELLOW)
+        for line in _notes(jobs):
+            typer.secho(line, err=True, fg=typer.colors.YELLOW)
         if fmt == "md":
             from vbl_robust.report.markdown import zones_markdown
 
@@ -84,6 +80,18 @@ def register(app: typer.Typer) -> None:
                 if j.box is not None and j.box.dim <= 2:
                     plot_zones(j.zones, plot / f"{j.key[:16]}.png",
                                title=f"{j.method}, {j.sample_id}, {j.box_label}: {j.zones.describe()[:60]}")
+
+
+def _notes(jobs: list[Any]) -> list[str]:
+    """One line per method and reason, with its count (a campaign of thousands of jobs gives a few lines, not one
+    per job); ``--format json`` lists every skipped job and its note."""
+    from collections import Counter
+
+    skipped = Counter((j.method, j.note.removeprefix(f"{j.method}: ")) for j in jobs if j.zones is None)
+    outside = Counter(j.method for j in jobs if j.zones is not None and j.note)
+    return ([f"note: skipped {n} {method} job(s): {why}" for (method, why), n in sorted(skipped.items())]
+            + [f"note: {n} {method} job(s) breached at evaluations that are no cell's centre (a batch cut at its "
+               "first breach; --format json lists them as outside_breaches)" for method, n in sorted(outside.items())])
 
 
 def _as_json(run: Path, jobs: list[Any]) -> str:
