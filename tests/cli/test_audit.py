@@ -33,6 +33,34 @@ def test_audit_small_run_resumes_and_exports(tmp_path):
     assert res.exit_code == 2 and "other settings" in res.output
 
 
+def test_an_incomplete_run_exits_1_and_a_rerun_completes_it(tmp_path, monkeypatch):
+    """A run that ends with jobs left (here: a sample whose jobs never come back, as when its worker dies) says so and
+    exits 1 — `reproduce` after its other experiments too; rerunning the same command completes it and exits 0."""
+    import vbl_robust.campaigns.runner as runner_mod
+
+    real = runner_mod.run_sample_task
+
+    def loses_the_second_sample(task, *args, **kwargs):
+        if task.sample.id.endswith("1"):
+            return iter(())
+        return real(task, *args, **kwargs)
+
+    out = tmp_path / "run"
+    args = ["audit", "--out", str(out), "--n", "2", "--roll", "10", "--methods", "random", "--max-evals", "4",
+            "--no-landscape", "--no-report", "--workers", "1", *SMALL]
+    monkeypatch.setattr(runner_mod, "run_sample_task", loses_the_second_sample)
+    res = runner.invoke(app, args)
+    assert res.exit_code == 1 and "1 new jobs" in res.output and "run incomplete" in res.output, res.output
+    paper = ["reproduce", "paper", "--out", str(tmp_path / "paper"), "--images", "2", "--workers", "1",
+             "--max-evals", "4", "--grid-step", "0", "--iterations", "2", "--time-budgets", "0.05",
+             "--eval-budgets", "4", "--no-landscape", *SMALL]
+    res = runner.invoke(app, paper)
+    assert res.exit_code == 1 and res.output.count("run incomplete") == 7 and "claims:" in res.output, res.output
+    monkeypatch.setattr(runner_mod, "run_sample_task", real)
+    res = runner.invoke(app, args)
+    assert res.exit_code == 0 and "1 new jobs, 1 already done" in res.output, res.output
+
+
 @pytest.mark.parametrize("args, message", [
     (["--roll", "none"], "at least one of --roll, --contrast"),
     (["--methods", "magic"], "unknown method"),

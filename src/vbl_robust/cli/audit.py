@@ -283,8 +283,9 @@ def check_exports(csv: Path | None, parquet: Path | None, out: Path | None = Non
             fail(f"{option} {path}: cannot write there ({parent} is not a writable directory)")
 
 
-def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, report: bool, quiet: bool = False) -> None:
-    """Print the summary table, export, and write the HTML report."""
+def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, report: bool, quiet: bool = False) -> bool:
+    """Print the summary table, export, and write the HTML report; False when the run is incomplete (its caller
+    ends with exit code 1 once it has done what else it can: a run that did not finish never exits 0)."""
     from rich.console import Console
     from rich.table import Table
 
@@ -327,6 +328,7 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
         from vbl_robust.report import build_report
 
         typer.echo(f"report: {build_report(out)}")
+    return summary.status == "finished"
 
 
 def load_sequence_samples(source: str, frames: int, rate: float, seed: int, width: int, height: int,
@@ -482,11 +484,13 @@ def register(app: typer.Typer) -> None:
         summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
                                     config=config, quiet=quiet, workers=workers, wait=wait,
                                     retry_failed=retry_failed)
-        finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
+        complete = finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
         if refine_zones:
             from .zones import refine_audit
 
             refine_audit(out, samples, det, refine_zones, lipschitz=parse_lipschitz(lipschitz), quiet=quiet)
+        if not complete:
+            raise typer.Exit(1)
 
     @app.command()
     def demo(
@@ -521,4 +525,5 @@ def register(app: typer.Typer) -> None:
         config = {"command": "demo", "n": n, "seed": seed, "max_evals": max_evals, "landscape": landscape}
         summary = run_with_progress(spec, samples, out, det, executor="local", address=None, source=source,
                                     config=config, quiet=quiet, workers=workers)
-        finish(out, summary, csv=out / "jobs.csv", parquet=None, report=True, quiet=quiet)
+        if not finish(out, summary, csv=out / "jobs.csv", parquet=None, report=True, quiet=quiet):
+            raise typer.Exit(1)

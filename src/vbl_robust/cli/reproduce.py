@@ -226,7 +226,7 @@ def register(app: typer.Typer) -> None:
         if resume_from is not None and not resume_from.is_dir():
             fail(f"--resume-from {resume_from}: not a directory")
         references = {exp.name: _reference(check_against, exp.name) for exp in exps} if check_against else {}
-        differ = False
+        differ = incomplete = False  # an incomplete experiment does not stop the next ones; the exit code says it
         for exp in exps:
             spec = exp.build(seed, opts)
             spec = with_method_options(spec, method_opts, strict=False)  # checked over all experiments above
@@ -246,7 +246,7 @@ def register(app: typer.Typer) -> None:
             summary = run_with_progress(spec, samples, out_dir, det, executor=executor, address=address,
                                         source=source, config=config, quiet=quiet, workers=n_workers, wait=wait,
                                         retry_failed=retry_failed)
-            finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
+            incomplete |= not finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
             if references:
                 differ |= _check(exp.name, out_dir, references[exp.name])
         if group:
@@ -254,5 +254,5 @@ def register(app: typer.Typer) -> None:
 
             typer.echo(f"claims: {write_claims(root)}")
             typer.echo(f"index: {write_index(root, [e.name for e in exps], claims_html(claims_of(root), str(root)))}")
-        if differ:
+        if differ or incomplete:
             raise typer.Exit(1)
