@@ -67,6 +67,11 @@ def test_an_incomplete_run_exits_1_and_a_rerun_completes_it(tmp_path, monkeypatc
     (["--executor", "gpu"], "--executor"),
     (["--lipschitz", "-1"], "--lipschitz"),
     (["--model", "missing.pt"], "missing.pt"),
+    (["--seed", "-1"], "--seed"),
+    (["--max-evals", "-3"], "--max-evals"),
+    (["--max-seconds", "-1"], "--max-seconds"),
+    (["--oracle", "--oracle-noise", "-2"], "--oracle-noise"),
+    (["--width", "8"], "--width"),
 ])
 def test_audit_user_errors(tmp_path, args, message):
     res = runner.invoke(app, ["audit", "--out", str(tmp_path), "--n", "1", "--width", "128", "--height", "128", *args])

@@ -380,9 +380,9 @@ def register(app: typer.Typer) -> None:
                                                  "here or in --contrast, not both)."),
         methods: str = typer.Option(",".join(AUDIT_METHODS), "--methods", help="Comma-separated search methods."),
         method_option: list[str] | None = o.METHOD_OPTION,
-        max_evals: int | None = typer.Option(200, "--max-evals", help="Evaluations per image and method (0 = no "
+        max_evals: int | None = typer.Option(200, "--max-evals", min=0, help="Evaluations per image and method (0 = no "
                                                  "evaluation cap: then give --max-seconds)."),
-        max_seconds: float | None = typer.Option(None, "--max-seconds", help="Seconds per image and method."),
+        max_seconds: float | None = typer.Option(None, "--max-seconds", min=0.0, help="Seconds per image and method."),
         early_stop: bool = typer.Option(True, "--early-stop/--no-early-stop", help="Stop an image's search at its "
                                         "first breach (answers 'is there a breach?')."),
         lipschitz: str | None = typer.Option(None, "--lipschitz", help="Lipschitz constant of the error (m per unit, "

@@ -9,11 +9,11 @@ QUIET = typer.Option(False, "--quiet", "-q", help="No progress bar or tables (al
                      "vbl-robust -q COMMAND).")
 VERBOSE = typer.Option(False, "--verbose", "-v", help="Log progress details (INFO) (also accepted before the "
                        "command: vbl-robust -v COMMAND).")
-SEED = typer.Option(0, "--seed", help="Seed of the image choice and of the searches.")
+SEED = typer.Option(0, "--seed", min=0, help="Seed of the image choice and of the searches.")
 LARD = typer.Option(None, "--lard", help="LARD V2 dataset directory (CSV + runway DB JSON) instead of generated "
                     "synthetic approaches.")
-WIDTH = typer.Option(1024, "--width", help="Synthetic image width (px).")
-HEIGHT = typer.Option(1024, "--height", help="Synthetic image height (px).")
+WIDTH = typer.Option(1024, "--width", min=16, help="Synthetic image width (px).")
+HEIGHT = typer.Option(1024, "--height", min=16, help="Synthetic image height (px).")
 MODEL = typer.Option(None, "--model", help="Detector: a YOLO-pose .pt or .onnx file, 'default' for the shipped "
                      "model, or 'hardened' for the shipped model hardened by vbl-robust harden once installed "
                      "(default: the shipped model once it is validated, else the oracle).")
@@ -27,7 +27,7 @@ DEVICE = typer.Option("cpu", "--device", help="Where the pipeline runs: cpu (def
                       "when available). On a GPU the perturbation, views, detector and differentiable PnP run there; "
                       "--engine auto then means torch.")
 ORACLE = typer.Option(False, "--oracle", help="Use the oracle detector (exact projected corners).")
-ORACLE_NOISE = typer.Option(0.0, "--oracle-noise", help="Oracle: fixed per-image corner noise (px).")
+ORACLE_NOISE = typer.Option(0.0, "--oracle-noise", min=0.0, help="Oracle: fixed per-image corner noise (px).")
 METHOD_OPTION = typer.Option(None, "--method-option", help="A search method's option, METHOD.OPTION=VALUE "
                              "(repeatable; VALUE read as YAML: 9, 0.5, true, [3, 5]), e.g. georobust-a.min_ratio=9 or "
                              "georobust.alpha=3; recorded in the store and the job keys.")

@@ -13,7 +13,7 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def scenes(
         n: int = typer.Option(100, "--n", min=1, help="Number of approach images (without --sequences)."),
-        seed: int = typer.Option(0, "--seed", help="Seed; the same seed gives the same dataset."),
+        seed: int = typer.Option(0, "--seed", min=0, help="Seed; the same seed gives the same dataset."),
         out: Path = typer.Option(..., "--out", help="Output directory (images/, metadata CSV, runway DB JSON)."),
         width: int = typer.Option(1024, help="Image width in pixels."),
         height: int = typer.Option(1024, help="Image height in pixels."),

@@ -22,7 +22,7 @@ def register(app: typer.Typer) -> None:
         imgsz: int = typer.Option(320, "--imgsz", help="Network input size (multiple of 32)."),
         epochs: int = typer.Option(10, "--epochs", min=1, help="Epochs of this stage."),
         batch: int = typer.Option(16, "--batch", min=1, help="Training batch size (views per optimizer step)."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the rendered samples, the crops and the training."),
+        seed: int = typer.Option(0, "--seed", min=0, help="Seed of the rendered samples, the crops and the training."),
         detector: str = typer.Option("twostage", "--detector", help="'twostage' (full view + runway crop) or 'single'."),
         init: str = typer.Option(None, "--init", help="Initial weights of a first stage: a .pt path or 'default' (the shipped model)."),
         trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading an --init .pt pickle from outside the package."),
@@ -144,7 +144,7 @@ def register(app: typer.Typer) -> None:
         epochs: int = typer.Option(2, "--epochs", min=1, help="Epochs per round."),
         n_train: int = typer.Option(300, "--n-train", min=1, help="Synthetic training approaches."),
         n_val: int = typer.Option(60, "--n-val", min=1, help="Synthetic validation approaches (clean)."),
-        seed: int | None = typer.Option(None, "--seed", help="Seed of the training approaches (their own airports), "
+        seed: int | None = typer.Option(None, "--seed", min=0, help="Seed of the training approaches (their own airports), "
                                         "the candidates and the training (default: detect.protocol.HARDEN_SEED); the "
                                         "audits' seed 0 and the protocol's validation and test seeds are refused."),
         clean: bool = typer.Option(True, "--clean/--no-clean", help="Train on the clean images too (half the views)."),
