@@ -100,3 +100,31 @@ def test_report_shows_failed_evaluations_per_reason(tmp_path):
     assert "failed evals" in html and "Failed evaluations by reason" in html
     assert FAILURE_REASONS["no_detection"] in html and FAILURE_REASONS["pnp_failed"] in html
     assert re.search(r"<td[^>]*>20</td><td[^>]*>4</td><td[^>]*>3</td><td[^>]*>1</td>", html)  # evals, failed, per reason
+
+
+def test_searches_with_no_evaluation_in_time_are_counted_apart_in_the_report_and_the_cli(tmp_path, capsys):
+    """A time-budgeted search that completed no evaluation survives (it found nothing), but the tables must say so
+    rather than show a bare 100 % survival with no worst error."""
+    from types import SimpleNamespace
+
+    from vbl_robust.campaigns.store import JobRow
+    from vbl_robust.cli.audit import finish
+
+    budget = Budget(max_seconds=0.1, stop_at_breach=False)
+    spec = CampaignSpec("audit", (Block(boxes=(roll_box(5),), methods=("apgd", "random"), budgets=(budget,)),))
+    rows = [("apgd", None, 0, "no breach found"), ("random", 1200.0, 3, "breach")]
+    with ResultStore(tmp_path / "results.sqlite") as st:
+        st.bind_campaign(spec.name, spec.to_dict(), {"kind": "oracle", "sha256": None, "name": "oracle"})
+        st.commit([JobRow(key=f"k{i}", experiment="audit", kind="search", role="main", method=m, sample_id="s0",
+                          sample_index=0, status="done", box=roll_box(5), budget=budget, worst_m=w, verdict=v,
+                          nfev=n) for i, (m, w, n, v) in enumerate(rows)])
+    html = build_report(tmp_path).read_text()
+    assert "no evaluation in time" in html
+    done = SimpleNamespace(done=2, skipped=0, failed=0, seconds=1.0, status="finished")
+    assert finish(tmp_path, done, csv=None, parquet=None, report=False)
+    out = capsys.readouterr().out
+    assert "no eval in time" in out and "count as survivors" in out
+    apgd = next(line for line in out.splitlines() if "apgd" in line)
+    assert re.search(r"100\.0\s*│\s*1\s*│\s*–", apgd), apgd  # survival, 1 empty search, no median worst
+    random = next(line for line in out.splitlines() if "random" in line)
+    assert re.search(r"0\.0\s*│\s*0\s*│\s*1200\.0", random), random

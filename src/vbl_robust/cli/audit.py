@@ -312,14 +312,19 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
         for c in cols:  # a method's name is never cut (georobust and georobust-av must stay apart)
             table.add_column(heads[c], no_wrap=c == "method", min_width=max(len(str(ln.method)) for ln in lines)
                              if c == "method" else None)
-        for col in (f"{spec.unit}s", "survival %", "median worst (m)", "breaches", "failed jobs", "failed evals"):
+        empty = any(line.n_empty for line in lines)  # survivors never searched (no evaluation in a time budget)
+        for col in (f"{spec.unit}s", "survival %", *(["no eval in time"] if empty else []), "median worst (m)",
+                    "breaches", "failed jobs", "failed evals"):
             table.add_column(col, justify="right")
         for line in lines:
-            fe = line.failed_evals
+            fe, med = line.failed_evals, line.median_worst_m
             table.add_row(*(str(getattr(line, c)) for c in cols), str(line.n), f"{line.survival:.1f}",
-                          f"{line.median_worst_m:.1f}", str(line.breaches), str(line.failed),
-                          "–" if fe is None else str(fe))
+                          *([str(line.n_empty)] if empty else []), "–" if math.isnan(med) else f"{med:.1f}",
+                          str(line.breaches), str(line.failed), "–" if fe is None else str(fe))
         Console().print(table)
+        if empty:
+            typer.echo("no eval in time: searches that completed no evaluation within their time budget; they "
+                       "found nothing and count as survivors")
     status = f"{summary.done} new jobs, {summary.skipped} already done, {summary.failed} failed, {summary.seconds:.0f} s"
     typer.echo(f"{spec.name}: {status}; results in {out / 'results.sqlite'}")
     if summary.status != "finished":

@@ -38,6 +38,8 @@ def _summary_table(summary: Sequence[mx.Summary], unit: str = "image") -> str:
         ("breaches", "breaches", None), ("certified", "certified", None), ("failed", "failed", None),
         ("mean_nfev", "mean evals", None), ("failed_evals", "failed evals", None), ("median_search_s", "median s", None),
     ]
+    if any(line.n_empty for line in summary):  # survivors that were never searched: say how many
+        cols.insert(5, ("n_empty", "no evaluation in time", None))
     if any(line.read_from for line in summary):
         cols.append(("read_from", "read off the run", None))
     return table([ln.as_row() for ln in summary], cols, left=("method", "box_label", "budget_label", "read_from"))
