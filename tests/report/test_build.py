@@ -128,3 +128,28 @@ def test_searches_with_no_evaluation_in_time_are_counted_apart_in_the_report_and
     assert re.search(r"100\.0\s*│\s*1\s*│\s*–", apgd), apgd  # survival, 1 empty search, no median worst
     random = next(line for line in out.splitlines() if "random" in line)
     assert re.search(r"0\.0\s*│\s*0\s*│\s*1200\.0", random), random
+
+
+def test_markdown_survival_has_a_column_per_budget_when_the_run_has_several(tmp_path):
+    """A runtime experiment's survival is per budget: pooling the budgets into one cell would mean nothing."""
+    from vbl_robust.campaigns.store import JobRow
+    from vbl_robust.report.markdown import survival_markdown
+
+    short, long = Budget(max_seconds=0.5, stop_at_breach=False), Budget(max_evals=10, stop_at_breach=False)
+    spec = CampaignSpec("runtime", (Block(boxes=(roll_box(5),), methods=("apgd", "random"), budgets=(long, short)),))
+    worst = {("apgd", "s0", long): 1500.0, ("apgd", "s1", long): 300.0, ("random", "s0", long): 200.0,
+             ("random", "s1", long): 1200.0, ("apgd", "s0", short): None, ("apgd", "s1", short): 100.0,
+             ("random", "s0", short): 200.0, ("random", "s1", short): 400.0}
+    with ResultStore(tmp_path / "results.sqlite") as st:
+        st.bind_campaign(spec.name, spec.to_dict(), {"kind": "oracle", "sha256": None, "name": "oracle"})
+        st.commit([JobRow(key=f"k{i}", experiment="runtime", kind="search", role="main", method=m, sample_id=s,
+                          sample_index=int(s[1]), status="done", box=roll_box(5), budget=b,
+                          worst_m=w, verdict="no breach found" if w is None or w <= 1000 else "breach",
+                          nfev=0 if w is None else 10) for i, ((m, s, b), w) in enumerate(worst.items())])
+    text = survival_markdown(tmp_path)
+    head, rule, *body = [ln for ln in text.splitlines() if ln.startswith("|")][:5]
+    assert [c.strip() for c in head.strip("|").split("|")] == ["method", short.label, long.label]  # time budgets first
+    cells = {r[0]: r[1:] for r in ([c.strip() for c in ln.strip("|").split("|")] for ln in body)}
+    assert cells["apgd"] == ["100.0 (0)", "50.0 (1)"] and cells["random"] == ["100.0 (0)", "50.0 (1)"]
+    assert cells["any of them"] == ["100.0 (0)", "0.0 (2)"]
+    assert "Evaluations spent per job" not in text

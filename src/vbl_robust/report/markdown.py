@@ -3,7 +3,8 @@
 Everything is read from the store; nothing is evaluated. Only images whose every main job is stored count, so a
 run still in progress (or resumed across sessions) compares its methods on the same images.
 
-* :func:`survival_markdown` — survival % (breaches) per method and box, the union "any of them", evaluations
+* :func:`survival_markdown` — survival % (breaches) per method and box (and budget, where the run has several:
+  the runtime experiments), the union "any of them", evaluations
   spent, and where the run holds a dense landscape grid the found / true worst ratio of each method;
   ``others`` adds the main rows of other runs of the same experiment and seed as more methods (labelled with
   their options, e.g. ``georobust-a [vertices=True]``);
@@ -72,31 +73,46 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
         rows += [dataclasses.replace(r, method=_labelled(r)) for r in more]
     if not rows:
         raise ValueError(f"{run}: no search jobs stored yet")
-    keys = {(r.method, r.box_label) for r in rows}
+    # a column per box, or per box and budget where the run has several budgets (the runtime experiments: a
+    # survival pooled over budgets would mean nothing)
+    several = len({r.budget_label for r in rows}) > 1
+
+    def col(r) -> tuple:
+        return (r.box_label, r.budget_label if several else None)
+
+    keys = {(r.method, col(r)) for r in rows}
     per_image: dict[str, set] = defaultdict(set)
     for r in rows:
-        per_image[r.sample_id].add((r.method, r.box_label))
+        per_image[r.sample_id].add((r.method, col(r)))
     done = sorted(s for s, k in per_image.items() if k == keys)
     rows = [r for r in rows if r.sample_id in done]
     eps = spec.eps_safe_m
-    lines = mx.summarize(rows, eps, by=("method", "box_label"))
-    boxes = [b for b, _ in sorted({ln.box_label: ln.box_level for ln in lines}.items(),
-                                  key=lambda kv: kv[1] or 0.0)]
+    lines = mx.summarize(rows, eps, by=("method", "box_label", "budget_label") if several else ("method", "box_label"))
+
+    def order(ln) -> tuple:  # boxes by size, then time budgets before evaluation budgets, each ascending
+        def num(v: float) -> float:
+            return math.inf if math.isnan(v) else v
+        return (ln.box_level or 0.0, math.isnan(ln.max_seconds), num(ln.max_seconds), num(ln.max_evals))
+
+    cols = list(dict.fromkeys(col(ln) for ln in sorted(lines, key=order)))
+    one_box = len({b for b, _ in cols}) == 1
+    heads = [b if not several else (g if one_box else f"{b}, {g}") for b, g in cols]
     methods = list(dict.fromkeys(ln.method for ln in lines))
-    cell = {(ln.method, ln.box_label): ln for ln in lines}
+    cell = {(ln.method, col(ln)): ln for ln in lines}
+    where = f"; box {cols[0][0]}" if several and one_box else ""
     out = [f"{run}: {len(done)} {spec.unit}s completed by every method (of {len(per_image)} started); "
-           f"ε_safe = {eps:g} m; cell = survival % (breaches)", ""]
-    table = [[m, *(f"{cell[(m, b)].survival:.1f} ({cell[(m, b)].breaches})" if (m, b) in cell else "–"
-                   for b in boxes)] for m in methods]
-    if len(methods) > 1 and done:  # the union: an image breaches a box when any method found a breach there
+           f"ε_safe = {eps:g} m{where}; cell = survival % (breaches)", ""]
+    table = [[m, *(f"{cell[(m, c)].survival:.1f} ({cell[(m, c)].breaches})" if (m, c) in cell else "–"
+                   for c in cols)] for m in methods]
+    if len(methods) > 1 and done:  # the union: an image breaches a column when any method found a breach there
         hit = defaultdict(set)
         for r in rows:
             if r.worst_m is not None and r.worst_m > eps:
-                hit[r.box_label].add(r.sample_id)
-        table.append(["any of them", *(f"{100.0 * (len(done) - len(hit[b])) / len(done):.1f} ({len(hit[b])})"
-                                       for b in boxes)])
-    out += _table(["method", *boxes], table)
-    if len(methods) > 1:
+                hit[col(r)].add(r.sample_id)
+        table.append(["any of them", *(f"{100.0 * (len(done) - len(hit[c])) / len(done):.1f} ({len(hit[c])})"
+                                       for c in cols)])
+    out += _table(["method", *heads], table)
+    if len(methods) > 1 and not several:  # (with several budgets the budgets set the evaluations)
         out += ["", "Evaluations spent per job, mean over all jobs / over the jobs that found a breach: " + "; ".join(
             f"{m} {_mean([r.nfev for r in rows if r.method == m]):.0f} / "
             f"{_mean([r.nfev for r in rows if r.method == m and (r.worst_m or 0) > eps]):.1f}" for m in methods) + "."]
@@ -104,12 +120,12 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
         if g.points is None or not len(g.points) or g.sample_id not in done:
             continue
         xs, fs = g.points.xs, g.points.fs
-        here = {(r.method, r.box_label): r for r in rows if r.sample_id == g.sample_id}
+        here = {(r.method, col(r)): r for r in rows if r.sample_id == g.sample_id}
         ratios = []
         for m in methods:
             vals = []
-            for b in boxes:
-                r = here.get((m, b))
+            for c in cols:
+                r = here.get((m, c))
                 if r is None or r.box is None or r.worst_m is None:
                     vals.append("–")
                     continue
@@ -119,7 +135,7 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
                 vals.append(f"{r.worst_m / true:.3f}" if true > 0 else "–")
             ratios.append([m, *vals])
         out += ["", f"Landscape grid on image {g.sample_id} ({len(fs)} points over {g.box_label}): found / true worst",
-                "", *_table(["method", *boxes], ratios)]
+                "", *_table(["method", *heads], ratios)]
     return "\n".join(out) + "\n"
 
 
