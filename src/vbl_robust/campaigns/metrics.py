@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -148,6 +148,19 @@ class Summary:
         if axis not in ("max_seconds", "max_evals", "max_iters"):
             raise ValueError(f"axis must be max_seconds, max_evals or max_iters, got {axis!r}")
         return getattr(self, axis)
+
+
+def columns(rows: Sequence[JobRow]) -> tuple[bool, Callable[[Any], str]]:
+    """Whether ``rows`` hold several budgets, and the table column of a row (or of a :class:`Summary` grouped by
+    box and budget): its box label, followed by its budget label where there are several (the runtime
+    experiments: a survival pooled over budgets would mean nothing). The one rule of ``report --format md`` and
+    of the paired comparison (``--compare``)."""
+    several = len({r.budget_label for r in rows}) > 1
+
+    def column(r: Any) -> str:
+        return f"{r.box_label}, {r.budget_label}" if several else str(r.box_label)
+
+    return several, column
 
 
 def summarize(rows: Iterable[JobRow], eps_safe_m: float,

@@ -108,10 +108,7 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
     spec_b, rows_b, det_b, _ = _read(after)
     check_alike(before, spec, rows_a, after, spec_b, rows_b)
     eps = spec.eps_safe_m
-    several = len({r.budget_label for r in rows_a}) > 1
-
-    def where(r: JobRow) -> str:  # the box, and the budget where the run has several
-        return f"{r.box_label}, {r.budget_label}" if several else str(r.box_label)
+    _, where = mx.columns(rows_a)  # the box, and the budget where the run has several
 
     def index_rows(rows: Sequence[JobRow]) -> dict[tuple[str, str, str], JobRow]:
         return {(r.method, where(r), r.sample_id): r for r in rows}

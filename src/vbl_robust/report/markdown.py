@@ -73,13 +73,7 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
         rows += [dataclasses.replace(r, method=_labelled(r)) for r in more]
     if not rows:
         raise ValueError(f"{run}: no search jobs stored yet")
-    # a column per box, or per box and budget where the run has several budgets (the runtime experiments: a
-    # survival pooled over budgets would mean nothing)
-    several = len({r.budget_label for r in rows}) > 1
-
-    def col(r) -> tuple:
-        return (r.box_label, r.budget_label if several else None)
-
+    several, col = mx.columns(rows)  # a column per box, or per box and budget (the runtime experiments)
     keys = {(r.method, col(r)) for r in rows}
     per_image: dict[str, set] = defaultdict(set)
     for r in rows:
@@ -87,19 +81,21 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
     done = sorted(s for s, k in per_image.items() if k == keys)
     rows = [r for r in rows if r.sample_id in done]
     eps = spec.eps_safe_m
-    lines = mx.summarize(rows, eps, by=("method", "box_label", "budget_label") if several else ("method", "box_label"))
+    lines = mx.summarize(rows, eps)
 
     def order(ln) -> tuple:  # boxes by size, then time budgets before evaluation budgets, each ascending
         def num(v: float) -> float:
             return math.inf if math.isnan(v) else v
         return (ln.box_level or 0.0, math.isnan(ln.max_seconds), num(ln.max_seconds), num(ln.max_evals))
 
-    cols = list(dict.fromkeys(col(ln) for ln in sorted(lines, key=order)))
-    one_box = len({b for b, _ in cols}) == 1
-    heads = [b if not several else (g if one_box else f"{b}, {g}") for b, g in cols]
+    ordered = sorted(lines, key=order)
+    cols = list(dict.fromkeys(col(ln) for ln in ordered))
+    boxes = list(dict.fromkeys(ln.box_label for ln in ordered))
+    one = f"{boxes[0]}, " if several and len(boxes) == 1 else ""  # one box: the columns name only the budgets
+    heads = [c.removeprefix(one) for c in cols]
     methods = list(dict.fromkeys(ln.method for ln in lines))
     cell = {(ln.method, col(ln)): ln for ln in lines}
-    where = f"; box {cols[0][0]}" if several and one_box else ""
+    where = f"; box {boxes[0]}" if one else ""
     out = [f"{run}: {len(done)} {spec.unit}s completed by every method (of {len(per_image)} started); "
            f"ε_safe = {eps:g} m{where}; cell = survival % (breaches)", ""]
     table = [[m, *(f"{cell[(m, c)].survival:.1f} ({cell[(m, c)].breaches})" if (m, c) in cell else "–"
