@@ -42,6 +42,8 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
     text = repro.read_text()
     assert text.startswith("# prose before\n") and text.endswith("prose after\n") and "old table" not in text
     assert (bundle / "claims.md").read_text() in text and (bundle / "status.md").read_text() in text
+    index = (bundle / "index.html").read_text()  # the bundle's own page: each report, its jobs, the claims
+    assert all(f'href="{name}/report.html"' in index for name in EXPERIMENTS) and "claims, checked" in index
     status = (bundle / "status.md").read_text()
     with ResultStore.open_existing(out / "spatial-1d") as store:
         n_jobs_s1 = store.count()
@@ -58,7 +60,7 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
         assert name != "spatial-1d" or "data:image/png;base64," in page  # figures are embedded
         assert not (bundle / name / "figures").exists() and not (bundle / name / "results.sqlite").exists()
         assert (bundle / name / "results.sqlite.xz").stat().st_size > 0
-        assert f"| {name} | {n_jobs} / {n_jobs} |" in status
+        assert f"| {name} | {n_jobs} / {n_jobs} |" in status and f"{name}</a> — {n_jobs} of {n_jobs} jobs" in index
         t = prov["totals"]  # the searches' hours on the campaign's clock beside the wall and worker hours
         assert f"| {t['search_s'] / 3600:.2f} | {t['clock']} |" in status
     # a smaller run reproduces the bundle's rows (the issue's check: reproduce EXPERIMENT --images 3), checked

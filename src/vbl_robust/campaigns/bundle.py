@@ -15,8 +15,9 @@ or ``all`` writes them; a run still in progress is read as it stands) and writes
 and, with ``stores=True``, ``results.sqlite.xz``: a compact copy of the store (``VACUUM INTO`` then xz), from which
 :func:`restore_store` lets a fresh checkout resume an unfinished run (``reproduce --resume-from``);
 
-and ``out/status.md``: one line per experiment (jobs done / planned, images, wall and worker hours), and
-``out/claims.md``: the paper's claims checked on those stores (:mod:`vbl_robust.report.claims`). With
+and ``out/status.md``: one line per experiment (jobs done / planned, images, wall and worker hours),
+``out/claims.md``: the paper's claims checked on those stores (:mod:`vbl_robust.report.claims`), and
+``out/index.html``: a link to each report (with its jobs done) and the claims section. With
 ``reproduction=PATH`` the part of that Markdown file between :data:`BEGIN` and :data:`END` is replaced by the
 claims and status tables (the rest of it is prose kept as written). Without ``stores``
 the SQLite stores are not copied (tens of MB); rerunning the command that made them regenerates them.
@@ -164,7 +165,7 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
     ``out/status.md`` and ``out/claims.md`` (and the generated part of ``reproduction``) and returns the totals per
     experiment. ``FileNotFoundError`` when there is no run; ``ValueError`` when ``reproduction`` lacks the
     markers (checked before any work)."""
-    from ..report.claims import claims_markdown, claims_of
+    from ..report.claims import claims_html, claims_markdown, claims_of, write_index
 
     runs = run_dirs(root, names)
     if not runs:
@@ -176,9 +177,13 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
             raise ValueError(f"{reproduction}: needs one {BEGIN} line followed by one {END} line")
     totals = {run.name: write_experiment(run, Path(out) / run.name, stores) for run in runs}
     status = status_markdown(totals)
-    claims = claims_markdown(claims_of(root), str(root))
+    checked = claims_of(root)
+    claims = claims_markdown(checked, str(root))
     (Path(out) / "status.md").write_text(status)
     (Path(out) / "claims.md").write_text(claims)
+    write_index(out, list(totals), claims_html(checked, str(root)),
+                {n: f"{t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} of {t['images']} images"
+                 for n, t in totals.items()})
     if text is not None:
         head, rest = text.split(BEGIN)
         tail = rest.split(END)[1]

@@ -76,19 +76,6 @@ def _estimate(exps: list, opts: Any, seed: int, images: int | None, det: Any, pr
                "every budget spent, no early stop)")
 
 
-def write_index(out: Path, names: list[str], extra: str = "") -> Path:
-    """``out/index.html``: one link per experiment report (those that exist), then ``extra`` HTML (the claims)."""
-    import html
-
-    items = "".join(
-        f'<li><a href="{html.escape(n)}/report.html">{html.escape(n)}</a></li>' if (out / n / "report.html").exists()
-        else f"<li>{html.escape(n)} (no report yet: rerun to resume)</li>" for n in names)
-    page = (f"<!doctype html><meta charset='utf-8'><title>vbl-robust: the paper's experiments</title>"
-            f"<h1>vbl-robust: the paper's experiments</h1><ul>{items}</ul>{extra}")
-    (out / "index.html").write_text(page)
-    return out / "index.html"
-
-
 def _reference(root: Path, name: str) -> Path:
     """``--check-against``: where experiment ``name``'s earlier rows are (``root/name`` or ``root`` itself: a run
     directory with a results store, a bundle's experiment directory with ``jobs.parquet``, or that file); refused
@@ -250,7 +237,7 @@ def register(app: typer.Typer) -> None:
             if references:
                 differ |= _check(exp.name, out_dir, references[exp.name])
         if group:
-            from vbl_robust.report.claims import claims_html, claims_of, write_claims
+            from vbl_robust.report.claims import claims_html, claims_of, write_claims, write_index
 
             typer.echo(f"claims: {write_claims(root)}")
             typer.echo(f"index: {write_index(root, [e.name for e in exps], claims_html(claims_of(root), str(root)))}")

@@ -54,12 +54,12 @@ from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import JobRow, JobStatus, ResultStore
 from ..constants import Verdict
 from ..search import direct_family
-from .html import fmt_num
+from .html import esc, fmt_num, page
 from .rows import Context, main_boxes, reference
 
 __all__ = ["CLAIMS", "VERDICTS", "Claim", "at_most", "behind", "claims_html", "claims_markdown", "claims_of", "combine",
            "crosses_by", "exceptions", "first_breach_s", "largest_jump", "phi_near", "plateaus_near", "ra_below",
-           "rises_then_plateaus", "rough_verdict", "times_differ", "write_claims"]
+           "rises_then_plateaus", "rough_verdict", "times_differ", "write_claims", "write_index"]
 
 logger = logging.getLogger(__name__)
 
@@ -534,6 +534,24 @@ def claims_html(claims: Sequence[Claim], source: str = "ROOT") -> str:
                    for c in claims)
     return (f'<section class="claims"><h2>The paper\'s claims, checked</h2><table><thead><tr>{head}</tr></thead>'
             f"<tbody>{body}</tbody></table><p>{html.escape(GENERATED.format(source))}</p></section>")
+
+
+def write_index(out: str | Path, names: Sequence[str], extra: str = "",
+                notes: Mapping[str, str] | None = None) -> Path:
+    """``out/index.html``, the page of a set of experiment runs (``reproduce paper|all``) or of their bundle: one
+    link per experiment's report (those that exist; ``notes[name]``, e.g. its jobs done, after it), then ``extra``
+    HTML (the claims section, :func:`claims_html`); returns its path."""
+    out, notes = Path(out), notes or {}
+
+    def item(n: str) -> str:
+        note = f" — {esc(notes[n])}" if n in notes else ""
+        if (out / n / "report.html").exists():
+            return f'<li><a href="{esc(n)}/report.html">{esc(n)}</a>{note}</li>'
+        return f"<li>{esc(n)} (no report yet: rerun to resume){note}</li>"
+
+    title = "vbl-robust: the paper's experiments"
+    (out / "index.html").write_text(page(title, f"<h1>{esc(title)}</h1><ul>{''.join(map(item, names))}</ul>{extra}"))
+    return out / "index.html"
 
 
 def write_claims(root: str | Path, out: str | Path | None = None) -> Path:
