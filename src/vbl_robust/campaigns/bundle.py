@@ -162,9 +162,9 @@ def status_markdown(totals: dict[str, dict[str, Any]]) -> str:
 def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
                  reproduction: Path | None = None, stores: bool = False) -> dict[str, dict[str, Any]]:
     """Bundle every experiment run under ``root`` (those of ``names`` that exist) into ``out``; writes
-    ``out/status.md`` and ``out/claims.md`` (and the generated part of ``reproduction``) and returns the totals per
-    experiment. ``FileNotFoundError`` when there is no run; ``ValueError`` when ``reproduction`` lacks the
-    markers (checked before any work)."""
+    ``out/status.md``, ``out/claims.md`` and ``out/index.html`` (and the generated part of ``reproduction``) and
+    returns the totals per experiment. ``FileNotFoundError`` when there is no run; ``ValueError`` when
+    ``reproduction`` lacks the markers (checked before any work)."""
     from ..report.claims import claims_html, claims_markdown, claims_of, write_index
 
     runs = run_dirs(root, names)
