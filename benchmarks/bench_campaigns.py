@@ -110,12 +110,16 @@ def durations(detector, bundle: Path, quick: bool) -> str:
              "| experiment | images | expected (h) | upper bound (h) | jobs measured | searches, measured (CPU h) | "
              "searches ÷ workers (h) | measured ÷ expected | wall of its runs (h) |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    sums = {"t": 0.0, "ub": 0.0, "spent": 0.0, "wall": 0.0, "complete": True}
     for name, spec in specs.items():
         n = EXPERIMENTS[name].images
         t, ub = expected_seconds(spec, n, pr, WORKERS), expected_seconds(spec, n, Probe(pr.rate, pr.grad_rate), WORKERS)
         prov = bundle / name / "provenance.json"
         tot = json.loads(prov.read_text())["totals"] if prov.is_file() else None
+        sums["t"] += t
+        sums["ub"] += ub
         if tot is None or tot["clock"] != "process":
+            sums["complete"] = False
             lines.append(f"| {name} | {n} | {t / 3600:.2f} | {ub / 3600:.2f} | – | – | – | – | – |")
             continue
         done = f"{tot['jobs_done']} / {tot['jobs_planned']}"
@@ -124,11 +128,34 @@ def durations(detector, bundle: Path, quick: bool) -> str:
         ratio = f"{spent / WORKERS / t:.2f}" if tot["jobs_done"] == tot["jobs_planned"] and t else "(partial)"
         lines.append(f"| {name} | {n} | {t / 3600:.2f} | {ub / 3600:.2f} | {done} | {search:.2f} | "
                      f"{search / WORKERS:.2f} | {ratio} | {tot['wall_s'] / 3600:.2f} |")
+        sums["spent"] += spent
+        sums["wall"] += tot["wall_s"]
+        sums["complete"] &= tot["jobs_done"] == tot["jobs_planned"]
+    if sums["complete"]:
+        s = sums["spent"] / 3600
+        lines.append(f"| **all** | | {sums['t'] / 3600:.2f} | {sums['ub'] / 3600:.2f} | | {s:.2f} | "
+                     f"{s / WORKERS:.2f} | {sums['spent'] / WORKERS / sums['t']:.2f} | {sums['wall'] / 3600:.2f} |")
     return "\n".join(lines) + "\n"
+
+
+def _convergence_spend(bundle: Path) -> str:
+    """What the bundle's convergence jobs spent, for the note under the durations table ("" without its table)."""
+    table = bundle / "convergence" / "jobs.parquet"
+    if not table.is_file():
+        return ""
+    import pyarrow.parquet as pq
+
+    nfev = [v for v in pq.read_table(table, columns=["nfev"]).column("nfev").to_pylist() if v is not None]
+    if not nfev:
+        return ""
+    return (f"; its {len(nfev)} runs of GeoRobust spent {sum(nfev) / len(nfev):.0f} evaluations on average "
+            f"(at most {max(nfev)}): 1-D DIRECT selects few rectangles per iteration")
 
 
 def main(quick: bool = False, oracle_only: bool = False) -> str:
     import torch
+
+    from vbl_robust.campaigns.experiments import CONVERGENCE_MAX_EVALS
 
     torch.set_num_threads(1)
     oracle, det = _detectors(oracle_only)
@@ -149,7 +176,9 @@ def main(quick: bool = False, oracle_only: bool = False) -> str:
         "the full-size run's searches in CPU hours, from the committed bundle `results/paper` (each experiment's "
         "`provenance.json`; `vbl-robust bundle` writes it), and that time split over the two workers — what an idle "
         "machine needs (the PnP validation has no search: its jobs' own time); the wall time of its runs also holds "
-        "the sessions' other work. \"measured ÷ expected\" once an experiment is complete.\n\n" + t_exp
+        "the sessions' other work. \"measured ÷ expected\" once an experiment is complete; the row \"all\" once "
+        "every experiment is. The convergence experiment's expectation charges each image its evaluation cap "
+        f"({CONVERGENCE_MAX_EVALS}){_convergence_spend(BUNDLE)}.\n\n" + t_exp
     )
 
 
