@@ -31,11 +31,12 @@ mkdir -p "$OUT"
 
 # 1. training (resumes its rounds)
 $VR harden --perturb roll_deg=-30,30 --rounds 2 --k 8 --epochs 2 --n-train 300 --n-val 60 --threads 1 --out "$H"
-W=$($PY -c "import json, sys; print(json.load(open(sys.argv[1]))['weights'])" "$H/round01/round.json")
+# the last round's weights, as an absolute path (round.json may hold either; the protocol runs from benchmarks/)
+W=$($PY -c "import json, os, sys; print(os.path.abspath(json.load(open(sys.argv[1]))['weights']))" "$H/round01/round.json")
 HARDENED=(--model hardened)
 
 # 2. nominal accuracy on every protocol seed, the validation seeds paired with v9; then ship it beside v9
-[ -f "$OUT/protocol_all.json" ] || (cd benchmarks && ../$PY detector_protocol.py --model "../$W" --split all \
+[ -f "$OUT/protocol_all.json" ] || (cd benchmarks && ../$PY detector_protocol.py --model "$W" --split all \
   --json "../$OUT/protocol_all.json" --compare ../results/detector_candidates/protocol_v9_validation.json) \
   | tee "$OUT/nominal.txt"
 [ -f src/vbl_robust/models/hardened/runway_yolov8n_pose.pt ] || $VR ship "$W" --as hardened --version 1 \
