@@ -219,11 +219,16 @@ def test_the_hardened_model_ships_beside_the_default(tiny_pose_pt, tmp_path, mon
         DetectorSpec.shipped("robust")
 
 
-def test_the_commands_name_a_missing_hardened_model_in_one_line(tmp_path):
+def test_the_commands_name_a_missing_hardened_model_in_one_line(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 
     from vbl_robust.cli import app
+    from vbl_robust.detect import shipped
 
+    # an installation without the hardened model (the repository ships one since issue 29)
+    monkeypatch.setattr(shipped, "MODELS_DIR", tmp_path / "installed_models")
+    tmp_path = tmp_path / "out"
+    tmp_path.mkdir()
     runner = CliRunner()
     for args, message in ((["audit", "--model", "hardened", "--out", str(tmp_path / "a")],
                            "--model hardened: the shipped hardened detector model is not installed"),
