@@ -64,10 +64,13 @@ from pathlib import Path
 import torch
 
 from vbl_robust.detect.shipped import DEFAULT_MODEL
-from vbl_robust.detect.train import train
+from vbl_robust.detect.train import SHIPPED_DATA, train
 
 COMMON = dict(n_val=60, imgsz=320, crops_per_sample=1, batch=16, workers=0, resume=True, n_airports=2000,
               threads=1, optimizer="AdamW", warmup_epochs=0.1, min_box=24, pose=36.0, save_period=1)
+#: the generator options of steps K on (their airport pool is COMMON's): detect.train.SHIPPED_DATA
+GEN = {k: v for k, v in SHIPPED_DATA.items() if k != "n_airports"}
+assert SHIPPED_DATA["n_airports"] == COMMON["n_airports"]
 
 #: step → (default epochs, train() arguments). ``init_weights`` is the shipped model at the time the step ran,
 #: unless the step names another step's checkpoint in ``INIT``.
@@ -75,26 +78,26 @@ STEPS = {
     "j": (5, dict(seed=7, n_train=3000, lr0=3e-4, lrf=0.1,
                   generate_options={"weights": (2.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
     "k": (3, dict(seed=8, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True,
-                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+                  generate_options=GEN)),
     "l": (3, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={},
-                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+                  generate_options=GEN)),
     "n": (3, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, crop_jitter={"min_side": 40.0},
-                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+                  generate_options=GEN)),
     "o": (2, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, pose=108.0,
-                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+                  generate_options=GEN)),
     "p": (2, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, width_loss=0.5,
-                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+                  generate_options=GEN)),
     "q": (2, dict(seed=10, n_train=3000, lr0=1e-4, lrf=0.1, cos_lr=True, appearance={}, width_loss=0.5,
-                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+                  generate_options=GEN)),
     "r": (2, dict(seed=11, n_train=3000, lr0=1e-4, lrf=0.1, cos_lr=True, appearance={}, width_loss=0.5,
-                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+                  generate_options=GEN)),
     "s": (2, dict(seed=12, n_train=3000, lr0=1e-4, lrf=0.1, cos_lr=True, appearance={}, width_loss=0.5,
-                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+                  generate_options=GEN)),
     "t": (3, dict(seed=12, n_train=3000, lr0=1e-4, lrf=0.1, cos_lr=True, appearance={}, width_loss=0.5,
                   full_views=False,
-                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+                  generate_options=GEN)),
     "m": (2, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, degrees=30.0, pose=72.0,
-                  generate_options={"weights": (3.0, 1.0, 1.0), "runway_length_range_m": (1500.0, 4500.0)})),
+                  generate_options=GEN)),
 }
 
 #: step → (step, epoch index) whose saved checkpoint it starts from, instead of the shipped model.

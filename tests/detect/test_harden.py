@@ -112,7 +112,33 @@ def test_the_command_refuses_bad_input_in_one_line(tmp_path):
                           (["--perturb", "roll_deg", "--model", str(pt)], "pass --trust-model"),
                           (["--perturb", "roll_deg", "--seed", "0"], "--seed 0: the approaches of this seed are an "
                                                                       "audit's"),
-                          (["--perturb", "roll_deg", "--seed", "777001"], "never trained on")):
+                          (["--perturb", "roll_deg", "--seed", "777001"], "never trained on"),
+                          (["--perturb", "roll_deg", "--data", "lard"], "--data lard: choose audit or shipped")):
         res = runner.invoke(app, ["harden", "--out", str(tmp_path / "h"), *args])
         assert res.exit_code == 2 and message in res.output, (args, res.output)
     assert not (tmp_path / "h").exists()
+
+
+@pytest.mark.parametrize("data", ["audit", "shipped"])
+def test_the_command_draws_its_approaches_from_the_data_it_names(tmp_path, monkeypatch, data):
+    """``--data shipped``: the shipped model's own training mix (detect.train.SHIPPED_DATA), ``audit``: the
+    generator's defaults; the validation approaches from the same mix."""
+    from typer.testing import CliRunner
+
+    from vbl_robust.cli import app
+    from vbl_robust.detect import harden as harden_module
+    from vbl_robust.detect.protocol import HARDEN_SEED
+    from vbl_robust.detect.train import SHIPPED_DATA, VAL_SEED_OFFSET
+    from vbl_robust.scenes import generate
+
+    seen = {}
+    monkeypatch.setattr(harden_module, "harden", lambda out, box, **kw: seen.update(kw) or [])
+    res = CliRunner().invoke(app, ["harden", "--perturb", "roll_deg", "--n-train", "6", "--n-val", "3", "--data", data,
+                                   "--out", str(tmp_path / "h")])
+    assert res.exit_code == 0, res.output
+    options = SHIPPED_DATA if data == "shipped" else {}
+    for key, n, seed in (("train_samples", 6, HARDEN_SEED), ("val_samples", 3, HARDEN_SEED + VAL_SEED_OFFSET)):
+        want = [s.position.tolist() for s in generate(n, seed=seed, **options)]
+        other = [s.position.tolist() for s in generate(n, seed=seed, **({} if options else SHIPPED_DATA))]
+        got = [s.position.tolist() for s in seen[key]]
+        assert got == want and got != other

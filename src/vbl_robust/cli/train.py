@@ -148,6 +148,9 @@ def register(app: typer.Typer) -> None:
                                         "the candidates and the training (default: detect.protocol.HARDEN_SEED); the "
                                         "audits' seed 0 and the protocol's validation and test seeds are refused."),
         clean: bool = typer.Option(True, "--clean/--no-clean", help="Train on the clean images too (half the views)."),
+        data: str = typer.Option("audit", "--data", help="Which synthetic approaches: audit (the generator's defaults, "
+                                 "as the audits draw them) or shipped (the shipped model's own training mix: three far "
+                                 "approaches for each medium and close one, 2000 airports; detect.train.SHIPPED_DATA)."),
         imgsz: int = typer.Option(320, "--imgsz", help="Network input size (multiple of 32)."),
         batch: int = typer.Option(16, "--batch", min=1, help="Training batch size (views per optimizer step)."),
         threads: int = typer.Option(None, "--threads", min=1, help="Torch threads for CPU training (default: all cores)."),
@@ -156,12 +159,15 @@ def register(app: typer.Typer) -> None:
         from vbl_robust.detect.harden import harden as run_harden
         from vbl_robust.detect.protocol import HARDEN_FORBIDDEN_SEEDS, HARDEN_SEED
         from vbl_robust.detect.shipped import SHIPPED_MODELS, default_model_path, default_model_status
-        from vbl_robust.detect.train import VAL_SEED_OFFSET
+        from vbl_robust.detect.train import SHIPPED_DATA, VAL_SEED_OFFSET
         from vbl_robust.scenes import generate
         from vbl_robust.space import ParameterBox
 
         from .audit import parse_perturb
 
+        scenes = {"audit": {}, "shipped": SHIPPED_DATA}
+        if data not in scenes:
+            fail(f"--data {data}: choose {' or '.join(scenes)}")
         seed = HARDEN_SEED if seed is None else seed
         if seed in HARDEN_FORBIDDEN_SEEDS:
             fail(f"--seed {seed}: the approaches of this seed are an audit's or the detector protocol's (never trained "
@@ -178,8 +184,8 @@ def register(app: typer.Typer) -> None:
             fail(f"--model {model}: a .pt file is a pickle that runs code when loaded; pass --trust-model if you trust it")
         try:
             box = ParameterBox(parse_perturb(perturb))
-            rs = run_harden(out, box, train_samples=generate(n_train, seed=seed),
-                            val_samples=generate(n_val, seed=seed + VAL_SEED_OFFSET), init_weights=model,
+            rs = run_harden(out, box, train_samples=generate(n_train, seed=seed, **scenes[data]),
+                            val_samples=generate(n_val, seed=seed + VAL_SEED_OFFSET, **scenes[data]), init_weights=model,
                             rounds=rounds, k=k, epochs=epochs, seed=seed, imgsz=imgsz, batch=batch, threads=threads,
                             clean=clean)
         except (ValueError, FileNotFoundError) as exc:

@@ -66,6 +66,12 @@ VAL_SEED_OFFSET = 1_000_003
 FINE_TUNE = dict(optimizer="AdamW", lr0=1e-4, lrf=0.1, cos_lr=True, warmup_epochs=0.1, min_box=24.0, pose=36.0,
                  width_loss=0.5, appearance={}, crops_per_sample=1, workers=0)
 
+#: The synthetic data of the shipped model's last training steps (training log K–R → v9, ``tools/train_step.py``):
+#: three far approaches for each medium and each close one, runways 1500–4500 m long, a pool of 2000 airports
+#: (``scenes.generate`` keyword arguments). ``vbl-robust harden --data shipped`` draws its approaches from it, so
+#: that a fine-tune does not also move the model to another mix of envelopes and airports.
+SHIPPED_DATA = dict(weights=(3.0, 1.0, 1.0), runway_length_range_m=(1500.0, 4500.0), n_airports=2000)
+
 
 @dataclass
 class CropJitter:
