@@ -66,11 +66,11 @@ import torch
 from vbl_robust.detect.shipped import DEFAULT_MODEL
 from vbl_robust.detect.train import SHIPPED_DATA, train
 
-COMMON = dict(n_val=60, imgsz=320, crops_per_sample=1, batch=16, workers=0, resume=True, n_airports=2000,
-              threads=1, optimizer="AdamW", warmup_epochs=0.1, min_box=24, pose=36.0, save_period=1)
+COMMON = dict(n_val=60, imgsz=320, crops_per_sample=1, batch=16, workers=0, resume=True,
+              n_airports=SHIPPED_DATA["n_airports"], threads=1, optimizer="AdamW", warmup_epochs=0.1, min_box=24,
+              pose=36.0, save_period=1)
 #: the generator options of steps K on (their airport pool is COMMON's): detect.train.SHIPPED_DATA
 GEN = {k: v for k, v in SHIPPED_DATA.items() if k != "n_airports"}
-assert SHIPPED_DATA["n_airports"] == COMMON["n_airports"]
 
 #: step → (default epochs, train() arguments). ``init_weights`` is the shipped model at the time the step ran,
 #: unless the step names another step's checkpoint in ``INIT``.

@@ -227,15 +227,15 @@ def test_the_commands_name_a_missing_hardened_model_in_one_line(tmp_path, monkey
 
     # an installation without the hardened model (the repository ships one since issue 29)
     monkeypatch.setattr(shipped, "MODELS_DIR", tmp_path / "installed_models")
-    tmp_path = tmp_path / "out"
-    tmp_path.mkdir()
+    out = tmp_path / "out"
+    out.mkdir()
     runner = CliRunner()
-    for args, message in ((["audit", "--model", "hardened", "--out", str(tmp_path / "a")],
+    for args, message in ((["audit", "--model", "hardened", "--out", str(out / "a")],
                            "--model hardened: the shipped hardened detector model is not installed"),
-                          (["harden", "--perturb", "roll_deg", "--model", "hardened", "--out", str(tmp_path / "h")],
+                          (["harden", "--perturb", "roll_deg", "--model", "hardened", "--out", str(out / "h")],
                            "--model hardened: the shipped hardened detector model is not installed"),
-                          (["ship", str(tmp_path / "c.pt"), "--version", "1", "--epochs", "1", "--protocol",
-                            str(tmp_path / "p.json"), "--as", "robust"], "--as robust: shipped models are")):
+                          (["ship", str(out / "c.pt"), "--version", "1", "--epochs", "1", "--protocol",
+                            str(out / "p.json"), "--as", "robust"], "--as robust: shipped models are")):
         res = runner.invoke(app, args)
         assert res.exit_code == 2 and message in res.output, (args, res.output)
-    assert not any(tmp_path.iterdir())
+    assert not any(out.iterdir())
