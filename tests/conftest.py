@@ -18,8 +18,8 @@ ROOT = Path(__file__).resolve().parents[1]
 # Never let ultralytics or any library reach the network from the tests.
 os.environ.setdefault("YOLO_OFFLINE", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
-# CLI runs stay in the test process (worker processes are tested where asked for: --workers 2).
-os.environ.setdefault("VBL_ROBUST_WORKERS", "1")
+# No global override of the worker count, engine or device: tests run what users get by default
+# (tests/cli/test_user_paths.py); a test that needs the jobs in its own process says --workers 1.
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -3,12 +3,15 @@ sequence campaign, generated approach sequences or a LARD V2 directory grouped i
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .provenance import file_sha256
+
+logger = logging.getLogger(__name__)
 
 
 def find_lard_files(directory: str | Path) -> tuple[Path, Path]:
@@ -32,12 +35,13 @@ def find_lard_files(directory: str | Path) -> tuple[Path, Path]:
 
 
 def load_samples(n: int, seed: int, *, lard: str | Path | None = None, width: int = 1024, height: int = 1024,
-                 **read_options: Any) -> tuple[list[Any], dict[str, Any]]:
+                 at_most: bool = False, **read_options: Any) -> tuple[list[Any], dict[str, Any]]:
     """``n`` samples and a description of their source (provenance).
 
     Synthetic (``lard`` None): ``vbl_robust.scenes.generate(n, seed=seed, width=, height=)``. LARD: all rows of the
     dataset read with :func:`vbl_robust.data.read_lard`, then ``n`` of them drawn at random with ``seed``, kept in
-    file order (``ValueError`` when the dataset has fewer than ``n``).
+    file order (``ValueError`` when the dataset has fewer than ``n``, unless ``at_most``: then ``n`` was a default
+    count, not the user's, and a smaller dataset gives all of its rows, with a warning).
     """
     if n < 1:
         raise ValueError(f"number of images must be >= 1, got {n}")
@@ -52,6 +56,10 @@ def load_samples(n: int, seed: int, *, lard: str | Path | None = None, width: in
     allrows = list(read_lard(csv_path, db_path, **read_options))
     if not allrows:
         raise ValueError(f"--lard {lard}: the dataset has no usable rows")
+    if n > len(allrows) and at_most:
+        logger.warning("--lard %s: the dataset has %d usable rows; all of them are used (the default count is %d)",
+                       lard, len(allrows), n)
+        n = len(allrows)
     if n > len(allrows):  # never fewer images than asked without a word
         raise ValueError(f"--lard {lard}: {n} images asked for, the dataset has {len(allrows)} usable rows (ask for "
                          f"{len(allrows)} or fewer)")

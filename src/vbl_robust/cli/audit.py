@@ -27,6 +27,8 @@ from .common import (
 #: Fixed corner noise of the oracle stand-in (``--oracle``, or no validated model installed): exact corners
 #: make L(θ) flat in roll (< 1 cm), which shows nothing; 1 px is about what a good detector achieves.
 DEMO_ORACLE_NOISE_PX = 1.0
+#: Images of an audit when --n is not given (all rows of a smaller --lard dataset).
+AUDIT_IMAGES = 20
 
 
 def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_noise: float,
@@ -348,11 +350,14 @@ def load_sequence_samples(source: str, frames: int, rate: float, seed: int, widt
     raise AssertionError("unreachable")  # pragma: no cover
 
 
-def load(n: int, seed: int, lard: Path | None, width: int, height: int) -> tuple[list, dict]:
+def load(n: int | None, seed: int, lard: Path | None, width: int, height: int, *,
+         default: int = AUDIT_IMAGES) -> tuple[list, dict]:
+    """``n`` samples (``None``: ``default``, or all rows of a smaller ``lard`` dataset), or one line."""
     from vbl_robust.campaigns import load_samples
 
     try:
-        return load_samples(n, seed, lard=lard, width=width, height=height)
+        return load_samples(default if n is None else n, seed, lard=lard, width=width, height=height,
+                            at_most=n is None)
     except (ValueError, FileNotFoundError) as exc:
         fail(str(exc))
     raise AssertionError("unreachable")  # pragma: no cover
@@ -365,7 +370,9 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def audit(
         out: Path = typer.Option(Path("runs/audit"), "--out", help="Run directory (results.sqlite, report.html)."),
-        n: int = typer.Option(20, "--n", "--images", min=1, help="Number of images."),
+        n: int | None = typer.Option(None, "--n", "--images", min=1, show_default=False,
+                                     help=f"Number of images (default {AUDIT_IMAGES}, or all rows of a smaller --lard "
+                                          "dataset)."),
         seed: int = o.SEED,
         lard: Path | None = o.LARD,
         width: int = o.WIDTH,
@@ -477,7 +484,7 @@ def register(app: typer.Typer) -> None:
             samples, source = load_sequence_samples(sequences, frames, rate, seed, width, height)
         else:
             samples, source = load(n, seed, lard, width, height)
-        config = {"command": "audit", "n": n, "seed": seed, "lard": str(lard) if lard else None, "roll": roll,
+        config = {"command": "audit", "n": len(samples) if sequences is None else n, "seed": seed, "lard": str(lard) if lard else None, "roll": roll,
                   "contrast": contrast, "methods": list(method_list), "max_evals": max_evals, "max_seconds": max_seconds,
                   "early_stop": early_stop, "lipschitz": lipschitz, "pnp": pnp, "width": width, "height": height}
         if perturb:

@@ -207,7 +207,7 @@ def register(app: typer.Typer) -> None:
             from vbl_robust.campaigns.estimate import PROBE_IMAGES
 
             run_spec, n_workers = run_settings(exps[0].build(seed, opts), clock, device, workers)
-            _estimate(exps, opts, seed, images, det, load(PROBE_IMAGES, seed, lard, width, height)[0], n_workers,
+            _estimate(exps, opts, seed, images, det, load(None, seed, lard, width, height, default=PROBE_IMAGES)[0], n_workers,
                       experiment if group else "", probe_seconds, run_spec.clock, root)
             return
         if resume_from is not None and not resume_from.is_dir():
@@ -218,15 +218,14 @@ def register(app: typer.Typer) -> None:
             spec = exp.build(seed, opts)
             spec = with_method_options(spec, method_opts, strict=False)  # checked over all experiments above
             spec, n_workers = run_settings(spec, clock, device, workers)
-            n = images or exp.images
             out_dir = root / exp.name if group else root
             if resume_from is not None:
                 from vbl_robust.campaigns.bundle import PACKED, restore_store
 
                 if restore_store(resume_from / exp.name / PACKED, out_dir):
                     typer.echo(f"{exp.name}: store restored from {resume_from / exp.name / PACKED}")
-            samples, source = load(n, seed, lard, width, height)
-            config = {"command": "reproduce", "experiment": exp.name, "images": n, "seed": seed,
+            samples, source = load(images, seed, lard, width, height, default=exp.images)
+            config = {"command": "reproduce", "experiment": exp.name, "images": len(samples), "seed": seed,
                       "lard": str(lard) if lard else None, "options": repr(opts), "width": width, "height": height}
             if method_opts:
                 config["method_options"] = method_opts

@@ -33,7 +33,7 @@ import csv
 import logging
 import math
 import re
-from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 import numpy as np
@@ -350,20 +350,25 @@ def _parse_row(row, i, csv_file, db_file, db, frames, base, use_exact, fov_deg, 
         R=R,
         image_path=path,
         meta=meta,
-        _loader=_image_loader(path, where),
+        _loader=_ImageLoader(path, where),
     )
 
 
-def _image_loader(path: Path, where: str) -> Callable[[], np.ndarray]:
-    def load() -> np.ndarray:
-        try:
-            return load_rgb(path)
-        except FileNotFoundError:
-            raise FileNotFoundError(f"{where}: image file {path} not found") from None
-        except ValueError as exc:
-            raise ValueError(f"{where}: {exc}") from None
+@dataclass(frozen=True)
+class _ImageLoader:
+    """Loads one LARD row's image; a module-level class (not a closure) so that a sample pickles into a worker
+    process of a local or Ray run."""
 
-    return load
+    path: Path
+    where: str
+
+    def __call__(self) -> np.ndarray:
+        try:
+            return load_rgb(self.path)
+        except FileNotFoundError:
+            raise FileNotFoundError(f"{self.where}: image file {self.path} not found") from None
+        except ValueError as exc:
+            raise ValueError(f"{self.where}: {exc}") from None
 
 
 def _named_target(s: Sample) -> tuple[str, str] | None:
