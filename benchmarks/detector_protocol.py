@@ -69,7 +69,7 @@ def evaluate(det, seed: int, n: int) -> tuple[list[dict], list[bool]]:
 def compare(new: dict, old: dict, split: str = "validation") -> str:
     """Paired comparison of two protocol JSONs (``--json``) on the approaches of ``split`` both evaluated:
     per seed and pooled, the approaches only one model survives and the exact McNemar p-value
-    (:func:`vbl_robust.campaigns.metrics.paired_survival`)."""
+    (:func:`vbl_robust.stats.paired`)."""
     from vbl_robust.detect.evaluate import paired_seeds
 
     try:
@@ -79,8 +79,8 @@ def compare(new: dict, old: dict, split: str = "validation") -> str:
     lines = ["| seed | n | both survive | only new | only old | neither | new − old | p (exact McNemar) |",
              "|---|---|---|---|---|---|---|---|"]
     for s, c in rows + [("pooled", pooled)]:
-        lines.append(f"| {s} | {c['n']} | {c['both']} | {c['only_a']} | {c['only_b']} | {c['neither']} | "
-                     f"{c['gain']:+d} | {c['p_value']:.4f} |")
+        lines.append(f"| {s} | {c.n} | {c.both} | {c.only_a} | {c.only_b} | {c.neither} | {c.gain:+d} | "
+                     f"{c.p_value:.4f} |")
     return "\n".join(lines)
 
 

@@ -115,6 +115,24 @@ def test_every_failure_is_penalised_with_its_reason(samples):
     assert Objective(s, StubDetector(s.corners_2d, empty=True), BOX, penalty_m=123.0)(theta).values.tolist() == [123.0, 123.0]
 
 
+def test_a_search_for_misleading_poses_counts_flagged_failures_as_safe(samples):
+    """--target misleading: a failure the system sees (here no detection) evaluates to 0 m with its reason kept, so a
+    search maximises only the confident poses' errors; the audit spec carries that penalty and says so."""
+    from vbl_robust.campaigns import BoxSpec, Budget, audit_spec
+    from vbl_robust.constants import TARGETS
+
+    s, theta = samples[1], np.array([[0.0, 1.0], [5.0, 1.2]])
+    ev = Objective(s, StubDetector(s.corners_2d, empty=True), BOX, penalty_m=TARGETS["misleading"])(theta)
+    assert ev.values.tolist() == [0.0, 0.0] and ev.reasons == ("no_detection", "no_detection")
+    spec = audit_spec(BoxSpec(BOX, "b", 1.0), methods=("random",), budget=Budget(max_evals=4), target="misleading")
+    assert spec.penalty_m == 0.0 and "misleading poses only" in spec.notes
+    assert audit_spec(BoxSpec(BOX, "b", 1.0), methods=("random",), budget=Budget(max_evals=4)).penalty_m == 5000.0
+    with pytest.raises(ValueError, match="--target must be one of any, misleading"):
+        audit_spec(BoxSpec(BOX, "b", 1.0), methods=("random",), budget=Budget(max_evals=4), target="flagged")
+    with pytest.raises(ValueError, match="penalty_m must be finite and >= 0"):
+        Objective(s, StubDetector(s.corners_2d), BOX, penalty_m=-1.0)
+
+
 def test_oracle_fail_outside_penalises_only_the_rows_that_lose_a_corner():
     s = make_sample(900.0, 5.0, -20.0, -3.0, 0.0, sid="edge", size=(320, 192))  # 90° roll: a corner leaves
     theta = np.array([[0.0, 1.0], [90.0, 1.0]])

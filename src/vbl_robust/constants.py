@@ -5,6 +5,8 @@
 - ``PENALTY_M``: the error ``L`` assigned to any failed evaluation (metres; the paper's detection-breakdown value).
 - ``FAILURE_REASONS``: why one evaluation failed (it is then penalised with ``PENALTY_M``).
 - :class:`Verdict`: the answer for one image and box, used by search, campaigns and report alike.
+- :class:`BreachKind`: what kind of failure a breach is — flagged (the system knows it has no fix) or hazardously
+  misleading (a confident pose far off).
 
 This module imports nothing of the package, so every part (``search/`` included) may import it.
 """
@@ -13,7 +15,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 
-__all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FAILURE_REASONS", "PENALTY_M", "Verdict"]
+__all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FAILURE_REASONS", "PENALTY_M", "TARGETS", "BreachKind", "Verdict"]
 
 #: ε_safe: the largest acceptable camera-position error, metres (the paper's threshold).
 EPS_SAFE_M = 1000.0
@@ -23,6 +25,11 @@ CONF_THRESHOLD = 0.25
 
 #: L of a failed evaluation (no detection, PnP failure, …), metres (the paper's L_E2E of a breakdown).
 PENALTY_M = 5000.0
+
+#: What a search looks for (``--target``): ``"any"`` breach (a flagged failure counts :data:`PENALTY_M`, the
+#: paper's convention), or ``"misleading"`` poses only (a flagged failure counts 0 m, as safe, so the search hunts
+#: the worst *silent* error: a confident pose far off).
+TARGETS: dict[str, float] = {"any": PENALTY_M, "misleading": 0.0}
 
 #: Why an evaluation failed, with what each code means. ``""`` is a success.
 FAILURE_REASONS: dict[str, str] = {
@@ -49,6 +56,24 @@ class Verdict(StrEnum):
     BREACH = "breach"
     NO_BREACH_FOUND = "no breach found"
     FAILED = "failed"
+
+
+
+class BreachKind(StrEnum):
+    """What an image's result over a box is, as a safety case counts it (integrity apart from availability).
+
+    - ``SAFE``: no evaluation above ε_safe was found.
+    - ``FLAGGED``: every evaluation above ε_safe was a *flagged failure* (a reason of :data:`FAILURE_REASONS`: no
+      detection, confidence below τ_conf, PnP failed, out of view, …) — the system knows it has no fix and can go
+      around (availability is lost).
+    - ``MISLEADING``: some evaluation gave a *hazardously misleading* pose — a selected candidate with confidence
+      ≥ τ_conf and a PnP position whose error is above ε_safe — the system does not know (integrity is lost).
+    """
+
+    SAFE = "safe"
+    FLAGGED = "flagged"
+    MISLEADING = "misleading"
+
 
 #: Warning torch 2.14 gives about its own use of ``torch.jit.script`` when torch.func first loads its
 #: decompositions (the gradient methods): nothing a user can act on, silenced by the CLI and its worker processes.

@@ -185,8 +185,8 @@ class Objective:
             raise ValueError(f"Objective: unknown PnP solver pnp={pnp!r}; choose from {SOLVERS}")
         if not (0.0 <= float(conf_threshold) <= 1.0):
             raise ValueError(f"Objective: conf_threshold must be in [0, 1], got {conf_threshold}")
-        if not (np.isfinite(penalty_m) and penalty_m > 0):
-            raise ValueError(f"Objective: penalty_m must be finite and > 0, got {penalty_m}")
+        if not (np.isfinite(penalty_m) and penalty_m >= 0):  # 0: flagged failures count as safe (misleading only)
+            raise ValueError(f"Objective: penalty_m must be finite and >= 0, got {penalty_m}")
         if isinstance(batch_size, bool) or not isinstance(batch_size, int | np.integer) or batch_size < 1:
             raise ValueError(f"Objective: batch_size must be an int >= 1, got {batch_size!r}")
         if resolution not in ("auto", "full") and not (isinstance(resolution, int | np.integer) and resolution >= 8):

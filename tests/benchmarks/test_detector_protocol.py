@@ -50,26 +50,6 @@ def test_second_names_a_pass_2_network_of_its_own(script):
     assert two.first.path == two.second.path == DEFAULT_MODEL
 
 
-def test_paired_survival_counts_the_discordant_approaches_and_tests_them():
-    from scipy.stats import binomtest
-
-    from vbl_robust.campaigns.metrics import paired_survival
-
-    a = [True] * 50 + [True] * 7 + [False] * 2 + [False] * 1
-    b = [True] * 50 + [False] * 7 + [True] * 2 + [False] * 1
-    c = paired_survival(a, b)
-    assert (c["n"], c["both"], c["only_a"], c["only_b"], c["neither"], c["gain"]) == (60, 50, 7, 2, 1, 5)
-    assert c["p_value"] == pytest.approx(binomtest(7, 9).pvalue) and 0.05 < c["p_value"] < 0.2
-    # swapping the models swaps the sides, not the p-value; identical models differ nowhere
-    r = paired_survival(b, a)
-    assert (r["only_a"], r["only_b"], r["gain"]) == (2, 7, -5) and r["p_value"] == pytest.approx(c["p_value"])
-    assert paired_survival(a, a)["p_value"] == 1.0 and paired_survival(a, a)["gain"] == 0
-    # 30 discordant approaches all on one side: far below 0.05
-    assert paired_survival([True] * 30, [False] * 30)["p_value"] < 1e-6
-    with pytest.raises(ValueError, match="equal-length"):
-        paired_survival([True, False], [True])
-
-
 def test_compare_pairs_the_approaches_of_the_seeds_both_files_hold(script):
     p = script("benchmarks/detector_protocol.py")
     new = {"validation": {"1": [], "2": []}, "survived": {"1": [True, True, False], "2": [True, False]}}

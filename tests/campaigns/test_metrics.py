@@ -2,10 +2,12 @@ import math
 
 import numpy as np
 import pytest
+from scipy.stats import binomtest
 
 from vbl_robust.campaigns import Budget, roll_box
 from vbl_robust.campaigns import metrics as mx
 from vbl_robust.campaigns.store import JobRow, Points
+from vbl_robust.constants import BreachKind
 from vbl_robust.search import TraceRow
 
 
@@ -34,6 +36,50 @@ def test_survived_is_the_one_survival_rule():
     assert mx.survived(row(worst_m=None, nfev=0), eps)  # no evaluation within its time budget: nothing found
     rows = [row(key=f"k{i}", worst_m=w, nfev=0 if w is None else 4) for i, w in enumerate((10.0, math.inf, None, 2e3))]
     assert mx.summarize(rows, eps)[0].survival == 50.0
+
+
+def test_breach_kinds_split_flagged_failures_from_misleading_poses():
+    """A flagged failure (a reason: the system knows it has no fix) is not a misleading pose (no reason, error
+    above ε_safe); a job with both is misleading; the summary counts each kind and gives exact intervals."""
+    eps, xs = 1000.0, np.zeros((3, 1))
+
+    def job(i, fs, reasons, status="done"):
+        fs = np.asarray(fs, dtype=np.float64)
+        return row(key=f"k{i}", worst_m=float(np.nanmax(fs)), nfev=len(fs), status=status,
+                   worst_reason=reasons[int(np.nanargmax(fs))], points=Points(xs, fs, reasons))
+
+    rows = [job(0, [10, 20, 900], ("", "", "")),  # safe
+            job(1, [10, 5000, 20], ("", "low_confidence", "")),  # flagged only
+            job(2, [10, 5000, 3000], ("", "no_detection", "")),  # misleading below a flagged worst
+            job(3, [10, 3000, 20], ("", "", "")),  # misleading worst
+            job(4, [10, np.nan, 20], ("", "", ""))]  # a non-finite value: not a pose at all
+    kinds = [mx.breach_kind(r, eps) for r in rows]
+    assert kinds == [BreachKind.SAFE, BreachKind.FLAGGED, BreachKind.MISLEADING, BreachKind.MISLEADING,
+                     BreachKind.SAFE]
+    failed = row(key="k5", worst_m=5000.0, status="failed", nfev=0)
+    assert mx.breach_kind(failed, eps) is BreachKind.FLAGGED
+    # without the points only a silent worst is known; a flagged worst may hide a misleading pose
+    assert mx.breach_kind(rows[3].replace(points=None), eps) is BreachKind.MISLEADING
+    assert mx.breach_kind(rows[2].replace(points=None), eps) is None
+    s = mx.summarize(rows[:4] + [failed], eps)[0]
+    assert (s.n, s.survivors, s.flagged, s.misleading) == (5, 1, 2, 2)
+    assert s.survival_rate.ci.low == pytest.approx(100 * binomtest(1, 5).proportion_ci(method="exact").low)
+    line = s.as_row()
+    assert (line["survival_ci_low"], line["survival_ci_high"]) == (s.survival_rate.ci.low, s.survival_rate.ci.high)
+    assert (line["misleading_pct"], line["flagged_pct"]) == (40.0, 40.0)
+    unknown = mx.summarize([rows[2].replace(points=None), rows[0]], eps)[0]
+    assert unknown.misleading is None and unknown.flagged is None and math.isnan(unknown.as_row()["misleading_pct"])
+
+
+def test_no_breach_in_k_uniform_points_bounds_the_breached_fraction():
+    eps = 1000.0
+    clean = row(method="random", worst_m=500.0, nfev=100)
+    assert mx.residual_bound(clean, eps) == pytest.approx(1 - 0.05 ** (1 / 100))
+    assert mx.residual_bound(clean.replace(worst_m=2000.0), eps) is None  # a breach: nothing residual to bound
+    assert mx.residual_bound(clean.replace(method="georobust"), eps) is None  # DIRECT's points are not uniform
+    assert mx.residual_bound(clean.replace(method="sobol"), eps) is None  # nor independent
+    rows = [clean, clean.replace(key="k2", nfev=20), clean.replace(key="k3", worst_m=3000.0)]
+    assert mx.summarize(rows, eps)[0].residual == pytest.approx(1 - 0.05 ** (1 / 20))  # the weakest image's
 
 
 def test_against_reference_counts_found_missed_and_beyond_the_grid():
@@ -82,7 +128,10 @@ def test_reference_rows_restrict_a_dense_grid_to_nested_boxes():
     out = mx.reference_rows([grid_row(xs, fs, 61)], boxes, 1000.0, 5000.0)
     assert [r.box_level for r in out] == [5, 10, 15]  # ±40 is not inside the grid
     assert [r.worst_m for r in out] == [5000.0, 5000.0, 5000.0]
-    assert {r.method for r in out} == {mx.REFERENCE_METHOD} and out[0].box == boxes[0] and out[0].points is None
+    assert {r.method for r in out} == {mx.REFERENCE_METHOD} and out[0].box == boxes[0]
+    # each pseudo-row keeps the grid's points inside its box (the kind of its breach needs them)
+    assert [len(r.points) for r in out] == [11, 21, 31]
+    assert [mx.breach_kind(r, 1000.0) for r in out] == [BreachKind.FLAGGED, BreachKind.FLAGGED, BreachKind.MISLEADING]
     fs[30] = 10.0
     out = mx.reference_rows([grid_row(xs, fs, 61)], boxes, 1000.0, 5000.0)
     assert [r.worst_m for r in out] == [10.0, 10.0, 3000.0]

@@ -241,3 +241,41 @@ def test_a_store_that_is_not_sqlite_is_one_line_not_a_traceback(tmp_path):
         assert res.exception is None or isinstance(res.exception, SystemExit)
     res = runner.invoke(app, ["report", str(run), "--out", str(run / "results.sqlite")])
     assert res.exit_code == 2 and "is a file" in res.output
+
+
+def test_report_prints_the_summary_table_as_csv_and_json_with_exact_intervals(tmp_path):
+    """`report RUN --format csv|json`: one row per method, box and budget; the interval is the exact one of the
+    row's own counts; the job export carries each job's breach kind."""
+    import io
+
+    from vbl_robust.stats import Rate
+
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["audit", "--out", str(out), "--n", "4", "--roll", "10", "--methods", "random,georobust",
+                              "--max-evals", "8", "--no-landscape", "--no-report", "--workers", "1", "--csv",
+                              str(tmp_path / "jobs.csv"), "--oracle", "--oracle-noise", "0.5", "--width", "320",
+                              "--height", "320", "--quiet"])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["report", str(out), "--format", "csv"])
+    assert res.exit_code == 0, res.output
+    rows = list(csv.DictReader(io.StringIO(res.output)))
+    assert [r["method"] for r in rows] == ["random", "georobust"]
+    for r in rows:
+        k, n = int(r["survivors"]), int(r["images"])
+        ci = Rate(k, n).ci
+        assert n == 4 and 0 < k < n and float(r["survival_pct"]) == pytest.approx(100 * k / n)
+        assert (float(r["survival_ci_low"]), float(r["survival_ci_high"])) == pytest.approx((ci.low, ci.high))
+        assert int(r["misleading"]) + int(r["flagged"]) == n - k
+        assert (r["residual_bound"] != "") == (r["method"] == "random" and k > 0)
+    res = runner.invoke(app, ["report", str(out), "--format", "json"])
+    assert res.exit_code == 0 and [dict(d) for d in json.loads(res.output)] == [
+        {**r, **{c: json.loads(r[c]) if r[c] != "" else None for c in r if c not in ("experiment", "method",
+                                                                                      "box_label", "budget_label")}}
+        for r in rows]
+    jobs = list(csv.DictReader(open(tmp_path / "jobs.csv")))
+    assert {j["breach_kind"] for j in jobs} <= {"safe", "flagged", "misleading"}
+    assert sum(j["breach_kind"] != "safe" for j in jobs) == sum(4 - int(r["survivors"]) for r in rows)
+    for bad, msg in ((["--format", "xml"], "choose html, md, csv or json"),
+                     (["--format", "csv", "--out", str(tmp_path)], "--format csv prints the summary table")):
+        res = runner.invoke(app, ["report", str(out), *bad])
+        assert res.exit_code == 2 and msg in res.output, res.output

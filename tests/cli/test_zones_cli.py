@@ -222,13 +222,15 @@ def test_report_markdown_survival_table_from_the_store(gated_run, tmp_path):
         from vbl_robust.campaigns.metrics import main_rows, summarize
 
         lines = summarize(main_rows(store, spec, with_trace=False), spec.eps_safe_m)
-    survival = res.output.split("Landscape grid")[0]
+    survival = res.output.split("Breaches by kind")[0]
     rows = _md_rows(survival)
     head = next(ln for ln in survival.splitlines() if ln.startswith("| method"))
     budgets = [c.strip() for c in head.strip().strip("|").split("|")][1:]  # two budgets: a column each
     assert sorted(budgets) == sorted({ln.budget_label for ln in lines}) and len(budgets) == 2
     for ln in lines:
-        assert rows[ln.method][budgets.index(ln.budget_label)] == f"{ln.survival:.1f} ({ln.breaches})"
+        ci = ln.survival_rate.ci
+        cell = f"{ln.survival:.1f} [{ci.low:.1f}, {ci.high:.1f}] ({ln.breaches})"
+        assert rows[ln.method][budgets.index(ln.budget_label)] == cell
     assert "any of them" in rows and "Landscape grid on image" in res.output  # the dense grid's found / true ratios
     # refused: md prints, it writes nothing; --with needs md and the same experiment
     for args, msg in ((["--format", "md", "--out", str(tmp_path)], "--format md prints"),

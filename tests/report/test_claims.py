@@ -8,6 +8,7 @@ import shutil
 
 import numpy as np
 import pytest
+from scipy.stats import binomtest
 from typer.testing import CliRunner
 
 from vbl_robust.campaigns import metrics as mx
@@ -17,6 +18,7 @@ from vbl_robust.campaigns.store import JobRow, JobStatus, Points, ResultStore
 from vbl_robust.cli import app
 from vbl_robust.report import claims as C
 from vbl_robust.report.html import fmt_num
+from vbl_robust.stats import ClaimVerdict
 
 # 512 px, not 128: at 128 px the integer-truncated and detected corners of these far runways are degenerate and every
 # PnP solve fails, which would leave the PnP row nothing to compare. Oracle detector, 2 images, 4 evaluations, a 5°
@@ -107,10 +109,12 @@ def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
             assert f"{ln['method']} {ln['found']}/{ln['grid_breaches']}" in row.truth
         else:
             assert "breaches at" not in row.truth
-    g, r, a = surv["georobust"], surv["random"], surv["apgd"]
-    lowest = all(x <= min(y, z) for x, y, z in zip(g, r, a, strict=True))
-    no_better = all(z >= y for y, z in zip(r, a, strict=True))
-    assert row.verdict == {(True, True): C.HOLDS, (False, False): C.FAILS}.get((lowest, no_better), C.PARTLY)
+    # the verdict is the tests': recomputed from the rows, each box a part
+    labels = [b.label for b in sorted(boxes_of(main), key=lambda b: b.level)]
+    groups = C.survival_parts(main, spec.eps_safe_m, (("georobust", "random"), ("georobust", "apgd"),
+                                                      ("random", "apgd")), labels)
+    assert row.verdict == C.combine([o for out, _ in groups for o in out])
+    assert all(text in row.reason for _, text in groups) and "p = " in row.reason
 
 
 def test_the_report_shows_each_method_against_the_grid(root):
@@ -148,7 +152,7 @@ def test_missing_experiments_say_not_run_yet(root, tmp_path):
     assert by["spatial-1d"].verdict != C.NOT_RUN and by["spatial-1d"].images == N_IMAGES
     assert all(c.verdict == C.NOT_RUN for c in some if "spatial-1d" not in c.experiment)
     both = by["spatial-1d + spatial-2d"]  # half of its inputs: never "holds"
-    assert both.verdict in (C.PARTLY, C.FAILS) and "2-D: not run yet — not measured" in both.reason
+    assert both.verdict != C.HOLDS and "2-D: not run yet — not measured" in both.reason
 
 
 def _copy_store(root, dst, keep, extra_sample=False):
@@ -205,6 +209,9 @@ def test_html_escapes_every_text(claims):
 @pytest.mark.parametrize(("parts", "verdict"), [
     ([True, True], C.HOLDS), ([True, False], C.PARTLY), ([True, None], C.PARTLY), ([False, None], C.FAILS),
     ([False, False], C.FAILS), ([None, None], C.NOT_RUN), ([], C.NOT_RUN),
+    ([ClaimVerdict.HOLDS, True], C.HOLDS), ([ClaimVerdict.HOLDS, ClaimVerdict.TIE], C.PARTLY),
+    ([ClaimVerdict.TIE, ClaimVerdict.TIE], C.TIE), ([ClaimVerdict.TIE, False], C.TIE),
+    ([ClaimVerdict.HOLDS, ClaimVerdict.CONTRADICTED], C.CONTRADICTED), ([ClaimVerdict.CONTRADICTED, None], C.CONTRADICTED),
 ])
 def test_combine(parts, verdict):
     assert C.combine(parts) == verdict
@@ -223,19 +230,45 @@ def _verdict_row(method, half_width, sid, worst, status=JobStatus.DONE, nfev=4):
                   box=roll_box(half_width), worst_m=worst, nfev=nfev)
 
 
-def test_exceptions_give_paired_counts_and_mcnemar_where_a_comparison_fails():
+def test_survival_claims_are_judged_by_their_paired_tests():
+    """"georobust survives less than random": per box a tie, a hold or a contradiction by the exact McNemar test,
+    Holm-adjusted over the claim's tests; a one- or two-image difference is a tie."""
     eps = 1000.0
     rows = []
-    for i in range(10):  # ±5°: georobust survives images 0-7, random 0-5 -> only georobust on 6, 7, exact p = 0.5
-        rows += [_verdict_row("georobust", 5, f"s{i}", 10.0 if i < 8 else 3000.0),
-                 _verdict_row("random", 5, f"s{i}", 10.0 if i < 6 else 3000.0),
-                 # ±10°: random survives more -> georobust ≤ random holds there, no exception
+    for i in range(20):
+        rows += [  # ±5°: only georobust survives images 18, 19 (2 vs 0 of 20): a tie
+                 _verdict_row("georobust", 5, f"s{i}", 10.0),
+                 _verdict_row("random", 5, f"s{i}", 10.0 if i < 18 else 3000.0),
+                 # ±10°: georobust breaks all 20, random survives 12 of them: holds (12 vs 0, p = 0.0005)
                  _verdict_row("georobust", 10, f"s{i}", 3000.0),
-                 _verdict_row("random", 10, f"s{i}", 10.0 if i < 2 else 3000.0)]
-    text = C.exceptions(rows, eps, "georobust", "random", ["±5°", "±10°"])
-    assert text == " (where not: ±5°: 2 only georobust survives, 0 only random of 10 images, exact McNemar p = 0.5)"
-    assert C.exceptions(rows, eps, "random", "georobust", ["±5°", "±10°"]).startswith(" (where not: ±10°: 2 only random")
-    assert C.exceptions(rows, eps, "georobust", "apgd", ["±5°"]) == ""  # no paired images: nothing to say
+                 _verdict_row("random", 10, f"s{i}", 10.0 if i < 12 else 3000.0),
+                 # ±20°: the other way round: contradicted
+                 _verdict_row("georobust", 20, f"s{i}", 10.0 if i < 12 else 3000.0),
+                 _verdict_row("random", 20, f"s{i}", 3000.0)]
+    [(outcomes, text)] = C.survival_parts(rows, eps, [("georobust", "random")], ["±5°", "±10°", "±20°"])
+    assert outcomes == [ClaimVerdict.TIE, ClaimVerdict.HOLDS, ClaimVerdict.CONTRADICTED]
+    # Holm over three tests: raw p 0.5 (2 vs 0), p12 = 2 · 0.5^12 twice -> 3 · p12 for both, 0.5 unchanged
+    p12 = 3 * binomtest(12, 12).pvalue
+    assert text == (f"georobust survives less than random: ±5° tie (2 vs 0 of 20, p = 0.5), ±10° holds (0 vs 12 of "
+                    f"20, p = {p12:.2g}), ±20° contradicted (12 vs 0 of 20, p = {p12:.2g})")
+    assert C.combine(outcomes) == C.CONTRADICTED and C.combine(outcomes[:2]) == C.PARTLY
+    # no paired images: not measured
+    [(none, text)] = C.survival_parts(rows, eps, [("georobust", "apgd")], ["±5°"])
+    assert none == [None] and "±5° not measured" in text
+
+
+def test_a_rate_against_a_threshold_is_judged_by_its_interval():
+    assert C.rate_part(0, 100, 5.0)[0] is ClaimVerdict.HOLDS  # [0, 3.6] % lies below 5 %
+    assert C.rate_part(2, 100, 5.0)[0] is ClaimVerdict.TIE  # [0.2, 7.0] % straddles it
+    assert C.rate_part(20, 100, 5.0)[0] is ClaimVerdict.CONTRADICTED
+    assert C.rate_part(0, 0, 5.0)[0] is None
+
+
+def test_fewer_evaluations_is_judged_by_the_signed_rank_test():
+    a, b = [5.0] * 12, [9.0 + i for i in range(12)]
+    assert C.fewer_evals(a, b)[0] is ClaimVerdict.HOLDS and C.fewer_evals(b, a)[0] is ClaimVerdict.CONTRADICTED
+    assert C.fewer_evals([5.0, 7.0, 6.0], [6.0, 6.0, 6.5])[0] is ClaimVerdict.TIE
+    assert C.fewer_evals([3.0], [3.0])[0] is ClaimVerdict.TIE and C.fewer_evals([], [])[0] is None
 
 
 def test_times_differ():

@@ -31,6 +31,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from fractions import Fraction
 
+from ..constants import TARGETS
 from .spec import Block, BoxSpec, Budget, CampaignSpec, roll_box, roll_contrast_box
 
 #: The paper's experiments compare the paper's GeoRobust and georobust-av (labelled apart) with random and APGD.
@@ -382,10 +383,15 @@ PAPER = tuple(name for name in EXPERIMENTS if name != "families")
 
 def audit_spec(box: BoxSpec, *, methods: Sequence[str] = AUDIT_METHODS, budget: Budget, seed: int = 0,
                lipschitz: float | tuple[float, ...] | None = None, pnp: str = "ippe_lm",
-               landscape: tuple[int, ...] | None = None, sustain: int | None = None) -> CampaignSpec:
+               landscape: tuple[int, ...] | None = None, sustain: int | None = None,
+               target: str = "any") -> CampaignSpec:
     """The ``audit`` job: one box, the given methods and budget; optionally a landscape grid on the first image
     (counts per parameter) for the heat map. ``sustain``: an audit of approach sequences (a sequence campaign,
-    :class:`CampaignSpec`), the error sustained over that many consecutive frames."""
+    :class:`CampaignSpec`), the error sustained over that many consecutive frames. ``target``: a key of
+    :data:`vbl_robust.constants.TARGETS` (``"misleading"``: flagged failures count 0 m, so every method searches
+    for the worst confident pose)."""
+    if target not in TARGETS:
+        raise ValueError(f"--target must be one of {', '.join(TARGETS)}, got {target!r}")
     blocks = [Block(boxes=(box,), methods=tuple(methods), budgets=(budget,))]
     if landscape and min(landscape) > 0:
         blocks.append(_grid_block(box, landscape, role="landscape", max_samples=1))
@@ -395,11 +401,14 @@ def audit_spec(box: BoxSpec, *, methods: Sequence[str] = AUDIT_METHODS, budget: 
     if sustain is not None:
         figures = ("sequences", *figures)
     return CampaignSpec("audit", tuple(blocks), seed=seed, lipschitz=lipschitz, pnp=pnp, figures=figures,
-                        sustain=sustain, notes=(
+                        sustain=sustain, penalty_m=TARGETS[target], notes=(
         f"Box {box.label}; methods {', '.join(methods)}; budget per {unit}: {budget.label} ({stop})."
         + ("" if sustain is None else f" One θ held over each approach sequence; its error is the error sustained "
            f"over {sustain} consecutive frame(s).")
-        + ("" if lipschitz is None else f" Lipschitz bound given: {lipschitz} m per unit (certificates possible).")))
+        + ("" if lipschitz is None else f" Lipschitz bound given: {lipschitz} m per unit (certificates possible).")
+        + ("" if target == "any" else " Target: misleading poses only — a flagged failure (no detection, low "
+           "confidence, PnP failed …) counts 0 m, as safe; survival is then the share with no misleading pose "
+           "found.")))
 
 
 def experiment(name: str) -> Experiment:

@@ -22,7 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from ..constants import Verdict
+from ..constants import BreachKind, Verdict
+from ..stats import Rate, breach_fraction_bound, paired
 from .spec import BoxSpec, Budget
 from .store import JobRow, JobStatus, Points
 
@@ -47,31 +48,49 @@ def empty_row(row: JobRow) -> bool:
 def survived(row: JobRow, eps_safe_m: float) -> bool:
     """Whether the image survived this job: its worst error is finite and ≤ ``eps_safe_m``, or the job completed
     no evaluation (:func:`empty_row`); a failed job (worst = the penalty) never survives. The one definition behind
-    every survival rate (:func:`summarize`) and paired comparison (claims, ``report --compare``)."""
+    every survival rate (:func:`summarize`) and paired comparison (claims, ``report --compare``; the test is
+    :func:`vbl_robust.stats.paired`)."""
     if empty_row(row):
         return True
+    if row.status is JobStatus.FAILED:
+        return False
     return row.worst_m is not None and math.isfinite(row.worst_m) and row.worst_m <= eps_safe_m
 
 
-def paired_survival(a: Sequence[bool], b: Sequence[bool]) -> dict:
-    """Paired comparison of two survival vectors on the *same* items (``a[i]``, ``b[i]``: did approach or image i
-    survive with A / B — two detectors, two searches, a search and the dense grid).
+def breach_kind(row: JobRow, eps_safe_m: float) -> BreachKind | None:
+    """Integrity apart from availability (:class:`~vbl_robust.constants.BreachKind`): ``SAFE`` for a survivor
+    (:func:`survived`); ``MISLEADING`` when some evaluation of the job succeeded (no failure reason: a selected
+    candidate with confidence ≥ τ_conf and a PnP pose) with a finite error above ``eps_safe_m``; else ``FLAGGED``
+    (every breach was a flagged failure; a job that could not run at all is flagged too).
 
-    Returns the counts (``n``, ``both``, ``only_a``, ``only_b``, ``neither``), ``gain`` = only_a − only_b and the
-    exact two-sided McNemar p-value: under "A and B survive alike", each discordant approach is A's with
-    probability ½, so the p-value is the binomial test of ``only_a`` successes in ``only_a + only_b`` trials
-    (``scipy.stats.binomtest``; 1.0 when there is no discordant approach). The overall counts hide how many
-    approaches swapped sides: two models 3 approaches apart with 40 discordant ones cannot be told apart.
-    """
-    from scipy.stats import binomtest
+    Exact from the job's points (``store.jobs(with_points=True)``, as :func:`main_rows` loads them). Without
+    them, a job whose worst point is itself a silent breach is ``MISLEADING``; any other breached job is ``None``
+    (unknown: a misleading pose may hide below a flagged worst)."""
+    if survived(row, eps_safe_m):
+        return BreachKind.SAFE
+    if row.status is not JobStatus.DONE:
+        return BreachKind.FLAGGED
+    if row.points is None:
+        silent_worst = not row.worst_reason and row.worst_m is not None and math.isfinite(row.worst_m)
+        return BreachKind.MISLEADING if silent_worst and row.worst_m > eps_safe_m else None
+    p = row.points
+    ok = np.fromiter((not r for r in p.reasons), dtype=bool, count=len(p))
+    with np.errstate(invalid="ignore"):
+        silent = ok & np.isfinite(p.fs) & (p.fs > eps_safe_m)
+    return BreachKind.MISLEADING if silent.any() else BreachKind.FLAGGED
 
-    a, b = np.asarray(a, bool), np.asarray(b, bool)
-    if a.shape != b.shape or a.ndim != 1:
-        raise ValueError(f"paired_survival: need two equal-length 1-D vectors, got shapes {a.shape} and {b.shape}")
-    only_a, only_b = int(np.sum(a & ~b)), int(np.sum(~a & b))
-    p = binomtest(only_a, only_a + only_b, 0.5).pvalue if only_a + only_b else 1.0
-    return dict(n=int(a.size), both=int(np.sum(a & b)), only_a=only_a, only_b=only_b, neither=int(np.sum(~a & ~b)),
-                gain=only_a - only_b, p_value=float(p))
+
+def residual_bound(row: JobRow, eps_safe_m: float) -> float | None:
+    """What "no breach found" is worth for a search whose points are independent and uniform over the box
+    (``iid_uniform`` methods: random search): with k = ``nfev`` points and no breach, the breached fraction of the
+    box is below :func:`vbl_robust.stats.breach_fraction_bound` (k) at 95 % (≈ 3/k). None for a breached row, a
+    row of another method (DIRECT's and APGD's points are not uniform draws) or one not run."""
+    from ..search.api import METHODS
+
+    cls = METHODS.get(row.method)
+    if cls is None or not cls.iid_uniform or row.status is not JobStatus.DONE or not survived(row, eps_safe_m):
+        return None
+    return breach_fraction_bound(int(row.nfev))
 
 
 def _stats(values: Sequence[float]) -> dict[str, float]:
@@ -107,8 +126,15 @@ class Summary:
         method, box_label, budget_label, box_level: the group's value of each attribute it is grouped by (None for
             one it is not grouped by; ``box_level`` is the first row's when not grouped by it).
         max_evals, max_seconds, max_iters: the group's numeric budget (NaN when the budget has no such bound).
-        n: rows (images, or sequences); survival: S_rate (%); n_empty: rows with no evaluation completed within
-            their time budget (survivors, left out of the worst-error statistics).
+        n: rows (images, or sequences); survivors: rows that survived (:func:`survived`); survival: S_rate =
+            100 · survivors / n (%), with its exact 95 % interval ``survival_ci`` (:mod:`vbl_robust.stats`);
+            n_empty: rows with no evaluation completed within their time budget (survivors, left out of the
+            worst-error statistics).
+        flagged, misleading: breached rows whose every breach was a flagged failure / that hold a hazardously
+            misleading pose (:func:`breach_kind`); None when some breached row's kind is unknown (no points).
+        residual: for a method of independent uniform points, the largest :func:`residual_bound` over the rows
+            without a breach — on each of them the breached fraction of the box is below it at 95 %; None
+            otherwise (or when every row breached).
         median_worst_m, mean_worst_m: over the rows with a worst error (NaN for none).
         breaches, certified, failed: verdict and status counts.
         nfev, mean_nfev: evaluations in all and per row; failed_evals: failed evaluations (None when no row
@@ -125,8 +151,12 @@ class Summary:
     max_seconds: float
     max_iters: float
     n: int
+    survivors: int
     survival: float
     n_empty: int
+    flagged: int | None
+    misleading: int | None
+    residual: float | None
     median_worst_m: float
     mean_worst_m: float
     breaches: int
@@ -139,9 +169,27 @@ class Summary:
     median_search_s: float
     read_from: str
 
+    @property
+    def survival_rate(self) -> Rate:
+        """Survivors of n with the exact interval (:class:`vbl_robust.stats.Rate`)."""
+        return Rate(self.survivors, self.n)
+
+    def kind_rate(self, kind: BreachKind) -> Rate | None:
+        """Rows of ``kind`` of n (None when the kinds are unknown)."""
+        count = {BreachKind.SAFE: self.survivors, BreachKind.FLAGGED: self.flagged,
+                 BreachKind.MISLEADING: self.misleading}[kind]
+        return None if count is None else Rate(count, self.n)
+
     def as_row(self) -> dict[str, Any]:
-        """The fields by name (for the report's and the command line's tables)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        """The fields by name, plus ``survival_ci_low`` / ``survival_ci_high`` (%, exact 95 %) and
+        ``misleading_pct`` / ``flagged_pct`` (for the report's, the command line's and the exported tables)."""
+        row = {f.name: getattr(self, f.name) for f in fields(self)}
+        ci = self.survival_rate.ci
+        row.update(survival_ci_low=ci.low, survival_ci_high=ci.high)
+        for kind in (BreachKind.FLAGGED, BreachKind.MISLEADING):
+            r = self.kind_rate(kind)
+            row[f"{kind.value}_pct"] = math.nan if r is None else r.pct
+        return row
 
     def budget(self, axis: str) -> float:
         """The numeric budget on ``axis`` ("max_seconds", "max_evals", "max_iters"), NaN when unbounded there."""
@@ -183,13 +231,20 @@ def summarize(rows: Iterable[JobRow], eps_safe_m: float,
         s = _stats([w for w, e in zip(worst, empty, strict=True) if not e])
         known = [r.n_failed for r in rs if r.n_failed is not None]
         group = dict(zip(by, key, strict=True))
+        alive = [survived(r, eps_safe_m) for r in rs]
+        kinds = [breach_kind(r, eps_safe_m) for r, ok in zip(rs, alive, strict=True) if not ok]
+        kinds_known = None not in kinds
+        bounds = [b for b in (residual_bound(r, eps_safe_m) for r in rs) if b is not None]
         out.append(Summary(
             method=group.get("method"), box_label=group.get("box_label"), budget_label=group.get("budget_label"),
             box_level=group.get("box_level", rs[0].box_level),
             max_evals=budget_value(rs[0], "max_evals"), max_seconds=budget_value(rs[0], "max_seconds"),
             max_iters=budget_value(rs[0], "max_iters"),
-            n=len(rs), survival=100.0 * float(np.mean([survived(r, eps_safe_m) for r in rs])),
-            n_empty=sum(empty), median_worst_m=s["median"], mean_worst_m=s["mean"],
+            n=len(rs), survivors=sum(alive), survival=100.0 * float(np.mean(alive)), n_empty=sum(empty),
+            flagged=kinds.count(BreachKind.FLAGGED) if kinds_known else None,
+            misleading=kinds.count(BreachKind.MISLEADING) if kinds_known else None,
+            residual=max(bounds) if bounds else None,
+            median_worst_m=s["median"], mean_worst_m=s["mean"],
             breaches=sum(r.verdict is Verdict.BREACH for r in rs),
             certified=sum(r.verdict is Verdict.CERTIFIED for r in rs),
             failed=sum(r.status is JobStatus.FAILED for r in rs),
@@ -261,7 +316,10 @@ def reference_rows(ref_rows: Iterable[JobRow], boxes: Sequence[BoxSpec], eps_saf
                 bounds = list(zip(grid.lower, grid.upper, strict=True))
                 if counts is None or not lattice_covered(r.points.xs, bounds, counts, lo, hi):
                     continue
-            out.append(r.replace(method=REFERENCE_METHOD, box=b, worst_m=w, worst_x=None, points=None, trace=(),
+            inside = _inside(r.points.xs, lo, hi)
+            pts = Points(r.points.xs[inside], r.points.fs[inside],
+                         tuple(c for c, k in zip(r.points.reasons, inside, strict=True) if k))
+            out.append(r.replace(method=REFERENCE_METHOD, box=b, worst_m=w, worst_x=None, points=pts, trace=(),
                                  verdict=Verdict.BREACH if w > eps_safe_m else Verdict.NO_BREACH_FOUND))
     return out
 
@@ -271,7 +329,8 @@ def against_reference(rows: Iterable[JobRow], ref_rows: Iterable[JobRow], eps_sa
     of :func:`reference_rows`) on the images both have — ``grid_breaches`` (images the grid breaks), ``found`` (of
     those, the ones the method breaks too), ``missed`` (the method survives where the grid breaks),
     ``beyond_grid`` (the method breaks an image the grid does not: a breach between grid nodes), ``found_pct`` and
-    the exact McNemar ``p_value`` of method vs grid (:func:`paired_survival`). Is the worst case really found?"""
+    the exact McNemar ``p_value`` of method vs grid (:func:`vbl_robust.stats.paired`). Is the worst case really
+    found?"""
     rows = list(rows)
     truth = {(r.box_label, r.sample_id): survived(r, eps_safe_m) for r in ref_rows}
     ok = {(r.method, r.box_label, r.budget_label, r.sample_id): survived(r, eps_safe_m) for r in rows}
@@ -280,12 +339,12 @@ def against_reference(rows: Iterable[JobRow], ref_rows: Iterable[JobRow], eps_sa
         ids = [sid for (mm, bb, bu, sid) in ok if (mm, bb, bu) == (m, b, budget) and (b, sid) in truth]
         if not ids:
             continue
-        t = paired_survival([truth[(b, i)] for i in ids], [ok[(m, b, budget, i)] for i in ids])
-        breaches = t["neither"] + t["only_b"]
-        out.append({"method": m, "box_label": b, "budget_label": budget, "n": t["n"], "grid_breaches": breaches,
-                    "found": t["neither"], "missed": t["only_b"], "beyond_grid": t["only_a"],
-                    "found_pct": 100.0 * t["neither"] / breaches if breaches else math.nan,
-                    "p_value": t["p_value"]})
+        t = paired([truth[(b, i)] for i in ids], [ok[(m, b, budget, i)] for i in ids])
+        breaches = t.neither + t.only_b
+        out.append({"method": m, "box_label": b, "budget_label": budget, "n": t.n, "grid_breaches": breaches,
+                    "found": t.neither, "missed": t.only_b, "beyond_grid": t.only_a,
+                    "found_pct": 100.0 * t.neither / breaches if breaches else math.nan,
+                    "p_value": t.p_value})
     return out
 
 
@@ -561,9 +620,9 @@ def reads_trace(spec: Any) -> bool:
 
 
 def main_rows(store: Any, spec: Any, *, with_trace: bool = True) -> list[JobRow]:
-    """The main search rows of a campaign as its tables and figures show them: stored rows, with every run that
-    reads smaller budgets off its trace replaced by its read-off rows (:func:`read_off_rows`; ``points`` are
-    loaded for the campaigns that need them)."""
+    """The main search rows of a campaign as its tables and figures show them: stored rows with their points (the
+    kind of each breach, :func:`breach_kind`), with every run that reads smaller budgets off its trace replaced by
+    its read-off rows (:func:`read_off_rows`)."""
     reads = reads_trace(spec)
-    rows = store.jobs(kind="search", role="main", with_points=reads, with_trace=with_trace or reads)
+    rows = store.jobs(kind="search", role="main", with_points=True, with_trace=with_trace or reads)
     return read_off_rows(rows, spec.eps_safe_m, spec.penalty_m) if reads else rows

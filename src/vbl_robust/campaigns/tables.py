@@ -1,10 +1,14 @@
-"""Flat exports of a store's job rows: CSV (standard library) and Parquet (pyarrow).
+"""Flat exports of a store: its job rows (CSV, standard library; Parquet, pyarrow) and its summary table.
 
-One line per job with the identifying columns, the worst error and point (one column per parameter, real
-units), verdict, counts and timings (a sequence campaign's main jobs also their breach facts along the approach,
+:func:`export` writes one line per job with the identifying columns, the worst error and point (one column per
+parameter, real units), verdict, the kind of breach (``breach_kind``: safe / flagged / misleading) and what "no
+breach found" is worth for a uniform random search (``residual_bound``), counts and timings (a sequence campaign's main jobs also their breach facts along the approach,
 :data:`SEQUENCE_COLUMNS`); traces, evaluated points and per-frame errors stay in the store. A run that reads smaller
 budgets off its trace (runtime experiments) is followed by one line per read budget, derived from it
 (:func:`~vbl_robust.campaigns.metrics.read_off_rows`; column ``read_from`` = the run's budget label).
+
+:func:`summary_records` gives the summary table (``vbl-robust report RUN --format csv|json``): one record per
+method, box and budget with the survival rate and its exact 95 % interval (:data:`SUMMARY_COLUMNS`).
 """
 
 from __future__ import annotations
@@ -21,7 +25,16 @@ COLUMNS = (
     "experiment", "kind", "role", "method", "sample_id", "sample_index", "slant_distance_m", "envelope", "box_label",
     "box_level", "budget_label", "max_evals", "max_seconds", "max_iters", "stop_at_breach", "seed", "status",
     "reason", "worst_m", "verdict", "nfev", "nit", "n_failed", "failures", "worst_reason", "search_status",
-    "search_s", "job_s", "upper_bound", "bound_estimate", "run_id", "key", "read_from",
+    "search_s", "job_s", "upper_bound", "bound_estimate", "run_id", "key", "read_from", "breach_kind",
+    "residual_bound",
+)
+
+#: Columns of :func:`summary_records` (survival in %, its exact 95 % interval; ``residual_bound``: for random
+#: search, the largest bound on the breached fraction of the box over the images without a breach).
+SUMMARY_COLUMNS = (
+    "experiment", "method", "box_label", "box_level", "budget_label", "images", "survivors", "survival_pct",
+    "survival_ci_low", "survival_ci_high", "breaches", "misleading", "flagged", "certified", "failed_jobs",
+    "median_worst_m", "mean_evals", "residual_bound",
 )
 
 
@@ -42,12 +55,14 @@ def _plain(v: Any) -> Any:
 def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
     """Job rows as flat dicts, and the column names (``COLUMNS`` then ``worst_<parameter>`` columns);
     ``failures`` is the JSON ``{reason: count}`` of the failed evaluations."""
-    from .metrics import read_off
+    from ..constants import EPS_SAFE_M
+    from .metrics import breach_kind, read_off, residual_bound
 
     samples = store.samples()
     camp = store.campaign()
     eps, penalty = ((camp["spec"].get("eps_safe_m"), camp["spec"].get("penalty_m")) if camp else (None, None))
-    stored = store.jobs(with_trace=False)
+    eps_kind = EPS_SAFE_M if eps is None else eps
+    stored = store.jobs(with_trace=False, with_points=True)
     if any(r.budget is not None and r.budget.reads for r in stored):
         full = {r.key: r for r in store.jobs(role="main", with_points=True) if r.budget is not None and r.budget.reads}
         stored = [x for r in stored for x in
@@ -60,6 +75,9 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
         d = {c: _plain(getattr(r, c, None)) for c in COLUMNS}
         d.update(slant_distance_m=s.get("slant_distance_m"), envelope=s.get("envelope"), max_evals=b.get("max_evals"),
                  max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"), stop_at_breach=b.get("stop_at_breach"))
+        if r.kind == "search":
+            kind = breach_kind(r, eps_kind)
+            d.update(breach_kind=None if kind is None else kind.value, residual_bound=residual_bound(r, eps_kind))
         for name, v in (r.worst_x or {}).items():
             col = f"worst_{name}"
             if col not in params:
@@ -73,6 +91,49 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
                      nominal_breached_frames=seq["nominal"].get("breached_frames"))
         rows.append(d)
     return rows, [*COLUMNS, *params, *(SEQUENCE_COLUMNS if sequences else ())]
+
+
+def summary_records(store: ResultStore) -> list[dict[str, Any]]:
+    """The run's summary table: one record per method, box and budget of its main search rows (and of the dense
+    grid's reference pseudo-rows, method ``grid (reference)``), :data:`SUMMARY_COLUMNS` each; ``ValueError`` for a
+    store without a campaign."""
+    import math
+
+    from .metrics import main_rows, reference_rows, summarize
+    from .spec import CampaignSpec
+
+    camp = store.campaign()
+    if camp is None:
+        raise ValueError(f"{store.path}: no campaign stored")
+    spec = CampaignSpec.from_dict(camp["spec"])
+    rows = main_rows(store, spec, with_trace=False)
+    boxes = list({r.box.label: r.box for r in rows if r.box is not None}.values())
+    ref = store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
+    rows += reference_rows(ref, boxes, spec.eps_safe_m, spec.penalty_m)
+    out = []
+    for s in summarize(rows, spec.eps_safe_m):
+        ci = s.survival_rate.ci
+        out.append({
+            "experiment": spec.name, "method": s.method, "box_label": s.box_label, "box_level": s.box_level,
+            "budget_label": s.budget_label, "images": s.n, "survivors": s.survivors, "survival_pct": s.survival,
+            "survival_ci_low": ci.low, "survival_ci_high": ci.high, "breaches": s.breaches,
+            "misleading": s.misleading, "flagged": s.flagged, "certified": s.certified, "failed_jobs": s.failed,
+            "median_worst_m": None if math.isnan(s.median_worst_m) else s.median_worst_m,
+            "mean_evals": s.mean_nfev, "residual_bound": s.residual,
+        })
+    return out
+
+
+def write_records(records: list[dict[str, Any]], columns: tuple[str, ...], fmt: str, stream: Any) -> None:
+    """``records`` to ``stream`` as ``csv`` (a header, then one line each) or ``json`` (a list of objects)."""
+    if fmt == "csv":
+        w = csv.DictWriter(stream, fieldnames=list(columns), extrasaction="ignore", lineterminator="\n")
+        w.writeheader()
+        w.writerows(records)
+    elif fmt == "json":
+        stream.write(json.dumps([{c: r.get(c) for c in columns} for r in records], indent=1) + "\n")
+    else:
+        raise ValueError(f"format must be csv or json, got {fmt!r}")
 
 
 def export(store: ResultStore, path: str | Path) -> Path:

@@ -315,15 +315,19 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
             table.add_column(heads[c], no_wrap=c == "method", min_width=max(len(str(ln.method)) for ln in lines)
                              if c == "method" else None)
         empty = any(line.n_empty for line in lines)  # survivors never searched (no evaluation in a time budget)
-        for col in (f"{spec.unit}s", "survival %", *(["no eval in time"] if empty else []), "median worst (m)",
-                    "breaches", "failed jobs", "failed evals"):
+        for col in (f"{spec.unit}s", "survival % [95 % CI]", *(["no eval in time"] if empty else []),
+                    "median worst (m)", "breaches", "misleading / flagged", "failed jobs", "failed evals"):
             table.add_column(col, justify="right")
         for line in lines:
             fe, med = line.failed_evals, line.median_worst_m
-            table.add_row(*(str(getattr(line, c)) for c in cols), str(line.n), f"{line.survival:.1f}",
-                          *([str(line.n_empty)] if empty else []), "–" if math.isnan(med) else f"{med:.1f}",
-                          str(line.breaches), str(line.failed), "–" if fe is None else str(fe))
+            kinds = "?" if line.misleading is None else f"{line.misleading} / {line.flagged}"
+            table.add_row(*(str(getattr(line, c)) for c in cols), str(line.n),
+                          line.survival_rate.text(1, percent=False), *([str(line.n_empty)] if empty else []),
+                          "–" if math.isnan(med) else f"{med:.1f}", str(line.breaches), kinds, str(line.failed),
+                          "–" if fe is None else str(fe))
         Console().print(table)
+        typer.echo("misleading: a confident pose off by more than ε_safe; flagged: every breach was a flagged "
+                   "failure (no detection, low confidence, PnP failed …)")
         if empty:
             typer.echo("no eval in time: searches that completed no evaluation within their time budget; they "
                        "found nothing and count as survivors")
@@ -417,6 +421,10 @@ def register(app: typer.Typer) -> None:
         sequences: str | None = typer.Option(None, "--sequences", help="Audit approach sequences instead of images: "
                                              "a number N (generated) or a LARD V2 directory grouped into sequences; "
                                              "one θ is held over each sequence (see --sustain)."),
+        target: str = typer.Option("any", "--target", help="What the searches look for: any (every breach; a "
+                                   "flagged failure — no detection, low confidence, PnP failed — counts 5000 m, "
+                                   "as in the paper) or misleading (a flagged failure counts 0 m, as safe: every "
+                                   "method hunts the worst confident pose, the hazardously misleading error)."),
         sustain: int = typer.Option(1, "--sustain", min=1, help="With --sequences: frames the error must hold "
                                     "(the worst error sustained over K consecutive frames)."),
         frames: int | None = typer.Option(None, "--frames", min=1, help="With --sequences N: frames per sequence "
@@ -447,6 +455,10 @@ def register(app: typer.Typer) -> None:
         bounds.update(extra)
         if not bounds:
             fail("give at least one of --roll, --contrast, --perturb")
+        from vbl_robust.constants import TARGETS
+
+        if target not in TARGETS:
+            fail(f"--target {target}: choose {' or '.join(TARGETS)}")
         from vbl_robust.campaigns.runner import check_executor
 
         try:
@@ -472,7 +484,7 @@ def register(app: typer.Typer) -> None:
         counts = (21, 11)[: box.dim] if landscape and box.dim <= 2 else None
         spec = audit_spec(BoxSpec(box, label, level), methods=method_list, budget=budget, seed=seed,
                           lipschitz=parse_lipschitz(lipschitz), pnp=pnp, landscape=counts,
-                          sustain=None if sequences is None else sustain)
+                          sustain=None if sequences is None else sustain, target=target)
         method_opts = parse_method_options(method_option)
         spec = with_method_options(spec, method_opts)
         spec, workers = run_settings(spec, clock, device, workers)

@@ -20,9 +20,11 @@ def register(app: typer.Typer) -> None:
         out: Path | None = typer.Option(None, "--out", help="Directory for report.html and figures/ (default: RUN)."),
         csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to CSV."),
         parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to Parquet."),
-        fmt: str = typer.Option("html", "--format", help="html (the report) or md: print the survival tables "
+        fmt: str = typer.Option("html", "--format", help="html (the report); md: print the survival tables "
                                 "(and a families run's ranking) as Markdown instead, on the images every method "
-                                "completed."),
+                                "completed; csv or json: print the summary table, one row per method, box and "
+                                "budget (images, survivors, survival_pct, survival_ci_low, survival_ci_high, "
+                                "breaches, misleading, flagged, …)."),
         others: list[Path] | None = typer.Option(None, "--with", help="--format md: another run of the same "
                                                  "experiment and seed whose methods join the table (repeatable)."),
         compare: Path | None = typer.Option(None, "--compare", help="Another run of the same experiment, seed and "
@@ -35,8 +37,14 @@ def register(app: typer.Typer) -> None:
         from vbl_robust.campaigns import ResultStore, export
         from vbl_robust.report import build_report
 
-        if fmt not in ("html", "md"):
-            fail(f"--format {fmt}: choose html or md")
+        if fmt not in ("html", "md", "csv", "json"):
+            fail(f"--format {fmt}: choose html, md, csv or json")
+        if fmt in ("csv", "json"):
+            if out is not None or csv is not None or parquet is not None or others or compare is not None:
+                fail(f"--format {fmt} prints the summary table: --out, --csv, --parquet, --with and --compare "
+                     "belong to the other formats")
+            _summary(run, fmt)
+            return
         if fmt == "md":
             if out is not None or csv is not None or parquet is not None:
                 fail("--format md prints to standard output: --out, --csv and --parquet belong to --format html")
@@ -130,6 +138,21 @@ def register(app: typer.Typer) -> None:
                     typer.echo(f"{src}: {new} job rows merged, {had} already in {dst}")
         except (ValueError, FileNotFoundError, OSError, EOFError, lzma.LZMAError) as exc:
             fail(str(exc))
+
+
+def _summary(run: Path, fmt: str) -> None:
+    """The run's summary table (:func:`vbl_robust.campaigns.tables.summary_records`) on standard output."""
+    import sys
+
+    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.campaigns.tables import SUMMARY_COLUMNS, summary_records, write_records
+
+    try:
+        with ResultStore.open_existing(run) as store:
+            records = summary_records(store)
+    except (ValueError, FileNotFoundError) as exc:
+        fail(str(exc))
+    write_records(records, SUMMARY_COLUMNS, fmt, sys.stdout)
 
 
 def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:

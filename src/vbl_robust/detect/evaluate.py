@@ -24,10 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..campaigns.metrics import paired_survival
 from ..constants import CONF_THRESHOLD
 from ..data.sample import Sample
 from ..perturb.views import to_tensor
+from ..stats import Paired, paired
 from .base import DetectContext, select
 
 #: nominal survival: position error ≤ this many metres with no perturbation
@@ -167,8 +167,8 @@ def score(r: EvalResult, method: str = "ippe_lm") -> tuple[float, float]:
     return float(np.mean(e <= SURVIVAL_M)), -float(np.median(100.0 * e / r.slant_m))
 
 
-def paired_seeds(new: dict, old: dict, split: str = "validation") -> tuple[list[tuple[str, dict]], dict]:
-    """Per seed and pooled :func:`paired_survival` of two protocol results (``benchmarks/detector_protocol.py
+def paired_seeds(new: dict, old: dict, split: str = "validation") -> tuple[list[tuple[str, Paired]], Paired]:
+    """Per seed and pooled :func:`vbl_robust.stats.paired` (exact McNemar) of two protocol results (``benchmarks/detector_protocol.py
     --json``: ``split`` → seed → summary rows, ``survived`` → seed → each approach's survival) on the seeds of
     ``split`` that both hold. Raises ValueError saying what is missing."""
     seeds = [s for s in new.get(split, {}) if s in old.get(split, {})]
@@ -178,6 +178,6 @@ def paired_seeds(new: dict, old: dict, split: str = "validation") -> tuple[list[
         if any(s not in p.get("survived", {}) for s in seeds):
             raise ValueError(f"the {name} protocol results have no per-approach results (written before they were "
                              "recorded: rerun benchmarks/detector_protocol.py --json)")
-    rows = [(s, paired_survival(new["survived"][s], old["survived"][s])) for s in seeds]
-    pooled = paired_survival(sum((new["survived"][s] for s in seeds), []), sum((old["survived"][s] for s in seeds), []))
+    rows = [(s, paired(new["survived"][s], old["survived"][s])) for s in seeds]
+    pooled = paired(sum((new["survived"][s] for s in seeds), []), sum((old["survived"][s] for s in seeds), []))
     return rows, pooled

@@ -65,10 +65,10 @@ def replacement_verdict(new: dict, old: dict) -> tuple[bool, str]:
     except ValueError as exc:
         return False, str(exc)
     seeds = [s for s, _ in rows]
-    text = (f"pooled validation (seeds {', '.join(seeds)}, {c['n']} approaches): {c['gain']:+d} survive "
-            f"({c['only_a']} only with the candidate, {c['only_b']} only with the shipped model), exact McNemar "
-            f"p = {c['p_value']:.4f}")
-    return c["gain"] > 0 and c["p_value"] < REPLACE_P, text
+    text = (f"pooled validation (seeds {', '.join(seeds)}, {c.n} approaches): {c.gain:+d} survive "
+            f"({c.only_a} only with the candidate, {c.only_b} only with the shipped model), exact McNemar "
+            f"p = {c.p_value:.4f}")
+    return c.gain > 0 and c.p_value < REPLACE_P, text
 
 
 def info_from_protocol(p: dict, version: int, epochs: int) -> dict:

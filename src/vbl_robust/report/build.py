@@ -7,7 +7,8 @@ identity, configuration) closes the page. Figures are also written as PNG files 
 Where things are: :mod:`.rows` (the context and which stored rows each section reads), :mod:`.sections` (one
 function per section), :mod:`.zone_section` (the vulnerability zones), :mod:`.sequence_section` (a sequence
 campaign's errors along the approach), :mod:`.figures` (drawing), :mod:`.html`
-(the page); this module only orders the sections and writes the page.
+(the page), :mod:`.evidence` (the evidence section after the summary, and ``evidence.json``); this module only
+orders the sections and writes the page.
 
 Which figures: the ones the campaign spec declares (``CampaignSpec.figures``, see
 :data:`vbl_robust.campaigns.spec.FIGURES`; a spec stored without a declaration gets
@@ -37,6 +38,7 @@ from ..campaigns import metrics as mx
 from ..campaigns.experiments import EXPERIMENTS
 from ..campaigns.spec import FIGURES, CampaignSpec
 from ..campaigns.store import ResultStore
+from .evidence import section_evidence
 from .html import esc, page
 from .rows import Context, Section
 from .sections import (
@@ -45,6 +47,7 @@ from .sections import (
     section_distance,
     section_families,
     section_landscapes,
+    section_methods,
     section_overview,
     section_per_image,
     section_pnp,
@@ -80,6 +83,14 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
         exp = EXPERIMENTS.get(spec.name)
         title = exp.title if exp else "Robustness audit"
         sections = [section_overview(ctx, title)]
+        try:
+            evidence = section_evidence(ctx)
+        except Exception:  # one broken section must not hide the others
+            logger.exception("report section evidence failed")
+            evidence = Section("Evidence", ['<p class="warn">This section failed to build; see the log.</p>'])
+        if evidence is not None:
+            sections.append(evidence)
+        sections.append(section_methods(ctx))
         declared = spec.report_figures
         for name in FIGURES:
             builds = [SECTIONS[name]] if name in declared else []
@@ -95,6 +106,7 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
                 if sec is not None:
                     sections.append(sec)
         sections.append(section_provenance(ctx))
+        sections = [sec for sec in sections if sec is not None]
     body = [f"<h1>vbl-robust — {esc(title)} <small>({esc(spec.name)})</small></h1>"]
     for sec in sections:
         body.append(f"<h2>{esc(sec.title)}</h2>")

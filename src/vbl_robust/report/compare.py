@@ -5,7 +5,7 @@ Read from the two stores, nothing evaluated. An image *survives* a (method, box)
 ≤ ε_safe; the union "any of them" survives a box when no method found a breach there (on the images every method
 of both runs completed). Per method and box: survival before and after on the images both runs completed, the
 images only one run survives — *fixed* (breached before, not after) and *new breaches* (the other way) — and the
-exact McNemar p-value of that difference (:func:`vbl_robust.campaigns.metrics.paired_survival`). Per image: the
+exact McNemar p-value of that difference (:func:`vbl_robust.stats.paired`). Per image: the
 union's changes with the worst error over the methods before and after. The union is also given per approach
 envelope (far / medium / close, where the images carry one): far approaches fail more often without any
 perturbation, so a change there reads differently.
@@ -26,6 +26,7 @@ import numpy as np
 from ..campaigns import metrics as mx
 from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import JobRow, ResultStore
+from ..stats import Paired, paired
 
 __all__ = ["ALL", "ANY", "Change", "Comparison", "PairedLine", "check_alike", "compare_html", "line_order",
            "paired_comparison"]
@@ -125,7 +126,7 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
         if shared:
             a = [ok(ia[(m, b, s)]) for s in shared]
             z = [ok(ib[(m, b, s)]) for s in shared]
-            lines.append(_line(m, b, level[b], a, z, mx.paired_survival(z, a)))
+            lines.append(_line(m, b, level[b], a, z, paired(z, a)))
     if not lines:
         raise ValueError(f"{before} and {after}: no method and box with images both runs completed")
     changes: list[Change] = []
@@ -137,11 +138,11 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
         a = [all(ok(ia[(m, b, s)]) for m in ms) for s in shared]
         z = [all(ok(ib[(m, b, s)]) for m in ms) for s in shared]
         if len(ms) > 1:  # one method's own line is already there
-            lines.append(_line(ANY, b, level[b], a, z, mx.paired_survival(z, a)))
+            lines.append(_line(ANY, b, level[b], a, z, paired(z, a)))
         for env in sorted({envelope[s] for s in shared if s in envelope}):
             idx = [i for i, s in enumerate(shared) if envelope.get(s) == env]
             ae, ze = [a[i] for i in idx], [z[i] for i in idx]
-            lines.append(_line(ANY if len(ms) > 1 else ms[0], b, level[b], ae, ze, mx.paired_survival(ze, ae), env))
+            lines.append(_line(ANY if len(ms) > 1 else ms[0], b, level[b], ae, ze, paired(ze, ae), env))
         for s, x, y in zip(shared, a, z, strict=True):
             if x != y:
                 changes.append(Change(s, b, _worst(ia, ms, b, s), _worst(ib, ms, b, s),
@@ -149,10 +150,10 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
     return Comparison(str(before), str(after), spec, (det_a, det_b), tuple(lines), tuple(changes))
 
 
-def _line(method: str, box: str, level: float, a: Sequence[bool], z: Sequence[bool], c: dict,
+def _line(method: str, box: str, level: float, a: Sequence[bool], z: Sequence[bool], c: Paired,
           envelope: str = ALL) -> PairedLine:
     return PairedLine(method, box, level, len(a), 100.0 * float(np.mean(a)), 100.0 * float(np.mean(z)),
-                      c["only_a"], c["only_b"], c["p_value"], envelope)
+                      c.only_a, c.only_b, c.p_value, envelope)
 
 
 def _worst(rows: dict, methods: Sequence[str], box: str, sid: str) -> float | None:

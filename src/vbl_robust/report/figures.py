@@ -76,12 +76,20 @@ def _fig(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (6.4, 4.0),
     return fig, ax
 
 
+def _ci_bars(rows: Sequence[Summary]) -> np.ndarray:
+    """``(2, N)`` distances from each row's survival % down and up to its exact 95 % interval (error bars)."""
+    cis = [r.survival_rate.ci for r in rows]
+    return np.array([[max(r.survival - c.low, 0.0) for r, c in zip(rows, cis, strict=True)],
+                     [max(c.high - r.survival, 0.0) for r, c in zip(rows, cis, strict=True)]]).reshape(2, len(rows))
+
+
 def survival_vs_level(summary: Sequence[Summary], *, title: str, xlabel: str,
                       tick_labels: Mapping[float, str] | None = None) -> Figure:
-    """Survival rate (%) against the perturbation budget (box level), one line per method (+ grid reference).
+    """Survival rate (%) against the perturbation budget (box level), one line per method (+ grid reference),
+    each point with its exact 95 % interval as an error bar.
 
     Budgets are placed at equal spacing (categories, as in the paper) and methods are offset slightly
-    sideways so that coinciding curves stay visible.
+    sideways so that coinciding curves and their bars stay visible.
     """
     fig, ax = _fig()
     levels = sorted({r.box_level for r in summary})
@@ -91,9 +99,9 @@ def survival_vs_level(summary: Sequence[Summary], *, title: str, xlabel: str,
         rs = sorted((r for r in summary if r.method == m), key=lambda r: r.box_level)
         st = style(m)
         dx = 0.0 if m == REFERENCE else 0.07 * (j - (len(methods) - 2) / 2)
-        ax.plot([pos[r.box_level] + dx for r in rs], [r.survival for r in rs], marker=st["marker"],
-                color=st["color"], linestyle=st["linestyle"], label=st["label"], markersize=6, linewidth=1.6,
-                alpha=0.9, zorder=4 if m == REFERENCE else 3)
+        ax.errorbar([pos[r.box_level] + dx for r in rs], [r.survival for r in rs], yerr=_ci_bars(rs),
+                    marker=st["marker"], color=st["color"], linestyle=st["linestyle"], label=st["label"], markersize=6,
+                    linewidth=1.6, elinewidth=0.8, capsize=2, alpha=0.9, zorder=4 if m == REFERENCE else 3)
     ax.set_xticks(range(len(levels)))
     if tick_labels:
         ax.set_xticklabels([tick_labels.get(v, f"{v:g}") for v in levels], rotation=20, ha="right", fontsize=8)
@@ -103,10 +111,12 @@ def survival_vs_level(summary: Sequence[Summary], *, title: str, xlabel: str,
     ax.axhline(10, **{**EPS_STYLE, "color": "grey"}, label="10 % (φ_crit level)")
     n = max((r.n for r in summary), default=0)
     ax.set_xlabel(xlabel)
-    ax.set_ylabel(f"survival rate S_rate (%)   [N = {n} images]")
+    ax.set_ylabel(f"survival rate S_rate (%), 95 % CI   [N = {n} images]")
     ax.set_title(title)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    handles, names = ax.get_legend_handles_labels()  # the methods first (error bars are listed after lines)
+    order = sorted(range(len(names)), key=lambda i: names[i].startswith("10 %"))
+    ax.legend([handles[i] for i in order], [names[i] for i in order], fontsize=8, loc="best")
     return fig
 
 
@@ -143,8 +153,9 @@ def survival_before_after(lines: Sequence[Any], *, title: str) -> Figure:
 
 def runtime(summary: Sequence[Summary], *, axis: str, title: str, eps_safe_m: float,
             reference: Mapping[str, float] | None = None) -> Figure:
-    """Two panels against the per-image budget (``axis`` "max_seconds" or "max_evals"): survival rate and
-    median worst error, one line per method; ``reference`` = {"survival", "median_worst_m"} of the dense grid."""
+    """Two panels against the per-image budget (``axis`` "max_seconds" or "max_evals"): survival rate (with exact
+    95 % intervals) and median worst error, one line per method; ``reference`` = {"survival", "median_worst_m"} of
+    the dense grid."""
     fig, (a1, a2) = _fig(1, 2, size=(10.5, 4.4))
     rows = [r for r in summary if math.isfinite(r.budget(axis))]
     for m in method_order(r.method for r in rows):
@@ -152,7 +163,7 @@ def runtime(summary: Sequence[Summary], *, axis: str, title: str, eps_safe_m: fl
         st = style(m)
         x = [r.budget(axis) for r in rs]
         kw = {"marker": st["marker"], "color": st["color"], "label": st["label"], "linewidth": 1.8}
-        a1.plot(x, [r.survival for r in rs], **kw)
+        a1.errorbar(x, [r.survival for r in rs], yerr=_ci_bars(rs), elinewidth=0.8, capsize=2, **kw)
         a2.plot(x, [r.median_worst_m for r in rs], **kw)
     if reference:
         st = style(REFERENCE)
@@ -169,7 +180,7 @@ def runtime(summary: Sequence[Summary], *, axis: str, title: str, eps_safe_m: fl
         a.set_xlabel(xl)
         a.grid(alpha=0.3)
     a1.set_ylim(-3, 103)
-    a1.set_ylabel("survival rate S_rate (%)")
+    a1.set_ylabel("survival rate S_rate (%), 95 % CI")
     a2.set_yscale("log")
     lo, hi = a2.get_ylim()
     if hi / lo < 20:  # short range: label the minor ticks too, in plain numbers

@@ -20,6 +20,7 @@ table { border-collapse: collapse; margin: .8em 0; font-size: 13px; }
 th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
 th { background: #f0f4f8; }
 td.l, th.l { text-align: left; }
+td:not(.l) { white-space: nowrap; }
 tr.breach td { background: #fde8e8; }
 img { max-width: 100%; border: 1px solid #eee; }
 .note { background: #f7f7f7; border-left: 4px solid #1f77b4; padding: .5em 1em; }

@@ -3,7 +3,8 @@
 Everything is read from the store; nothing is evaluated. Only images whose every main job is stored count, so a
 run still in progress (or resumed across sessions) compares its methods on the same images.
 
-* :func:`survival_markdown` — survival % (breaches) per method and box (and budget, where the run has several:
+* :func:`survival_markdown` — survival % with its exact 95 % interval (breaches, and their kinds: misleading /
+  flagged) per method and box (and budget, where the run has several:
   the runtime experiments), the union "any of them", evaluations
   spent, and where the run holds a dense landscape grid the found / true worst ratio of each method;
   ``others`` adds the main rows of other runs of the same experiment and seed as more methods (labelled with
@@ -29,6 +30,8 @@ import numpy as np
 from ..campaigns import metrics as mx
 from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import ResultStore
+from ..constants import BreachKind
+from ..stats import Rate
 
 __all__ = ["compare_markdown", "families_markdown", "survival_markdown", "zones_markdown"]
 
@@ -45,6 +48,11 @@ def _labelled(r) -> str:
 def _mean(values: list) -> float:
     vals = [v for v in values if v is not None]
     return float(np.mean(vals)) if vals else float("nan")
+
+
+def _kinds(line: mx.Summary) -> str:
+    """``"misleading / flagged"`` breach counts of a summary line (``?`` when unknown)."""
+    return "? / ?" if line.misleading is None else f"{line.misleading} / {line.flagged}"
 
 
 def _read(run: str | Path):
@@ -97,17 +105,25 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
     cell = {(ln.method, col(ln)): ln for ln in lines}
     where = f"; box {boxes[0]}" if one else ""
     out = [f"{run}: {len(done)} {spec.unit}s completed by every method (of {len(per_image)} started); "
-           f"ε_safe = {eps:g} m{where}; cell = survival % (breaches)", ""]
-    table = [[m, *(f"{cell[(m, c)].survival:.1f} ({cell[(m, c)].breaches})" if (m, c) in cell else "–"
-                   for c in cols)] for m in methods]
+           f"ε_safe = {eps:g} m{where}; cell = survival % [exact 95 % interval] (breaches)", ""]
+    table = [[m, *(f"{cell[(m, c)].survival_rate.text(1, percent=False)} ({cell[(m, c)].breaches})"
+                   if (m, c) in cell else "–" for c in cols)] for m in methods]
+    kinds = [[m, *(_kinds(cell[(m, c)]) if (m, c) in cell else "–" for c in cols)] for m in methods]
     if len(methods) > 1 and done:  # the union: an image breaches a column when any method found a breach there
-        hit = defaultdict(set)
+        hit: dict[str, set] = defaultdict(set)
+        silent: dict[str, set] = defaultdict(set)
         for r in rows:
-            if r.worst_m is not None and r.worst_m > eps:
+            if not mx.survived(r, eps):
                 hit[col(r)].add(r.sample_id)
-        table.append(["any of them", *(f"{100.0 * (len(done) - len(hit[c])) / len(done):.1f} ({len(hit[c])})"
-                                       for c in cols)])
+                if mx.breach_kind(r, eps) is BreachKind.MISLEADING:
+                    silent[col(r)].add(r.sample_id)
+        table.append(["any of them", *(f"{Rate(len(done) - len(hit[c]), len(done)).text(1, percent=False)} "
+                                       f"({len(hit[c])})" for c in cols)])
+        kinds.append(["any of them", *(f"{len(silent[c])} / {len(hit[c]) - len(silent[c])}" for c in cols)])
     out += _table(["method", *heads], table)
+    out += ["", "Breaches by kind, misleading / flagged only: misleading = a confident pose (confidence ≥ τ_conf, "
+            "a PnP position) off by more than ε_safe; flagged = no detection, low confidence, PnP failed, … (the "
+            "system knows it has no fix)", "", *_table(["method", *heads], kinds)]
     if len(methods) > 1 and not several:  # (with several budgets the budgets set the evaluations)
         out += ["", "Evaluations spent per job, mean over all jobs / over the jobs that found a breach: " + "; ".join(
             f"{m} {_mean([r.nfev for r in rows if r.method == m]):.0f} / "

@@ -32,17 +32,22 @@ from .rows import (
 
 
 def _summary_table(summary: Sequence[mx.Summary], unit: str = "image") -> str:
+    """Per method, box and budget: survival with its exact 95 % interval, breaches split by kind (misleading /
+    flagged only), verdicts and effort."""
     cols = [
         ("method", "method", None), ("box_label", "box", None), ("budget_label", f"budget per {unit}", None),
-        ("n", f"{unit}s", None), ("survival", "survival %", None), ("median_worst_m", "median worst (m)", None),
-        ("breaches", "breaches", None), ("certified", "certified", None), ("failed", "failed", None),
-        ("mean_nfev", "mean evals", None), ("failed_evals", "failed evals", None), ("median_search_s", "median s", None),
+        ("n", f"{unit}s", None), ("survival_text", "survival % [95 % CI]", esc),
+        ("median_worst_m", "median worst (m)", None), ("breaches", "breaches", None),
+        ("misleading", "misleading", None), ("flagged", "flagged only", None), ("certified", "certified", None),
+        ("failed", "failed", None), ("mean_nfev", "mean evals", None), ("failed_evals", "failed evals", None),
+        ("median_search_s", "median s", None),
     ]
     if any(line.n_empty for line in summary):  # survivors that were never searched: say how many
         cols.insert(5, ("n_empty", "no evaluation in time", None))
     if any(line.read_from for line in summary):
         cols.append(("read_from", "read off the run", None))
-    return table([ln.as_row() for ln in summary], cols, left=("method", "box_label", "budget_label", "read_from"))
+    rows = [{**ln.as_row(), "survival_text": ln.survival_rate.text(1, percent=False)} for ln in summary]
+    return table(rows, cols, left=("method", "box_label", "budget_label", "read_from"))
 
 
 def _failures_table(summary: Sequence[mx.Summary], penalty_m: float) -> str:
@@ -84,10 +89,6 @@ def section_overview(ctx: Context, title: str) -> Section:
     if total and n_done < total:
         s.html.append(f'<p class="warn">The campaign is incomplete ({n_done} of {total} jobs): rerun the same '
                       "command to resume.</p>")
-    if ctx.main:
-        summary = mx.summarize(ctx.main, ctx.eps)
-        s.html.append(_summary_table(summary, ctx.spec.unit))
-        s.html.append(_failures_table(summary, ctx.spec.penalty_m))
     failed = [r for r in ctx.store.jobs(with_trace=False) if r.status is JobStatus.FAILED]
     if failed:
         s.html.append(f'<p class="warn">{len(failed)} job(s) failed and count with the {ctx.spec.penalty_m:g} m '
@@ -97,6 +98,17 @@ def section_overview(ctx: Context, title: str) -> Section:
         s.html.append(table(lines, [("sample_id", "sample", None), ("method", "method", None),
                                     ("box_label", "box", None), ("reason", "reason", None)],
                             left=("sample_id", "method", "box_label", "reason")))
+    return s
+
+
+def section_methods(ctx: Context) -> Section | None:
+    """Per method, box and budget: the summary table and the failed evaluations by reason."""
+    if not ctx.main:
+        return None
+    s = Section("Per method, box and budget")
+    summary = mx.summarize(ctx.main, ctx.eps)
+    s.html.append(_summary_table(summary, ctx.spec.unit))
+    s.html.append(_failures_table(summary, ctx.spec.penalty_m))
     return s
 
 

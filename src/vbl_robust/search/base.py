@@ -114,6 +114,9 @@ class Optimizer:
     anytime: ClassVar[bool] = True
     #: The method keeps cells that tile the box (:meth:`cells`): the DIRECT family and the grid.
     covers: ClassVar[bool] = False
+    #: Its points are independent and uniform over the box, so k of them without a breach bound the breached
+    #: fraction of the box (:func:`vbl_robust.stats.breach_fraction_bound`): random search only.
+    iid_uniform: ClassVar[bool] = False
 
     def __init__(
         self,

@@ -48,6 +48,7 @@ class RandomSearch(_Batched):
 
     name: ClassVar[str] = "random"
     label: ClassVar[str] = "Random"
+    iid_uniform: ClassVar[bool] = True
 
     def __init__(self, box: ParameterBox, *, batch_size: int = 64, **budget: Any):
         super().__init__(box, batch_size=batch_size, **budget)
