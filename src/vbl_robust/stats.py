@@ -23,8 +23,9 @@ from enum import StrEnum
 import numpy as np
 
 __all__ = [
-    "ALPHA", "LEVEL", "ClaimVerdict", "Interval", "Paired", "Rate", "breach_fraction_bound", "claim_verdict",
-    "clopper_pearson", "holm", "paired", "rate",
+    "ALPHA", "LEVEL", "ClaimVerdict", "Interval", "Paired", "Rate", "RiskVerdict", "SequentialTest", "Stratum",
+    "breach_fraction_bound", "claim_verdict", "clopper_pearson", "holm", "paired", "rate", "risk_verdict",
+    "stratified_interval",
 ]
 
 #: Two-sided confidence level of every interval.
@@ -210,3 +211,102 @@ def breach_fraction_bound(k: int, level: float = LEVEL) -> float:
     if k < 0:
         raise ValueError(f"k must be >= 0, got {k}")
     return 1.0 if k == 0 else float(1.0 - (1.0 - level) ** (1.0 / k))
+
+
+class RiskVerdict(StrEnum):
+    """The verdict on "the failure probability is at most τ, at confidence 1 − δ".
+
+    - ``HOLDS``: the interval's top is ≤ τ.
+    - ``VIOLATED``: the interval's bottom is > τ.
+    - ``UNDECIDED``: the interval straddles τ (more evaluations would be needed).
+    """
+
+    HOLDS = "holds"
+    VIOLATED = "violated"
+    UNDECIDED = "undecided"
+
+
+def risk_verdict(ci: Interval, tau: float) -> RiskVerdict:
+    """:class:`RiskVerdict` of a failure-probability interval (fractions) against the limit ``tau``."""
+    if ci.high <= tau:
+        return RiskVerdict.HOLDS
+    return RiskVerdict.VIOLATED if ci.low > tau else RiskVerdict.UNDECIDED
+
+
+@dataclass(frozen=True)
+class SequentialTest:
+    """A group-sequential test of "p ≤ τ" for Bernoulli outcomes, valid however early it stops.
+
+    The outcomes are looked at after ``looks[0] < looks[1] < …`` of them (e.g. 32, 64, 128, …); at each look the
+    exact interval at level 1 − δ/K (K = ``len(looks)``) decides: top ≤ τ → holds, bottom > τ → violated, else go
+    on; after the last look it is undecided. By the union bound over the K looks, the probability that any
+    reported interval misses p is ≤ δ, so the verdict and the interval at the stopping look are valid at
+    confidence 1 − δ (PRoA-style: stop as soon as decided). Written here: scipy has no sequential binomial test.
+    """
+
+    tau: float
+    delta: float
+    looks: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.tau < 1.0:
+            raise ValueError(f"tau must be in [0, 1), got {self.tau!r}")
+        if not 0.0 < self.delta < 1.0:
+            raise ValueError(f"delta must be in (0, 1), got {self.delta!r}")
+        if not self.looks or any(b <= a for a, b in zip(self.looks, self.looks[1:], strict=False)) or self.looks[0] < 1:
+            raise ValueError(f"looks must be increasing positive counts, got {self.looks!r}")
+
+    @classmethod
+    def doubling(cls, tau: float, delta: float, max_n: int, first: int = 32) -> SequentialTest:
+        """Looks at ``first``, 2·first, 4·first, … and ``max_n`` (the last)."""
+        if max_n < 1:
+            raise ValueError(f"max_n must be >= 1, got {max_n}")
+        looks, n = [], min(first, max_n)
+        while n < max_n:
+            looks.append(n)
+            n *= 2
+        return cls(tau, delta, (*looks, max_n))
+
+    @property
+    def level(self) -> float:
+        """The level of each look's interval, 1 − δ/K."""
+        return 1.0 - self.delta / len(self.looks)
+
+    def interval(self, k: int, n: int) -> Interval:
+        return clopper_pearson(k, n, self.level)
+
+    def decide(self, k: int, n: int) -> RiskVerdict | None:
+        """At a look (``n`` in ``looks``): the verdict, or None to go on (undecided after the last look)."""
+        if n not in self.looks:
+            raise ValueError(f"{n} outcomes is not a look of this test ({self.looks})")
+        v = risk_verdict(self.interval(k, n), self.tau)
+        if v is RiskVerdict.UNDECIDED and n != self.looks[-1]:
+            return None
+        return v
+
+
+@dataclass(frozen=True)
+class Stratum:
+    """One stratum of a stratified sample: its probability ``mass`` under the sampling distribution, and ``k``
+    failures in ``n`` draws from the distribution restricted to it."""
+
+    mass: float
+    k: int
+    n: int
+
+
+def stratified_interval(strata: Sequence[Stratum], level: float = LEVEL) -> tuple[float, Interval]:
+    """The stratified estimate Σ mass·k/n of a failure probability and a valid interval: each stratum's exact
+    interval at level 1 − (1 − level)/S (Bonferroni over the S strata), weighted by its mass. The masses must sum
+    to 1; a stratum with n = 0 contributes its whole mass to the top (nothing is known of it)."""
+    total = sum(s.mass for s in strata)
+    if not strata or abs(total - 1.0) > 1e-9 or any(s.mass < 0 for s in strata):
+        raise ValueError(f"strata masses must be >= 0 and sum to 1, got {[s.mass for s in strata]}")
+    each = 1.0 - (1.0 - level) / len(strata)
+    est, low, high = 0.0, 0.0, 0.0
+    for s in strata:
+        ci = clopper_pearson(s.k, s.n, each)
+        est += s.mass * (s.k / s.n if s.n else 0.0)
+        low += s.mass * ci.low
+        high += s.mass * ci.high
+    return est, Interval(low, min(high, 1.0), level, "stratified Clopper-Pearson (Bonferroni)")

@@ -38,3 +38,25 @@ def test_a_killed_run_counts_up_to_its_last_stored_job_not_up_to_now(tmp_path):
     con.close()
     with ResultStore.open_existing(tmp_path) as store:
         assert provenance(store)["totals"]["wall_s"] == 12.5
+
+
+def test_a_check_tells_a_changed_finding_from_numeric_drift(tmp_path):
+    """reproduce --check-against on another machine: the same verdicts with other evaluation counts or a slightly
+    other worst error are drift (reported with its size, exit 0); another verdict or status is a finding."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from vbl_robust.campaigns.bundle import compare_runs
+
+    base = {"key": ["a", "b", "c"], "budget_label": ["x", "x", "x"], "max_seconds": [None, None, None],
+            "status": ["done"] * 3, "verdict": ["breach", "no breach found", "no breach found"],
+            "nfev": [291, 40, 40], "nit": [5, 3, 3], "worst_roll_deg": [1.0, 2.0, 3.0], "worst_m": [954.039, 10.0, 20.0]}
+    other = dict(base, nfev=[293, 40, 40], worst_m=[954.050, 10.0, 20.0])
+    pq.write_table(pa.table(base), tmp_path / "a.parquet")
+    pq.write_table(pa.table(other), tmp_path / "b.parquet")
+    c = compare_runs(tmp_path / "a.parquet", tmp_path / "b.parquet")
+    assert c["differ"] == [] and c["drift"] == ["a"] and abs(c["drift_m"] - 0.011) < 1e-9
+    lost = dict(base, verdict=["breach", "breach", "no breach found"])
+    pq.write_table(pa.table(lost), tmp_path / "c.parquet")
+    c = compare_runs(tmp_path / "a.parquet", tmp_path / "c.parquet")
+    assert c["differ"] == ["b"] and c["drift"] == []

@@ -85,6 +85,10 @@ def test_unreadable_image_is_a_recorded_failure_and_the_campaign_goes_on(tmp_pat
 
     Image.fromarray(good.image).save(tmp_path / "nope.png")
     with ResultStore(tmp_path / "r.sqlite") as st:
+        # a retry with other settings is refused before anything is forgotten (issue 48 item 7)
+        with pytest.raises(ValueError, match="other settings"):
+            run_campaign(small_spec(methods=("random",)), [bad, good], st, detector=oracle, retry_failed=True)
+        assert sum(r.status is JobStatus.FAILED for r in st.jobs()) == 2
         assert run_campaign(small_spec(), [bad, good], st, detector=oracle).done == 0
         again = run_campaign(small_spec(), [bad, good], st, detector=oracle, retry_failed=True)
         rows = st.jobs()

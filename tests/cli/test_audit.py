@@ -279,3 +279,19 @@ def test_report_prints_the_summary_table_as_csv_and_json_with_exact_intervals(tm
                      (["--format", "csv", "--out", str(tmp_path)], "--format csv prints the summary table")):
         res = runner.invoke(app, ["report", str(out), *bad])
         assert res.exit_code == 2 and msg in res.output, res.output
+
+
+def test_a_store_refuses_a_detector_with_other_options(tmp_path):
+    """Issue 48 item 2: the same model with another oracle noise (or design) is another detector: a second audit on
+    the same --out is refused in one line instead of adding rows that the report would count twice."""
+    out = tmp_path / "run"
+    base = ["audit", "--out", str(out), "--n", "1", "--roll", "5", "--methods", "random", "--max-evals", "2",
+            "--no-landscape", "--no-report", "--workers", "1", "--oracle", "--width", "96", "--height", "96", "-q"]
+    assert runner.invoke(app, [*base, "--oracle-noise", "1"]).exit_code == 0
+    res = runner.invoke(app, [*base, "--oracle-noise", "3"])
+    assert res.exit_code == 2 and "holds results of detector" in res.output and "noise" in res.output, res.output
+    from vbl_robust.campaigns import ResultStore
+
+    with ResultStore.open_existing(out) as st:
+        assert st.count() == 1
+    assert runner.invoke(app, [*base, "--oracle-noise", "1"]).exit_code == 0  # the same detector resumes

@@ -72,14 +72,15 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
                               str(bundle), *SMALL])
     assert res.exit_code == 0, res.output
     assert (f"spatial-1d: checked against {bundle / 'spatial-1d'}: {n_jobs_s1} rows, {n_jobs_s1} found there, "
-            "0 differ") in res.output
-    assert compare_runs(again, out / "spatial-1d") == {"rows": n_jobs_s1, "common": n_jobs_s1, "differ": []}
+            "0 with another finding") in res.output
+    assert compare_runs(again, out / "spatial-1d") == {"rows": n_jobs_s1, "common": n_jobs_s1, "differ": [],
+                                                       "drift": [], "drift_m": 0.0}
     runtime = compare_runs(out / "runtime-1d", bundle / "runtime-1d")  # read-off and time-budget rows too
     assert runtime["differ"] == [] and runtime["rows"] == pq.read_table(bundle / "runtime-1d" / "jobs.parquet").num_rows
     other = tmp_path / "other"  # another seed: other searches, no common row, exit code 1
     res = runner.invoke(app, ["reproduce", "spatial-1d", "--out", str(other), "--seed", "1", "--check-against",
                               str(bundle / "spatial-1d" / "jobs.parquet"), *SMALL])
-    assert res.exit_code == 1 and f"{n_jobs_s1} rows, 0 found there, {n_jobs_s1} differ (first: " in res.output
+    assert res.exit_code == 1 and f"{n_jobs_s1} rows, 0 found there, {n_jobs_s1} with another finding (first: " in res.output
     res = runner.invoke(app, ["reproduce", "spatial-1d", "--out", str(tmp_path / "none"), "--check-against",
                               str(tmp_path / "nothing"), *SMALL])  # refused before any work
     assert res.exit_code == 2 and "--check-against" in res.output and not (tmp_path / "none").exists(), res.output

@@ -53,6 +53,9 @@ def _check_complete(res, out, jobs_expected):
     rows, runs = _stored(out)
     assert len(rows) == jobs_expected and all(r.status.value == "done" for r in rows)
     assert [r["config"]["workers"] for r in runs] == [default_workers()]
+    # what moves the numerics between machines is in the provenance (issue 45 item 8)
+    machine = runs[0]["config"]["machine"]
+    assert machine["cpu"] and isinstance(machine["simd"], list) and machine["cores"] == default_workers()
     return rows
 
 

@@ -215,12 +215,18 @@ def _table_rows(source: Path) -> dict[tuple[str, str], dict[str, Any]]:
 def compare_runs(small: Path, big: Path, rel: float = 1e-3) -> dict[str, Any]:
     """Check that a smaller run reproduces a larger one's rows (``reproduce EXPERIMENT --images 3
     --check-against``): every row of ``small`` (a run directory or store) must be in ``big`` (a run directory or
-    store, or a bundle's job table: :func:`_table_rows`) under the same key and budget, with the same status,
-    verdict, evaluation and iteration counts and worst point, and the worst error within ``rel`` (relative). Rows
-    of a time budget are counted but not compared (timings differ run to run). Returns
-    ``{"rows", "common", "differ": [keys…]}`` (``differ`` also lists the rows ``big`` lacks)."""
+    store, or a bundle's job table: :func:`_table_rows`) under the same key and budget. Rows of a time budget are
+    counted but not compared (timings differ run to run). A row differs in one of two ways:
+
+    - a **finding** changed (``differ``): the row is missing there, or its status or verdict differs — a breach
+      found or lost, a job failed;
+    - **numeric drift** (``drift``): the same finding, but the evaluation or iteration count, the worst point or
+      the worst error (beyond ``rel``, relative) moved — what another CPU's kernels rounding differently do to a
+      search whose tie-breaks then diverge. ``drift_m`` is the largest worst-error change (metres).
+
+    Returns ``{"rows", "common", "differ": [keys…], "drift": [keys…], "drift_m": float}``."""
     rows_a, rows_b = _table_rows(small), _table_rows(big)
-    differ = []
+    differ, drift, drift_m = [], [], 0.0
     for (key, budget), r in rows_a.items():
         s = rows_b.get((key, budget))
         if s is None:
@@ -228,9 +234,15 @@ def compare_runs(small: Path, big: Path, rel: float = 1e-3) -> dict[str, Any]:
             continue
         if r["max_seconds"] is not None:
             continue
-        exact = ["status", "verdict", "nfev", "nit", *(c for c in r if c.startswith("worst_") and c != "worst_m")]
+        if any(r[c] != s.get(c) for c in ("status", "verdict")):
+            differ.append(key)
+            continue
+        numeric = ["nfev", "nit", *(c for c in r if c.startswith("worst_") and c != "worst_m")]
         a, b = r["worst_m"], s["worst_m"]
         close = a == b or (a is not None and b is not None and abs(a - b) <= rel * max(1.0, abs(b)))
-        if not close or any(r[c] != s.get(c) for c in exact):
-            differ.append(key)
-    return {"rows": len(rows_a), "common": sum(k in rows_b for k in rows_a), "differ": differ}
+        if not close or any(r[c] != s.get(c) for c in numeric):
+            drift.append(key)
+            if a is not None and b is not None:
+                drift_m = max(drift_m, abs(a - b))
+    return {"rows": len(rows_a), "common": sum(k in rows_b for k in rows_a), "differ": differ, "drift": drift,
+            "drift_m": drift_m}

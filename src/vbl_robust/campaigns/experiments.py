@@ -411,6 +411,33 @@ def audit_spec(box: BoxSpec, *, methods: Sequence[str] = AUDIT_METHODS, budget: 
            "found.")))
 
 
+def risk_spec(box: BoxSpec, *, methods: Sequence[str] = ("mc", "guided"), max_evals: int = 1024, seed: int = 0,
+              dist: dict[str, tuple[str, float, float]] | None = None, tau: float = 0.01, delta: float = 0.05,
+              guide_evals: int = 64, pnp: str = "ippe_lm") -> CampaignSpec:
+    """The ``risk`` job (:mod:`vbl_robust.campaigns.risk`): per image, the failure probability under ``dist``
+    (parameter → ``("normal", mean, sd)``; uniform elsewhere) over ``box`` by each estimator of ``methods``, at
+    most ``max_evals`` evaluations each, and the verdict on "p_fail ≤ ``tau``" at confidence 1 − ``delta``."""
+    from .risk import MAX_EVALS, ThetaDistribution
+
+    if not 0.0 <= tau < 1.0:
+        raise ValueError(f"--tau must be in [0, 1), got {tau}")
+    if not 0.0 < delta < 1.0:
+        raise ValueError(f"--delta must be in (0, 1), got {delta}")
+    if not 2 <= max_evals <= MAX_EVALS:
+        raise ValueError(f"--max-evals must be in [2, {MAX_EVALS}], got {max_evals}")
+    if not 1 <= guide_evals < max_evals:
+        raise ValueError(f"--guide-evals must be in [1, --max-evals), got {guide_evals}")
+    d = ThetaDistribution.over(box.box, dist)  # refuses a parameter not in the box, a normal with no mass
+    base = {"dist": {k: list(v) for k, v in sorted((dist or {}).items())}, "tau": tau, "delta": delta}
+    options = {m: {**base, **({"guide_evals": guide_evals} if m == "guided" else {})} for m in methods}
+    blk = Block(boxes=(box,), methods=tuple(methods), budgets=(Budget(max_evals=max_evals, stop_at_breach=False),),
+                kind="risk", options=options)
+    return CampaignSpec("risk", (blk,), seed=seed, pnp=pnp, figures=("risk",), notes=(
+        f"Failure probability p_fail = P(L > ε_safe) per image, θ ~ {d.text()} over {box.label}; estimators "
+        f"{', '.join(methods)}, at most {max_evals} evaluations each; verdict on p_fail ≤ {tau:g} at confidence "
+        f"{1 - delta:g}."))
+
+
 def experiment(name: str) -> Experiment:
     """The experiment called ``name`` (``ValueError`` listing the names otherwise)."""
     try:

@@ -59,6 +59,42 @@ def library_versions() -> dict[str, str]:
     return out
 
 
+#: CPU flags that change which kernels numeric libraries pick (and so the last digits of their results).
+SIMD_FLAGS = ("sse4_2", "avx", "avx2", "fma", "avx512f", "avx512_vnni", "avx512_bf16", "amx_tile", "neon", "asimd")
+#: Environment variables that set the thread counts of numeric libraries.
+THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
+def machine_identity() -> dict[str, Any]:
+    """What moves a run's numerics from one machine to another, for its provenance: the CPU model and the SIMD
+    instruction sets it offers (:data:`SIMD_FLAGS`, from ``/proc/cpuinfo`` where there is one), the cores this
+    process may use, torch's intra-op threads and the thread variables of the environment. Two machines with the
+    same wheels can still round differently when these differ (``reproduce --check-against`` calls that drift)."""
+    import os
+    import platform
+
+    model, flags = platform.processor() or platform.machine(), set()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and value.strip():
+                model = value.strip()
+            elif key.strip() in ("flags", "Features"):
+                flags.update(value.split())
+    except OSError:
+        pass
+    try:
+        import torch
+
+        torch_threads: int | None = torch.get_num_threads()
+    except ImportError:  # pragma: no cover - torch is a dependency
+        torch_threads = None
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return {"cpu": model, "simd": [f for f in SIMD_FLAGS if f in flags], "cores": cores,
+            "torch_threads": torch_threads, "thread_env": {v: os.environ[v] for v in THREAD_VARS if v in os.environ},
+            "python": platform.python_version(), "system": platform.system()}
+
+
 def sample_fingerprint(sample: Any) -> str:
     """Digest of a sample's identity and geometry (id, size, K, corners 3D/2D, true position); of an approach
     sequence (a sample of a sequence campaign): its id, its frames' digests, frame indices and times."""

@@ -24,7 +24,14 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..constants import Verdict
-from .provenance import DetectorSpec, code_version, dataset_identity, library_versions, sample_fingerprint
+from .provenance import (
+    DetectorSpec,
+    code_version,
+    dataset_identity,
+    library_versions,
+    machine_identity,
+    sample_fingerprint,
+)
 from .spec import CampaignSpec, Job
 from .store import JobRow, JobStatus, ResultStore, WriterLock
 from .work import SampleTask, Settings, detector_for, run_sample_task
@@ -163,22 +170,23 @@ def run_campaign(
     spec.check_samples(samples)
     lock = WriterLock(store.path).acquire(wait=wait)
     try:
-        if retry_failed:
-            logger.info("%d failed job(s) forgotten, to be run again", store.forget_failed())
         return _run(spec, samples, store, detector, executor, workers, address, ray_num_cpus, progress,
-                    dataset_source, config)
+                    dataset_source, config, retry_failed)
     finally:
         lock.release()
 
 
 def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detector: DetectorSpec, executor: str,
          workers: int, address: str | None, ray_num_cpus: int | None, progress: Callable[[Progress], None] | None,
-         dataset_source: dict[str, Any] | None, config: dict[str, Any] | None) -> RunSummary:
+         dataset_source: dict[str, Any] | None, config: dict[str, Any] | None, retry_failed: bool = False,
+         ) -> RunSummary:
     t0 = time.perf_counter()
     det_identity = detector.identity()
     store.bind_campaign(spec.name, spec.to_dict(), det_identity)
     jobs = plan(spec, samples, detector)
     store.check_contents(samples)
+    if retry_failed:  # only once the store has accepted these settings and pixels: a refusal loses nothing
+        logger.info("%d failed job(s) forgotten, to be run again", store.forget_failed())
     store.add_samples(sample_record(s, i) for i, s in enumerate(samples))
     done_keys = store.done_keys()
     pending = [j for j in jobs if j.key not in done_keys]
@@ -189,7 +197,7 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
         "dataset_id": dataset["sha256"], "dataset": dataset, "seed": spec.seed, "executor": executor,
         "config": {"campaign": spec.to_dict(), "user": config or {}, "executor": executor, "address": address,
                    "workers": workers if executor == "local" else None, "clock": spec.clock,
-                   "libraries": library_versions()},
+                   "libraries": library_versions(), "machine": machine_identity()},
         "host": platform.node(), "jobs_total": len(jobs), "jobs_skipped": skipped,
     })
     logger.info("campaign %s: %d jobs, %d already done, %d to run (%s executor)", spec.name, len(jobs), skipped,

@@ -28,8 +28,9 @@ __all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FIGURES", "JOB_KINDS", "PENALTY_M", 
            "CampaignSpec", "Job", "box_label", "canonical_json", "default_figures", "derive_seed", "digest", "roll_box",
            "roll_contrast_box"]
 
-#: Job kinds: a worst-case search, or the PnP-solver comparison of one image.
-JOB_KINDS = ("search", "pnp")
+#: Job kinds: a worst-case search, the PnP-solver comparison of one image, or a failure-probability estimate
+#: (:mod:`vbl_robust.campaigns.risk`; methods ``mc`` / ``guided``, options the distribution, τ and δ).
+JOB_KINDS = ("search", "pnp", "risk")
 #: Roles of a block: the compared searches, a dense-grid reference, a landscape grid for one image.
 ROLES = ("main", "reference", "landscape")
 #: Figures (report sections) a campaign can declare, with the rows each one draws:
@@ -41,9 +42,10 @@ ROLES = ("main", "reference", "landscape")
 #: which survival drops below 50 % and 10 % (plus the reference grids); ``convergence`` — |PO_k| and RA(k) of
 #: DIRECT-family traces; ``landscape`` — L over a dense grid of one image (landscape role, else the reference grid) with the
 #: methods' points; ``progress`` — worst error found against evaluations; ``per_image`` — each image's worst case.
-#: ``sequences`` — a sequence campaign's errors along each approach and its per-sequence breach facts.
-FIGURES = ("pnp", "survival", "runtime", "distance", "families", "sequences", "convergence", "landscape", "progress",
-           "per_image")
+#: ``sequences`` — a sequence campaign's errors along each approach and its per-sequence breach facts; ``risk`` —
+#: each image's failure probability under the θ distribution (``kind="risk"`` blocks) and the pooled rate.
+FIGURES = ("pnp", "risk", "survival", "runtime", "distance", "families", "sequences", "convergence", "landscape",
+           "progress", "per_image")
 
 
 def derive_seed(base_seed: int, *parts: Any) -> int:
@@ -193,7 +195,8 @@ class Block:
         boxes, methods, budgets: the factors.
         role: "main" (compared searches), "reference" (dense grid: the true worst case), "landscape" (dense
             grid on a few images for the heat map).
-        kind: "search" or "pnp" (the PnP-solver comparison: one job per image; boxes/methods/budgets unused).
+        kind: "search", "pnp" (the PnP-solver comparison: one job per image; boxes/methods/budgets unused) or
+            "risk" (a failure-probability estimate per image, box, method and budget).
         max_samples: only the first ``max_samples`` samples (None: all).
         chain: per (sample, method), run boxes in order and, once a breach is found at a box, record the larger
             boxes as implied breaches without searching (used for the smallest breaching roll budget; boxes
@@ -216,8 +219,10 @@ class Block:
             raise ValueError(f"Block: role must be one of {ROLES}, got {self.role!r}")
         if self.kind not in JOB_KINDS:
             raise ValueError(f"Block: kind must be one of {JOB_KINDS}, got {self.kind!r}")
-        if self.kind == "search" and not (self.boxes and self.methods and self.budgets):
-            raise ValueError("Block: a search block needs at least one box, one method and one budget")
+        if self.kind in ("search", "risk") and not (self.boxes and self.methods and self.budgets):
+            raise ValueError(f"Block: a {self.kind} block needs at least one box, one method and one budget")
+        if self.kind == "risk" and (self.chain or self.role != "main"):
+            raise ValueError("Block: a risk block is a main block without a chain")
         if self.chain:
             levels = [b.level for b in self.boxes]
             if levels != sorted(levels):
@@ -287,8 +292,8 @@ def default_figures(blocks: Sequence[Block]) -> tuple[str, ...]:
     from what its blocks hold (see :data:`FIGURES`)."""
     out: set[str] = set()
     for b in blocks:
-        if b.kind == "pnp":
-            out.add("pnp")
+        if b.kind in ("pnp", "risk"):
+            out.add(b.kind)
         elif b.role in ("reference", "landscape"):
             out.add("landscape")
         elif b.chain:
@@ -366,12 +371,15 @@ class CampaignSpec:
 
         if self.pnp not in SOLVERS:
             raise ValueError(f"pnp: unknown solver {self.pnp!r}; solvers are {', '.join(SOLVERS)}")
+        from .risk import RISK_METHODS
+
         for blk in self.blocks:
-            if blk.kind != "search":
+            if blk.kind == "pnp":
                 continue
-            unknown = [m for m in blk.methods if m not in METHODS]
+            known = RISK_METHODS if blk.kind == "risk" else METHODS
+            unknown = [m for m in blk.methods if m not in known]
             if unknown:
-                raise ValueError(f"methods: unknown method(s) {unknown}; methods are {', '.join(METHODS)}")
+                raise ValueError(f"methods: unknown method(s) {unknown}; methods are {', '.join(known)}")
             twice = sorted({m for m in blk.methods if blk.methods.count(m) > 1})
             if twice:
                 raise ValueError(f"methods: {', '.join(twice)} given more than once")
@@ -513,6 +521,6 @@ class CampaignSpec:
                                  if blk.chain else None)
                         for box in blk.boxes:
                             seed = derive_seed(self.seed, sid, method, box.label, budget.label)
-                            jobs.append(Job(self.name, sid, fp, i, "search", blk.role, method, box, budget, seed, opts,
-                                            ctx, chain))
+                            jobs.append(Job(self.name, sid, fp, i, blk.kind, blk.role, method, box, budget, seed,
+                                            opts, ctx, chain))
         return jobs

@@ -524,7 +524,8 @@ class ResultStore:
         A store is bound by what was computed in it: while it holds no job row (a new store, or a run that
         failed before its first job, e.g. on a refused model file), the campaign and detector are recorded
         anew and samples recorded by that run are forgotten. Once it holds a job row, another campaign (spec,
-        :data:`PRESENTATION_KEYS` aside) or another detector (kind, model SHA-256) is refused (``ValueError``).
+        :data:`PRESENTATION_KEYS` aside) or another detector (kind, model SHA-256 and options such as the design or
+        the oracle's noise: :func:`_detector_identity`) is refused (``ValueError``).
         """
         have = self.campaign()
         spec_j = json.dumps(spec, sort_keys=True)
@@ -546,10 +547,12 @@ class ResultStore:
         if shown(have["spec"]) != shown(spec):
             diff = _first_difference(have["spec"], spec)
             raise ValueError(f"{self.path}: holds campaign {have['name']!r} with other settings ({diff}); {hint}")
-        if have["detector"].get("sha256") != detector.get("sha256") or have["detector"].get("kind") != detector.get("kind"):
+        mine, theirs = _detector_identity(have["detector"]), _detector_identity(detector)
+        if mine != theirs:
+            diff = _first_difference(mine, theirs)
             raise ValueError(
                 f"{self.path}: holds results of detector {have['detector'].get('name')!r} "
-                f"(sha256 {str(have['detector'].get('sha256'))[:12]}…), not of {detector.get('name')!r}; "
+                f"(sha256 {str(have['detector'].get('sha256'))[:12]}…), not of {detector.get('name')!r} ({diff}); "
                 + ("use another --out" if hint.startswith("rerun") else hint))
 
     def begin_run(self, provenance: Mapping[str, Any]) -> int:
@@ -758,6 +761,14 @@ class _Transaction:
 
 def _dumps(v: Any) -> str | None:
     return None if v is None else json.dumps(v, sort_keys=True, default=str)
+
+
+def _detector_identity(detector: Mapping[str, Any]) -> dict[str, Any]:
+    """What decides a detector's outputs, as a store compares it: its kind, model SHA-256 and options (design,
+    oracle noise, crop window, …) — not the engine or device, which change speed and outputs by ≤ 1e-3 px only, so
+    a run may resume or merge across them (CPU and GPU, ONNX Runtime and torch)."""
+    options = {k: v for k, v in (detector.get("options") or {}).items() if k not in ("engine", "device")}
+    return {"kind": detector.get("kind"), "sha256": detector.get("sha256"), "options": options}
 
 
 def _first_difference(a: Any, b: Any, path: str = "") -> str:

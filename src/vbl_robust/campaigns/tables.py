@@ -28,6 +28,9 @@ COLUMNS = (
     "search_s", "job_s", "upper_bound", "bound_estimate", "run_id", "key", "read_from", "breach_kind",
     "residual_bound",
 )
+#: Columns of a risk job (``vbl-robust risk``; fractions): the failure probability, its interval, the verdict on
+#: p_fail ≤ τ and the evaluations spent.
+RISK_COLUMNS = ("p_fail", "ci_low", "ci_high", "ci_level", "tau", "risk_verdict", "evaluations")
 
 #: Columns of :func:`summary_records` (survival in %, its exact 95 % interval; ``residual_bound``: for random
 #: search, the largest bound on the breached fraction of the box over the images without a breach).
@@ -68,13 +71,17 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
         stored = [x for r in stored for x in
                   ([r] + ([read_off(full[r.key], b, eps, penalty) for b in r.budget.read_budgets()]
                           if r.key in full else []))]
-    rows, params, sequences = [], [], False
+    rows, params, sequences, has_risk = [], [], False, False
     for r in stored:
         s = samples.get(r.sample_id, {})
         b = {} if r.budget is None else r.budget.to_dict()
         d = {c: _plain(getattr(r, c, None)) for c in COLUMNS}
         d.update(slant_distance_m=s.get("slant_distance_m"), envelope=s.get("envelope"), max_evals=b.get("max_evals"),
                  max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"), stop_at_breach=b.get("stop_at_breach"))
+        risk = (r.payload or {}).get("risk") if r.kind == "risk" else None
+        if risk is not None:
+            has_risk = True
+            d.update({c: risk.get(c) for c in RISK_COLUMNS if c in risk}, risk_verdict=risk.get("verdict"))
         if r.kind == "search":
             kind = breach_kind(r, eps_kind)
             d.update(breach_kind=None if kind is None else kind.value, residual_bound=residual_bound(r, eps_kind))
@@ -90,7 +97,7 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
                      nominal_sustained_m=seq["nominal"].get("sustained_m"),
                      nominal_breached_frames=seq["nominal"].get("breached_frames"))
         rows.append(d)
-    return rows, [*COLUMNS, *params, *(SEQUENCE_COLUMNS if sequences else ())]
+    return rows, [*COLUMNS, *params, *(SEQUENCE_COLUMNS if sequences else ()), *(RISK_COLUMNS if has_risk else ())]
 
 
 def summary_records(store: ResultStore) -> list[dict[str, Any]]:

@@ -21,6 +21,7 @@ import logging
 import math
 import time
 import traceback
+from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -199,6 +200,31 @@ def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
         return maximize(f, job.box.box, job.method, max_seconds=b.max_seconds, **timing, **kwargs)
 
 
+def risk_row(job: Job, objective: Any, settings: Settings, run_id: int | None, t0: float) -> JobRow:
+    """Run a failure-probability job (:func:`vbl_robust.campaigns.risk.estimate_risk`; options: ``dist``, ``tau``,
+    ``delta``, ``guide_evals``) and its row: every draw as the row's points, the estimate, its interval and the
+    verdict in the ``risk`` payload; worst error and verdict as a search row's (the largest L drawn)."""
+    from .risk import ThetaDistribution, estimate_risk
+
+    opts = dict(job.options)
+    dist = ThetaDistribution.over(job.box.box, {k: tuple(v) for k, v in (opts.pop("dist", None) or {}).items()})
+    tau, delta = float(opts.pop("tau")), float(opts.pop("delta"))
+    t_search = time.perf_counter()
+    r = estimate_risk(objective, dist, job.method, eps_safe_m=settings.eps_safe_m, tau=tau, delta=delta,
+                      max_evals=int(job.budget.max_evals), seed=job.seed, **opts)
+    fs = np.where(np.isfinite(r.fs), r.fs, settings.penalty_m)
+    i = int(np.argmax(fs))
+    worst = float(fs[i])
+    return _row(job, run_id, JobStatus.DONE, worst_m=worst, worst_x=dict(zip(job.box.box.names, map(float, r.xs[i]),
+                                                                             strict=True)),
+                verdict=Verdict.BREACH if worst > settings.eps_safe_m else Verdict.NO_BREACH_FOUND,
+                nfev=r.evaluations, nit=1, n_failed=sum(1 for x in r.reasons if x),
+                failures=dict(sorted(Counter(x for x in r.reasons if x).items())), worst_reason=r.reasons[i],
+                search_status="budget_exhausted", points=Points(r.xs, r.fs, r.reasons),
+                payload=r.payload(tau, delta, dist), search_s=time.perf_counter() - t_search,
+                job_s=time.perf_counter() - t0)
+
+
 def search_kwargs(options: Mapping[str, Any], budget: Any, *, eps_safe_m: float, lipschitz: Any,
                   seed: int | None) -> dict[str, Any]:
     """The optimizer's arguments of a search job apart from its time budget: evaluation and iteration budgets, the
@@ -265,6 +291,9 @@ def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id:
             image_error = getattr(objective, "image_error", "")
             if image_error:  # the pipeline would penalise every evaluation: a failed sample, not a breach
                 yield [failed_row(job, f"image unavailable: {image_error}", settings, run_id, time.perf_counter() - t0)]
+                continue
+            if job.kind == "risk":
+                yield [risk_row(job, objective, settings, run_id, t0)]
                 continue
             result = run_search_job(job, objective, settings)
             row = search_row(job, result, settings, run_id, time.perf_counter() - t0)

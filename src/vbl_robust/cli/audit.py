@@ -143,6 +143,32 @@ def parse_perturb(items: list[str] | None) -> dict[str, tuple[float, float]]:
     return out
 
 
+def parse_box(roll: str, contrast: str | None, perturb: list[str] | None) -> Any:
+    """The :class:`~vbl_robust.campaigns.spec.BoxSpec` of ``--roll``, ``--contrast`` and ``--perturb`` (level: the
+    roll half-width, 0 without roll), or one line naming the option at fault."""
+    from vbl_robust.campaigns import BoxSpec
+    from vbl_robust.campaigns.spec import box_label
+    from vbl_robust.space import ParameterBox
+
+    bounds: dict[str, tuple[float, float]] = {}
+    extra = parse_perturb(perturb)
+    if roll.strip().lower() != "none" and "roll_deg" not in extra:
+        bounds["roll_deg"] = parse_range(roll, name="--roll", symmetric=True)
+    if contrast is not None:
+        if "contrast" in extra:
+            fail("--contrast and --perturb contrast=...: give the contrast range once")
+        bounds["contrast"] = parse_range(contrast, name="--contrast")
+    bounds.update(extra)
+    if not bounds:
+        fail("give at least one of --roll, --contrast, --perturb")
+    try:
+        box = ParameterBox(bounds)
+    except ValueError as exc:
+        fail(str(exc))
+    level = max(abs(v) for v in bounds["roll_deg"]) if "roll_deg" in bounds else 0.0
+    return BoxSpec(box, box_label(bounds), level)
+
+
 def parse_methods(text: str) -> tuple[str, ...]:
     from vbl_robust.search import METHODS
 
@@ -438,23 +464,11 @@ def register(app: typer.Typer) -> None:
                                          "--lipschitz, else the search's own estimate)."),
     ) -> None:
         """Find each image's worst case over a perturbation box: worst θ, worst error, verdict, survival, report."""
-        from vbl_robust.campaigns import BoxSpec, Budget, audit_spec
-        from vbl_robust.campaigns.spec import box_label
-        from vbl_robust.space import ParameterBox
+        from vbl_robust.campaigns import Budget, audit_spec
 
         quiet = set_verbosity(quiet=quiet, verbose=verbose)
 
-        bounds: dict[str, tuple[float, float]] = {}
-        extra = parse_perturb(perturb)
-        if roll.strip().lower() != "none" and "roll_deg" not in extra:
-            bounds["roll_deg"] = parse_range(roll, name="--roll", symmetric=True)
-        if contrast is not None:
-            if "contrast" in extra:
-                fail("--contrast and --perturb contrast=...: give the contrast range once")
-            bounds["contrast"] = parse_range(contrast, name="--contrast")
-        bounds.update(extra)
-        if not bounds:
-            fail("give at least one of --roll, --contrast, --perturb")
+        box_spec = parse_box(roll, contrast, perturb)
         from vbl_robust.constants import TARGETS
 
         if target not in TARGETS:
@@ -471,18 +485,16 @@ def register(app: typer.Typer) -> None:
                 if value is not None:
                     fail(f"{flag} {value:g} applies to --sequences only")
         frames, rate = frames or 20, 10.0 if rate is None else rate
+        box = box_spec.box
         try:
-            box = ParameterBox(bounds)
             budget = Budget(max_evals=max_evals or None, max_seconds=max_seconds, stop_at_breach=early_stop)
         except ValueError as exc:
             fail(str(exc))
-        level = max(abs(v) for v in bounds["roll_deg"]) if "roll_deg" in bounds else 0.0
-        label = box_label(bounds)
         method_list = parse_methods(methods)
         if landscape is None:  # on for images; for sequences a grid costs every frame per point: asked for only
             landscape = sequences is None
         counts = (21, 11)[: box.dim] if landscape and box.dim <= 2 else None
-        spec = audit_spec(BoxSpec(box, label, level), methods=method_list, budget=budget, seed=seed,
+        spec = audit_spec(box_spec, methods=method_list, budget=budget, seed=seed,
                           lipschitz=parse_lipschitz(lipschitz), pnp=pnp, landscape=counts,
                           sustain=None if sequences is None else sustain, target=target)
         method_opts = parse_method_options(method_option)

@@ -91,14 +91,17 @@ def _reference(root: Path, name: str) -> Path:
 
 
 def _check(name: str, run: Path, reference: Path) -> bool:
-    """Print how the rows of ``run`` compare with ``reference``'s (:func:`~vbl_robust.campaigns.bundle.compare_runs`);
-    True when a row differs or is missing there."""
+    """Print how the rows of ``run`` compare with ``reference``'s (:func:`~vbl_robust.campaigns.bundle.compare_runs`):
+    findings changed (status, verdict, a row missing) apart from numeric drift (same findings, other counts or
+    worst errors); True only when a finding changed."""
     from vbl_robust.campaigns.bundle import compare_runs
 
     c = compare_runs(run, reference)
     first = f" (first: {', '.join(c['differ'][:3])})" if c["differ"] else ""
+    drift = (f"; {len(c['drift'])} with numeric drift only (same status and verdict; worst error moved by at most "
+             f"{c['drift_m']:.3g} m)" if c["drift"] else "")
     typer.echo(f"{name}: checked against {reference}: {c['rows']} rows, {c['common']} found there, "
-               f"{len(c['differ'])} differ{first}")
+               f"{len(c['differ'])} with another finding{first}{drift}")
     return bool(c["differ"])
 
 

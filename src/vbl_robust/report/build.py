@@ -40,6 +40,7 @@ from ..campaigns.spec import FIGURES, CampaignSpec
 from ..campaigns.store import ResultStore
 from .evidence import section_evidence
 from .html import esc, page
+from .risk_section import section_risk
 from .rows import Context, Section
 from .sections import (
     section_best_vs_evals,
@@ -61,9 +62,12 @@ from .zone_section import section_zones
 logger = logging.getLogger(__name__)
 
 
+#: Titles of the campaigns that are not experiments of the paper.
+TITLES = {"audit": "Robustness audit", "risk": "Failure probability under a θ distribution"}
+
 #: The section drawing each figure a campaign can declare (``CampaignSpec.figures``), in report order.
 SECTIONS: dict[str, Callable[[Context], Section | None]] = {
-    "pnp": section_pnp, "survival": section_survival_level, "runtime": section_runtime, "distance": section_distance,
+    "pnp": section_pnp, "risk": section_risk, "survival": section_survival_level, "runtime": section_runtime, "distance": section_distance,
     "families": section_families, "sequences": section_sequences, "convergence": section_convergence, "landscape": section_landscapes, "progress": section_best_vs_evals,
     "per_image": section_per_image,
 }
@@ -81,7 +85,7 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
         out_dir = Path(out) if out is not None else (run if run.is_dir() else run.parent)
         ctx = Context(store, spec, out_dir, mx.main_rows(store, spec), store.samples())
         exp = EXPERIMENTS.get(spec.name)
-        title = exp.title if exp else "Robustness audit"
+        title = exp.title if exp else TITLES.get(spec.name, "Robustness audit")
         sections = [section_overview(ctx, title)]
         try:
             evidence = section_evidence(ctx)

@@ -580,3 +580,26 @@ def _heat_map(fig: Any, ax: Any, xs: np.ndarray, fs: np.ndarray, threshold: floa
     else:
         im = ax.scatter(xs[finite, 0], xs[finite, 1], c=v[finite], norm=norm, cmap="viridis", s=8)
     fig.colorbar(im, ax=ax).set_label(f"landscape value (log scale; dashed: ε = {threshold:g})", fontsize=8)
+
+
+def risk_per_image(series: Mapping[str, Sequence[tuple[int, float, float, float]]], n_images: int,
+                   tau: float) -> Figure:
+    """Each image's failure probability with its interval, one series per estimator: ``series[method]`` = (image
+    position, p_fail, low, high) as fractions, drawn in %; the dashed line is ``tau``."""
+    fig, ax = _fig(size=(8.0, 3.8))
+    for j, (m, pts) in enumerate(series.items()):
+        if not pts:
+            continue
+        x, p, lo, hi = (np.asarray(v, dtype=np.float64) for v in zip(*pts, strict=True))
+        ax.errorbar(x + 0.15 * (j - (len(series) - 1) / 2), 100 * p, yerr=np.clip([100 * (p - lo), 100 * (hi - p)], 0,
+                                                                                    None),
+                    fmt="o", capsize=2, markersize=4, label=m)
+    ax.axhline(100 * tau, **{**EPS_STYLE, "color": "grey"}, label=f"τ = {100 * tau:g} %")
+    ax.set_xticks(range(n_images))
+    ax.set_xticklabels([str(i + 1) for i in range(n_images)], fontsize=7)
+    ax.set_xlabel("image (in the table's order)")
+    ax.set_ylabel("p_fail (%), with its interval")
+    ax.set_title("Failure probability per image")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig

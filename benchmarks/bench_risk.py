@@ -1,0 +1,172 @@
+"""Failure probability (``vbl-robust risk``): are the intervals valid, and how many evaluations does the
+search-guided estimator save?
+
+Cases: (image, box) pairs of the paper run whose truth is known — the runtime-1d experiment's complete dense grids
+(roll ±15°, 601 nodes, 0.05° apart) on the first 100 images of seed 0: the true p_fail under θ uniform over a box is
+the share of the grid's nodes inside it whose error is above ε_safe (or failed). Boxes ±15° and ±7.5°; images: every
+one with 0 < p_fail ≤ 50 % at ±15°, then images with p_fail = 0, up to ``CASES`` cases.
+
+Per case, with the shipped detector (v9, ONNX Runtime) and the pipeline of the paper run:
+- Monte Carlo: 1024 uniform draws; the exact 95 % interval at n = 128, 256, 512, 1024 (prefixes, fixed n).
+- guided: the stratified estimator at budgets 128, 256, 512 (its 32-evaluation guide search included).
+Measured: coverage of the true p_fail by each interval (goal ≥ 95 %), and on the cases with 0 < p_fail ≤ 5 % the
+fewest guided evaluations whose half-width is at most Monte Carlo's at 1024 (goal: ≥ 10× fewer).
+
+Each case's numbers are kept in ``runs/bench_risk/cases.json`` as soon as computed: a killed run resumes. Two
+worker processes (one thread each). Usage: ``python benchmarks/run_all.py --only risk`` (≈ 45 min on 2 cores) or
+``python benchmarks/bench_risk.py``.
+"""
+
+from __future__ import annotations
+
+import json
+import lzma
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT / "results" / "paper" / "runtime-1d" / "results.sqlite.xz"
+WORK = ROOT / "runs" / "bench_risk"
+CASES, MC_N, MC_LOOKS, GUIDED_BUDGETS, GUIDE = 40, 1024, (128, 256, 512, 1024), (128, 256, 512), 32
+BOXES = (15.0, 7.5)
+
+
+def truth_cases(limit: int) -> list[dict]:
+    """The cases and their true p_fail, from the paper's runtime-1d grids."""
+    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.campaigns import metrics as mx
+
+    WORK.mkdir(parents=True, exist_ok=True)
+    store = WORK / "runtime-1d.sqlite"
+    if not store.exists():
+        with lzma.open(PAPER) as src, open(store, "wb") as dst:
+            shutil.copyfileobj(src, dst)
+    with ResultStore(store, readonly=True) as st:
+        grids = [r for r in st.jobs(kind="search", role="reference", with_points=True) if mx.grid_complete(r)]
+        eps = st.campaign()["spec"]["eps_safe_m"]
+    truth = {}
+    for g in grids:
+        x, f = g.points.xs[:, 0], g.points.fs
+        fail = ~np.isfinite(f) | (f > eps)
+        truth[g.sample_id] = {h: float(fail[np.abs(x) <= h + 1e-9].mean()) for h in BOXES}
+    ids = sorted(truth)
+    informative = [s for s in ids if 0 < truth[s][15.0] <= 0.5]
+    rest = [s for s in ids if truth[s][15.0] == 0]
+    chosen = (informative + rest)[: (limit + 1) // len(BOXES)]
+    return [{"sample_id": s, "half_width": h, "p_true": truth[s][h]} for s in chosen for h in BOXES][:limit]
+
+
+def run_case(case: dict) -> dict:
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import torch
+
+    torch.set_num_threads(1)
+    from vbl_robust.campaigns.risk import ThetaDistribution, estimate_risk
+    from vbl_robust.campaigns.spec import derive_seed
+    from vbl_robust.campaigns.work import Settings, build_objective
+    from vbl_robust.detect.shipped import DetectorSpec
+    from vbl_robust.scenes import generate
+    from vbl_robust.space import ParameterBox
+    from vbl_robust.stats import clopper_pearson
+
+    global _DET
+    if "_DET" not in globals():
+        _DET = DetectorSpec.shipped("default", {"engine": "onnxruntime"}).build()
+    index = int(case["sample_id"].rsplit("_", 1)[1])
+    sample = next(s for i, s in enumerate(generate(index + 1, seed=0)) if i == index)
+    h = case["half_width"]
+    box = ParameterBox({"roll_deg": (-h, h)})
+    settings = Settings(1000.0, 5000.0, 0.25, "ippe_lm")
+    f = build_objective(sample, _DET, box, settings)
+    dist = ThetaDistribution.over(box)
+    rng = np.random.default_rng(derive_seed(0, case["sample_id"], h))
+    mc_n, looks, budgets = case["mc_n"], case["looks"], case["budgets"]  # passed in: spawned workers re-import
+    x = dist.sample(mc_n, rng)
+    values = np.concatenate([np.asarray(f(x[i:i + 64]).values) for i in range(0, mc_n, 64)])
+    fail = ~np.isfinite(values) | (values > settings.eps_safe_m)
+    out = dict(case, mc={})
+    for n in looks:
+        ci = clopper_pearson(int(fail[:n].sum()), n)
+        out["mc"][str(n)] = {"p": float(fail[:n].mean()), "low": ci.low, "high": ci.high}
+    out["guided"] = {}
+    for b in budgets:
+        r = estimate_risk(f, dist, "guided", eps_safe_m=settings.eps_safe_m, max_evals=b, guide_evals=GUIDE,
+                          seed=b)
+        out["guided"][str(b)] = {"p": r.p_fail, "low": r.ci.low, "high": r.ci.high, "evals": r.evaluations,
+                                 "strata": [[s.mass, s.k, s.n] for s in r.strata]}
+    return out
+
+
+def _load() -> dict:
+    path = WORK / "cases.json"
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
+def _save(done: dict) -> None:
+    path = WORK / "cases.json"
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(done, indent=1))
+    tmp.replace(path)
+
+
+def measure(limit: int, workers: int) -> dict:
+    import multiprocessing as mp
+
+    cases = [dict(c, mc_n=MC_N, looks=list(MC_LOOKS), budgets=list(GUIDED_BUDGETS)) for c in truth_cases(limit)]
+    done = _load()
+    todo = [c for c in cases if f"{c['sample_id']}@{c['half_width']:g}" not in done]
+    if todo:
+        with mp.get_context("spawn").Pool(workers) as pool:
+            for r in pool.imap_unordered(run_case, todo):
+                done[f"{r['sample_id']}@{r['half_width']:g}"] = r
+                _save(done)
+                print(f"{len(done)}/{len(cases)} cases", file=sys.stderr, flush=True)
+    return {k: done[k] for k in (f"{c['sample_id']}@{c['half_width']:g}" for c in cases)}
+
+
+def table(results: dict) -> str:
+    rs = list(results.values())
+    lines = [f"Cases: {len(rs)} (image, box) pairs, true p_fail from the paper's runtime-1d dense grids "
+             "(601 nodes over ±15°); θ uniform over the box; shipped detector v9 (ONNX Runtime).", ""]
+    cover = {("mc", str(n)): [r["mc"][str(n)]["low"] <= r["p_true"] <= r["mc"][str(n)]["high"] for r in rs]
+             for n in MC_LOOKS}
+    cover.update({("guided", str(b)): [r["guided"][str(b)]["low"] <= r["p_true"] <= r["guided"][str(b)]["high"]
+                                       for r in rs] for b in GUIDED_BUDGETS})
+    lines += ["| estimator | evaluations | cases covered | coverage % | mean half-width (points of %) |",
+              "|---|---|---|---|---|"]
+    for (m, n), ok in cover.items():
+        hw = np.mean([(r[m][n]["high"] - r[m][n]["low"]) / 2 for r in rs]) * 100
+        lines.append(f"| {m} | {n} | {sum(ok)} / {len(ok)} | {100 * np.mean(ok):.1f} | {hw:.2f} |")
+    small = [r for r in rs if 0 < r["p_true"] <= 0.05]
+    lines += ["", f"Cases with 0 < p_fail ≤ 5 %: {len(small)}. Fewest guided evaluations (of "
+              f"{', '.join(map(str, GUIDED_BUDGETS))}) whose half-width is at most Monte Carlo's at {MC_N}:", "",
+              "| case | p_true % | MC 1024 half-width | guided 128 / 256 / 512 half-width | saving |", "|---|---|---|---|---|"]
+    savings = []
+    for r in small:
+        target = (r["mc"][str(MC_N)]["high"] - r["mc"][str(MC_N)]["low"]) / 2
+        hws = [(r["guided"][str(b)]["high"] - r["guided"][str(b)]["low"]) / 2 for b in GUIDED_BUDGETS]
+        reach = next((b for b, hw in zip(GUIDED_BUDGETS, hws, strict=True) if hw <= target), None)
+        saving = MC_N / reach if reach else None
+        savings.append(saving)
+        lines.append(f"| {r['sample_id']} ±{r['half_width']:g}° | {100 * r['p_true']:.2f} | {100 * target:.2f} | "
+                     + " / ".join(f"{100 * v:.2f}" for v in hws) + f" | {f'{saving:.0f}×' if saving else '< 2×'} |")
+    reached = [s for s in savings if s]
+    lines += ["", f"Saving ≥ 10×: {sum(s >= 10 for s in reached)} of {len(small)} cases; reached MC-1024's "
+              f"half-width within 512 evaluations: {len(reached)} of {len(small)}."]
+    return "\n".join(lines)
+
+
+def main(quick: bool = False) -> str:
+    global CASES, MC_N, MC_LOOKS, GUIDED_BUDGETS, WORK
+    if quick:  # a smoke run of its own (never mixed into the full run's cases)
+        CASES, MC_N, MC_LOOKS, GUIDED_BUDGETS, WORK = 2, 64, (64,), (64,), WORK / "quick"
+    results = measure(CASES, 2)
+    return "## Failure probability: interval coverage and the guided estimator's saving\n\n" + table(results) + "\n"
+
+
+if __name__ == "__main__":
+    print(main("--quick" in sys.argv))
