@@ -27,7 +27,8 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 
 # Order in which sections appear; unknown benchmarks follow alphabetically.
-ORDER = ["scenes", "pnp", "search", "spatial2d", "perturb", "detector", "engines", "device", "naive", "pipeline", "campaigns"]
+ORDER = ["scenes", "pnp", "search", "spatial2d", "perturb", "detector", "engines", "device", "naive", "pipeline", "campaigns",
+         "risk"]
 
 
 MARKER = re.compile(r"^<!-- bench:(\w+) -->$", re.M)
@@ -75,6 +76,7 @@ def _load(path: Path):
     spec = importlib.util.spec_from_file_location(path.stem, path)
     mod = importlib.util.module_from_spec(spec)
     sys.path.insert(0, str(HERE))
+    sys.modules[path.stem] = mod  # a benchmark's worker processes (spawned) find its functions by this name
     spec.loader.exec_module(mod)
     return mod
 
