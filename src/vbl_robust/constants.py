@@ -31,6 +31,17 @@ PENALTY_M = 5000.0
 #: the worst *silent* error: a confident pose far off).
 TARGETS: dict[str, float] = {"any": PENALTY_M, "misleading": 0.0}
 
+#: Stated bounds on what a user may ask for (checked before any work; beyond them memory or time runs out, not
+#: the tool's answer): images per run, pixels per image side, evaluations per job, points of a dense grid, and the
+#: size a stored blob may decompress to.
+MAX_IMAGES = 100_000
+MAX_IMAGE_SIDE = 8192
+MAX_EVALS = 10_000_000
+MAX_GRID_POINTS = 2_000_000
+MAX_BLOB_BYTES = 512 * 1024 * 1024
+#: Largest seed (the store keeps seeds as SQLite's 64-bit integers).
+MAX_SEED = 2**63 - 1
+
 #: Why an evaluation failed, with what each code means. ``""`` is a success.
 FAILURE_REASONS: dict[str, str] = {
     "image_unavailable": "the sample's pixels could not be loaded",

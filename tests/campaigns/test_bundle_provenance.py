@@ -2,6 +2,8 @@
 
 import sqlite3
 
+import pytest
+
 from vbl_robust.campaigns import (
     Block,
     Budget,
@@ -60,3 +62,23 @@ def test_a_check_tells_a_changed_finding_from_numeric_drift(tmp_path):
     pq.write_table(pa.table(lost), tmp_path / "c.parquet")
     c = compare_runs(tmp_path / "a.parquet", tmp_path / "c.parquet")
     assert c["differ"] == ["b"] and c["drift"] == []
+
+
+def test_bundle_index_links_stay_relative_and_a_bundle_never_overwrites_its_runs(tmp_path):
+    from vbl_robust.campaigns.bundle import restore_store, write_bundle
+    from vbl_robust.report.claims import write_index
+
+    name = "javascript:alert(1)"
+    (tmp_path / name).mkdir()
+    (tmp_path / name / "report.html").write_text("x")
+    page = write_index(tmp_path, [name]).read_text()
+    assert 'href="javascript%3Aalert%281%29/report.html"' in page and 'href="javascript:' not in page
+    with pytest.raises(ValueError, match="not into their directory"):
+        write_bundle(tmp_path, tmp_path)
+    packed = tmp_path / "cut.sqlite.xz"
+    import lzma
+
+    packed.write_bytes(lzma.compress(b"x" * 10000)[:40])  # a truncated pack
+    with pytest.raises(ValueError, match=r"cut\.sqlite\.xz: not a complete packed store"):
+        restore_store(packed, tmp_path / "restored")
+    assert not (tmp_path / "restored" / "results.sqlite").exists()

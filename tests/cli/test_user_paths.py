@@ -111,3 +111,20 @@ def test_audit_of_a_lard_directory_on_ray(lard_dir, tmp_path):
     rows, runs = _stored(out)
     assert len(rows) == 3 and all(r.status.value == "done" for r in rows)
     assert [r["executor"] for r in runs] == ["ray"]
+
+
+def test_a_run_where_every_job_failed_exits_non_zero(lard_dir, tmp_path):
+    """Issue 48 item 10: images that cannot be read are recorded failures, and a run that measured nothing says so
+    and exits 1 (a rerun after the images are restored, with --retry-failed, measures them)."""
+    import shutil
+
+    broken = tmp_path / "lard"
+    shutil.copytree(lard_dir, broken)
+    for png in (broken / "images").glob("*.png"):
+        png.write_bytes(b"not a png")
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["audit", "--lard", str(broken), "--out", str(out), "--max-evals", "2", "--methods",
+                              "random", "--no-landscape", "--quiet"])
+    assert res.exit_code == 1 and "every job failed (3)" in res.output, res.output
+    rows, _ = _stored(out)
+    assert len(rows) == 3 and all(r.status.value == "failed" for r in rows)

@@ -32,6 +32,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ..atomic import atomic_write
 from .store import ResultStore
 
 STORE = "results.sqlite"
@@ -119,7 +120,11 @@ def restore_store(packed: Path, run: Path) -> bool:
         return False
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = target.with_name(STORE + ".restoring")
-    tmp.write_bytes(lzma.decompress(Path(packed).read_bytes()))
+    try:
+        tmp.write_bytes(lzma.decompress(Path(packed).read_bytes()))
+    except (lzma.LZMAError, EOFError) as exc:
+        tmp.unlink(missing_ok=True)
+        raise ValueError(f"{packed}: not a complete packed store ({exc})") from None
     tmp.replace(target)
     return True
 
@@ -136,7 +141,7 @@ def write_experiment(run: Path, out: Path, stores: bool = False) -> dict[str, An
         export(store, out / "jobs.parquet")
         if stores:
             pack_store(store, out / PACKED)
-    (out / "provenance.json").write_text(json.dumps(prov, indent=1, sort_keys=True, default=str) + "\n")
+    atomic_write(out / "provenance.json", json.dumps(prov, indent=1, sort_keys=True, default=str) + "\n")
     build_report(run, out)
     shutil.rmtree(out / "figures", ignore_errors=True)  # embedded in report.html
     return prov["totals"]
@@ -165,6 +170,9 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
     ``out/status.md``, ``out/claims.md`` and ``out/index.html`` (and the generated part of ``reproduction``) and
     returns the totals per experiment. ``FileNotFoundError`` when there is no run; ``ValueError`` when
     ``reproduction`` lacks the markers (checked before any work)."""
+    if Path(out).resolve() == Path(root).resolve():
+        raise ValueError(f"--out {out}: the bundle goes beside the runs, not into their directory (it would replace "
+                         "each run's report)")
     from ..report.claims import claims_html, claims_markdown, claims_of, write_index
 
     runs = run_dirs(root, names)
@@ -179,15 +187,15 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
     status = status_markdown(totals)
     checked = claims_of(root)
     claims = claims_markdown(checked, str(root))
-    (Path(out) / "status.md").write_text(status)
-    (Path(out) / "claims.md").write_text(claims)
+    atomic_write(Path(out) / "status.md", status)
+    atomic_write(Path(out) / "claims.md", claims)
     write_index(out, list(totals), claims_html(checked, str(root)),
                 {n: f"{t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} of {t['images']} images"
                  for n, t in totals.items()})
     if text is not None:
         head, rest = text.split(BEGIN)
         tail = rest.split(END)[1]
-        Path(reproduction).write_text(f"{head}{BEGIN}\n## The paper's claims, checked\n\n{claims}\n"
+        atomic_write(Path(reproduction), f"{head}{BEGIN}\n## The paper's claims, checked\n\n{claims}\n"
                                       f"## Status of the runs\n\n{status}{END}{tail}")
     return totals
 

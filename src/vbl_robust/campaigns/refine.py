@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..atomic import atomic_write
+
 __all__ = ["Refined", "refine_run"]
 
 
@@ -71,5 +73,5 @@ def refine_run(run: str | Path, samples: list, detector: Any, budget: int, *,
                         "basis_description": ref.after.describe(), **ref.to_dict()})
         done.append(Refined(row.sample_index, row.method, ref))
     path = Path(run) / "zones_refined.json"
-    path.write_text(json.dumps({"budget_per_job": budget, "jobs": entries}, indent=1, allow_nan=False) + "\n")
+    atomic_write(path, json.dumps({"budget_per_job": budget, "jobs": entries}, indent=1, allow_nan=False) + "\n")
     return path, done

@@ -389,6 +389,15 @@ class CampaignSpec:
                     check_lipschitz(self.lipschitz, "2", box.box.dim)
                 except ValueError as exc:
                     raise ValueError(f"box {box.label}: {exc}") from None
+            if "grid" in blk.methods:  # a lattice beyond MAX_GRID_POINTS is refused here, not as failed jobs
+                from ..search import make_optimizer
+
+                for box in blk.boxes:
+                    for budget in blk.budgets:
+                        try:
+                            make_optimizer("grid", box.box, max_evals=budget.max_evals, **blk.options.get("grid", {}))
+                        except ValueError as exc:
+                            raise ValueError(f"dense grid on box {box.label}: {exc}") from None
 
     @property
     def unit(self) -> str:

@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from ..constants import Verdict
+from ..constants import MAX_BLOB_BYTES, Verdict
 from ..search.result import TraceRow
 from .spec import BoxSpec, Budget
 
@@ -301,7 +301,7 @@ class Points:
     def from_blob(cls, blob: bytes) -> Points:
         """Inverse of :meth:`to_blob` (null values come back as NaN, missing reasons as ``""``, missing times as
         None)."""
-        d = json.loads(zlib.decompress(blob))
+        d = json.loads(_inflate(blob))
         fs = np.array([math.nan if v is None else v for v in d["fs"]], dtype=np.float64)
         xs = np.asarray(d["xs"], dtype=np.float64).reshape(len(fs), d.get("d", -1 if len(fs) else 0))
         ts = d.get("ts")
@@ -312,6 +312,16 @@ class Points:
 def encode_points(xs: np.ndarray, fs: np.ndarray, reasons: Sequence[str] = ()) -> bytes:
     """Compress evaluated points ``(n, d)``, values ``(n,)`` and reasons (see :meth:`Points.to_blob`)."""
     return Points(xs, fs, tuple(reasons)).to_blob()
+
+
+def _inflate(blob: bytes) -> bytes:
+    """``zlib`` decompression that refuses to grow past :data:`~vbl_robust.constants.MAX_BLOB_BYTES` (a crafted
+    store must not exhaust memory): ``ValueError`` naming the bound."""
+    d = zlib.decompressobj()
+    out = d.decompress(blob, MAX_BLOB_BYTES)
+    if d.unconsumed_tail:
+        raise ValueError(f"a stored blob decompresses to more than {MAX_BLOB_BYTES} bytes (a damaged or crafted store)")
+    return out + d.flush()
 
 
 def decode_points(blob: bytes | None) -> tuple[np.ndarray, np.ndarray]:
@@ -602,12 +612,16 @@ class ResultStore:
 
     # -- samples ------------------------------------------------------------------------------------------
     def add_samples(self, rows: Iterable[Mapping[str, Any]]) -> None:
-        cols = ("sample_id", "sample_index", "slant_distance_m", "envelope", "width", "height", "fingerprint", "meta_json")
         with self._tx():
-            self._con.executemany(
-                f"INSERT OR IGNORE INTO samples ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})",
-                [tuple(r.get(c) for c in cols) for r in rows],
-            )
+            self._insert_samples(rows)
+
+    def _insert_samples(self, rows: Iterable[Mapping[str, Any]]) -> None:
+        """The samples' rows, inside the caller's transaction."""
+        cols = ("sample_id", "sample_index", "slant_distance_m", "envelope", "width", "height", "fingerprint", "meta_json")
+        self._con.executemany(
+            f"INSERT OR IGNORE INTO samples ({', '.join(cols)}) VALUES ({', '.join('?' * len(cols))})",
+            [tuple(r.get(c) for c in cols) for r in rows],
+        )
 
     def samples(self) -> dict[str, dict[str, Any]]:
         cur = self._con.execute("SELECT * FROM samples ORDER BY sample_index")
@@ -738,7 +752,7 @@ class ResultStore:
             self._con.executemany("INSERT OR IGNORE INTO contents (sample_id, path, size, mtime_ns, sha256) "
                                   "VALUES (?, ?, ?, ?, ?)",
                                   other._con.execute("SELECT sample_id, path, size, mtime_ns, sha256 FROM contents"))
-        self.add_samples(other.samples().values())
+            self._insert_samples(other.samples().values())  # one transaction: all of it or nothing
         return len(rows), other.count() - len(rows)
 
     # -- helpers ------------------------------------------------------------------------------------------

@@ -13,6 +13,7 @@ from typing import Any
 
 import typer
 
+from vbl_robust.constants import MAX_EVALS, MAX_IMAGES
 from vbl_robust.perturb.registry import PERTURBATIONS, known
 
 from . import options as o
@@ -365,6 +366,10 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
         from vbl_robust.report import build_report
 
         typer.echo(f"report: {build_report(out)}")
+    if summary.done and summary.failed == summary.done and summary.status == "finished":
+        typer.secho(f"every job failed ({summary.failed}): nothing was measured — see the reasons in the report",
+                    fg=typer.colors.RED, err=True)
+        return False
     return summary.status == "finished"
 
 
@@ -400,7 +405,7 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def audit(
         out: Path = typer.Option(Path("runs/audit"), "--out", help="Run directory (results.sqlite, report.html)."),
-        n: int | None = typer.Option(None, "--n", "--images", min=1, show_default=False,
+        n: int | None = typer.Option(None, "--n", "--images", min=1, max=MAX_IMAGES, show_default=False,
                                      help=f"Number of images (default {AUDIT_IMAGES}, or all rows of a smaller --lard "
                                           "dataset)."),
         seed: int = o.SEED,
@@ -422,7 +427,7 @@ def register(app: typer.Typer) -> None:
                                                  "here or in --contrast, not both)."),
         methods: str = typer.Option(",".join(AUDIT_METHODS), "--methods", help="Comma-separated search methods."),
         method_option: list[str] | None = o.METHOD_OPTION,
-        max_evals: int | None = typer.Option(200, "--max-evals", min=0, help="Evaluations per image and method (0 = no "
+        max_evals: int | None = typer.Option(200, "--max-evals", min=0, max=MAX_EVALS, help="Evaluations per image and method (0 = no "
                                                  "evaluation cap: then give --max-seconds)."),
         max_seconds: float | None = typer.Option(None, "--max-seconds", min=0.0, help="Seconds per image and method."),
         early_stop: bool = typer.Option(True, "--early-stop/--no-early-stop", help="Stop an image's search at its "
@@ -531,9 +536,9 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def demo(
         out: Path = typer.Option(Path("runs/demo"), "--out", help="Run directory."),
-        n: int = typer.Option(10, "--n", "--images", min=1, help="Number of synthetic images."),
+        n: int = typer.Option(10, "--n", "--images", min=1, max=MAX_IMAGES, help="Number of synthetic images."),
         seed: int = o.SEED,
-        max_evals: int = typer.Option(40, "--max-evals", min=1, help="Evaluations per image and method."),
+        max_evals: int = typer.Option(40, "--max-evals", min=1, max=MAX_EVALS, help="Evaluations per image and method."),
         oracle: bool = o.ORACLE,
         engine: str = o.ENGINE,
         device: str = o.DEVICE,

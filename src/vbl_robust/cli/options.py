@@ -5,15 +5,19 @@ from __future__ import annotations
 
 import typer
 
+from ..constants import MAX_IMAGE_SIDE, MAX_SEED
+
 QUIET = typer.Option(False, "--quiet", "-q", help="No progress bar or tables (also accepted before the command: "
                      "vbl-robust -q COMMAND).")
 VERBOSE = typer.Option(False, "--verbose", "-v", help="Log progress details (INFO) (also accepted before the "
                        "command: vbl-robust -v COMMAND).")
-SEED = typer.Option(0, "--seed", min=0, help="Seed of the image choice and of the searches.")
+SEED = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the image choice and of the searches.")
 LARD = typer.Option(None, "--lard", help="LARD V2 dataset directory (CSV + runway DB JSON) instead of generated "
                     "synthetic approaches.")
-WIDTH = typer.Option(1024, "--width", min=16, help="Synthetic image width (px).")
-HEIGHT = typer.Option(1024, "--height", min=16, help="Synthetic image height (px).")
+WIDTH = typer.Option(1024, "--width", min=16, max=MAX_IMAGE_SIDE, help=f"Synthetic image width (px, at most "
+                     f"{MAX_IMAGE_SIDE}).")
+HEIGHT = typer.Option(1024, "--height", min=16, max=MAX_IMAGE_SIDE, help=f"Synthetic image height (px, at most "
+                      f"{MAX_IMAGE_SIDE}).")
 MODEL = typer.Option(None, "--model", help="Detector: a YOLO-pose .pt or .onnx file, 'default' for the shipped "
                      "model, or 'hardened' for the shipped model hardened by vbl-robust harden once installed "
                      "(default: the shipped model once it is validated, else the oracle).")

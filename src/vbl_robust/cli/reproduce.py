@@ -13,6 +13,7 @@ from typing import Any
 
 import typer
 
+from ..constants import MAX_EVALS, MAX_IMAGES
 from . import options as o
 from .audit import (
     check_exports,
@@ -121,7 +122,7 @@ def register(app: typer.Typer) -> None:
     def reproduce(
         experiment: str = typer.Argument(..., help=f"One of: {names}; 'paper' (the paper's seven) or 'all'."),
         out: Path | None = typer.Option(None, "--out", help="Run directory (default runs/<experiment>)."),
-        images: int | None = typer.Option(None, "--images", min=1, help="Number of images (default: the paper's, "
+        images: int | None = typer.Option(None, "--images", min=1, max=MAX_IMAGES, help="Number of images (default: the paper's, "
                                           "100; 1000 for pnp-validation)."),
         seed: int = o.SEED,
         lard: Path | None = o.LARD,
@@ -140,7 +141,7 @@ def register(app: typer.Typer) -> None:
         landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="spatial-2d / runtime-2d: the dense "
                                        "61 × 36 grid on the first image (the report's heat map, about 2200 "
                                        "evaluations)."),
-        max_evals: int | None = typer.Option(None, "--max-evals", min=1, help="Per-image evaluations of the spatial "
+        max_evals: int | None = typer.Option(None, "--max-evals", min=1, max=MAX_EVALS, help="Per-image evaluations of the spatial "
                                              "experiments (default 200)."),
         grid_step: float | None = typer.Option(None, "--grid-step", min=0.0, help="1-D dense-grid reference step in "
                                                "degrees (default 0.05; 0 = no reference)."),

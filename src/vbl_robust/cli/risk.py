@@ -9,6 +9,7 @@ from pathlib import Path
 
 import typer
 
+from ..constants import MAX_IMAGES
 from . import options as o
 from .common import fail, set_verbosity
 
@@ -17,7 +18,7 @@ def register(app: typer.Typer) -> None:
     @app.command()
     def risk(
         out: Path = typer.Option(Path("runs/risk"), "--out", help="Run directory (results.sqlite, report.html)."),
-        n: int | None = typer.Option(None, "--n", "--images", min=1, show_default=False,
+        n: int | None = typer.Option(None, "--n", "--images", min=1, max=MAX_IMAGES, show_default=False,
                                      help="Number of images (default 20, or all rows of a smaller --lard dataset)."),
         seed: int = o.SEED,
         lard: Path | None = o.LARD,

@@ -6,13 +6,14 @@ from pathlib import Path
 
 import typer
 
+from ..constants import MAX_IMAGES
 from .common import fail
 
 
 def register(app: typer.Typer) -> None:
     @app.command()
     def scenes(
-        n: int = typer.Option(100, "--n", min=1, help="Number of approach images (without --sequences)."),
+        n: int = typer.Option(100, "--n", min=1, max=MAX_IMAGES, help="Number of approach images (without --sequences)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed; the same seed gives the same dataset."),
         out: Path = typer.Option(..., "--out", help="Output directory (images/, metadata CSV, runway DB JSON)."),
         width: int = typer.Option(1024, help="Image width in pixels."),

@@ -19,6 +19,7 @@ from typing import Any
 
 import typer
 
+from ..atomic import atomic_write
 from .common import fail, parse_lipschitz
 
 FORMATS = ("json", "csv", "md")
@@ -73,7 +74,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(text, nl=False)
         else:
             out.parent.mkdir(parents=True, exist_ok=True)
-            out.write_text(text)
+            atomic_write(out, text)
             typer.echo(f"zones of {len(done)} job(s) ({len(jobs) - len(done)} skipped): {out}", err=True)
         if plot is not None:
             for j in done:

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..atomic import atomic_write
 from ..data.sample import Sample
 from ..data.yolo import write_data_yaml, write_pose_images
 from ..perturb.views import image_to_view, resample, to_tensor
@@ -412,6 +413,6 @@ def ship(weights: str | Path, *, detector: str, imgsz: int, models_dir: str | Pa
     d.mkdir(parents=True, exist_ok=True)
     out = d / DEFAULT_MODEL.name
     strip_optimizer(str(weights), s=str(out))
-    (d / "default.json").write_text(json.dumps(dict(detector=detector, imgsz=int(imgsz), **info),
+    atomic_write(d / "default.json", json.dumps(dict(detector=detector, imgsz=int(imgsz), **info),
                                                indent=1) + "\n")
     return out

@@ -34,6 +34,7 @@ import logging
 from collections.abc import Callable
 from pathlib import Path
 
+from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.experiments import EXPERIMENTS
 from ..campaigns.spec import FIGURES, CampaignSpec
@@ -117,5 +118,5 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
         body.extend(sec.html)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "report.html"
-    path.write_text(page(f"vbl-robust {spec.name}", "\n".join(body)))
+    atomic_write(path, page(f"vbl-robust {spec.name}", "\n".join(body)))
     return path

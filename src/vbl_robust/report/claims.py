@@ -51,9 +51,11 @@ from collections.abc import Callable, Mapping, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import quote
 
 import numpy as np
 
+from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.experiments import PAPER, PAPER_METHODS
 from ..campaigns.pnpcheck import TRUNCATED
@@ -605,12 +607,12 @@ def write_index(out: str | Path, names: Sequence[str], extra: str = "",
 
     def item(n: str) -> str:
         note = f" — {esc(notes[n])}" if n in notes else ""
-        if (out / n / "report.html").exists():
-            return f'<li><a href="{esc(n)}/report.html">{esc(n)}</a>{note}</li>'
+        if (out / n / "report.html").exists():  # quoted: a folder named "javascript:…" stays a relative path
+            return f'<li><a href="{esc(quote(n))}/report.html">{esc(n)}</a>{note}</li>'
         return f"<li>{esc(n)} (no report yet: rerun to resume){note}</li>"
 
     title = "vbl-robust: the paper's experiments"
-    (out / "index.html").write_text(page(title, f"<h1>{esc(title)}</h1><ul>{''.join(map(item, names))}</ul>{extra}"))
+    atomic_write(out / "index.html", page(title, f"<h1>{esc(title)}</h1><ul>{''.join(map(item, names))}</ul>{extra}"))
     return out / "index.html"
 
 
@@ -620,5 +622,5 @@ def write_claims(root: str | Path, out: str | Path | None = None) -> Path:
     root = Path(root)
     path = Path(out if out is not None else root) / "claims.md"
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(claims_markdown(claims_of(root), str(root)))
+    atomic_write(path, claims_markdown(claims_of(root), str(root)))
     return path

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import JobRow, ResultStore
@@ -176,7 +177,7 @@ def compare_html(before: str | Path, after: str | Path, out: str | Path | None =
     png = figure_png(fig)
     plt.close(fig)
     (out_dir / "figures").mkdir(parents=True, exist_ok=True)
-    (out_dir / "figures" / "compare_survival.png").write_bytes(png)
+    atomic_write(out_dir / "figures" / "compare_survival.png", png)
     rows = [{"method": ln.method if ln.method == ANY else F.style(ln.method)["label"], "box": ln.box,
              "envelope": ln.envelope, "n": ln.n,
              "before": ln.before_pct, "after": ln.after_pct, "gain": ln.after_pct - ln.before_pct, "fixed": ln.fixed,
@@ -204,7 +205,7 @@ def compare_html(before: str | Path, after: str | Path, out: str | Path | None =
               left=("sample_id", "box", "change")) if changes else "<p>None.</p>",
     ]
     path = out_dir / "compare.html"
-    path.write_text(page(f"vbl-robust compare {c.spec.name}", "\n".join(body)), encoding="utf-8")
+    atomic_write(path, page(f"vbl-robust compare {c.spec.name}", "\n".join(body)))
     return path
 
 

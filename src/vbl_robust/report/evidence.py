@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.store import JobRow
 from ..constants import BreachKind
@@ -157,7 +158,7 @@ def section_evidence(ctx: Context) -> Section | None:
     ev = evidence_of(ctx)
     if not ev.boxes:
         return None
-    (ctx.out_dir / "evidence.json").write_text(json.dumps(ev.to_dict(), indent=1, default=str))
+    atomic_write(ctx.out_dir / "evidence.json", json.dumps(ev.to_dict(), indent=1, default=str))
     unit = ctx.spec.unit
     s = Section("Evidence: safe where, and how sure")
     s.html.append(

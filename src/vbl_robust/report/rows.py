@@ -12,6 +12,7 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.spec import BoxSpec, CampaignSpec
 from ..campaigns.store import JobRow, JobStatus, ResultStore
@@ -50,7 +51,7 @@ class Context:
         plt.close(fig)
         path = self.out_dir / "figures" / f"{name}.png"
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_bytes(png)
+        atomic_write(path, png)
         self.figures.append(path)
         return img(png, name, caption)
 

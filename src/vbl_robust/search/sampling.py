@@ -10,6 +10,7 @@ from typing import Any, ClassVar
 import numpy as np
 from scipy.stats import qmc
 
+from ..constants import MAX_GRID_POINTS
 from ..space import ParameterBox
 from .base import Optimizer
 from .cells import Cells
@@ -141,7 +142,10 @@ class GridSearch(Optimizer):
             self.counts = (k,) * d
         else:
             self.counts = (DEFAULT_GRID_COUNT,) * d
-        self.size = int(np.prod(self.counts))
+        self.size = int(np.prod([float(c) for c in self.counts]))
+        if self.size > MAX_GRID_POINTS:
+            raise ValueError(f"grid: {' × '.join(map(str, self.counts))} = {self.size} points exceeds the bound of "
+                             f"{MAX_GRID_POINTS} (a coarser step or fewer counts)")
         self._axes = [np.full(1, 0.5) if n == 1 else np.linspace(0.0, 1.0, n) for n in self.counts]
         self._next = 0
         self._perm: np.ndarray | None = None

@@ -1,0 +1,38 @@
+"""Issue 48 item 5: counts, sizes and grids have stated bounds, checked before any work (one line, exit 2, nothing
+stored), and a stored blob may not inflate past its bound."""
+
+import zlib
+
+import pytest
+from typer.testing import CliRunner
+
+from vbl_robust.cli import app
+from vbl_robust.constants import MAX_GRID_POINTS
+
+runner = CliRunner()
+
+
+@pytest.mark.parametrize(("args", "msg"), [
+    (["audit", "--seed", "9223372036854775808"], "--seed"),
+    (["audit", "--width", "100000"], "--width"),
+    (["audit", "--images", "1000000000"], "--images"),
+    (["scenes", "--n", "1000000000"], "--n"),
+    (["demo", "--images", "1000000000"], "--images"),
+    (["audit", "--max-evals", "100000000000"], "--max-evals"),
+    (["audit", "--methods", "grid", "--method-option", "grid.counts=[1000000000]"], f"bound of {MAX_GRID_POINTS}"),
+    (["reproduce", "spatial-1d", "--grid-step", "1e-12", "--images", "1"], f"bound of {MAX_GRID_POINTS}"),
+])
+def test_a_count_beyond_its_bound_is_refused_before_any_work(tmp_path, args, msg):
+    out = tmp_path / "run"
+    res = runner.invoke(app, [*args, "--out", str(out), *(["--oracle"] if args[0] != "scenes" else [])])
+    assert res.exit_code == 2 and msg in res.output, res.output
+    assert not (out / "results.sqlite").exists()
+
+
+def test_a_stored_blob_may_not_inflate_past_its_bound(monkeypatch):
+    from vbl_robust.campaigns import store
+
+    monkeypatch.setattr(store, "MAX_BLOB_BYTES", 1000)
+    bomb = zlib.compress(b"[" + b"0," * 5000 + b"0]")  # tiny compressed, 10 kB inflated
+    with pytest.raises(ValueError, match="decompresses to more than 1000 bytes"):
+        store.Points.from_blob(bomb)
