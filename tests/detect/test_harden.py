@@ -96,6 +96,19 @@ def test_harden_trains_on_the_worst_views_and_resumes(tmp_path, sample):
     assert [r.weights for r in again] == [r.weights for r in rounds] and again[1].weights.stat().st_mtime_ns == stamp
     with pytest.raises(ValueError, match="lower bound of 'contrast'"):
         harden(tmp_path / "bad", ParameterBox({"contrast": (-1.0, 2.0)}), **kw)
+    # resuming a later round loads a recorded round's weights (a pickle): only with the caller's trust, and only
+    # weights inside the run's directory (issue 48 item 3)
+    import shutil
+
+    shutil.rmtree(tmp_path / "h" / "round01")
+    with pytest.raises(ValueError, match="pass --trust-model if you trust the rounds"):
+        harden(tmp_path / "h", box, **kw)
+    record = tmp_path / "h" / "round00" / "round.json"
+    crafted = json.loads(record.read_text())
+    crafted["weights"] = str(tmp_path / "elsewhere.pt")
+    record.write_text(json.dumps(crafted))
+    with pytest.raises(ValueError, match="lie outside"):
+        harden(tmp_path / "h", box, trust_rounds=True, **kw)
 
 
 def test_the_command_refuses_bad_input_in_one_line(tmp_path):

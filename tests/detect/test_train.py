@@ -61,7 +61,11 @@ def test_train_offline_and_resume(tmp_path, monkeypatch):
     assert r.best.exists() and r.stage_dir.name == "stage00"
     with pytest.raises(ValueError, match="resume"):
         train(tmp_path / "run", samples=_samples(8), imgsz=64, epochs=1)
-    r2 = train(tmp_path / "run", samples=_samples(8), n_val=2, imgsz=64, epochs=1, batch=4, workers=0, resume=True)
+    # resuming loads the stage's checkpoints (pickles): refused without the caller's trust (issue 48 item 3)
+    with pytest.raises(ValueError, match="pass --trust-model if you trust them"):
+        train(tmp_path / "run", samples=_samples(8), n_val=2, imgsz=64, epochs=1, batch=4, workers=0, resume=True)
+    r2 = train(tmp_path / "run", samples=_samples(8), n_val=2, imgsz=64, epochs=1, batch=4, workers=0, resume=True,
+               trust_checkpoints=True)
     assert r2.stage_dir.name == "stage01" and r2.best.exists()  # a finished stage continues as a new stage
 
 
@@ -151,7 +155,7 @@ def test_new_stage_starts_from_previous_weights(tmp_path):
                   warmup_bias_lr=0.0)
     kw = dict(samples=_samples(6), n_val=2, imgsz=64, epochs=1, batch=4, workers=0, seed=0)
     r0 = train(tmp_path / "run", **kw)
-    r1 = train(tmp_path / "run", resume=True, **kw, **frozen)
+    r1 = train(tmp_path / "run", resume=True, trust_checkpoints=True, **kw, **frozen)
 
     def conv_weights(p):
         m = torch.load(p, weights_only=False)["ema"] or torch.load(p, weights_only=False)["model"]
@@ -257,3 +261,27 @@ def test_crops_only_training_lists_only_the_crop_views(tmp_path, monkeypatch):
     for bad in (dict(detector="single"), dict(crops_used=0)):
         with pytest.raises(ValueError, match="crops only"):
             train(tmp_path / "e", **{**common, "full_views": False, **bad})
+
+
+def test_ship_validates_the_checkpoint_before_writing_anything(tmp_path):
+    """Issue 48 item 4: a file that is no pose checkpoint (or a bad version) ships nothing: the installed weights and
+    default.json stay as they were."""
+    from vbl_robust.detect.shipped import DEFAULT_MODEL
+    from vbl_robust.detect.train import ship
+
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "default.json").write_text('{"version": 9}')
+    (models / DEFAULT_MODEL.name).write_bytes(b"installed")
+    garbage = tmp_path / "garbage.pt"
+    garbage.write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError, match="nothing shipped"):
+        ship(garbage, detector="twostage", imgsz=320, info={"version": 99}, models_dir=models)
+    with pytest.raises(ValueError, match="version must be an integer >= 1"):
+        ship(DEFAULT_MODEL, detector="twostage", imgsz=320, info={"version": "99"}, models_dir=models)
+    assert (models / "default.json").read_text() == '{"version": 9}'
+    assert (models / DEFAULT_MODEL.name).read_bytes() == b"installed"
+    assert sorted(p.name for p in models.iterdir()) == ["default.json", DEFAULT_MODEL.name]
+    # the shipped model itself ships (a pose model with 4 corners)
+    out = ship(DEFAULT_MODEL, detector="twostage", imgsz=320, info={"version": 10}, models_dir=models)
+    assert out.stat().st_size > 1000 and '"version": 10' in (models / "default.json").read_text()

@@ -25,7 +25,7 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the rendered samples, the crops and the training."),
         detector: str = typer.Option("twostage", "--detector", help="'twostage' (full view + runway crop) or 'single'."),
         init: str = typer.Option(None, "--init", help="Initial weights of a first stage: a .pt path or 'default' (the shipped model)."),
-        trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading an --init .pt pickle from outside the package."),
+        trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading an --init .pt pickle from outside the package, and (--resume) the checkpoints of --out."),
         crops: int = typer.Option(2, "--crops", min=0, help="Jittered runway crops rendered per training sample (two-stage)."),
         crops_used: int = typer.Option(None, "--crops-used", min=0, help="Train on only the first N crops of each sample (more weight on full views)."),
         min_box: float = typer.Option(None, "--min-box", min=0, help="Minimum labelled box side in view pixels (default 7.5 % of --imgsz)."),
@@ -62,7 +62,8 @@ def register(app: typer.Typer) -> None:
                 fail(str(exc))
         try:
             res = tr.train(out, samples=samples, n_train=n_train, n_val=n_val, imgsz=imgsz, epochs=epochs,
-                           batch=batch, seed=seed, resume=resume, init_weights=init_path, detector=detector,
+                           batch=batch, seed=seed, resume=resume, trust_checkpoints=trust_model,
+                           init_weights=init_path, detector=detector,
                            crops_per_sample=crops, crops_used=crops_used, min_box=min_box, lr0=lr0,
                            optimizer=optimizer, workers=workers, threads=threads,
                            n_airports=airports or DEFAULT_POOL,
@@ -127,7 +128,12 @@ def register(app: typer.Typer) -> None:
 
         setup_offline()
         typer.echo(json.dumps(info, indent=1))
-        typer.echo(f"shipped {ship_weights(checkpoint, detector='twostage', imgsz=320, info=info, models_dir=shipped_model_dir(name))}")
+        try:
+            shipped_to = ship_weights(checkpoint, detector="twostage", imgsz=320, info=info,
+                                      models_dir=shipped_model_dir(name))
+        except (ValueError, FileNotFoundError) as exc:
+            fail(str(exc))
+        typer.echo(f"shipped {shipped_to}")
 
     @app.command()
     def harden(
@@ -172,6 +178,7 @@ def register(app: typer.Typer) -> None:
         if seed in HARDEN_FORBIDDEN_SEEDS:
             fail(f"--seed {seed}: the approaches of this seed are an audit's or the detector protocol's (never trained "
                  f"on); choose another (default {HARDEN_SEED})")
+        trust_rounds = trust_model  # the user's word on the .pt files of --out (before a shipped model sets it)
         if model is not None and str(model) in SHIPPED_MODELS:  # a shipped model: part of the package, trusted
             name = str(model)
             model = default_model_path(name)
@@ -187,7 +194,7 @@ def register(app: typer.Typer) -> None:
             rs = run_harden(out, box, train_samples=generate(n_train, seed=seed, **scenes[data]),
                             val_samples=generate(n_val, seed=seed + VAL_SEED_OFFSET, **scenes[data]), init_weights=model,
                             rounds=rounds, k=k, epochs=epochs, seed=seed, imgsz=imgsz, batch=batch, threads=threads,
-                            clean=clean)
+                            clean=clean, trust_rounds=trust_rounds)
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         for r in rs:

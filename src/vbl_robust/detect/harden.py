@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_write
 from ..data.sample import Sample
 from ..perturb import Perturbation
 from ..space import ParameterBox
@@ -111,14 +112,16 @@ class Round:
 def harden(out_dir: str | Path, box: ParameterBox, *, train_samples: Sequence[Sample],
            val_samples: Sequence[Sample], init_weights: str | Path | None = None, rounds: int = 2, k: int = 8,
            epochs: int = 2, seed: int = 0, imgsz: int = 320, eps_m: float | None = None, clean: bool = True,
-           **train_options) -> list[Round]:
+           trust_rounds: bool = False, **train_options) -> list[Round]:
     """Rounds of worst-of-k training (module docstring): each round scores ``k`` candidates per training image on
     the current model (two-stage, ``imgsz``), renders the worst trainable one, and fine-tunes on those views (and
     the clean images when ``clean``) for ``epochs`` with the shipped model's recipe
     (:data:`~vbl_robust.detect.train.FINE_TUNE`; ``train_options`` override it), validating on the clean
     ``val_samples``. ``init_weights``:
     the model to harden (None: the shipped one). Resumable: a finished round (``roundNN/round.json``) is read
-    back, an interrupted one resumes its training. Returns the rounds; ``Round.breaches`` counts the training
+    back, an interrupted one resumes its training — both load weights written in ``out_dir`` (pickles), so
+    resuming needs ``trust_rounds`` (``--trust-model``), and a round's weights must lie inside ``out_dir``. Returns
+    the rounds; ``Round.breaches`` counts the training
     images whose worst θ broke the round's starting model (``L > eps_m``, default ε_safe)."""
     import json
     import time
@@ -136,14 +139,22 @@ def harden(out_dir: str | Path, box: ParameterBox, *, train_samples: Sequence[Sa
     current = Path(init_weights) if init_weights is not None else None
     previous: list[list[np.ndarray]] = [[] for _ in train_samples]
     done: list[Round] = []
+    from_record = False  # whether ``current`` was read back from a round.json (not given by the caller)
     for r in range(rounds):
         rdir = out / f"round{r:02d}"
         record = rdir / "round.json"
-        if record.exists():  # finished earlier: read back
+        record_read = record.exists()
+        if record_read:  # finished earlier: read back
             d = json.loads(record.read_text())
-            rnd = Round(r, rdir, Path(d["weights"]), tuple(d["worst"]), tuple(d["values"]), d["breaches"],
+            weights = Path(d["weights"]).resolve()
+            if not weights.is_relative_to(out.resolve()):
+                raise ValueError(f"{record}: its weights {weights} lie outside {out} (a round's weights are its own)")
+            rnd = Round(r, rdir, weights, tuple(d["worst"]), tuple(d["values"]), d["breaches"],
                         d.get("search_s"), d.get("train_s"))
         else:
+            if from_record and not trust_rounds:  # the next round loads a recorded round's weights
+                raise ValueError(f"harden: resuming loads {current}, a pickle that runs code when loaded; pass "
+                                 f"--trust-model if you trust the rounds in {out}")
             det = (default_detector(design="twostage") if current is None
                    else with_design(UltralyticsDetector(current, trust=True, imgsz=imgsz), "twostage"))
             t0 = time.perf_counter()
@@ -160,13 +171,14 @@ def harden(out_dir: str | Path, box: ParameterBox, *, train_samples: Sequence[Sa
             stage = rdir / "stage00"
             res = train(rdir, samples=[*train_samples, *views] if clean else views, val_samples=val_samples,
                         init_weights=current if current is not None else DEFAULT_MODEL, epochs=epochs, seed=seed,
-                        imgsz=imgsz, resume=stage.exists(), **{**FINE_TUNE, **train_options})
+                        imgsz=imgsz, resume=stage.exists(), trust_checkpoints=trust_rounds,
+                        **{**FINE_TUNE, **train_options})
             rnd = Round(r, rdir, res.best, tuple(worst), tuple(values),
                         int(sum(v > eps for v in values if np.isfinite(v))), t1 - t0, time.perf_counter() - t1)
-            record.write_text(json.dumps(rnd.to_dict(), indent=1) + "\n")
+            atomic_write(record, json.dumps(rnd.to_dict(), indent=1) + "\n")
         for i, th in enumerate(rnd.worst):
             if th is not None:
                 previous[i] = [np.asarray(th, dtype=np.float64)]
-        current = rnd.weights
+        current, from_record = rnd.weights, record_read
         done.append(rnd)
     return done

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -241,6 +242,7 @@ OPTIMIZERS = ("auto", "SGD", "Adam", "Adamax", "AdamW", "NAdam", "RAdam", "RMSpr
 def train(
     out_dir: str | Path, *, samples: Sequence[Sample] | None = None, n_train: int = 1000, n_val: int = 100,
     imgsz: int = 320, epochs: int = 10, batch: int = 16, seed: int = 0, resume: bool = False,
+    trust_checkpoints: bool = False,
     init_weights: str | Path | None = None, detector: str = "twostage", crops_per_sample: int = 2,
     workers: int = 2, lr0: float | None = None, crops_used: int | None = None, min_box: float | None = None,
     threads: int | None = None, n_airports: int = DEFAULT_POOL, generate_options: dict | None = None,
@@ -261,6 +263,8 @@ def train(
         batch, workers: ultralytics batch size and data-loader workers.
         seed: seed for data generation, split, crop jitter and ultralytics.
         resume: continue the latest stage (interrupted) or start a new stage from its ``best.pt`` (finished).
+        trust_checkpoints: resuming loads the stage's checkpoints, pickles that run code: refused (``ValueError``)
+            unless the caller says it trusts them (``--trust-model``).
         init_weights: initial weights of a new first stage (e.g. the shipped model); None → from
             ``yolov8n-pose.yaml`` (random init, no hub weights).
         detector: ``"twostage"`` (full views + crops) or ``"single"`` (full views only).
@@ -318,6 +322,9 @@ def train(
     stages = _stages(out_dir)
     if stages and not resume:
         raise ValueError(f"train: {out_dir} already holds training stages; pass resume=True (--resume) to continue")
+    if stages and not trust_checkpoints:  # resuming unpickles the stage's last.pt / best.pt: only with consent
+        raise ValueError(f"train --resume: the checkpoints in {stages[-1] / 'weights'} are pickles that run code when "
+                         "loaded; pass --trust-model if you trust them (e.g. you wrote them)")
     if stages:
         last = stages[-1] / "weights" / "last.pt"
         if last.exists() and not _finished(last):
@@ -409,10 +416,32 @@ def ship(weights: str | Path, *, detector: str, imgsz: int, models_dir: str | Pa
 
     from .shipped import DEFAULT_MODEL
 
+    version = info.get("version")
+    if version is not None and (isinstance(version, bool) or not isinstance(version, int) or version < 1):
+        raise ValueError(f"ship: version must be an integer >= 1, got {version!r}")
+    src = Path(weights)
+    if not src.is_file():
+        raise FileNotFoundError(f"{src}: checkpoint not found")
     d = Path(models_dir) if models_dir is not None else DEFAULT_MODEL.parent
     d.mkdir(parents=True, exist_ok=True)
     out = d / DEFAULT_MODEL.name
-    strip_optimizer(str(weights), s=str(out))
+    # validated before anything is replaced: the stripped copy must be a pose model with the runway's 4 corners
+    tmp = d / f".shipping.{DEFAULT_MODEL.name}"  # a .pt name: ultralytics reads a checkpoint by its suffix
+    tmp.unlink(missing_ok=True)
+    try:
+        strip_optimizer(str(src), s=str(tmp))  # logs and writes nothing for a file that is not a checkpoint
+        if not tmp.is_file():
+            raise ValueError("not an ultralytics checkpoint")
+        from ultralytics import YOLO
+
+        model = YOLO(str(tmp))
+        kpt = list(getattr(model.model, "kpt_shape", None) or model.model.yaml.get("kpt_shape") or [])
+        if model.task != "pose" or kpt[:1] != [4]:
+            raise ValueError(f"a {model.task} model with keypoints {kpt}, not a 4-corner pose model")
+    except Exception as exc:
+        tmp.unlink(missing_ok=True)
+        raise ValueError(f"ship: {src}: {exc}; nothing shipped") from None
+    os.replace(tmp, out)
     atomic_write(d / "default.json", json.dumps(dict(detector=detector, imgsz=int(imgsz), **info),
                                                indent=1) + "\n")
     return out
