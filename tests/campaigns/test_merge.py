@@ -74,3 +74,26 @@ def test_merge_refuses_another_campaign_a_held_store_and_an_empty_source(tmp_pat
     (tmp_path / "bad.sqlite.xz").write_bytes(b"not xz")
     res = runner.invoke(app, ["merge", str(tmp_path / "bad.sqlite.xz"), "--into", str(tmp_path / "a")])
     assert res.exit_code == 2 and len(res.output.strip().splitlines()) == 1, res.output
+
+
+def test_a_merge_refuses_other_pixels_under_the_same_names(tmp_path):
+    """Issue 48 item 6: two runs whose jobs read other bytes for the same image file are not parts of one run."""
+    import dataclasses
+    import sqlite3
+
+    from PIL import Image
+
+    base = list(generate(1, seed=0, width=96, height=96))[0]
+    path = tmp_path / "img.png"
+    Image.fromarray(base.image).save(path)
+    on_file = dataclasses.replace(base, image_path=path, _image=None, _loader=None)
+    _run(tmp_path / "a", [on_file])
+    _run(tmp_path / "b", [on_file])
+    con = sqlite3.connect(tmp_path / "b" / "results.sqlite")  # as if b's machine had read other pixels
+    con.execute("UPDATE contents SET sha256 = 'f00d'")
+    con.commit()
+    con.close()
+    with ResultStore(tmp_path / "a" / "results.sqlite") as a, ResultStore.open_existing(tmp_path / "b") as b:
+        assert a.differing_pixels(b) == [base.id]
+        with pytest.raises(ValueError, match="image files of samples .* differ"):
+            a.merge(b)

@@ -199,4 +199,29 @@ def test_changed_pixels_are_refused_not_reused(tmp_path, small_samples, oracle):
         Image.fromarray(small_samples[1].image).save(path)  # other pixels
         with pytest.raises(ValueError, match=r"pixels of 1 sample\(s\) changed .*on_file"):
             run_campaign(spec, [on_file], st, detector=oracle)
+        # other bytes with the stored size and mtime (what cp -p, tar x, rsync -a keep): still refused (issue 48 item 6)
+        Image.fromarray(small_samples[0].image).save(path)
+        data = bytearray(path.read_bytes())
+        data[-20] ^= 0xFF  # the same length, other bytes
+        path.write_bytes(bytes(data))
+        stored_mtime = next(iter(st._con.execute("SELECT mtime_ns, size FROM contents")))
+        os.utime(path, ns=(stored_mtime[0], stored_mtime[0]))
+        assert (path.stat().st_size, path.stat().st_mtime_ns) == (stored_mtime[1], stored_mtime[0])
+        with pytest.raises(ValueError, match=r"pixels of 1 sample\(s\) changed .*on_file"):
+            run_campaign(spec, [on_file], st, detector=oracle)
         assert st.count() == 1
+
+
+def test_deleting_the_lock_file_does_not_let_a_second_writer_in(tmp_path):
+    """Issue 48 item 8: the writer also holds a lock on the store file, so a lock file deleted during a run (and
+    created anew by the second writer) does not make a second, free lock."""
+    import os
+
+    from vbl_robust.campaigns.store import WriterLock
+
+    store = tmp_path / "results.sqlite"
+    with WriterLock(store):
+        os.unlink(f"{store}.lock")
+        with pytest.raises(ValueError, match="in use by"):
+            WriterLock(store).acquire()
+    WriterLock(store).acquire().release()  # free once the first writer has let go

@@ -188,39 +188,49 @@ PRESENTATION_KEYS = ("figures",)
 
 
 class WriterLock:
-    """The one-writer lock of a store: an exclusive ``flock`` on ``<store>.lock`` (which holds the writer's PID),
-    held from :meth:`acquire` to :meth:`release` or the end of the process. A second writer gets a ``ValueError``
-    naming the PID that holds it, or waits for it with ``wait=True``."""
+    """The one-writer lock of a store: an exclusive ``flock`` on ``<store>.lock`` (which holds the writer's PID) and
+    on the store file itself, held from :meth:`acquire` to :meth:`release` or the end of the process. A second
+    writer gets a ``ValueError`` naming the PID that holds it, or waits for it with ``wait=True``. The lock on the
+    store file keeps a second writer out even when ``<store>.lock`` is deleted during a run (a new lock file would
+    be a new, free lock); ``flock`` does not interfere with SQLite's own (POSIX) locks, so readers are unaffected."""
 
     def __init__(self, store_path: str | Path):
+        self.store = Path(store_path)
         self.path = Path(f"{store_path}.lock")
-        self._fd: int | None = None
+        self._fds: list[int] = []
 
     def acquire(self, wait: bool = False) -> WriterLock:
         import fcntl
         import os
 
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        fds = []
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+            for target in (self.path, self.store):
+                fd = os.open(target, os.O_RDWR | os.O_CREAT, 0o644)
+                fds.append(fd)
+                fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
         except BlockingIOError:
-            holder = os.read(fd, 64).decode(errors="replace").strip() or "another process"
-            os.close(fd)
+            try:
+                holder = self.path.read_text().strip() or "another process"
+            except OSError:
+                holder = "another process"
+            for fd in fds:
+                os.close(fd)
             raise ValueError(f"{self.path.parent}: in use by PID {holder} (another run is writing this store); wait "
                              "for it to end or write to another --out") from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, str(os.getpid()).encode(), 0)
-        self._fd = fd
+        os.ftruncate(fds[0], 0)
+        os.pwrite(fds[0], str(os.getpid()).encode(), 0)
+        self._fds = fds
         return self
 
     def release(self) -> None:
         import fcntl
         import os
 
-        if self._fd is not None:
-            fcntl.flock(self._fd, fcntl.LOCK_UN)
-            os.close(self._fd)
-            self._fd = None
+        for fd in self._fds:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+        self._fds = []
 
     def __enter__(self) -> WriterLock:
         return self.acquire()
@@ -631,8 +641,9 @@ class ResultStore:
     def check_contents(self, samples: Iterable[Any]) -> None:
         """Record the image-file digest of each sample (each frame of a sequence) read from a file (``image_path``), and refuse
         (``ValueError`` naming them) samples whose file's bytes differ from those their stored jobs were computed
-        on. A file whose size and mtime are unchanged is not read again; samples rendered in memory have no file
-        (their pixels follow from their geometry and the generator, both in the job keys and the provenance)."""
+        on. Every file is hashed on every run: a size and mtime that did not change prove nothing (``cp -p``,
+        ``tar x`` and ``rsync -a`` keep them for other bytes); samples rendered in memory have no file (their pixels
+        follow from their geometry and the generator, both in the job keys and the provenance)."""
         from ..digest import file_sha256
 
         stored = {r[0]: r[1:] for r in self._con.execute("SELECT sample_id, size, mtime_ns, sha256 FROM contents")}
@@ -645,8 +656,6 @@ class ResultStore:
                     continue  # rendered in memory, or missing (the job records that failure)
                 st = Path(path).stat()
                 old = stored.get(s.id)
-                if old is not None and (old[0], old[1]) == (st.st_size, st.st_mtime_ns):
-                    continue
                 digest = file_sha256(path)
                 if old is not None and old[2] != digest and owner.id in with_jobs:
                     changed.append(f"{s.id} ({path})")
@@ -701,6 +710,15 @@ class ResultStore:
         sql += " ORDER BY sample_index, rowid"
         return [_from_columns(dict(zip(cols, r, strict=True))) for r in self._con.execute(sql, args)]
 
+    def image_digests(self) -> dict[str, str]:
+        """The SHA-256 of each sample's image file as its jobs read it (samples read from files only)."""
+        return {r[0]: r[1] for r in self._con.execute("SELECT sample_id, sha256 FROM contents") if r[1]}
+
+    def differing_pixels(self, other: ResultStore) -> list[str]:
+        """The samples both stores read from files whose bytes differ (the same id, other pixels)."""
+        mine, theirs = self.image_digests(), other.image_digests()
+        return sorted(sid for sid, d in theirs.items() if sid in mine and mine[sid] != d)
+
     def check_mergeable(self, other: ResultStore, campaign: Mapping[str, Any] | None = None) -> dict[str, Any]:
         """``ValueError`` unless ``other`` holds job rows of this store's campaign and detector (or of ``campaign``,
         when given: several sources checked against the first before anything is written) on samples that agree
@@ -717,6 +735,10 @@ class ResultStore:
                  and (here[sid]["fingerprint"], here[sid]["sample_index"]) != (s["fingerprint"], s["sample_index"])]
         if clash:
             raise ValueError(f"{other.path}: samples {clash[:5]} differ from {self.path}'s (another image set)")
+        pixels = self.differing_pixels(other)
+        if pixels:
+            raise ValueError(f"{other.path}: the image files of samples {pixels[:5]} differ from those {self.path}'s "
+                             "jobs read (other pixels under the same names)")
         return theirs
 
     def merge(self, other: ResultStore, *, source: str = "") -> tuple[int, int]:

@@ -109,6 +109,11 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
     spec, rows_a, det_a, envelope = _read(before)
     spec_b, rows_b, det_b, _ = _read(after)
     check_alike(before, spec, rows_a, after, spec_b, rows_b)
+    with ResultStore.open_existing(before) as a, ResultStore.open_existing(after) as b:
+        pixels = a.differing_pixels(b)
+    if pixels:
+        raise ValueError(f"{after}: the image files of {pixels[:5]} differ from those {before} read (other pixels "
+                         "under the same names): no paired comparison")
     eps = spec.eps_safe_m
     _, where = mx.columns(rows_a)  # the box, and the budget where the run has several
 
