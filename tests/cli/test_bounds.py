@@ -36,3 +36,24 @@ def test_a_stored_blob_may_not_inflate_past_its_bound(monkeypatch):
     bomb = zlib.compress(b"[" + b"0," * 5000 + b"0]")  # tiny compressed, 10 kB inflated
     with pytest.raises(ValueError, match="decompresses to more than 1000 bytes"):
         store.Points.from_blob(bomb)
+
+
+def test_probes_that_gave_tracebacks_give_one_line(tmp_path):
+    """Issue 48 item 9: each of these printed a traceback; now one line naming the option, exit 2."""
+    import lzma
+
+    (tmp_path / "file").write_text("x")
+    cut = tmp_path / "cut" / "spatial-1d"
+    cut.mkdir(parents=True)
+    (cut / "results.sqlite.xz").write_bytes(lzma.compress(b"y" * 5000)[:30])
+    probes = [
+        (["reproduce", "runtime-1d", "--time-budgets", "nan", "--out", str(tmp_path / "r"), "--oracle"],
+         "--time-budgets"),
+        (["reproduce", "spatial-1d", "--resume-from", str(tmp_path / "cut"), "--out", str(tmp_path / "r2"),
+          "--oracle", "--images", "1"], "not a complete packed store"),
+        (["bundle", str(tmp_path), "--out", str(tmp_path / "file")], "is a file"),
+        (["train", "--imgsz", "0", "--out", str(tmp_path / "t")], "--imgsz"),
+    ]
+    for args, msg in probes:
+        res = runner.invoke(app, args)
+        assert res.exit_code == 2 and msg in res.output and "Traceback" not in res.output, (args, res.output)

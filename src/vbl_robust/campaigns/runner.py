@@ -347,7 +347,10 @@ def _ray_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Set
     if not ray.is_initialized():
         kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
         if address:
-            ray.init(address=address, **kw)
+            try:
+                ray.init(address=address, **kw)
+            except ConnectionError as exc:  # e.g. --address auto with no cluster running: one line, not a trace
+                raise ValueError(f"--address {address}: {str(exc).splitlines()[0]}") from None
         else:
             ray.init(num_cpus=num_cpus, **kw)
         started = True

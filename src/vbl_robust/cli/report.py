@@ -90,6 +90,8 @@ def register(app: typer.Typer) -> None:
         status table; runs still in progress are bundled as they stand (rerun to refresh)."""
         from vbl_robust.campaigns.bundle import write_bundle
 
+        if out.exists() and not out.is_dir():
+            fail(f"--out {out}: is a file; a bundle is a directory")
         try:
             totals = write_bundle(root, out, reproduction=reproduction, stores=stores)
         except (ValueError, FileNotFoundError) as exc:

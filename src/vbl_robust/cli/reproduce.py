@@ -8,6 +8,7 @@ evaluation budget spent, no early stop), and exits.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -39,8 +40,8 @@ def _floats(text: str | None, name: str) -> tuple[float, ...] | None:
         vals = tuple(float(v) for v in text.split(",") if v.strip())
     except ValueError:
         raise typer.BadParameter(f"{name}: expected comma-separated numbers, got {text!r}") from None
-    if not vals or any(v <= 0 for v in vals):
-        raise typer.BadParameter(f"{name}: expected numbers > 0, got {text!r}")
+    if not vals or any(not math.isfinite(v) or v <= 0 for v in vals):
+        raise typer.BadParameter(f"{name}: expected finite numbers > 0, got {text!r}")
     return vals
 
 
@@ -226,7 +227,11 @@ def register(app: typer.Typer) -> None:
             if resume_from is not None:
                 from vbl_robust.campaigns.bundle import PACKED, restore_store
 
-                if restore_store(resume_from / exp.name / PACKED, out_dir):
+                try:
+                    restored = restore_store(resume_from / exp.name / PACKED, out_dir)
+                except ValueError as exc:
+                    fail(f"--resume-from {resume_from}: {exc}")
+                if restored:
                     typer.echo(f"{exp.name}: store restored from {resume_from / exp.name / PACKED}")
             samples, source = load(images, seed, lard, width, height, default=exp.images)
             config = {"command": "reproduce", "experiment": exp.name, "images": len(samples), "seed": seed,

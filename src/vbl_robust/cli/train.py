@@ -19,7 +19,7 @@ def register(app: typer.Typer) -> None:
         n_train: int = typer.Option(1000, "--n-train", min=2, help="Synthetic training approaches."),
         n_val: int = typer.Option(100, "--n-val", min=1, help="Validation approaches."),
         airports: int = typer.Option(None, "--airports", min=1, help="Synthetic airports (runway sizes) of the generated data (default: the generator's pool)."),
-        imgsz: int = typer.Option(320, "--imgsz", help="Network input size (multiple of 32)."),
+        imgsz: int = typer.Option(320, "--imgsz", min=32, max=4096, help="Network input size (a multiple of 32, 32 to 4096)."),
         epochs: int = typer.Option(10, "--epochs", min=1, help="Epochs of this stage."),
         batch: int = typer.Option(16, "--batch", min=1, help="Training batch size (views per optimizer step)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the rendered samples, the crops and the training."),
@@ -157,7 +157,7 @@ def register(app: typer.Typer) -> None:
         data: str = typer.Option("audit", "--data", help="Which synthetic approaches: audit (the generator's defaults, "
                                  "as the audits draw them) or shipped (the shipped model's own training mix: three far "
                                  "approaches for each medium and close one, 2000 airports; detect.train.SHIPPED_DATA)."),
-        imgsz: int = typer.Option(320, "--imgsz", help="Network input size (multiple of 32)."),
+        imgsz: int = typer.Option(320, "--imgsz", min=32, max=4096, help="Network input size (a multiple of 32, 32 to 4096)."),
         batch: int = typer.Option(16, "--batch", min=1, help="Training batch size (views per optimizer step)."),
         threads: int = typer.Option(None, "--threads", min=1, help="Torch threads for CPU training (default: all cores)."),
     ) -> None:
