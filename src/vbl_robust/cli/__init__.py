@@ -31,7 +31,7 @@ def _version(value: bool) -> None:
         raise typer.Exit()
 
 # Sub-command modules; each defines `register(app)`. A module that is not there yet is skipped.
-_COMMAND_MODULES = ("scenes", "audit", "risk", "reproduce", "report", "train", "zones")
+_COMMAND_MODULES = ("scenes", "audit", "risk", "reproduce", "truth", "report", "train", "zones")
 
 
 @app.callback()

@@ -196,6 +196,15 @@ class DetectorSpec:
         raise ValueError(f"--model {path}: expected a .pt (ultralytics) or .onnx file")
 
     @classmethod
+    def from_identity(cls, ident: dict[str, Any], *, trust: bool = False) -> DetectorSpec:
+        """The spec a run recorded (:meth:`identity`, as stored with its campaign): to run more jobs with the same
+        detector. A ``.pt`` file loads only with ``trust`` (it is a pickle)."""
+        kind = ident.get("kind")
+        path = ident.get("factory") if kind == "factory" else ident.get("path")
+        return cls(kind, path if kind in ("ultralytics", "onnx", "factory") else None, trust=trust,
+                   options=dict(ident.get("options") or {}))
+
+    @classmethod
     def shipped(cls, name: str = "default", options: dict[str, Any] | None = None) -> DetectorSpec:
         """A model shipped with the package (:data:`SHIPPED_MODELS`; the default model's spec names none, so its
         runs' keys stay as they were)."""
