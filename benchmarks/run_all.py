@@ -28,7 +28,7 @@ HERE = Path(__file__).resolve().parent
 
 # Order in which sections appear; unknown benchmarks follow alphabetically.
 ORDER = ["scenes", "pnp", "search", "spatial2d", "perturb", "detector", "engines", "device", "naive", "pipeline", "campaigns",
-         "risk"]
+         "risk", "monitors"]
 
 
 MARKER = re.compile(r"^<!-- bench:(\w+) -->$", re.M)

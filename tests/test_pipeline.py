@@ -356,3 +356,20 @@ def test_nfev_counts_rows(samples):
     obj(grid(n_roll=3, contrasts=(1.0,)))
     obj(torch.zeros(2, 2) + torch.tensor([0.0, 1.0]))
     assert obj.nfev == 5
+
+
+def test_a_residual_monitor_turns_an_inconsistent_pose_into_a_flagged_failure(samples):
+    """--monitor-residual: exact corners pass (residual ≈ 0); one corner moved 15 px off the rectangle's geometry
+    gives a PnP residual above 2 px, which the monitor flags ("monitor_rejected", the penalty) instead of a pose."""
+    s = samples[1]
+    theta = np.array([[0.0, 1.0]])
+    moved = s.corners_2d.copy()
+    moved[0] += 15.0
+    plain = Objective(s, StubDetector(moved), BOX).evaluate(theta)
+    assert plain.reason == ("",) and plain.reproj_error_px[0] > 2.0
+    watched = Objective(s, StubDetector(moved), BOX, max_reproj_px=2.0).evaluate(theta)
+    assert watched.reason == ("monitor_rejected",) and watched.loss[0] == 5000.0 and np.isnan(watched.error_m[0])
+    exact = Objective(s, StubDetector(s.corners_2d), BOX, max_reproj_px=2.0).evaluate(theta)
+    assert exact.reason == ("",) and exact.reproj_error_px[0] < 0.01
+    with pytest.raises(ValueError, match="max_reproj_px"):
+        Objective(s, StubDetector(s.corners_2d), BOX, max_reproj_px=0.0)

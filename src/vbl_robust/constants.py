@@ -51,6 +51,7 @@ FAILURE_REASONS: dict[str, str] = {
     "pnp_failed": "the PnP solver found no pose",
     "non_finite_position": "the PnP position is not finite",
     "out_of_view": "the perturbation turned the runway out of the camera's view (a corner behind the camera)",
+    "monitor_rejected": "a runtime monitor rejected the pose (its PnP reprojection residual above the monitor's limit)",
 }
 
 

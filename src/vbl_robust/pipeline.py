@@ -149,6 +149,8 @@ class Objective:
         device: where the perturbation, the views and the differentiable PnP run (``auto``, ``cpu``,
             ``cuda[:N]``; :mod:`vbl_robust.detect.device`); None → the detector's ``device`` (CPU if it has none).
             θ, the losses and the black-box PnP stay on the CPU.
+        max_reproj_px: a runtime monitor: a pose whose PnP reprojection residual (RMS, the sample's pixels) is above
+            it is a flagged failure (``"monitor_rejected"``) instead of a pose; None: no monitor.
 
     Raises:
         ValueError: a user mistake (unknown parameter name, unknown PnP solver, bad threshold/penalty/batch size,
@@ -174,6 +176,7 @@ class Objective:
         resolution: str | int = "auto",
         pnp_grad: str = "exact",
         device: str | None = None,
+        max_reproj_px: float | None = None,
     ):
         if not isinstance(box, ParameterBox):
             raise ValueError(f"Objective: box must be a vbl_robust.ParameterBox, got {type(box).__name__}")
@@ -187,6 +190,8 @@ class Objective:
             raise ValueError(f"Objective: conf_threshold must be in [0, 1], got {conf_threshold}")
         if not (np.isfinite(penalty_m) and penalty_m >= 0):  # 0: flagged failures count as safe (misleading only)
             raise ValueError(f"Objective: penalty_m must be finite and >= 0, got {penalty_m}")
+        if max_reproj_px is not None and not (np.isfinite(max_reproj_px) and max_reproj_px > 0):
+            raise ValueError(f"Objective: max_reproj_px must be a finite number > 0, got {max_reproj_px}")
         if isinstance(batch_size, bool) or not isinstance(batch_size, int | np.integer) or batch_size < 1:
             raise ValueError(f"Objective: batch_size must be an int >= 1, got {batch_size!r}")
         if resolution not in ("auto", "full") and not (isinstance(resolution, int | np.integer) and resolution >= 8):
@@ -198,6 +203,7 @@ class Objective:
         self.pnp = pnp
         self.conf_threshold = float(conf_threshold)
         self.penalty_m = float(penalty_m)
+        self.max_reproj_px = None if max_reproj_px is None else float(max_reproj_px)
         self.batch_size = int(batch_size)
         self.resolution = resolution
         self.pnp_grad = pnp_grad
@@ -363,11 +369,15 @@ class Objective:
             for j, i in enumerate(rows):
                 detail[i] = "" if success[j] else res.reason[j]
         err = np.linalg.norm(position[rows] - y, axis=1)
+        if self.max_reproj_px is not None and rows.size and grad:  # the monitor reads the residual of the forward
+            reproj[rows] = solve(kp[rows], self.sample.corners_3d, self.sample.K, method=self.pnp).reproj_error_px
         for j, i in enumerate(rows):
             if not success[j]:
                 reason[i] = "pnp_failed"
             elif not np.isfinite(err[j]):
                 reason[i] = "non_finite_position"
+            elif self.max_reproj_px is not None and not reproj[i] <= self.max_reproj_px:
+                reason[i] = "monitor_rejected"  # the monitor flags the pose: the system knows it has no fix
             else:
                 error[i] = err[j]
         failed = np.array([r != "" for r in reason])

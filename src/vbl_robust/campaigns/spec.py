@@ -329,6 +329,9 @@ class CampaignSpec:
             *sequence campaign*: every sample is an :class:`~vbl_robust.data.ApproachSequence`, one θ is held over
             its frames and a search job maximises the error sustained over ``k`` consecutive frames
             (:class:`~vbl_robust.sequences.SequenceObjective`). Part of the job context when set.
+        monitor_px: a runtime monitor of the pipeline: poses whose PnP reprojection residual is above this many
+            pixels become flagged failures (:class:`~vbl_robust.pipeline.Objective` ``max_reproj_px``). Part of the
+            job context when set.
     """
 
     name: str
@@ -343,6 +346,7 @@ class CampaignSpec:
     figures: tuple[str, ...] = ()
     clock: str = "wall"
     sustain: int | None = None
+    monitor_px: float | None = None
 
     def __post_init__(self) -> None:
         from ..search import CLOCKS
@@ -357,6 +361,10 @@ class CampaignSpec:
             raise ValueError(f"sustain: need an integer >= 1 (frames), got {self.sustain!r}")
         if self.sustain is not None and any(b.kind != "search" for b in self.blocks):
             raise ValueError("CampaignSpec: a sequence campaign (sustain set) holds search blocks only")
+        if self.monitor_px is not None and not (math.isfinite(self.monitor_px) and self.monitor_px > 0):
+            raise ValueError(f"--monitor-residual must be a finite number of pixels > 0, got {self.monitor_px}")
+        if self.monitor_px is not None and self.sustain is not None:
+            raise ValueError("--monitor-residual applies to image campaigns, not to sequences (--sequences)")
         object.__setattr__(self, "figures", tuple(self.figures))
 
     def check(self) -> None:
@@ -436,6 +444,8 @@ class CampaignSpec:
             out["clock"] = self.clock
         if self.sustain is not None:
             out["sustain"] = self.sustain
+        if self.monitor_px is not None:
+            out["monitor_px"] = self.monitor_px
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -461,7 +471,8 @@ class CampaignSpec:
         return cls(name=d["name"], blocks=blocks, seed=int(d["seed"]), eps_safe_m=float(d["eps_safe_m"]),
                    penalty_m=float(d["penalty_m"]), conf_threshold=float(d["conf_threshold"]), pnp=d["pnp"],
                    lipschitz=tuple(lip) if isinstance(lip, list) else lip, notes=d.get("notes", ""),
-                   figures=tuple(d.get("figures", ())), clock=d.get("clock", "wall"), sustain=d.get("sustain"))
+                   figures=tuple(d.get("figures", ())), clock=d.get("clock", "wall"), sustain=d.get("sustain"),
+                   monitor_px=d.get("monitor_px"))
 
     def context(self, detector_id: str) -> str:
         """Digest of what every job of this campaign shares: the settings and the detector identity."""

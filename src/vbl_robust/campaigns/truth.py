@@ -44,9 +44,20 @@ def largest_box(rows: Sequence[JobRow]) -> BoxSpec:
     return max(boxes, key=lambda b: (b.level, b.label))
 
 
+def _at_largest(rows: Sequence[JobRow]) -> tuple[BoxSpec, list[JobRow]]:
+    """The largest box, and the main rows there at the largest budget (a runtime run holds several budgets: its
+    verdict at the largest one is the one to check)."""
+    from .metrics import budget_value
+
+    box = largest_box(rows)
+    at = [r for r in rows if r.box_label == box.label]
+    top = max(at, key=lambda r: (budget_value(r, "max_seconds"), budget_value(r, "max_evals")))
+    return box, [r for r in at if r.budget_label == top.budget_label]
+
+
 def survivors_of_every_method(store: ResultStore) -> tuple[CampaignSpec, BoxSpec, list[str], list[str]]:
-    """The run's spec, its largest box, the methods, and the images every method ran at that box and left
-    surviving (sorted by sample index)."""
+    """The run's spec, its largest box, the methods, and the images every method ran at that box (at the largest
+    budget) and left surviving (sorted by sample index)."""
     from .metrics import main_rows
 
     camp = store.campaign()
@@ -54,8 +65,7 @@ def survivors_of_every_method(store: ResultStore) -> tuple[CampaignSpec, BoxSpec
         raise ValueError(f"{store.path}: holds no campaign")
     spec = CampaignSpec.from_dict(camp["spec"])
     rows = [r for r in main_rows(store, spec, with_trace=False) if r.chain is None]
-    box = largest_box(rows)
-    at = [r for r in rows if r.box_label == box.label]
+    box, at = _at_largest(rows)
     methods = list(dict.fromkeys(r.method for r in at))
     by: dict[str, dict[str, JobRow]] = {}
     for r in at:
@@ -109,7 +119,7 @@ def true_survival(run: str | Path, truth: str | Path | None = None) -> TrueSurvi
     truth = Path(truth) if truth is not None else run.with_name(run.name + TRUTH_SUFFIX)
     with ResultStore.open_existing(run) as store:
         spec, box, methods, keep = survivors_of_every_method(store)
-        rows = [r for r in main_rows(store, spec, with_trace=False) if r.chain is None and r.box_label == box.label]
+        _, rows = _at_largest([r for r in main_rows(store, spec, with_trace=False) if r.chain is None])
     with ResultStore.open_existing(truth) as tstore:
         grids = {r.sample_id: r for r in tstore.jobs(role="reference", with_trace=False)
                  if r.status is JobStatus.DONE}

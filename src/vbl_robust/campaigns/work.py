@@ -60,11 +60,12 @@ class Settings:
     lipschitz: float | tuple[float, ...] | None = None
     clock: str = "wall"
     sustain: int | None = None
+    monitor_px: float | None = None
 
     @classmethod
     def from_spec(cls, spec: Any) -> Settings:
         return cls(spec.eps_safe_m, spec.penalty_m, spec.conf_threshold, spec.pnp, spec.lipschitz, spec.clock,
-                   spec.sustain)
+                   spec.sustain, spec.monitor_px)
 
 
 def build_objective(sample: Any, detector: Any, box: Any, settings: Settings) -> Any:
@@ -80,7 +81,7 @@ def build_objective(sample: Any, detector: Any, box: Any, settings: Settings) ->
     from ..pipeline import Objective
 
     return Objective(sample, detector, box, pnp=settings.pnp, conf_threshold=settings.conf_threshold,
-                     penalty_m=settings.penalty_m)
+                     penalty_m=settings.penalty_m, max_reproj_px=settings.monitor_px)
 
 
 @dataclass

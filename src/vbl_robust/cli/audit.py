@@ -452,6 +452,10 @@ def register(app: typer.Typer) -> None:
         sequences: str | None = typer.Option(None, "--sequences", help="Audit approach sequences instead of images: "
                                              "a number N (generated) or a LARD V2 directory grouped into sequences; "
                                              "one θ is held over each sequence (see --sustain)."),
+        monitor_residual: float | None = typer.Option(None, "--monitor-residual", help="A runtime monitor: a pose "
+                                                      "whose PnP reprojection residual (RMS, image pixels) is above "
+                                                      "this is a flagged failure, not a pose (measure what it flags "
+                                                      "and rejects: BENCHMARKS, monitors)."),
         target: str = typer.Option("any", "--target", help="What the searches look for: any (every breach; a "
                                    "flagged failure — no detection, low confidence, PnP failed — counts 5000 m, "
                                    "as in the paper) or misleading (a flagged failure counts 0 m, as safe: every "
@@ -504,6 +508,13 @@ def register(app: typer.Typer) -> None:
                           sustain=None if sequences is None else sustain, target=target)
         method_opts = parse_method_options(method_option)
         spec = with_method_options(spec, method_opts)
+        if monitor_residual is not None:
+            from dataclasses import replace
+
+            try:
+                spec = replace(spec, monitor_px=float(monitor_residual))
+            except ValueError as exc:
+                fail(str(exc))
         spec, workers = run_settings(spec, clock, device, workers)
         check_exports(csv, parquet, out)
         det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)

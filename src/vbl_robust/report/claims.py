@@ -396,13 +396,31 @@ def _runtime_1d(e: _Exp) -> Row:
             *_judge([(ok, f"{spread} (≥ {TIME_FACTOR:g} needed)")]), len(e.ids))
 
 
+def truth_2d(e: _Exp) -> str:
+    """The dense grid's truth at the run's largest box (``vbl-robust truth``, :mod:`vbl_robust.campaigns.truth`),
+    when its run ``<experiment>-truth`` sits beside the experiment; "" otherwise."""
+    from ..campaigns.truth import TRUTH_SUFFIX, true_survival
+
+    run = e.ctx.out_dir
+    truth = run.with_name(run.name + TRUTH_SUFFIX)
+    if not (truth / "results.sqlite").is_file():
+        return ""
+    t = true_survival(run, truth)
+    head = (f"dense grid {' × '.join(map(str, t.counts))} at {t.box_label} on the {t.survivors_any} images every "
+            f"method left surviving: {t.gridded} gridded, {t.grid_breaches} breached")
+    if t.true_survivors is None:
+        return head + " (truth run incomplete)"
+    return (head + f"; true survival {Rate(t.true_survivors, t.images).text(1)} of {t.images}; true breaches "
+            "missed: " + ", ".join(f"{m} {k}" for m, k in t.missed.items()))
+
+
 def _spatial_2d(e: _Exp) -> Row:
     rows = [r for r in e.ctx.main if r.chain is None]
     labels, s = _survival(rows, e.eps)
     geo = [r for r in rows if r.method == "georobust" and labels and r.box_label == labels[-1]]
     alive = sum(mx.survived(r, e.eps) for r in geo)
     ok, text = rate_part(alive, len(geo), NEAR_ZERO_PCT)
-    return (_text(s, labels, *PAPER_METHODS), "",
+    return (_text(s, labels, *PAPER_METHODS), truth_2d(e),
             *_judge([(ok, f"georobust at the largest box {text}")],
                     survival_parts(rows, e.eps, (("random", "apgd"),), labels)), len(e.ids))
 
@@ -417,7 +435,7 @@ def _runtime_2d(e: _Exp) -> Row:
     apgd, geo = curve.get("apgd", []), curve.get("georobust", [])
     last = [fmt_num(w) for _, w in apgd if math.isfinite(w)][-2:]
     early = [fmt_num(w) for t, w in geo if t <= CROSS_BY_S and math.isfinite(w)]
-    return ("median worst error: " + ours, "",
+    return ("median worst error: " + ours, truth_2d(e),
             *_judge([(plateaus_near([w for _, w in apgd]), f"apgd's last two medians ({', '.join(last) or '–'} m) "
                       f"within ×{PLATEAU_FACTOR:g} of {PLATEAU_M:g} m, changing ≤ {100 * PLATEAU_CHANGE:g} %"),
                      (crosses_by([t for t, _ in geo], [w for _, w in geo], e.eps),
