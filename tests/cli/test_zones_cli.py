@@ -17,6 +17,7 @@ from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, Resu
 from vbl_robust.campaigns.replay import replay, zones_of_run
 from vbl_robust.campaigns.spec import roll_contrast_box
 from vbl_robust.cli import app
+from vbl_robust.stats import Rate
 
 runner = CliRunner()
 SMALL = ["--oracle", "--oracle-noise", "0.5", "--width", "256", "--height", "256", "--quiet"]
@@ -272,8 +273,8 @@ def test_report_compare_pairs_two_runs_per_image(gated_run, tmp_path):
         assert envelope == "all"
         hits = {r.sample_id for r in rows if r.method == method and f"{r.box_label}, {r.budget_label}" == where
                 and r.worst_m is not None and r.worst_m > 1000}
-        assert (n, fixed, new, surv_after) == ("2", str(len(hits)), "0", "100.0"), (method, where)
-        assert surv_before == f"{100 * (2 - len(hits)) / 2:.1f}"
+        assert (n, fixed, new, surv_after) == ("2", str(len(hits)), "0", Rate(2, 2).text(1, percent=False))
+        assert surv_before == Rate(2 - len(hits), 2).text(1, percent=False)  # with its exact interval
         checked += 1
     assert checked == 8  # 4 methods x 2 budgets
     # the union per approach envelope splits the union over every image

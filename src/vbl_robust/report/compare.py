@@ -27,7 +27,7 @@ from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import JobRow, ResultStore
-from ..stats import Paired, paired
+from ..stats import Paired, Rate, paired
 
 __all__ = ["ALL", "ANY", "Change", "Comparison", "PairedLine", "check_alike", "compare_html", "line_order",
            "paired_comparison"]
@@ -54,6 +54,15 @@ class PairedLine:
     new: int
     p_value: float
     envelope: str = "all"
+
+    @property
+    def before(self) -> Rate:
+        """Survivors before, of n, with the exact interval."""
+        return Rate(round(self.before_pct * self.n / 100.0), self.n)
+
+    @property
+    def after(self) -> Rate:
+        return Rate(round(self.after_pct * self.n / 100.0), self.n)
 
 
 @dataclass(frozen=True)
@@ -185,7 +194,8 @@ def compare_html(before: str | Path, after: str | Path, out: str | Path | None =
     atomic_write(out_dir / "figures" / "compare_survival.png", png)
     rows = [{"method": ln.method if ln.method == ANY else F.style(ln.method)["label"], "box": ln.box,
              "envelope": ln.envelope, "n": ln.n,
-             "before": ln.before_pct, "after": ln.after_pct, "gain": ln.after_pct - ln.before_pct, "fixed": ln.fixed,
+             "before": ln.before.text(1, percent=False), "after": ln.after.text(1, percent=False),
+             "gain": ln.after_pct - ln.before_pct, "fixed": ln.fixed,
              "new": ln.new, "p": f"{ln.p_value:.4f}"} for ln in sorted(c.lines, key=line_order)]
     changes = [{"sample_id": ch.sample_id, "box": ch.box, "before": ch.before_m, "after": ch.after_m,
                 "change": ch.change} for ch in c.changes]
@@ -200,7 +210,7 @@ def compare_html(before: str | Path, after: str | Path, out: str | Path | None =
         "<h2>Paired survival</h2>",
         table(rows, [("method", "method", None), ("box", "box", None), ("envelope", "envelope", None),
                      ("n", "images", None),
-                     ("before", "survival before %", None), ("after", "survival after %", None),
+                     ("before", "survival before % [95 % CI]", esc), ("after", "survival after % [95 % CI]", esc),
                      ("gain", "change (points)", None), ("fixed", "fixed", None), ("new", "new breaches", None),
                      ("p", "p", None)], left=("method", "box", "envelope")),
         f"<h2>Images whose verdict changed (any method), {len(changes)}</h2>",

@@ -245,8 +245,9 @@ def compare_markdown(before: str | Path, after: str | Path) -> str:
     out = [f"before: {before} ({c.detectors[0]}); after: {after} ({c.detectors[1]}) ({c.spec.name}, seed "
            f"{c.spec.seed}, ε_safe = {c.spec.eps_safe_m:g} m); paired per image: fixed = breached before and not "
            "after, new = the other way, p = exact McNemar", ""]
-    out += _table(["method", "box", "envelope", "images", "survival before %", "survival after %", "fixed",
-                   "new breaches", "p"],
-                  [[ln.method, ln.box, ln.envelope, str(ln.n), f"{ln.before_pct:.1f}", f"{ln.after_pct:.1f}",
+    out += _table(["method", "box", "envelope", "images", "survival before % [95 % CI]", "survival after % [95 % CI]",
+                   "fixed", "new breaches", "p"],
+                  [[ln.method, ln.box, ln.envelope, str(ln.n), ln.before.text(1, percent=False),
+                    ln.after.text(1, percent=False),
                     str(ln.fixed), str(ln.new), f"{ln.p_value:.4f}"] for ln in sorted(c.lines, key=line_order)])
     return "\n".join(out) + "\n"
