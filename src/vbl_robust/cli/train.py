@@ -7,6 +7,7 @@ from pathlib import Path
 
 import typer
 
+from ..constants import MAX_IMAGES
 from .common import fail
 
 
@@ -16,8 +17,8 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(Path("train_runs/default"), "--out", help="Working directory (dataset + stages)."),
         resume: bool = typer.Option(False, "--resume", help="Continue the latest stage, or start a new stage from its best weights."),
         lard: Path = typer.Option(None, "--lard", help="Train on a LARD V2 directory (CSV + runway DB JSON) instead of synthetic scenes."),
-        n_train: int = typer.Option(1000, "--n-train", min=2, help="Synthetic training approaches."),
-        n_val: int = typer.Option(100, "--n-val", min=1, help="Validation approaches."),
+        n_train: int = typer.Option(1000, "--n-train", min=2, max=MAX_IMAGES, help="Synthetic training approaches."),
+        n_val: int = typer.Option(100, "--n-val", min=1, max=MAX_IMAGES, help="Validation approaches."),
         airports: int = typer.Option(None, "--airports", min=1, help="Synthetic airports (runway sizes) of the generated data (default: the generator's pool)."),
         imgsz: int = typer.Option(320, "--imgsz", min=32, max=4096, help="Network input size (a multiple of 32, 32 to 4096)."),
         epochs: int = typer.Option(10, "--epochs", min=1, help="Epochs of this stage."),
@@ -145,11 +146,11 @@ def register(app: typer.Typer) -> None:
                                           "(default, hardened; default: the shipped default model)."),
         trust_model: bool = typer.Option(False, "--trust-model", help="Allow loading a --model .pt pickle from "
                                          "outside the package."),
-        rounds: int = typer.Option(2, "--rounds", min=1, help="Rounds: search the worst views, then fine-tune."),
-        k: int = typer.Option(8, "--k", min=1, help="Candidates per training image and round (worst of k)."),
+        rounds: int = typer.Option(2, "--rounds", min=1, max=100, help="Rounds: search the worst views, then fine-tune (at most 100)."),
+        k: int = typer.Option(8, "--k", min=1, max=10_000, help="Candidates per training image and round (worst of k, at most 10000)."),
         epochs: int = typer.Option(2, "--epochs", min=1, help="Epochs per round."),
-        n_train: int = typer.Option(300, "--n-train", min=1, help="Synthetic training approaches."),
-        n_val: int = typer.Option(60, "--n-val", min=1, help="Synthetic validation approaches (clean)."),
+        n_train: int = typer.Option(300, "--n-train", min=1, max=MAX_IMAGES, help="Synthetic training approaches."),
+        n_val: int = typer.Option(60, "--n-val", min=1, max=MAX_IMAGES, help="Synthetic validation approaches (clean)."),
         seed: int | None = typer.Option(None, "--seed", min=0, help="Seed of the training approaches (their own airports), "
                                         "the candidates and the training (default: detect.protocol.HARDEN_SEED); the "
                                         "audits' seed 0 and the protocol's validation and test seeds are refused."),
