@@ -314,10 +314,22 @@ def _slash(values: Sequence[float]) -> str:
     return "/".join(fmt_num(v) for v in values)
 
 
-def _text(s: Mapping[str, Sequence[float]], labels: Sequence[str], *methods: str) -> str:
-    """``"survival % at ±2° … ±30°: georobust 100/50; random 100/100"`` (the ``methods`` present)."""
+def _text(s: Mapping[str, Sequence[float]], labels: Sequence[str], *methods: str,
+          cis: Mapping[str, str] | None = None) -> str:
+    """``"survival % at ±2° … ±30°: georobust 100/50 [31.4, 68.6]; random 100/100"`` (the ``methods`` present;
+    ``cis``: a method's exact 95 % interval at the largest box, :func:`_last_ci`)."""
     head = f"survival % at {labels[0]} … {labels[-1]}: " if labels else ""
-    return head + "; ".join(f"{m} {_slash(s[m])}" for m in methods if m in s)
+    cis = cis or {}
+    return head + "; ".join(f"{m} {_slash(s[m])}" + (f" {cis[m]}" if m in cis else "") for m in methods if m in s)
+
+
+def _last_ci(rows: Sequence[JobRow], eps: float, label: str) -> dict[str, str]:
+    """Per method, the exact 95 % interval of its survival at the box ``label`` (``"[37.0, 57.2]"``, in %)."""
+    out = {}
+    for ln in mx.summarize([r for r in rows if r.box_label == label], eps, by=("method",)):
+        ci = ln.survival_rate.ci
+        out[ln.method] = f"[{ci.low:.1f}, {ci.high:.1f}]"
+    return out
 
 
 def first_breach_s(row: JobRow, eps_safe_m: float, penalty_m: float) -> float:
@@ -371,7 +383,8 @@ def _spatial_1d(e: _Exp) -> Row:
                   + ", ".join(f"{ln['method']} {ln['found']}/{ln['grid_breaches']}" for ln in found))
     groups = survival_parts(rows, e.eps, (("georobust", "random"), ("georobust", "apgd"), ("random", "apgd")),
                             labels)
-    return (_text(s, labels, *PAPER_METHODS), truth, *_judge([], groups), len(e.ids))
+    cis = _last_ci(rows, e.eps, labels[-1]) if labels else {}
+    return (_text(s, labels, *PAPER_METHODS, cis=cis), truth, *_judge([], groups), len(e.ids))
 
 
 def _runtime_1d(e: _Exp) -> Row:
@@ -420,7 +433,8 @@ def _spatial_2d(e: _Exp) -> Row:
     geo = [r for r in rows if r.method == "georobust" and labels and r.box_label == labels[-1]]
     alive = sum(mx.survived(r, e.eps) for r in geo)
     ok, text = rate_part(alive, len(geo), NEAR_ZERO_PCT)
-    return (_text(s, labels, *PAPER_METHODS), truth_2d(e),
+    cis = _last_ci(rows, e.eps, labels[-1]) if labels else {}
+    return (_text(s, labels, *PAPER_METHODS, cis=cis), truth_2d(e),
             *_judge([(ok, f"georobust at the largest box {text}")],
                     survival_parts(rows, e.eps, (("random", "apgd"),), labels)), len(e.ids))
 
@@ -502,7 +516,8 @@ def _av(s1: _Exp | None, s2: _Exp | None) -> Row:
             continue
         main = [r for r in e.ctx.main if r.chain is None]
         labels, s = _survival(main, e.eps)
-        ours.append(f"{tag}: {_text(s, labels, 'georobust', 'georobust-av')}")
+        cis = _last_ci(main, e.eps, labels[-1]) if labels else {}
+        ours.append(f"{tag}: {_text(s, labels, 'georobust', 'georobust-av', cis=cis)}")
         groups += [(out, f"{tag}: {text}") for out, text in
                    survival_parts(main, e.eps, (("georobust-av", "georobust"),), labels)]
         rows += main
