@@ -125,9 +125,10 @@ def test_searches_with_no_evaluation_in_time_are_counted_apart_in_the_report_and
     out = capsys.readouterr().out
     assert "no eval in time" in out and "count as survivors" in out
     apgd = next(line for line in out.splitlines() if "apgd" in line)
-    assert re.search(r"100\.0\s*│\s*1\s*│\s*–", apgd), apgd  # survival, 1 empty search, no median worst
+    # survival with its interval, 1 empty search, no median worst
+    assert re.search(r"100\.0 \[2\.5, 100\.0\]\s*│\s*1\s*│\s*–", apgd), apgd
     random = next(line for line in out.splitlines() if "random" in line)
-    assert re.search(r"0\.0\s*│\s*0\s*│\s*1200\.0", random), random
+    assert re.search(r"0\.0 \[0\.0, 97\.5\]\s*│\s*0\s*│\s*1200\.0", random), random
 
 
 def test_markdown_survival_has_a_column_per_budget_when_the_run_has_several(tmp_path):

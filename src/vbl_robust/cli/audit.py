@@ -342,19 +342,23 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
             table.add_column(heads[c], no_wrap=c == "method", min_width=max(len(str(ln.method)) for ln in lines)
                              if c == "method" else None)
         empty = any(line.n_empty for line in lines)  # survivors never searched (no evaluation in a time budget)
-        for col in (f"{spec.unit}s", "survival % [95 % CI]", *(["no eval in time"] if empty else []),
-                    "median worst (m)", "breaches", "misleading / flagged", "failed jobs", "failed evals"):
-            table.add_column(col, justify="right")
+        heads = ["n", "survival % [95 % CI]", *(["no eval in time"] if empty else []), "median (m)", "breaches",
+                 "failed"]
+        cells = []
         for line in lines:
             fe, med = line.failed_evals, line.median_worst_m
             kinds = "?" if line.misleading is None else f"{line.misleading} / {line.flagged}"
-            table.add_row(*(str(getattr(line, c)) for c in cols), str(line.n),
-                          line.survival_rate.text(1, percent=False), *([str(line.n_empty)] if empty else []),
-                          "–" if math.isnan(med) else f"{med:.1f}", str(line.breaches), kinds, str(line.failed),
-                          "–" if fe is None else str(fe))
+            cells.append([str(line.n), line.survival_rate.text(1, percent=False),
+                          *([str(line.n_empty)] if empty else []), "–" if math.isnan(med) else f"{med:.1f}",
+                          f"{line.breaches} ({kinds})", f"{line.failed} / {'–' if fe is None else fe}"])
+        for j, col in enumerate(heads):  # values are never cut: a column is at least as wide as its widest value
+            table.add_column(col, justify="right", min_width=max(len(c[j]) for c in cells))
+        for line, row in zip(lines, cells, strict=True):
+            table.add_row(*(str(getattr(line, c)) for c in cols), *row)
         Console().print(table)
-        typer.echo("misleading: a confident pose off by more than ε_safe; flagged: every breach was a flagged "
-                   "failure (no detection, low confidence, PnP failed …)")
+        typer.echo(f"n: {spec.unit}s; median: of the worst errors found; failed: jobs / evaluations; breaches: all "
+                   "(m / f): m misleading — a confident pose off by more than ε_safe; f flagged only — every "
+                   "breach a failure the system sees (no detection, low confidence, PnP failed …)")
         if empty:
             typer.echo("no eval in time: searches that completed no evaluation within their time budget; they "
                        "found nothing and count as survivors")
