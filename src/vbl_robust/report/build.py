@@ -87,6 +87,8 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
         ctx = Context(store, spec, out_dir, mx.main_rows(store, spec), store.samples())
         exp = EXPERIMENTS.get(spec.name)
         title = exp.title if exp else TITLES.get(spec.name, "Robustness audit")
+        if spec.name.endswith("-truth"):  # vbl-robust truth RUN: the dense grid behind "no breach found"
+            title = f"Dense-grid truth behind {spec.name.removesuffix('-truth')}'s survivors"
         sections = [section_overview(ctx, title)]
         try:
             evidence = section_evidence(ctx)
