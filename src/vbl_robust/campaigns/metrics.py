@@ -80,6 +80,21 @@ def breach_kind(row: JobRow, eps_safe_m: float) -> BreachKind | None:
     return BreachKind.MISLEADING if silent.any() else BreachKind.FLAGGED
 
 
+def breached_images(rows: Iterable[JobRow], eps_safe_m: float) -> tuple[set[str], set[str], bool]:
+    """Over every method together (an image is breached when any row of it is): the breached images, those of them
+    with a misleading pose (:func:`breach_kind`), and whether some breached row's kind is unknown (no points)."""
+    breached, misleading, unknown = set(), set(), False
+    for r in rows:
+        if survived(r, eps_safe_m):
+            continue
+        breached.add(r.sample_id)
+        kind = breach_kind(r, eps_safe_m)
+        unknown |= kind is None
+        if kind is BreachKind.MISLEADING:
+            misleading.add(r.sample_id)
+    return breached, misleading, unknown
+
+
 def residual_bound(row: JobRow, eps_safe_m: float) -> float | None:
     """What "no breach found" is worth for a search whose points are independent and uniform over the box
     (``iid_uniform`` methods: random search): with k = ``nfev`` points and no breach, the breached fraction of the

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .metrics import budget_value, main_rows, survived
 from .spec import Block, BoxSpec, Budget, CampaignSpec
 from .store import JobRow, JobStatus, ResultStore
 
@@ -28,12 +29,6 @@ __all__ = ["TRUTH_SUFFIX", "TrueSurvival", "survivors_of_every_method", "true_su
 TRUTH_SUFFIX = "-truth"
 #: Grid points per objective call (centre-out; the grid stops between calls at its first breach).
 BATCH = 16
-
-
-def _survived(r: JobRow, eps: float) -> bool:
-    from .metrics import survived
-
-    return survived(r, eps)
 
 
 def largest_box(rows: Sequence[JobRow]) -> BoxSpec:
@@ -47,8 +42,6 @@ def largest_box(rows: Sequence[JobRow]) -> BoxSpec:
 def _at_largest(rows: Sequence[JobRow]) -> tuple[BoxSpec, list[JobRow]]:
     """The largest box, and the main rows there at the largest budget (a runtime run holds several budgets: its
     verdict at the largest one is the one to check)."""
-    from .metrics import budget_value
-
     box = largest_box(rows)
     at = [r for r in rows if r.box_label == box.label]
     top = max(at, key=lambda r: (budget_value(r, "max_seconds"), budget_value(r, "max_evals")))
@@ -58,8 +51,6 @@ def _at_largest(rows: Sequence[JobRow]) -> tuple[BoxSpec, list[JobRow]]:
 def survivors_of_every_method(store: ResultStore) -> tuple[CampaignSpec, BoxSpec, list[str], list[str]]:
     """The run's spec, its largest box, the methods, and the images every method ran at that box (at the largest
     budget) and left surviving (sorted by sample index)."""
-    from .metrics import main_rows
-
     camp = store.campaign()
     if camp is None:
         raise ValueError(f"{store.path}: holds no campaign")
@@ -72,7 +63,7 @@ def survivors_of_every_method(store: ResultStore) -> tuple[CampaignSpec, BoxSpec
         by.setdefault(r.sample_id, {})[r.method] = r
     index = {r.sample_id: r.sample_index for r in at}
     keep = [sid for sid, rs in by.items() if set(rs) == set(methods)
-            and all(_survived(r, spec.eps_safe_m) for r in rs.values())]
+            and all(survived(r, spec.eps_safe_m) for r in rs.values())]
     return spec, box, methods, sorted(keep, key=index.__getitem__)
 
 
@@ -113,8 +104,6 @@ class TrueSurvival:
 
 def true_survival(run: str | Path, truth: str | Path | None = None) -> TrueSurvival:
     """:class:`TrueSurvival` of the run directory ``run`` from its truth run (default ``RUN-truth``)."""
-    from .metrics import main_rows
-
     run = Path(run)
     truth = Path(truth) if truth is not None else run.with_name(run.name + TRUTH_SUFFIX)
     with ResultStore.open_existing(run) as store:
@@ -126,10 +115,10 @@ def true_survival(run: str | Path, truth: str | Path | None = None) -> TrueSurvi
         counts = tuple(CampaignSpec.from_dict(tstore.campaign()["spec"]).blocks[0].options["grid"]["counts"])
     eps = spec.eps_safe_m
     done = [sid for sid in keep if sid in grids]
-    hit = {sid for sid in done if not _survived(grids[sid], eps)}
+    hit = {sid for sid in done if not survived(grids[sid], eps)}
     ids = {r.sample_id for r in rows}
-    breached = {r.sample_id for r in rows if not _survived(r, eps)} | hit
-    missed = {m: sum(1 for sid in breached if any(r.sample_id == sid and r.method == m and _survived(r, eps)
+    breached = {r.sample_id for r in rows if not survived(r, eps)} | hit
+    missed = {m: sum(1 for sid in breached if any(r.sample_id == sid and r.method == m and survived(r, eps)
                                                    for r in rows)) for m in methods}
     return TrueSurvival(box.label, counts, len(ids), len(keep), len(done), len(hit),
                         len(keep) - len(hit) if len(done) == len(keep) else None, missed)

@@ -24,7 +24,6 @@ import numpy as np
 from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.store import JobRow
-from ..constants import BreachKind
 from ..search import direct_family
 from ..stats import LEVEL, Rate
 from .html import esc, fmt_num, table
@@ -82,18 +81,10 @@ class Evidence:
 def _box_evidence(label: str, rows: Sequence[JobRow], eps: float) -> BoxEvidence:
     box = rows[0].box.box if rows[0].box is not None else None
     ids = sorted({r.sample_id for r in rows})
-    hit: dict[str, set[str]] = {BreachKind.MISLEADING: set(), BreachKind.FLAGGED: set()}
-    unknown = False
-    for r in rows:
-        kind = mx.breach_kind(r, eps)
-        if kind is None:
-            unknown = True
-        elif kind is not BreachKind.SAFE:
-            hit[kind].add(r.sample_id)
-    breached = hit[BreachKind.MISLEADING] | hit[BreachKind.FLAGGED]
+    breached, silent, unknown = mx.breached_images(rows, eps)
     survivors = len(ids) - len(breached)
-    misleading = None if unknown else len(hit[BreachKind.MISLEADING])
-    flagged = None if unknown else len(hit[BreachKind.FLAGGED] - hit[BreachKind.MISLEADING])
+    misleading = None if unknown else len(silent)
+    flagged = None if unknown else len(breached - silent)
     surv = Rate(survivors, len(ids))
     bounds = [b for b in (mx.residual_bound(r, eps) for r in rows if r.sample_id not in breached) if b is not None]
     ra = [r.trace[-1].remaining_area for r in rows if r.method in direct_family() and r.trace

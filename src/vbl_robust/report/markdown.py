@@ -30,7 +30,6 @@ import numpy as np
 from ..campaigns import metrics as mx
 from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import ResultStore
-from ..constants import BreachKind
 from ..stats import Rate
 
 __all__ = ["compare_markdown", "families_markdown", "survival_markdown", "zones_markdown"]
@@ -110,13 +109,9 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
                    if (m, c) in cell else "–" for c in cols)] for m in methods]
     kinds = [[m, *(_kinds(cell[(m, c)]) if (m, c) in cell else "–" for c in cols)] for m in methods]
     if len(methods) > 1 and done:  # the union: an image breaches a column when any method found a breach there
-        hit: dict[str, set] = defaultdict(set)
-        silent: dict[str, set] = defaultdict(set)
-        for r in rows:
-            if not mx.survived(r, eps):
-                hit[col(r)].add(r.sample_id)
-                if mx.breach_kind(r, eps) is BreachKind.MISLEADING:
-                    silent[col(r)].add(r.sample_id)
+        hit, silent = {}, {}
+        for c in cols:
+            hit[c], silent[c], _ = mx.breached_images([r for r in rows if col(r) == c], eps)
         table.append(["any of them", *(f"{Rate(len(done) - len(hit[c]), len(done)).text(1, percent=False)} "
                                        f"({len(hit[c])})" for c in cols)])
         kinds.append(["any of them", *(f"{len(silent[c])} / {len(hit[c]) - len(silent[c])}" for c in cols)])
