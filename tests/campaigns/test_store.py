@@ -1,4 +1,5 @@
 import math
+import re
 import sqlite3
 import tempfile
 from pathlib import Path
@@ -91,17 +92,24 @@ def test_open_existing_names_the_missing_store(tmp_path):
         ResultStore.open_existing(tmp_path)
 
 
-def test_a_store_of_schema_1_opens_and_is_migrated(tmp_path):
-    old = "\n".join(ln for ln in store_module._SCHEMA.splitlines() if "(schema 2)" not in ln)
-    old = old.replace("finished_at TEXT,\n)", "finished_at TEXT\n)")
-    assert "n_failed" not in old
-    con = sqlite3.connect(tmp_path / "r.sqlite")
-    con.executescript(old)
+def old_store(path, *added, version=0):
+    """A store of an older layout at ``path``: today's schema without the columns of the schema versions ``added``
+    (their comments say "(schema N)"), one job row (worst 12.5 m, 4 evaluations), ``user_version`` = ``version``."""
+    lines = [ln for ln in store_module._SCHEMA.splitlines() if not any(f"(schema {v})" in ln for v in added)]
+    con = sqlite3.connect(path)
+    con.executescript(re.sub(r",(\s*(--[^\n]*)?\n\))", r"\1", "\n".join(lines)))  # no comma after the last column
     con.execute("INSERT INTO jobs (key, experiment, kind, role, method, sample_id, sample_index, status, worst_m, "
                 "verdict, nfev, options_json) VALUES ('k', 'audit', 'search', 'main', 'random', 's', 0, 'done', 12.5, "
                 "'no breach found', 4, '{}')")
+    con.execute(f"PRAGMA user_version = {version}")
     con.commit()
+    columns = {r[1] for r in con.execute("PRAGMA table_info(jobs)")}
     con.close()
+    return columns
+
+
+def test_a_store_of_schema_1_opens_and_is_migrated(tmp_path):
+    assert not {"n_failed", "worst_corners_json"} & old_store(tmp_path / "r.sqlite", 2, 4)
     with ResultStore(tmp_path / "r.sqlite") as st:
         (r,) = st.jobs()
         assert (r.worst_m, r.nfev, r.n_failed, r.failures, r.worst_reason) == (12.5, 4, None, {}, None)
@@ -168,7 +176,8 @@ job_rows = st.builds(
     verdict=opt(st.sampled_from(Verdict)), nfev=st.integers(0, 10**9), nit=st.integers(0, 10**6),
     n_failed=opt(st.integers(0, 10**6)), failures=st.dictionaries(st.text(min_size=1, max_size=12), st.integers(1, 10**6),
                                                                   max_size=3),
-    worst_reason=opt(text), search_status=opt(text), message=opt(text), search_s=opt(finite), job_s=opt(finite),
+    worst_reason=opt(text), worst_corners=opt(st.lists(st.tuples(finite, finite), min_size=4, max_size=4).map(tuple)),
+    search_status=opt(text), message=opt(text), search_s=opt(finite), job_s=opt(finite),
     upper_bound=opt(finite), bound_estimate=opt(finite), lipschitz_estimate=opt(finite),
     trace=st.lists(trace_rows, max_size=3).map(tuple), points=opt(points()), payload=opt(json_dict),
     finished_at=opt(text),
@@ -182,3 +191,19 @@ def test_job_rows_round_trip_through_the_store(rows):
         assert store.commit(rows) == len(rows)
         back = store.jobs(with_points=True, with_trace=True)
     assert back == sorted(rows, key=lambda r: r.sample_index)
+
+
+def test_worst_corners_are_stored_and_a_schema_3_store_reads_them_as_none(tmp_path):
+    corners = ((310.5, 454.25), (303.5, 454.75), (298.5, 470.5), (309.75, 470.25))
+    with ResultStore(tmp_path / "new.sqlite") as st:
+        st.commit([row("a", worst_corners=corners), row("b")])
+        assert [r.worst_corners for r in st.jobs()] == [corners, None]
+    columns = old_store(tmp_path / "old.sqlite", 4, version=3)
+    assert "n_failed" in columns and "worst_corners_json" not in columns
+    with ResultStore.open_existing(tmp_path / "old.sqlite") as st:  # read-only: migrated in memory
+        assert [(r.worst_m, r.worst_corners) for r in st.jobs()] == [(12.5, None)]
+    with ResultStore(tmp_path / "old.sqlite") as st:  # a writer adds the column on open
+        st.commit([row("new", worst_corners=corners)])
+        assert [r.worst_corners for r in st.jobs()] == [None, corners]
+    con = sqlite3.connect(tmp_path / "old.sqlite")
+    assert con.execute("PRAGMA user_version").fetchone()[0] == store_module.SCHEMA_VERSION == 4

@@ -23,8 +23,10 @@ ends, however it ends), so two runs never mix in one store.
 Schema versions: 0/1 = before failures were recorded (no ``n_failed``, ``failures_json``, ``worst_reason``
 columns: they are added on open, old rows read them as unknown); 2 = failures recorded; 3 = now: every evaluated
 point carries its completion time on the search's clock (``ts`` in the points blob, so no column is added; rows
-written before read ``Points.times`` as None, and no time budget can be read off them). A store written by a
-newer version is refused with a one-line error.
+written before read ``Points.times`` as None, and no time budget can be read off them); 4 = now: a main search
+job stores the corners its detector predicted at the worst point (``worst_corners_json``, added on open; rows
+written before read ``JobRow.worst_corners`` as None). A store written by a newer version is refused with a
+one-line error.
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ from ..search.result import TraceRow
 from .spec import BoxSpec, Budget
 
 #: Version of the layout below (``PRAGMA user_version``).
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 
 _SCHEMA_TEMPLATE = """
 CREATE TABLE IF NOT EXISTS campaign (
@@ -109,6 +111,19 @@ def _loads(v: str | None) -> Any:
     return None if v is None else json.loads(v)
 
 
+#: Four predicted runway corners ``((u, v), …)`` in the sample's pixels, keypoint order TR, TL, BL, BR.
+Corners = tuple[tuple[float, float], ...]
+
+
+def _dump_corners(c: Corners | None) -> str | None:
+    return None if c is None else json.dumps([[float(u), float(v)] for u, v in c])
+
+
+def _load_corners(v: str | None) -> Corners | None:
+    d = _loads(v)
+    return None if d is None else tuple((float(u), float(w)) for u, w in d)
+
+
 @dataclass(frozen=True)
 class _Column:
     """One column of the jobs table: its declaration, the :class:`JobRow` field it holds and how the value goes in
@@ -166,6 +181,8 @@ _JOB_TABLE: tuple[_Column, ...] = (
             lambda v: _loads(v) or {}, comment="{reason: count} of the failed evaluations (schema 2)", since=2),
     _Column("worst_reason", "TEXT", "worst_reason", since=2,
             comment='failure reason at the worst point, "" = a successful evaluation (schema 2)'),
+    _Column("worst_corners_json", "TEXT", "worst_corners", _dump_corners, _load_corners, since=4,
+            comment="[[u, v] x 4] corners predicted at the worst point, sample's pixels (schema 4)"),
 )
 
 
@@ -177,8 +194,8 @@ def _jobs_ddl() -> str:
 
 _SCHEMA = _SCHEMA_TEMPLATE.format(jobs=_jobs_ddl())
 
-#: Columns added by schema version 2 (added to an older store when it is opened).
-_ADDED_COLUMNS = {c.name: c.decl for c in _JOB_TABLE if c.since == 2}
+#: Columns added after the first layout (schema 2: failures; 4: predicted corners), added to an older store on open.
+_ADDED_COLUMNS = {c.name: c.decl for c in _JOB_TABLE if c.since}
 
 JOB_COLUMNS = tuple(c.name for c in _JOB_TABLE)
 
@@ -355,7 +372,10 @@ class JobRow:
     ``verdict`` (None for a PnP job); ``nfev``/``nit`` = evaluations / iterations; ``n_failed`` = failed
     evaluations and ``failures`` = their counts per reason (None / ``{}`` in rows stored before failures were
     recorded); ``worst_reason`` = failure reason at the worst point (``""`` = a successful evaluation, None
-    unknown); ``search_status``/``message`` = why the search stopped; ``search_s``/``job_s`` = seconds in the
+    unknown); ``worst_corners`` = the four corners the detector's selected candidate gave at the worst point, in the
+    sample's pixels of the perturbed view (TR, TL, BL, BR; main search jobs from schema 4 on, None when no candidate
+    was found, for other jobs and in older rows; its confidence is ``payload["worst"]["conf"]``);
+    ``search_status``/``message`` = why the search stopped; ``search_s``/``job_s`` = seconds in the
     search / in the whole job; ``upper_bound`` (sound, metres; 1e300 for "unbounded"), ``bound_estimate``,
     ``lipschitz_estimate``; ``trace`` = the search's iterations (empty unless asked for); ``points`` = every
     evaluated point (None unless asked for); ``payload`` = PnP comparison or details of the worst point;
@@ -388,6 +408,7 @@ class JobRow:
     n_failed: int | None = None
     failures: Mapping[str, int] = field(default_factory=dict)
     worst_reason: str | None = None
+    worst_corners: Corners | None = None
     search_status: str | None = None
     message: str | None = None
     search_s: float | None = None

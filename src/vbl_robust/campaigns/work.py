@@ -32,7 +32,7 @@ from ..constants import Verdict
 from ..search.result import verdict_for
 from .provenance import DetectorSpec
 from .spec import Job
-from .store import JobRow, JobStatus, Points, now_iso
+from .store import Corners, JobRow, JobStatus, Points, now_iso
 
 logger = logging.getLogger(__name__)
 
@@ -123,7 +123,7 @@ def result_fields(result: Any, eps_safe_m: float, penalty_m: float) -> dict[str,
     return dict(
         worst_m=worst, worst_x=result.x_dict(), verdict=verdict, nfev=int(result.nfev),
         nit=int(result.nit), n_failed=int(result.n_failed), failures=result.failures,
-        worst_reason=None if result.x is None else result.x_reason,
+        worst_reason=None if result.x is None else result.x_reason, worst_corners=None,  # set by run_sample_task
         search_status=result.status.value, message=result.message, search_s=float(result.elapsed),
         upper_bound=None if ub is None else (float(ub) if math.isfinite(ub) else 1e300),
         bound_estimate=_finite(result.bound_estimate), lipschitz_estimate=_finite(result.lipschitz_estimate),
@@ -140,18 +140,22 @@ def search_row(job: Job, result: Any, settings: Settings, run_id: int | None, jo
 def implied_row(job: Job, breach: JobRow, settings: Settings, run_id: int | None) -> JobRow:
     """A larger box of a chain after a breach at a smaller, nested box: the same breach point lies in it."""
     return _row(job, run_id, JobStatus.IMPLIED, reason=f"breach found at {breach.box_label}", worst_m=breach.worst_m,
-                worst_x=breach.worst_x, verdict=Verdict.BREACH, worst_reason=breach.worst_reason, search_s=0.0,
-                job_s=0.0)
+                worst_x=breach.worst_x, verdict=Verdict.BREACH, worst_reason=breach.worst_reason,
+                worst_corners=breach.worst_corners, search_s=0.0, job_s=0.0)
 
 
-def worst_details(objective: Any, x: np.ndarray) -> dict[str, Any]:
-    """What the pipeline gives at the worst point (one more evaluation): top confidence, position error and
-    estimated position (the failure reason is the one the search recorded, ``JobRow.worst_reason``)."""
+def worst_details(objective: Any, x: np.ndarray) -> tuple[dict[str, Any], Corners | None]:
+    """What the pipeline gives at the worst point (one more evaluation): the payload's top confidence, position
+    error and estimated position (the failure reason is the one the search recorded, ``JobRow.worst_reason``), and
+    the four corners of the selected candidate in the sample's pixels (``JobRow.worst_corners``; None when the
+    detector gave none)."""
     rec = objective.evaluate(np.asarray(x, dtype=np.float64)[None])
     conf = float(rec.conf[0])
     err = float(rec.error_m[0])
+    kp = np.asarray(rec.keypoints[0], dtype=np.float64)
+    corners = tuple((float(u), float(v)) for u, v in kp) if kp.shape == (4, 2) and np.isfinite(kp).all() else None
     return {"conf": conf if math.isfinite(conf) else None, "error_m": err if math.isfinite(err) else None,
-            "position": [float(v) if math.isfinite(v) else None for v in rec.position[0]]}
+            "position": [float(v) if math.isfinite(v) else None for v in rec.position[0]]}, corners
 
 
 def sequence_details(objective: Any, x: np.ndarray, eps_safe_m: float) -> dict[str, Any]:
@@ -204,7 +208,8 @@ def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
 def risk_row(job: Job, objective: Any, settings: Settings, run_id: int | None, t0: float) -> JobRow:
     """Run a failure-probability job (:func:`vbl_robust.campaigns.risk.estimate_risk`; options: ``dist``, ``tau``,
     ``delta``, ``guide_evals``) and its row: every draw as the row's points, the estimate, its interval and the
-    verdict in the ``risk`` payload; worst error and verdict as a search row's (the largest L drawn)."""
+    verdict in the ``risk`` payload; worst error and verdict as a search row's (the largest L drawn), and the corners
+    predicted there (:func:`worst_details`: one more evaluation)."""
     from .risk import ThetaDistribution, estimate_risk
 
     opts = dict(job.options)
@@ -216,13 +221,15 @@ def risk_row(job: Job, objective: Any, settings: Settings, run_id: int | None, t
     fs = np.where(np.isfinite(r.fs), r.fs, settings.penalty_m)
     i = int(np.argmax(fs))
     worst = float(fs[i])
+    t_search = time.perf_counter() - t_search
     return _row(job, run_id, JobStatus.DONE, worst_m=worst, worst_x=dict(zip(job.box.box.names, map(float, r.xs[i]),
                                                                              strict=True)),
+                worst_corners=worst_details(objective, r.xs[i])[1],
                 verdict=Verdict.BREACH if worst > settings.eps_safe_m else Verdict.NO_BREACH_FOUND,
                 nfev=r.evaluations, nit=1, n_failed=sum(1 for x in r.reasons if x),
                 failures=dict(sorted(Counter(x for x in r.reasons if x).items())), worst_reason=r.reasons[i],
                 search_status="budget_exhausted", points=Points(r.xs, r.fs, r.reasons),
-                payload=r.payload(tau, delta, dist), search_s=time.perf_counter() - t_search,
+                payload=r.payload(tau, delta, dist), search_s=t_search,
                 job_s=time.perf_counter() - t0)
 
 
@@ -298,9 +305,11 @@ def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id:
                 continue
             result = run_search_job(job, objective, settings)
             row = search_row(job, result, settings, run_id, time.perf_counter() - t0)
-            if job.role == "main" and result.x is not None:
-                row = row.replace(payload={"sequence": sequence_details(objective, result.x, settings.eps_safe_m)}
-                                  if settings.sustain is not None else {"worst": worst_details(objective, result.x)})
+            if job.role == "main" and result.x is not None and settings.sustain is not None:
+                row = row.replace(payload={"sequence": sequence_details(objective, result.x, settings.eps_safe_m)})
+            elif job.role == "main" and result.x is not None:
+                details, corners = worst_details(objective, result.x)
+                row = row.replace(payload={"worst": details}, worst_corners=corners)
         except Exception as exc:  # a sample the pipeline cannot handle is a recorded failure
             logger.warning("sample %s, job %s/%s failed: %s", job.sample_id, job.method, job.box and job.box.label,
                            _reason(exc))
