@@ -27,7 +27,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 
 # Order in which sections appear; unknown benchmarks follow alphabetically.
-ORDER = ["scenes", "pnp", "search", "spatial2d", "perturb", "detector", "engines", "device", "naive", "pipeline", "campaigns",
+ORDER = ["scenes", "pnp", "search", "spatial2d", "perturb", "detector", "engines", "views", "device", "naive", "pipeline", "campaigns",
          "risk", "monitors"]
 
 
