@@ -1,6 +1,7 @@
 """``campaigns.bundle.provenance``: the wall time of runs, including those killed before they recorded their end."""
 
 import sqlite3
+from pathlib import Path
 
 import pytest
 
@@ -82,3 +83,43 @@ def test_bundle_index_links_stay_relative_and_a_bundle_never_overwrites_its_runs
     with pytest.raises(ValueError, match=r"cut\.sqlite\.xz: not a complete packed store"):
         restore_store(packed, tmp_path / "restored")
     assert not (tmp_path / "restored" / "results.sqlite").exists()
+
+
+def test_a_bundle_killed_midway_leaves_the_previous_bundle_whole(tmp_path, monkeypatch):
+    """A bundle killed after its first experiment left experiments without index.html / claims.md; now it is
+    written into a staging directory and published only when complete; a packed store is kept without --stores."""
+    import vbl_robust.report as report
+    from vbl_robust.campaigns.bundle import PACKED, write_bundle
+
+    spec = CampaignSpec("bundle-kill", (Block(boxes=(roll_box(5),), methods=("random",),
+                                              budgets=(Budget(max_evals=4),)),), seed=1)
+    root, out = tmp_path / "runs", tmp_path / "bundle"
+    for name in ("exp-a", "exp-b"):
+        with ResultStore(root / name / "results.sqlite") as store:
+            run_campaign(spec, list(generate(1, seed=0, width=96, height=96)), store,
+                         detector=DetectorSpec.oracle(1.0))
+    write_bundle(root, out, stores=True)
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert {Path("index.html"), Path("claims.md"), Path("exp-a/report.html"), Path("exp-b") / PACKED} <= set(before)
+
+    real, calls = report.build_report, []
+
+    def killed_on_the_second(run, dest, *a, **k):
+        calls.append(run)
+        if len(calls) == 2:
+            raise KeyboardInterrupt  # what SIGINT raises mid-bundle
+        return real(run, dest, *a, **k)
+
+    monkeypatch.setattr(report, "build_report", killed_on_the_second)
+    with pytest.raises(KeyboardInterrupt):
+        write_bundle(root, tmp_path / "first")  # a first bundle killed: nothing at all, not exp-a alone
+    assert not (tmp_path / "first").exists()
+    calls.clear()
+    with pytest.raises(KeyboardInterrupt):
+        write_bundle(root, out)
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bundle", "runs"]  # no staging directory left
+    monkeypatch.setattr(report, "build_report", real)
+    write_bundle(root, out)  # without --stores: the packed stores stay
+    assert (out / "exp-b" / PACKED).read_bytes() == before[Path("exp-b") / PACKED]

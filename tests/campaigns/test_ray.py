@@ -34,3 +34,33 @@ def test_ray_and_local_executors_agree(tmp_path, small_samples, oracle):
                 ray.shutdown()
     assert results["ray"] == results["local"]
     assert len(results["local"]) == 4
+
+
+def test_an_address_that_accepts_tcp_but_is_not_ray_is_refused_within_the_timeout():
+    """A port that accepts connections and never answers (not a Ray service) passed the TCP check and then hung
+    in ray.init for minutes; the gRPC handshake refuses it within the timeout, while a real gRPC server passes."""
+    import socket
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    import grpc
+
+    from vbl_robust.campaigns.runner import check_executor, grpc_answers
+
+    silent = socket.create_server(("127.0.0.1", 0))
+    try:
+        port = silent.getsockname()[1]
+        start = time.monotonic()
+        with pytest.raises(ValueError, match=f"127.0.0.1:{port}.*completes no gRPC handshake"):
+            check_executor("ray", f"127.0.0.1:{port}", timeout_s=1.0)
+        assert time.monotonic() - start < 30
+    finally:
+        silent.close()
+    server = grpc.server(ThreadPoolExecutor(1))
+    port = server.add_insecure_port("127.0.0.1:0")
+    server.start()
+    try:
+        assert grpc_answers("127.0.0.1", port, 5.0)
+        check_executor("ray", f"ray://127.0.0.1:{port}", timeout_s=5.0)
+    finally:
+        server.stop(None)

@@ -295,3 +295,40 @@ def test_a_store_refuses_a_detector_with_other_options(tmp_path):
     with ResultStore.open_existing(out) as st:
         assert st.count() == 1
     assert runner.invoke(app, [*base, "--oracle-noise", "1"]).exit_code == 0  # the same detector resumes
+
+
+def test_a_full_disk_ends_the_run_in_one_line_and_keeps_the_stored_jobs(tmp_path, monkeypatch):
+    """A disk full during a run (the store) or at its report was a traceback; now one line naming what failed,
+    exit 1, and a rerun resumes from the jobs committed before."""
+    import errno
+
+    from vbl_robust.campaigns.store import ResultStore
+
+    out = tmp_path / "run"
+    real_commit, commits = ResultStore.commit, []
+
+    def full_after_one(self, rows):
+        if commits:
+            raise sqlite3.OperationalError("database or disk is full")
+        commits.append(len(rows))
+        return real_commit(self, rows)
+
+    monkeypatch.setattr(ResultStore, "commit", full_after_one)
+    args = ["audit", "--out", str(out), "--n", "2", "--max-evals", "5", "--methods", "random", *SMALL]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 1 and "Traceback" not in res.output, res.output
+    assert "error: the results store: database or disk is full (jobs stored before it are kept" in res.output
+    with sqlite3.connect(out / "results.sqlite") as con:
+        assert con.execute("SELECT count(*) FROM jobs").fetchone()[0] == 1
+    monkeypatch.undo()
+
+    import vbl_robust.report.build as build
+
+    def no_space(path, data, **kw):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(build, "atomic_write", no_space)
+    res = runner.invoke(app, args)
+    assert res.exit_code == 1 and "Traceback" not in res.output, res.output
+    assert f"error: No space left on device: {out / 'report.html'}" in res.output
+    assert "1 already done" in res.output  # resumed from the job committed before the disk filled

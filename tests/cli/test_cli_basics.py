@@ -80,3 +80,17 @@ def test_quiet_and_verbose_before_or_after_the_command(tmp_path):
     assert res.exit_code == 0 and logging.getLogger().level == logging.INFO
     runner.invoke(app, ["audit", *args, str(tmp_path / "v")])  # the next invocation starts from its own flags
     assert logging.getLogger().level == logging.WARNING and common._GLOBAL == {"quiet": False, "verbose": False}
+
+
+@pytest.mark.parametrize("args, named", [
+    (["audit", "--out", ""], "--out"),
+    (["audit", "--out="], "--out"),
+    (["risk", "--csv", ""], "--csv"),
+    (["report", ""], "an argument"),
+])
+def test_an_empty_value_is_refused_not_read_as_the_current_directory(tmp_path, monkeypatch, args, named):
+    """``--out ""`` became Path("") = "." and the run wrote into the current directory."""
+    monkeypatch.chdir(tmp_path)
+    res = runner.invoke(app, args)
+    assert res.exit_code == 2 and f"Invalid value for {named}: an empty value" in res.output, res.output
+    assert list(tmp_path.iterdir()) == []

@@ -20,13 +20,19 @@ and ``out/status.md``: one line per experiment (jobs done / planned, images, wal
 ``out/index.html``: a link to each report (with its jobs done) and the claims section. With
 ``reproduction=PATH`` the part of that Markdown file between :data:`BEGIN` and :data:`END` is replaced by the
 claims and status tables (the rest of it is prose kept as written). Without ``stores``
-the SQLite stores are not copied (tens of MB); rerunning the command that made them regenerates them.
+the SQLite stores are not copied (tens of MB; a packed store already in ``out`` is kept); rerunning the command that
+made them regenerates them.
+
+Atomic as a whole: everything is written into a staging directory beside ``out`` first and moved into ``out`` only
+when complete (:func:`_publish`), so a bundle killed midway leaves the previous bundle as it was, never experiments
+without their ``index.html`` or ``claims.md``.
 """
 
 from __future__ import annotations
 
 import datetime as dt
 import json
+import os
 import shutil
 from collections.abc import Sequence
 from pathlib import Path
@@ -129,9 +135,10 @@ def restore_store(packed: Path, run: Path) -> bool:
     return True
 
 
-def write_experiment(run: Path, out: Path, stores: bool = False) -> dict[str, Any]:
-    """Bundle one run directory into ``out`` (created; with its packed store when ``stores``); returns its
-    provenance totals."""
+def write_experiment(run: Path, out: Path, stores: bool = False, keep: Path | None = None) -> dict[str, Any]:
+    """Bundle one run directory into ``out`` (created; with its packed store when ``stores``, else the packed store
+    of the bundle ``keep`` — the experiment's previous bundle directory — when it has one); returns its provenance
+    totals."""
     from ..report import build_report
     from .tables import export
 
@@ -141,11 +148,32 @@ def write_experiment(run: Path, out: Path, stores: bool = False) -> dict[str, An
         export(store, out / "jobs.parquet")
         if stores:
             pack_store(store, out / PACKED)
+        elif keep is not None and (keep / PACKED).is_file():
+            shutil.copy2(keep / PACKED, out / PACKED)
     atomic_write(out / "provenance.json", json.dumps(prov, indent=1, sort_keys=True, default=str) + "\n")
     build_report(run, out)
     shutil.rmtree(out / "figures", ignore_errors=True)  # embedded in report.html
     return prov["totals"]
 
+
+def _publish(stage: Path, out: Path) -> None:
+    """Move everything in ``stage`` into ``out``: each experiment directory replaces its old one by two renames (the
+    old one is removed only once the new one is in place), then the top files, ``index.html`` last, each by an atomic
+    replace. A bundle killed before this point leaves ``out`` as it was; one killed inside it (milliseconds) leaves
+    each experiment whole, old or new."""
+    out.mkdir(parents=True, exist_ok=True)
+    entries = sorted(stage.iterdir(), key=lambda p: (p.is_file(), p.name == "index.html", p.name))
+    for entry in entries:
+        target = out / entry.name
+        if entry.is_dir():
+            old = out / f".{entry.name}.old"
+            shutil.rmtree(old, ignore_errors=True)
+            if target.exists():
+                target.rename(old)
+            entry.rename(target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(entry, target)
 
 def status_markdown(totals: dict[str, dict[str, Any]]) -> str:
     """The per-experiment status table of a bundle (Markdown): wall hours of its runs; worker hours (each job's wall
@@ -183,15 +211,23 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
         text = Path(reproduction).read_text()
         if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
             raise ValueError(f"{reproduction}: needs one {BEGIN} line followed by one {END} line")
-    totals = {run.name: write_experiment(run, Path(out) / run.name, stores) for run in runs}
-    status = status_markdown(totals)
-    checked = claims_of(root)
-    claims = claims_markdown(checked, str(root))
-    atomic_write(Path(out) / "status.md", status)
-    atomic_write(Path(out) / "claims.md", claims)
-    write_index(out, list(totals), claims_html(checked, str(root)),
-                {n: f"{t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} of {t['images']} images"
-                 for n, t in totals.items()})
+    out = Path(out)
+    stage = out.parent / f".{out.name}.staging"  # the whole bundle is written here, then published into out
+    shutil.rmtree(stage, ignore_errors=True)
+    stage.mkdir(parents=True)
+    try:
+        totals = {run.name: write_experiment(run, stage / run.name, stores, keep=out / run.name) for run in runs}
+        status = status_markdown(totals)
+        checked = claims_of(root)
+        claims = claims_markdown(checked, str(root))
+        atomic_write(stage / "status.md", status)
+        atomic_write(stage / "claims.md", claims)
+        write_index(stage, list(totals), claims_html(checked, str(root)),
+                    {n: f"{t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} of {t['images']} "
+                        f"images" for n, t in totals.items()})
+        _publish(stage, out)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
     if text is not None:
         head, rest = text.split(BEGIN)
         tail = rest.split(END)[1]

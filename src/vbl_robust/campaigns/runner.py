@@ -85,8 +85,10 @@ RAY_CONNECT_TIMEOUT_S = 10.0
 
 def check_executor(executor: str, address: str | None, *, timeout_s: float = RAY_CONNECT_TIMEOUT_S) -> None:
     """``ValueError`` (one line naming the option) before any work: an unknown executor, ``address`` without Ray,
-    or a Ray address (``host:port``, ``ray://host:port``; ``auto`` is Ray's own lookup) whose port does not accept
-    a TCP connection within ``timeout_s`` — Ray itself would retry for minutes."""
+    or a Ray address (``host:port``, ``ray://host:port``, or ``auto``: Ray's own lookup of a cluster started on
+    this machine) where no gRPC server completes a handshake within ``timeout_s``. Ray's services (the GCS and the
+    Ray client server) speak gRPC over HTTP/2: a port that merely accepts TCP (another service, a silent socket) never
+    completes the HTTP/2 handshake and is refused here, where Ray itself would retry for minutes."""
     import socket
     from urllib.parse import urlsplit
 
@@ -96,20 +98,50 @@ def check_executor(executor: str, address: str | None, *, timeout_s: float = RAY
         return
     if executor != "ray":
         raise ValueError(f"--address {address} applies to --executor ray only")
-    if address == "auto":
-        return
-    parts = urlsplit(address if "://" in address else f"ray://{address}")
+    target = _running_cluster() if address == "auto" else address
+    if target is None:
+        raise ValueError("--address auto: no Ray cluster is running on this machine (start one with `ray start "
+                         "--head`, or name its address)")
+    parts = urlsplit(target if "://" in target else f"ray://{target}")
     try:
         host, port = parts.hostname, parts.port
     except ValueError:
         host, port = None, None
     if not host or port is None:
         raise ValueError(f"--address {address}: expected host:port or ray://host:port (or auto)")
-    try:
+    try:  # a closed port is refused at once; an open one must then speak gRPC
         socket.create_connection((host, port), timeout=timeout_s).close()
     except OSError as exc:
         raise ValueError(f"--address {address}: no Ray cluster answers at {host}:{port} within {timeout_s:g} s "
                          f"({exc.strerror or exc})") from None
+    if not grpc_answers(host, port, timeout_s):
+        raise ValueError(f"--address {address}: no Ray cluster answers at {host}:{port} within {timeout_s:g} s "
+                         f"(the port is open but completes no gRPC handshake: not a Ray service)")
+
+
+def _running_cluster() -> str | None:
+    """The address of the Ray cluster started on this machine (Ray's lookup behind ``address="auto"``), or None."""
+    from ray._private.services import canonicalize_bootstrap_address
+
+    try:
+        return canonicalize_bootstrap_address("auto")
+    except (ConnectionError, ValueError):
+        return None
+
+
+def grpc_answers(host: str, port: int, timeout_s: float) -> bool:
+    """Whether a gRPC server at ``host:port`` completes the HTTP/2 handshake within ``timeout_s`` (a channel that
+    becomes ready); a closed port, a non-gRPC service or a socket that never answers all give False."""
+    import grpc
+
+    channel = grpc.insecure_channel(f"{host}:{port}")
+    try:
+        grpc.channel_ready_future(channel).result(timeout=timeout_s)
+        return True
+    except grpc.FutureTimeoutError:
+        return False
+    finally:
+        channel.close()
 
 
 def sample_record(sample: Any, index: int) -> dict[str, Any]:

@@ -235,8 +235,13 @@ class WriterLock:
                 os.close(fd)
             raise ValueError(f"{self.path.parent}: in use by PID {holder} (another run is writing this store); wait "
                              "for it to end or write to another --out") from None
-        os.ftruncate(fds[0], 0)
-        os.pwrite(fds[0], str(os.getpid()).encode(), 0)
+        try:
+            os.ftruncate(fds[0], 0)
+            os.pwrite(fds[0], str(os.getpid()).encode(), 0)
+        except OSError as exc:  # e.g. a full disk: named after the lock file
+            for fd in fds:
+                os.close(fd)
+            raise OSError(exc.errno, exc.strerror, str(self.path)) from None
         self._fds = fds
         return self
 

@@ -9,10 +9,48 @@ import importlib
 import warnings
 
 import typer
+from typer.core import TyperGroup
 
 from .common import set_verbosity, stop_on_sigterm
 
+
+class _Commands(TyperGroup):
+    """The command group: refuses an empty argument before any command runs. ``--out ""`` would otherwise become
+    ``Path("")`` = the current directory (typer converts before any check could see it), and no option or argument
+    of this CLI means anything when empty."""
+
+    def parse_args(self, ctx: typer.Context, args: list[str]) -> list[str]:
+        for i, arg in enumerate(args):
+            name, eq, value = arg.partition("=")
+            if arg == "" or (eq and name.startswith("--") and value == ""):
+                option = name if eq else (args[i - 1] if i and args[i - 1].startswith("-") else "an argument")
+                raise typer.BadParameter("an empty value (name a file or directory, or leave the option out)",
+                                         param_hint=option)
+        return super().parse_args(ctx, args)
+
+    def invoke(self, ctx: typer.Context) -> object:
+        """Run the command; an operating-system or SQLite error that no command handles (a full disk, a store or
+        report directory without write permission, …) ends it in one line naming the file, exit 1 — every job
+        committed before stays in the store, and a rerun resumes once the cause is fixed."""
+        import errno
+        import sqlite3
+
+        try:
+            return super().invoke(ctx)
+        except OSError as exc:
+            if exc.errno == errno.EPIPE:  # a closed pipe (| head): typer's own handling
+                raise
+            where = f": {exc.filename}" if exc.filename else ""
+            typer.echo(f"error: {exc.strerror or exc}{where} (jobs stored before it are kept: fix the cause "
+                       f"and rerun to resume)", err=True)
+        except sqlite3.Error as exc:
+            typer.echo(f"error: the results store: {exc} (jobs stored before it are kept: fix the cause and rerun "
+                       f"to resume)", err=True)
+        raise typer.Exit(1)
+
+
 app = typer.Typer(
+    cls=_Commands,
     name="vbl-robust",
     help="Find the perturbations (camera roll, contrast, …) that make a vision-based landing pipeline fail.",
     no_args_is_help=True,
@@ -30,7 +68,7 @@ def _version(value: bool) -> None:
         typer.echo(f"vbl-robust {version('vbl-robust')}")
         raise typer.Exit()
 
-# Sub-command modules; each defines `register(app)`. A module that is not there yet is skipped.
+# Sub-command modules; each defines `register(app)`.
 _COMMAND_MODULES = ("scenes", "audit", "risk", "reproduce", "truth", "report", "train", "zones")
 
 
@@ -46,13 +84,7 @@ def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log progr
 
 
 for _name in _COMMAND_MODULES:
-    try:
-        _mod = importlib.import_module(f"{__name__}.{_name}")
-    except ModuleNotFoundError as exc:  # command not written yet
-        if exc.name != f"{__name__}.{_name}":
-            raise
-        continue
-    _mod.register(app)
+    importlib.import_module(f"{__name__}.{_name}").register(app)
 
 
 def main() -> None:  # pragma: no cover - console entry
