@@ -1,4 +1,4 @@
-# vbl-robust: set-up, demo, tests, benchmarks.
+# vbl-robust: set-up, demo, tests, documentation, wheel, benchmarks.
 PY ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
@@ -8,8 +8,9 @@ export YOLO_OFFLINE := 1
 export YOLO_CONFIG_DIR := $(CURDIR)/.cache/ultralytics
 export YOLO_VERBOSE := False
 export MPLBACKEND := Agg
+export NO_MKDOCS_2_WARNING := 1
 
-.PHONY: install demo test test-full bench lint clean
+.PHONY: install demo test test-full docs wheel bench lint clean
 
 $(STAMP): pyproject.toml
 	test -d $(VENV) || $(PY) -m venv $(VENV)
@@ -28,6 +29,15 @@ test: $(STAMP)
 test-full: $(STAMP)
 	$(BIN)/pytest -q --timeout=3600 --full
 
+# The documentation site (mkdocs.yml) into build/site/, strict: a broken link, a missing page or a docstring
+# mkdocstrings cannot read fails the build. `make test` builds it too (tests/test_docs.py).
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict
+
+# The wheel (shipped models, model card, CLI entry point) into dist/; tests/test_wheel.py checks its contents.
+wheel: $(STAMP)
+	$(BIN)/python -m build --wheel --no-isolation --outdir dist
+
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py --out BENCHMARKS.md
 
@@ -35,4 +45,4 @@ lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
 
 clean:
-	rm -rf runs .pytest_cache .cache
+	rm -rf runs .pytest_cache .cache build dist

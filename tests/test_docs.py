@@ -1,0 +1,147 @@
+"""The documentation: the site builds strictly (mkdocs.yml), the README is a front page, and every command line the
+README and the docs show names a real command and real options (checked against the typer app, not by hand).
+
+The build runs in `make test`: a broken link, a missing page, a missing included file or a docstring mkdocstrings
+cannot read fails it. A missing tool fails too (never a skip): `pip install -e '.[dev]'` installs it.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import click
+import pytest
+import typer
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+README = ROOT / "README.md"
+
+
+def _commands() -> tuple[click.Group, dict[str, click.Command]]:
+    from vbl_robust.cli import app
+
+    group = typer.main.get_command(app)
+    ctx = click.Context(group, info_name="vbl-robust")
+    return group, {name: group.get_command(ctx, name) for name in group.list_commands(ctx)}
+
+
+def _options(command: click.Command) -> set[str]:
+    opts: set[str] = set()
+    for param in command.params:
+        opts.update(o for o in (*param.opts, *getattr(param, "secondary_opts", ())) if o.startswith("-"))
+    return opts | {"-h", "--help"}
+
+
+@pytest.fixture(scope="module")
+def built_site(tmp_path_factory) -> Path:
+    assert importlib.util.find_spec("mkdocs") is not None, "mkdocs is not installed: pip install -e '.[dev]'"
+    site = tmp_path_factory.mktemp("site")
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1", "MPLBACKEND": "Agg"}
+    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(site)],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 0, f"mkdocs build --strict failed:\n{log[-4000:]}"
+    warnings = [line for line in log.splitlines() if line.startswith(("WARNING", "ERROR"))]
+    assert not warnings, "\n".join(warnings)
+    return site
+
+
+def test_site_builds_strict_with_every_page(built_site: Path) -> None:
+    for page in ("index.html", "getting-started.html", "concepts.html", "reference/cli.html", "reference/api.html",
+                 "reproduction.html", "benchmarks.html", "model-card.html", "changelog.html", "conventions.html",
+                 "security.html", "results/index.html"):
+        assert (built_site / page).is_file(), page
+    for how_to in ("audit-your-model", "lard-data", "sequences", "zones", "risk", "hardening", "ray", "gpu"):
+        assert (built_site / "how-to" / f"{how_to}.html").is_file(), how_to
+    # the included files arrive whole: their last generated section is there
+    assert "Status of the runs" in (built_site / "reproduction.html").read_text()
+    assert "Known limits" in (built_site / "model-card.html").read_text()
+    assert (built_site / "assets" / "demo_landscape.png").is_file()
+
+
+def test_cli_reference_lists_every_command(built_site: Path) -> None:
+    html = (built_site / "reference" / "cli.html").read_text()
+    _, commands = _commands()
+    assert len(commands) >= 10
+    for name in commands:
+        assert f'id="vbl-robust-{name}"' in html, f"no section for vbl-robust {name}"
+        assert f"Usage: vbl-robust {name} [OPTIONS]" in html, name
+
+
+def test_api_reference_is_generated_from_docstrings(built_site: Path) -> None:
+    html = (built_site / "reference" / "api.html").read_text()
+    for name in ("ParameterBox", "Objective", "maximize", "run_campaign", "clopper_pearson"):
+        assert name in html, name
+    assert "::: vbl_robust" not in html  # every directive rendered
+
+
+def test_readme_is_a_front_page() -> None:
+    text = README.read_text()
+    lines = text.splitlines()
+    assert len(lines) <= 150, f"README has {len(lines)} lines (at most 150)"
+    first_block = text.split("```", 2)[1]
+    assert re.search(r"^make demo\b", first_block, re.M) and re.search(r"^make test\b", first_block, re.M)
+    assert text.index("make demo") < text.index("## "), "README must start with make demo / make test"
+    links = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text) + re.findall(r'<img src="([^"]+)"', text)
+    assert "docs/assets/demo_landscape.png" in links, "the README shows the demo's figure"
+    for target in links:
+        if "://" in target:
+            continue
+        assert (ROOT / target).exists(), f"README links to {target}, which is not there"
+    assert "REPRODUCTION.md" in text and "docs/" in text
+
+
+def _shown_commands(text: str) -> list[str]:
+    """Every `vbl-robust …` command line of a Markdown text: code blocks (continuation lines joined) and inline
+    code spans."""
+    found: list[str] = []
+    for block in re.findall(r"```(?:bash|sh|console)?\n(.*?)```", text, flags=re.S):
+        for line in block.replace("\\\n", " ").splitlines():
+            line = line.split(" #", 1)[0].strip()
+            if line.startswith("vbl-robust "):
+                found.append(line)
+    prose = re.sub(r"```.*?```", "", text, flags=re.S)
+    found += [span for span in re.findall(r"`([^`\n]+)`", prose) if span.startswith("vbl-robust ")]
+    return found
+
+
+def _markdown_files() -> list[Path]:
+    return [README, ROOT / "CHANGELOG.md", *sorted(DOCS.rglob("*.md"))]
+
+
+def test_shown_commands_name_real_options() -> None:
+    group, commands = _commands()
+    global_opts = _options(group)
+    problems: list[str] = []
+    checked = 0
+    for path in _markdown_files():
+        for line in _shown_commands(path.read_text()):
+            words = [w for w in line.split()[1:] if w not in global_opts]
+            name = words[0] if words else ""
+            if name in ("COMMAND", "…", "..."):  # a placeholder, not a command
+                continue
+            if name not in commands:
+                problems.append(f"{path.relative_to(ROOT)}: unknown command in `{line}`")
+                continue
+            valid = _options(commands[name])
+            for opt in re.findall(r"(?<![\w-])(--?[a-zA-Z][\w-]*)", " ".join(words[1:])):
+                if opt not in valid:
+                    problems.append(f"{path.relative_to(ROOT)}: `vbl-robust {name}` has no option {opt} (`{line}`)")
+            checked += 1
+    assert checked >= 40, f"only {checked} command lines found"
+    assert not problems, "\n".join(problems)
+
+
+def test_shown_make_targets_exist() -> None:
+    targets = set(re.findall(r"^([a-z][\w-]*):", (ROOT / "Makefile").read_text(), flags=re.M))
+    for path in _markdown_files():
+        text = path.read_text()
+        code = re.findall(r"```.*?```", text, flags=re.S) + re.findall(r"`([^`\n]+)`", re.sub(r"```.*?```", "", text, flags=re.S))
+        for target in re.findall(r"(?:^|\s|&&\s*)make ([a-z][\w-]*)", "\n".join(code), flags=re.M):
+            assert target in targets, f"{path.relative_to(ROOT)}: `make {target}` is no Makefile target"
