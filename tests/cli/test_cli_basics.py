@@ -94,3 +94,19 @@ def test_an_empty_value_is_refused_not_read_as_the_current_directory(tmp_path, m
     res = runner.invoke(app, args)
     assert res.exit_code == 2 and f"Invalid value for {named}: an empty value" in res.output, res.output
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_os_error_outside_a_campaign_is_one_line_without_the_resume_hint(tmp_path):
+    """``zones RUN --out DIR`` was a traceback (IsADirectoryError); a command that stores no jobs says nothing of
+    resuming."""
+    from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, ResultStore, roll_box, run_campaign
+    from vbl_robust.scenes import generate
+
+    spec = CampaignSpec("zones-out", (Block(boxes=(roll_box(5),), methods=("georobust",),
+                                            budgets=(Budget(max_evals=8),)),), seed=1)
+    with ResultStore(tmp_path / "run" / "results.sqlite") as store:
+        run_campaign(spec, list(generate(1, seed=0, width=96, height=96)), store, detector=DetectorSpec.oracle(1.0))
+    (tmp_path / "dir").mkdir()
+    res = runner.invoke(app, ["zones", str(tmp_path / "run"), "--out", str(tmp_path / "dir")])
+    assert res.exit_code == 1 and "Traceback" not in res.output, res.output
+    assert res.output.strip().splitlines()[-1] == f"error: Is a directory: {tmp_path / 'dir'}"

@@ -14,6 +14,10 @@ from typer.core import TyperGroup
 from .common import set_verbosity, stop_on_sigterm
 
 
+#: The commands that run a campaign into a store (a rerun resumes them).
+_CAMPAIGNS = frozenset({"audit", "demo", "risk", "reproduce", "truth"})
+
+
 class _Commands(TyperGroup):
     """The command group: refuses an empty argument before any command runs. ``--out ""`` would otherwise become
     ``Path("")`` = the current directory (typer converts before any check could see it), and no option or argument
@@ -26,26 +30,28 @@ class _Commands(TyperGroup):
                 option = name if eq else (args[i - 1] if i and args[i - 1].startswith("-") else "an argument")
                 raise typer.BadParameter("an empty value (name a file or directory, or leave the option out)",
                                          param_hint=option)
+        # the command's name: the first argument that is not an option (the group's own options are flags)
+        ctx.meta["vbl_command"] = next((a for a in args if not a.startswith("-")), None)
         return super().parse_args(ctx, args)
 
     def invoke(self, ctx: typer.Context) -> object:
         """Run the command; an operating-system or SQLite error that no command handles (a full disk, a store or
-        report directory without write permission, …) ends it in one line naming the file, exit 1 — every job
-        committed before stays in the store, and a rerun resumes once the cause is fixed."""
+        report directory without write permission, …) ends it in one line naming the file, exit 1; in a campaign
+        every job committed before stays in the store, and a rerun resumes once the cause is fixed."""
         import errno
         import sqlite3
 
+        resumable = ctx.meta.get("vbl_command") in _CAMPAIGNS
+        kept = " (jobs stored before it are kept: fix the cause and rerun to resume)" if resumable else ""
         try:
             return super().invoke(ctx)
         except OSError as exc:
             if exc.errno == errno.EPIPE:  # a closed pipe (| head): typer's own handling
                 raise
             where = f": {exc.filename}" if exc.filename else ""
-            typer.echo(f"error: {exc.strerror or exc}{where} (jobs stored before it are kept: fix the cause "
-                       f"and rerun to resume)", err=True)
+            typer.echo(f"error: {exc.strerror or exc}{where}{kept}", err=True)
         except sqlite3.Error as exc:
-            typer.echo(f"error: the results store: {exc} (jobs stored before it are kept: fix the cause and rerun "
-                       f"to resume)", err=True)
+            typer.echo(f"error: the results store: {exc}{kept}", err=True)
         raise typer.Exit(1)
 
 
