@@ -36,6 +36,7 @@ docs: $(STAMP)
 
 # The wheel (shipped models, model card, CLI entry point) into dist/; tests/test_wheel.py checks its contents.
 wheel: $(STAMP)
+	rm -rf build/lib  # setuptools never cleans it: a deleted module would ride along
 	$(BIN)/python -m build --wheel --no-isolation --outdir dist
 
 bench: $(STAMP)
