@@ -1,3 +1,4 @@
+import dataclasses
 import math
 
 import numpy as np
@@ -78,3 +79,56 @@ def test_convergence_and_landscapes_and_pnp():
 @pytest.mark.parametrize("method", ["georobust", "unknown-method"])
 def test_style_has_defaults(method):
     assert {"color", "marker", "label", "linestyle"} <= set(F.style(method))
+
+
+def outside(fig):
+    """How far (inches; 0 when nothing) the drawn texts and axes of ``fig`` — titles, labels, tick labels, legends —
+    reach beyond its edges, where the PNG clips them: (left, bottom, right, top)."""
+    fig.canvas.draw()
+    bb = fig.get_tightbbox(fig.canvas.get_renderer())
+    w, h = fig.get_size_inches()
+    return tuple(round(max(0.0, v), 2) for v in (-bb.x0, -bb.y0, bb.x1 - w, bb.y1 - h))
+
+
+def every_figure():
+    """One figure of each kind the report draws, with labels as long as a report's."""
+    rows = [dataclasses.replace(r, n=100) for r in summary_rows()]
+    long_ticks = {2.0: "±2°, c∈[0.9, 1.1]", 5.0: "±15°, c∈[0.6, 1.6]", 10.0: "±30°, c∈[0.4, 2.5]"}
+    yield "survival", F.survival_vs_level(rows, title="Survival vs roll and contrast budget", tick_labels=long_ticks,
+                                          xlabel="perturbation box (roll half-width, contrast range)")
+    yield "runtime", F.runtime(rows, axis="max_seconds", eps_safe_m=1000.0, reference={"survival": 5.0,
+                               "median_worst_m": 3000.0}, title="Time budget per image, box ±10°, c∈[0.7, 1.4]")
+    prof = [{"quartile": q, "d_min_m": 1000.0 * q, "d_max_m": 1000.0 * (q + 1), "method": m, "n": 25,
+             "phi_crit": 10.0 * q, "survival": [50.0, 5.0, 0.0]} for q in (1, 2, 3, 4) for m in ("georobust", "apgd")]
+    yield "distance", F.distance_profile(prof, limit_deg=45.0, budgets=[5, 10, 45])
+    curves = {m: (np.arange(1, 201), np.linspace(100, 900, 200)) for m in ("georobust", "random", "apgd")}
+    yield "progress", F.best_vs_evals(curves, eps_safe_m=1000.0, title="Search progress (median over images)")
+    r, c = np.meshgrid(np.linspace(-30, 30, 9), np.linspace(0.4, 2.5, 5), indexing="ij")
+    xs = np.stack([r.ravel(), c.ravel()], axis=1)
+    fs = 10.0 + 300.0 * np.abs(xs[:, 0])
+    yield "landscape", F.landscape_2d(xs, fs, ["roll_deg", "contrast"], {"random": xs[:4]}, eps_safe_m=1000.0,
+                                      worst={"random": xs[3]},
+                                      title="L over ±30°, c∈[0.4, 2.5], image synth_s0_000000 (slant distance 5597 m)")
+    conv = [{"iteration": k, "n": 100, **{f"{n}_{s}": v for n in ("po", "ra") for s, v in
+             (("mean", 10.0 / k), ("std", 1.0), ("q10", 8.0 / k), ("q25", 9.0 / k), ("median", 10.0 / k),
+              ("q75", 11.0 / k), ("q90", 12.0 / k), ("max", 500.0))}} for k in range(1, 30)]
+    yield "convergence", F.convergence(conv, title="GeoRobust convergence")
+    pnp = [{"source": s, "solver": v, "n": 1000, "failures": 12, "median_rel_pct": 1.0, "mae_rel_pct": 2.0,
+            "median_abs_m": 30.0, "mae_abs_m": 60.0} for s in ("ground truth", "detector")
+           for v in ("ippe_lm", "iterative", "sqpnp", "ippe")]
+    yield "pnp", F.pnp_comparison(pnp)
+    yield "risk", F.risk_per_image({"mc": [(i, 0.01, 0.0, 0.05) for i in range(40)]}, 40, 0.01)
+    img = np.full((64, 80, 3), 0.5)
+    corners = np.array([[50.0, 30.0], [40.0, 30.0], [35.0, 50.0], [55.0, 50.0]])
+    yield "gallery", F.worst_view(img, img, corners, corners + 3, corners + 6, confident=False)
+
+
+@pytest.fixture(scope="module")
+def drawn():
+    return dict(every_figure())
+
+
+@pytest.mark.parametrize("name", ["survival", "runtime", "distance", "progress", "landscape", "convergence", "pnp",
+                                  "risk", "gallery"])
+def test_no_title_label_or_legend_is_clipped(name, drawn):
+    assert outside(drawn[name]) == (0, 0, 0, 0)

@@ -1,14 +1,21 @@
 """Assemble the HTML report of a run directory from its results store (``vbl-robust report RUN``).
 
 The report is rebuilt from the store alone: every figure is drawn from the stored rows, every figure comes with
-the table of the numbers behind it, and the provenance of every run (code version, model SHA-256, dataset
-identity, configuration) closes the page. Figures are also written as PNG files next to the report.
+the table of the numbers behind it (or a link to it, where another section shows the same rows), and the
+provenance of every run (code version, model SHA-256, dataset identity, configuration) closes the page. Figures
+are also written as PNG files next to the report. The one exception is the pixels of the worst-case gallery: its
+images are rebuilt from the run's dataset source (where that is not possible, the gallery says so and shows the
+stored facts alone).
+
+Order: the first screen answers "safe where, and how sure" (:mod:`.evidence`: per box, survival with its
+interval, misleading against flagged-only images, the bound), then the run's settings (the summary), the
+worst-case gallery (:mod:`.gallery`), the table per method, box and budget, the declared figures, provenance.
 
 Where things are: :mod:`.rows` (the context and which stored rows each section reads), :mod:`.sections` (one
 function per section), :mod:`.zone_section` (the vulnerability zones), :mod:`.sequence_section` (a sequence
-campaign's errors along the approach), :mod:`.figures` (drawing), :mod:`.html`
-(the page), :mod:`.evidence` (the evidence section after the summary, and ``evidence.json``); this module only
-orders the sections and writes the page.
+campaign's errors along the approach), :mod:`.figures` (drawing), :mod:`.html` (the page: long tables sortable,
+very long ones folded), :mod:`.evidence` (the first section, and ``evidence.json``), :mod:`.gallery`; this module
+only orders the sections and writes the page.
 
 Which figures: the ones the campaign spec declares (``CampaignSpec.figures``, see
 :data:`vbl_robust.campaigns.spec.FIGURES`; a spec stored without a declaration gets
@@ -33,16 +40,18 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.experiments import EXPERIMENTS
 from ..campaigns.spec import FIGURES, CampaignSpec
 from ..campaigns.store import ResultStore
-from .evidence import section_evidence
+from .evidence import Evidence, evidence_of, section_evidence
+from .gallery import section_gallery
 from .html import esc, page
 from .risk_section import section_risk
-from .rows import Context, Section
+from .rows import Context, Section, anchor
 from .sections import (
     section_best_vs_evals,
     section_convergence,
@@ -74,6 +83,18 @@ SECTIONS: dict[str, Callable[[Context], Section | None]] = {
 }
 
 
+def _guarded(name: str, build: Callable[..., Any], *args: Any) -> Any:
+    """``build(*args)``, or a section saying it failed (logged): one broken section must not hide the others. An
+    operating-system error (a full disk, no permission to write a figure) is not the section's: it ends the report."""
+    try:
+        return build(*args)
+    except OSError:
+        raise
+    except Exception:
+        logger.exception("report section %s failed", name)
+        return Section(name, ['<p class="warn">This section failed to build; see the log.</p>'])
+
+
 def build_report(run: str | Path, out: str | Path | None = None) -> Path:
     """Write ``report.html`` (self-contained) and ``figures/*.png`` for the run directory (or store file) ``run``;
     returns the HTML path. ``out`` defaults to the run directory."""
@@ -84,41 +105,31 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
             raise ValueError(f"{run}: the results store holds no campaign yet")
         spec = CampaignSpec.from_dict(camp["spec"])
         out_dir = Path(out) if out is not None else (run if run.is_dir() else run.parent)
+        out_dir.mkdir(parents=True, exist_ok=True)
         ctx = Context(store, spec, out_dir, mx.main_rows(store, spec), store.samples())
         exp = EXPERIMENTS.get(spec.name)
         title = exp.title if exp else TITLES.get(spec.name, "Robustness audit")
         if spec.name.endswith("-truth"):  # vbl-robust truth RUN: the dense grid behind "no breach found"
             title = f"Dense-grid truth behind {spec.name.removesuffix('-truth')}'s survivors"
-        sections = [section_overview(ctx, title)]
-        try:
-            evidence = section_evidence(ctx)
-        except Exception:  # one broken section must not hide the others
-            logger.exception("report section evidence failed")
-            evidence = Section("Evidence", ['<p class="warn">This section failed to build; see the log.</p>'])
-        if evidence is not None:
-            sections.append(evidence)
-        sections.append(section_methods(ctx))
+        ev = _guarded("evidence", evidence_of, ctx)
+        # the first screen answers "safe where, and how sure"; then the run's settings, then the failures
+        sections = [_guarded("evidence", section_evidence, ctx, ev) if isinstance(ev, Evidence) else ev,
+                    section_overview(ctx, title),
+                    _guarded("gallery", section_gallery, ctx, ev) if isinstance(ev, Evidence) else None,
+                    section_methods(ctx)]
         declared = spec.report_figures
         for name in FIGURES:
             builds = [SECTIONS[name]] if name in declared else []
             if name == "landscape":  # the zones follow the landscape, declared or not (they need no declaration)
                 builds.append(section_zones)
-            for build in builds:
-                try:
-                    sec = build(ctx)
-                except Exception:  # one broken section must not hide the others
-                    logger.exception("report section %s failed", build.__name__)
-                    sec = Section(build.__name__.removeprefix("section_"),
-                                  ['<p class="warn">This section failed to build; see the log.</p>'])
-                if sec is not None:
-                    sections.append(sec)
+            sections += [_guarded(build.__name__.removeprefix("section_"), build, ctx) for build in builds]
         sections.append(section_provenance(ctx))
         sections = [sec for sec in sections if sec is not None]
     body = [f"<h1>vbl-robust — {esc(title)} <small>({esc(spec.name)})</small></h1>"]
-    for sec in sections:
-        body.append(f"<h2>{esc(sec.title)}</h2>")
+    for sec in sections:  # a section's id is what a link to it names (rows.anchor)
+        body.append(f'<section id="{anchor(sec.title)}"><h2>{esc(sec.title)}</h2>')
         body.extend(sec.html)
-    out_dir.mkdir(parents=True, exist_ok=True)
+        body.append("</section>")
     path = out_dir / "report.html"
     atomic_write(path, page(f"vbl-robust {spec.name}", "\n".join(body)))
     return path

@@ -1,21 +1,27 @@
-"""The evidence a run gives, organised as a safety case reads it: what was covered, the worst cases found, how sure
-the numbers are, and how complete the search was. Worded as evidence, not as a compliance claim.
+"""The evidence a run gives, organised as a safety case reads it: what was covered, how sure the numbers are, how
+complete the search was, and the worst cases found. Worded as evidence, not as a compliance claim.
 
 :func:`evidence_of` computes it from a report :class:`~vbl_robust.report.rows.Context` (nothing is evaluated);
-:func:`section_evidence` renders it as the report's first section after the summary, and ``evidence.json`` beside
-``report.html`` holds the same numbers (:meth:`Evidence.to_dict`).
+:func:`section_evidence` renders it as the report's first screen ("safe where, and how sure"), :mod:`.gallery`
+draws its worst cases, and ``evidence.json`` beside ``report.html`` holds the same numbers
+(:meth:`Evidence.to_dict`).
 
 Per box, the images are counted over **every method together** (an image is breached when any method found a
 breach): survival, misleading and flagged-only images each with their exact 95 % interval
 (:class:`vbl_robust.stats.Rate`); for random search, the largest bound over its surviving images on the breached
-fraction of the box (:func:`vbl_robust.campaigns.metrics.residual_bound`); for the DIRECT family, the mean remaining
-area RA of the last iteration (the share of Θ not yet pruned as below the best value found).
+fraction of the box (:func:`vbl_robust.campaigns.metrics.residual_bound`); for a risk run, each estimator's pooled
+failure probability with its interval (:func:`vbl_robust.campaigns.risk.pooled_risk`); for the DIRECT family, the
+mean remaining area RA of the last iteration (the share of Θ not yet pruned as below the best value found).
+
+The worst cases (:func:`worst_cases`): one per breached image, at its most severe breach — misleading before
+unknown before flagged only (a confident pose far off is the hazard the system cannot see; a flagged failure it
+can), then the larger error, then the smaller box — at most :data:`WORST_CASES`, ordered the same way.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,18 +30,34 @@ import numpy as np
 from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.store import JobRow
+from ..constants import BreachKind
 from ..search import direct_family
 from ..stats import LEVEL, Rate
 from .html import esc, fmt_num, table
-from .rows import Context, Section, theta_text
+from .rows import Context, Section
 
-#: Worst cases listed per report (most severe first).
-WORST_CASES = 10
+#: Worst cases shown per report (the gallery, :mod:`.gallery`): the most severe breached images.
+WORST_CASES = 12
+
+#: Severity order of an image's breach kinds: misleading (the system does not know: integrity lost) first, then
+#: unknown (rows without their points), then flagged only (the system knows it has no fix: availability lost).
+_KIND_ORDER: dict[BreachKind | None, int] = {BreachKind.MISLEADING: 0, None: 1, BreachKind.FLAGGED: 2}
+
+
+@dataclass(frozen=True)
+class RiskBound:
+    """A risk run's pooled failure probability over a box's images (:func:`vbl_robust.campaigns.risk.pooled_risk`):
+    θ drawn from its distribution, in %, with its interval at ``level``."""
+
+    method: str
+    p_fail_pct: float
+    ci_pct: tuple[float, float]
+    level: float
 
 
 @dataclass(frozen=True)
 class BoxEvidence:
-    """One box over every method: coverage, counts with their intervals (in %), and completeness."""
+    """One box over every method: coverage, counts with their intervals (in %), bounds and completeness."""
 
     label: str
     ranges: dict[str, tuple[float, float]]
@@ -50,21 +72,37 @@ class BoxEvidence:
     residual_bound: float | None
     remaining_area_pct: float | None
     search_status: dict[str, int]
+    risk: tuple[RiskBound, ...] = ()
 
 
 @dataclass(frozen=True)
 class WorstCase:
+    """One breached image's most severe breach (:func:`worst_cases`), as the gallery shows it.
+
+    ``worst_m`` = the search's worst error at ``theta`` (θ*, real units); ``kind`` = the job's
+    :class:`~vbl_robust.constants.BreachKind` value (None: unknown); ``reason`` = the failure reason at θ* (``""``: a
+    pose; None: unknown); ``conf`` = the top candidate's confidence at θ*; ``corners`` = the corners the detector
+    predicted at θ* (sample's pixels of the perturbed view, TR TL BL BR; None: none, or not stored);
+    ``confident_m`` = the largest error of a confident pose the search found (None without its points): where θ*
+    itself is a flagged failure, the misleading pose lies elsewhere in Θ."""
+
     sample_id: str
     box_label: str
     method: str
+    budget_label: str | None
     worst_m: float
     theta: dict[str, float] | None
     kind: str | None
+    reason: str | None = None
+    conf: float | None = None
+    corners: tuple[tuple[float, float], ...] | None = None
+    confident_m: float | None = None
 
 
 @dataclass(frozen=True)
 class Evidence:
-    """Everything :func:`section_evidence` shows; ``level`` is the intervals' confidence level."""
+    """Everything :func:`section_evidence` shows; ``level`` is the intervals' confidence level; ``worst`` the
+    :data:`WORST_CASES` most severe of the ``breached`` images."""
 
     experiment: str
     eps_safe_m: float
@@ -73,9 +111,17 @@ class Evidence:
     jobs_planned: int | None
     boxes: tuple[BoxEvidence, ...]
     worst: tuple[WorstCase, ...]
+    breached: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+
+def _risk_bounds(rows: Sequence[JobRow]) -> tuple[RiskBound, ...]:
+    from ..campaigns.risk import pooled_risk
+
+    return tuple(RiskBound(p.method, 100.0 * p.p_fail, (100.0 * p.ci.low, 100.0 * p.ci.high), float(p.ci.level))
+                 for p in pooled_risk(rows))
 
 
 def _box_evidence(label: str, rows: Sequence[JobRow], eps: float) -> BoxEvidence:
@@ -102,36 +148,73 @@ def _box_evidence(label: str, rows: Sequence[JobRow], eps: float) -> BoxEvidence
                                                        Rate(misleading, len(ids)).ci.high),
         residual_bound=max(bounds) if bounds else None,
         remaining_area_pct=100.0 * float(np.mean(ra)) if ra else None, search_status=dict(sorted(status.items())),
+        risk=_risk_bounds(rows),
     )
 
 
+def confident_m(row: JobRow) -> float | None:
+    """The largest error of a confident pose (an evaluation with no failure reason) among the row's points; None
+    without points or without such a pose."""
+    p = row.points
+    if p is None:
+        return None
+    ok = np.array([not r for r in p.reasons], dtype=bool) & np.isfinite(p.fs)
+    return float(p.fs[ok].max()) if ok.any() else None
+
+
+def worst_cases(rows: Sequence[JobRow], eps: float, penalty_m: float, cap: int = WORST_CASES,
+                stored: Mapping[str, JobRow] | None = None) -> tuple[list[WorstCase], int]:
+    """The ``cap`` most severe breached images of ``rows`` and how many images are breached.
+
+    Each image stands by its most severe row: a misleading breach before an unknown one before a flagged-only one
+    (:data:`_KIND_ORDER`), then the larger error (a misleading row's: its largest confident-pose error), then the
+    smaller box. Images are ordered the same way. ``stored``: the stored runs by key, for rows read off a trace
+    (their corners are those of the run when the read-off budget has the run's worst point)."""
+    best: dict[str, tuple[tuple[float, float, float], JobRow, BreachKind | None, float | None]] = {}
+    for r in rows:
+        if mx.survived(r, eps):
+            continue
+        kind = mx.breach_kind(r, eps)
+        conf_m = confident_m(r)
+        err = conf_m if kind is BreachKind.MISLEADING and conf_m is not None else (
+            r.worst_m if r.worst_m is not None else penalty_m)
+        key = (_KIND_ORDER[kind], -err, r.box_level or 0.0)
+        if r.sample_id not in best or key < best[r.sample_id][0]:
+            best[r.sample_id] = (key, r, kind, conf_m)
+    cases = []
+    for _, r, kind, conf_m in sorted(best.values(), key=lambda t: (t[0], t[1].sample_id))[:cap]:
+        src = r
+        if r.read_from and stored is not None:  # read off a run: its corners hold where its worst point is the run's
+            run = stored.get(r.key.removesuffix(f"@{r.budget_label}"))
+            src = run if run is not None and run.worst_x == r.worst_x else r
+        worst = (src.payload or {}).get("worst") or {}
+        cases.append(WorstCase(r.sample_id, r.box_label or "", r.method, r.budget_label,
+                               float(r.worst_m if r.worst_m is not None else penalty_m),
+                               None if r.worst_x is None else dict(r.worst_x), None if kind is None else kind.value,
+                               r.worst_reason, worst.get("conf"), src.worst_corners, conf_m))
+    return cases, len(best)
+
+
 def evidence_of(ctx: Context) -> Evidence:
-    """The run's :class:`Evidence` from its main rows (rows read off a trace included, per budget: each budget is
-    a box's evidence of its own only when the run has one budget; otherwise the largest budget stands for it)."""
-    rows = [r for r in ctx.main if r.chain is None and r.box is not None]
+    """The run's :class:`Evidence` from its main rows and its failure-probability rows (rows read off a trace
+    included, per budget: each budget is a box's evidence of its own only when the run has one budget; otherwise the
+    largest budget stands for it)."""
+    rows = [r for r in [*ctx.main, *ctx.risk] if r.chain is None and r.box is not None]
     if len({r.budget_label for r in rows}) > 1:  # runtime experiments: the evidence of the largest budget
         top = max(rows, key=lambda r: (mx.budget_value(r, "max_seconds"), mx.budget_value(r, "max_evals")))
         rows = [r for r in rows if r.budget_label == top.budget_label]
     boxes = {}
     for r in sorted(rows, key=lambda r: r.box_level or 0.0):
         boxes.setdefault(r.box_label, []).append(r)
-    worst = sorted((r for r in rows if not mx.survived(r, ctx.eps)),
-                   key=lambda r: -(r.worst_m if r.worst_m is not None else ctx.spec.penalty_m))
-    seen: set[str] = set()
-    cases = []
-    for r in worst:  # one line per image: its most severe breach
-        if r.sample_id in seen:
-            continue
-        seen.add(r.sample_id)
-        kind = mx.breach_kind(r, ctx.eps)
-        cases.append(WorstCase(r.sample_id, r.box_label or "", r.method, float(r.worst_m or ctx.spec.penalty_m),
-                               r.worst_x, None if kind is None else kind.value))
-        if len(cases) == WORST_CASES:
-            break
+    stored = None
+    if any(r.read_from for r in rows):
+        stored = {r.key: r for r in ctx.store.jobs(kind="search", role="main", with_trace=False)}
+    cases, breached = worst_cases(rows, ctx.eps, ctx.spec.penalty_m, stored=stored)
     runs = ctx.store.runs()
     return Evidence(experiment=ctx.spec.name, eps_safe_m=ctx.eps, level=LEVEL, jobs_done=ctx.store.count(),
                     jobs_planned=runs[-1].get("jobs_total") if runs else None,
-                    boxes=tuple(_box_evidence(lab, rs, ctx.eps) for lab, rs in boxes.items()), worst=tuple(cases))
+                    boxes=tuple(_box_evidence(lab, rs, ctx.eps) for lab, rs in boxes.items()), worst=tuple(cases),
+                    breached=breached)
 
 
 def _pct_ci(ci: tuple[float, float] | None) -> str:
@@ -142,24 +225,26 @@ def _ranges(b: BoxEvidence) -> str:
     return ", ".join(f"{n} ∈ [{fmt_num(lo)}, {fmt_num(hi)}]" for n, (lo, hi) in b.ranges.items())
 
 
-def section_evidence(ctx: Context) -> Section | None:
-    """The evidence section (module docstring); also writes ``evidence.json`` into the report's directory."""
+def _bound_text(b: BoxEvidence) -> str:
+    """The bound cell: each risk estimator's pooled p_fail with its interval, else random search's bound on the
+    breached share of Θ over its no-breach images."""
+    if b.risk:
+        return "; ".join(f"p_fail {r.p_fail_pct:.2g} % [{r.ci_pct[0]:.2g}, {r.ci_pct[1]:.2g}] ({r.method}, "
+                         f"{100 * r.level:g} %)" for r in b.risk)
+    return "–" if b.residual_bound is None else f"< {100 * b.residual_bound:.2g} % of Θ (random search)"
+
+
+def section_evidence(ctx: Context, ev: Evidence) -> Section | None:
+    """The first screen of the report (module docstring): per box, survival with its interval, misleading against
+    flagged-only images and the bound, then completeness; also writes ``evidence.json`` into the report's
+    directory. None when the run has no box with a result."""
     import json
 
-    ev = evidence_of(ctx)
     if not ev.boxes:
         return None
     atomic_write(ctx.out_dir / "evidence.json", json.dumps(ev.to_dict(), indent=1, default=str))
     unit = ctx.spec.unit
-    s = Section("Evidence: safe where, and how sure")
-    s.html.append(
-        f"<p>Per box, over every method together: {'an' if unit[0] in 'aeiou' else 'a'} {unit} is <i>breached</i> "
-        "when any method found an error above "
-        f"ε_safe = {ev.eps_safe_m:g} m. <i>Misleading</i>: some search found a confident pose (confidence ≥ τ_conf, "
-        "a PnP position) off by more than ε_safe — integrity lost, the system does not know. <i>Flagged only</i>: "
-        "every breach was a failure the system sees (no detection, low confidence, PnP failed) — availability "
-        f"lost. Intervals: exact (Clopper–Pearson) {100 * ev.level:g} % over the {unit}s; they describe the {unit}s "
-        "drawn, not the searches' misses.</p>")
+    s = Section("Safe where, and how sure")
     lines = []
     for b in ev.boxes:
         lines.append({
@@ -167,34 +252,31 @@ def section_evidence(ctx: Context) -> Section | None:
             "evals": b.evaluations,
             "survival": f"{Rate(b.survivors, b.images).pct:.1f} {_pct_ci(b.survival_ci)}",
             "misleading": "?" if b.misleading is None else f"{b.misleading} {_pct_ci(b.misleading_ci)}",
-            "flagged": "?" if b.flagged is None else str(b.flagged),
-            "residual": "–" if b.residual_bound is None else f"< {100 * b.residual_bound:.2g} %",
+            "flagged": "?" if b.flagged is None else str(b.flagged), "bound": _bound_text(b),
             "ra": b.remaining_area_pct,
             "status": ", ".join(f"{k} {v}" for k, v in b.search_status.items()),
         })
-    s.html.append("<h3>Coverage and statistical bounds</h3>")
     s.html.append(table(lines, [
-        ("box", "box", esc), ("ranges", "parameters", esc), ("methods", "methods", esc), ("n", f"{unit}s", None),
-        ("evals", "evaluations", None), ("survival", "survival % [95 % CI]", esc),
+        ("box", "box", esc), ("n", f"{unit}s", None), ("survival", "survival % [95 % CI]", esc),
         ("misleading", f"misleading {unit}s [95 % CI, %]", esc), ("flagged", "flagged only", esc),
-        ("residual", "breached share of Θ, random search's no-breach images (95 %)", esc),
-    ], left=("box", "ranges", "methods")))
+        ("bound", "bound (95 %)", esc), ("ranges", "parameters", esc),
+    ], left=("box", "ranges", "bound"), cls="headline"))
+    article = "an" if unit[0] in "aeiou" else "a"
     s.html.append(
-        "<p>Breached share of Θ: where random search drew k independent uniform θ and found no breach, the breached "
-        "part of the box is below 1 − 0.05<sup>1/k</sup> of its volume at 95 % (the largest such bound over those "
-        f"{unit}s). A search that found nothing says only this much; DIRECT's and APGD's points are not uniform "
-        "draws and give no such bound.</p>")
+        f'<p class="legend">Per box, over every method together: {article} {unit} <i>survives</i> when no method '
+        f"found an error above ε_safe = {ev.eps_safe_m:g} m. <i>Misleading</i>: some search found a confident pose "
+        "(confidence ≥ τ_conf, a PnP position) off by more than ε_safe — integrity lost, the system does not know. "
+        "<i>Flagged only</i>: every breach was a failure the system sees (no detection, low confidence, PnP "
+        f"failed) — availability lost. Intervals: exact (Clopper–Pearson) {100 * ev.level:g} % over the {unit}s; "
+        f"they describe the {unit}s drawn, not the searches' misses. Bound: where random search drew k independent "
+        "uniform θ and found no breach, the breached part of the box is below 1 − 0.05<sup>1/k</sup> of its volume "
+        f"at 95 % (the largest such bound over those {unit}s; DIRECT's and APGD's points are not uniform draws and "
+        "give none); a risk run's pooled failure probability p_fail under its θ distribution, with its interval.</p>")
     s.html.append("<h3>Completeness</h3>")
-    s.html.append(table(lines, [("box", "box", esc), ("ra", "mean remaining area RA, last iteration (%)", None),
-                                ("status", "how the searches ended (jobs)", esc)], left=("box", "status")))
+    s.html.append(table(lines, [("box", "box", esc), ("methods", "methods", esc), ("evals", "evaluations", None),
+                                ("ra", "mean remaining area RA, last iteration (%)", None),
+                                ("status", "how the searches ended (jobs)", esc)], left=("box", "methods", "status")))
     planned = f" of {ev.jobs_planned} planned" if ev.jobs_planned else ""
     s.html.append(f"<p>{ev.jobs_done} jobs done{planned}. RA: the share of Θ the DIRECT-family searches had not "
                   "pruned when they stopped (estimated, not sound without a Lipschitz constant; see the zones).</p>")
-    if ev.worst:
-        s.html.append(f"<h3>Worst cases ({len(ev.worst)} most severe {unit}s)</h3>")
-        s.html.append(table([{**dataclasses.asdict(w), "theta": theta_text(w.theta)} for w in ev.worst], [
-            ("sample_id", unit, esc), ("box_label", "box", esc), ("method", "found by", esc),
-            ("worst_m", "error (m)", None), ("theta", "at θ", esc), ("kind", "kind", esc)],
-            left=("sample_id", "box_label", "method", "theta", "kind")))
     return s
-

@@ -11,8 +11,7 @@ from .rows import Context, Section, sample_cols
 
 
 def section_risk(ctx: Context) -> Section | None:
-    rows = [r for r in ctx.store.jobs(kind="risk", with_points=True, with_trace=False)
-            if r.status is JobStatus.DONE and r.payload and "risk" in r.payload]
+    rows = [r for r in ctx.risk if r.status is JobStatus.DONE and r.payload and "risk" in r.payload]
     if not rows:
         return None
     info = rows[0].payload["risk"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -42,12 +43,19 @@ class Context:
         return self.spec.eps_safe_m
 
     @cached_property
+    def risk(self) -> list[JobRow]:
+        """The stored failure-probability jobs (``vbl-robust risk``) with their points (every draw)."""
+        return self.store.jobs(kind="risk", with_points=True, with_trace=False)
+
+    @cached_property
     def runs(self) -> list[JobRow]:
         """The stored main search jobs with their points (as run: no rows read off a trace)."""
         return self.store.jobs(kind="search", role="main", with_points=True, with_trace=False)
 
-    def figure(self, fig: Any, name: str, caption: str) -> str:
-        png = figure_png(fig)
+    def figure(self, fig: Any, name: str, caption: str, *, colors: int | None = None) -> str:
+        """``fig`` written to ``figures/<name>.png`` (atomically; ``colors``: a palette of that many colours, see
+        :func:`~vbl_robust.report.html.figure_png`) and closed; returns its embedded ``<figure>`` HTML."""
+        png = figure_png(fig, colors=colors)
         plt.close(fig)
         path = self.out_dir / "figures" / f"{name}.png"
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -59,6 +67,12 @@ class Context:
         """A PNG already written under ``figures/`` (e.g. by :func:`vbl_robust.report.figures.plot_zones`), embedded."""
         self.figures.append(path)
         return img(path.read_bytes(), name, caption)
+
+
+def anchor(title: str) -> str:
+    """The id of a section's heading (``"Per method, box and budget"`` → ``"per-method-box-and-budget"``): what a
+    link to the section names."""
+    return re.sub(r"[^a-z0-9]+", "-", title.lower()).strip("-") or "section"
 
 
 def reference(ctx: Context, boxes: Sequence[BoxSpec]) -> list[JobRow]:

@@ -13,14 +13,15 @@ import numpy as np
 
 from ..campaigns import metrics as mx
 from ..campaigns.experiments import range_text
-from ..campaigns.store import JobStatus
+from ..campaigns.store import JobRow, JobStatus
 from ..constants import FAILURE_REASONS, Verdict
 from ..search import NON_FINITE
 from . import figures as F
-from .html import esc, fmt_num, table
+from .html import esc, fmt_num, folded, table
 from .rows import (
     Context,
     Section,
+    anchor,
     landscape_grids,
     landscape_runs,
     main_boxes,
@@ -97,19 +98,44 @@ def section_overview(ctx: Context, title: str) -> Section:
                  for r in failed[:50]]
         s.html.append(table(lines, [("sample_id", "sample", None), ("method", "method", None),
                                     ("box_label", "box", None), ("reason", "reason", None)],
-                            left=("sample_id", "method", "box_label", "reason")))
+                            left=("sample_id", "method", "box_label", "reason"), fold="The failed jobs"))
     return s
+
+
+#: The title of :func:`section_methods`, whose table the figures' sections link to when they would repeat it.
+METHODS_TITLE = "Per method, box and budget"
 
 
 def section_methods(ctx: Context) -> Section | None:
-    """Per method, box and budget: the summary table and the failed evaluations by reason."""
+    """Per method, box and budget: the summary table and, folded, the failed evaluations by reason."""
     if not ctx.main:
         return None
-    s = Section("Per method, box and budget")
+    s = Section(METHODS_TITLE)
     summary = mx.summarize(ctx.main, ctx.eps)
     s.html.append(_summary_table(summary, ctx.spec.unit))
-    s.html.append(_failures_table(summary, ctx.spec.penalty_m))
+    failures = _failures_table(summary, ctx.spec.penalty_m)
+    if failures:
+        s.html.append(folded("Failed evaluations by reason", failures))
     return s
+
+
+def _repeats_methods_table(ctx: Context, rows: Sequence[JobRow], by: tuple[str, str]) -> bool:
+    """True when summarising ``rows`` by ``by`` gives the rows of :func:`section_methods`' table again: they are
+    all the main rows and the grouping drops only a key that has one value per group (one budget per method and
+    box, or one box)."""
+    if len(rows) != len(ctx.main):
+        return False
+    dropped = "budget_label" if "budget_label" not in by else "box_label"
+    values: dict[tuple, set] = {}
+    for r in rows:
+        values.setdefault(tuple(getattr(r, k) for k in by), set()).add(getattr(r, dropped))
+    return all(len(v) == 1 for v in values.values())
+
+
+def _methods_link(unit: str) -> str:
+    return (f'<p class="note">The numbers behind this figure — per method and box: {unit}s, survival with its exact '
+            f'95 % interval, breaches by kind, effort — are the table in <a href="#{anchor(METHODS_TITLE)}">'
+            f"{esc(METHODS_TITLE)}</a> above (not repeated here).</p>")
 
 
 def section_survival_level(ctx: Context) -> Section | None:
@@ -128,7 +154,12 @@ def section_survival_level(ctx: Context) -> Section | None:
     s.html.append(ctx.figure(fig, "survival_2d" if two_d else "survival_1d",
                              "Survival rate S_rate: share of images whose worst error found stays ≤ ε_safe. Lower "
                              "means the search found more breaches (a stronger search)."))
-    s.html.append(_summary_table(summary + ref))
+    if _repeats_methods_table(ctx, rows, ("method", "box_label")):
+        s.html.append(_methods_link(ctx.spec.unit))
+        if ref:
+            s.html.append("<p>The dense grid (the true worst case up to its spacing):</p>" + _summary_table(ref))
+    else:
+        s.html.append(_summary_table(summary + ref))
     s.html.append(_against_grid_table(mx.against_reference(rows, reference(ctx, boxes), ctx.eps), ctx.spec.unit))
     return s
 
@@ -163,6 +194,7 @@ def section_runtime(ctx: Context) -> Section | None:
         ref = {"survival": mx.survival_rate(w, ctx.eps), "median_worst_m": float(np.median(w))}
     box_label = boxes[0].label if boxes else ""
     s = Section(f"Runtime budgets ({box_label})")
+    same = _repeats_methods_table(ctx, [*time_rows, *eval_rows], ("method", "budget_label"))
     for axis, rs, name in (("max_seconds", time_rows, "time"), ("max_evals", eval_rows, "evals")):
         if len({r.budget_label for r in rs}) < 2:
             continue
@@ -174,7 +206,10 @@ def section_runtime(ctx: Context) -> Section | None:
         s.html.append(ctx.figure(fig, f"runtime_{dims}_{name}",
                                  "Left: survival rate; right: median over images of the worst error found "
                                  "(no early stop). Dashed black: the dense grid's true worst case."))
-        s.html.append(_summary_table(summary, ctx.spec.unit))
+        if not same:
+            s.html.append(_summary_table(summary, ctx.spec.unit))
+    if same:
+        s.html.append(_methods_link(ctx.spec.unit))
     read = sorted({r.method for r in rows if r.read_from})
     if read:
         own = sorted({r.method for r in rows if not r.read_from})
@@ -406,7 +441,8 @@ def section_per_image(ctx: Context) -> Section | None:
     cols += [("worst", "worst of all (m)", None), ("verdict", "verdict", None)]
     s = Section(f"Per {ctx.spec.unit}: worst case found")
     s.html.append(table(lines, cols, row_class=lambda r: "breach" if r["verdict"] is Verdict.BREACH else "",
-                        left=("sample_id", "envelope", "verdict", *[f"{m}_x" for m in methods])))
+                        left=("sample_id", "envelope", "verdict", *[f"{m}_x" for m in methods]),
+                        fold=f"Each {ctx.spec.unit}'s worst case per method (breaches in red)"))
     return s
 
 

@@ -1,0 +1,163 @@
+"""The report's first screen and its worst-case gallery: breached images most severe first (misleading before
+flagged only, then the larger error), capped; the predicted corners stored with each job and drawn; an older store
+without them still reports; every id escaped."""
+
+import dataclasses
+import html
+import re
+import sqlite3
+
+import numpy as np
+import pytest
+
+from vbl_robust.campaigns import Budget, DetectorSpec, ResultStore, run_campaign
+from vbl_robust.campaigns import store as store_module
+from vbl_robust.campaigns.experiments import audit_spec
+from vbl_robust.campaigns.spec import CampaignSpec, roll_contrast_box
+from vbl_robust.campaigns.store import JobRow, Points
+from vbl_robust.perturb import Perturbation
+from vbl_robust.report import build_report
+from vbl_robust.report.evidence import WORST_CASES, worst_cases
+from vbl_robust.stats import Rate
+
+EVIL = '<img src=x onerror=alert(1)>&"'
+SOURCE = {"kind": "synthetic", "n": 3, "seed": 5, "width": 128, "height": 128}
+
+
+@pytest.fixture(scope="module")
+def samples():
+    from vbl_robust.scenes import generate
+
+    return list(generate(3, seed=5, width=128, height=128))
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory, samples):
+    """An audit where every image breaches (ε_safe = 1 m; the oracle's corners off by 0.5 px)."""
+    out = tmp_path_factory.mktemp("gallery")
+    spec = dataclasses.replace(audit_spec(roll_contrast_box(10, (0.7, 1.4)), methods=("random",),
+                                          budget=Budget(max_evals=6)), eps_safe_m=1.0)
+    with ResultStore(out / "results.sqlite") as st:
+        run_campaign(spec, samples, st, detector=DetectorSpec("oracle", options={"noise_px": 0.5}),
+                     dataset_source=SOURCE)
+    return out
+
+
+def copy_store(run, to):
+    """A copy of ``run``'s store in the new directory ``to``; returns a connection to the copy."""
+    to.mkdir()
+    src, dst = sqlite3.connect(run / "results.sqlite"), sqlite3.connect(to / "results.sqlite")
+    src.backup(dst)
+    src.close()
+    return dst
+
+
+def test_the_predicted_corners_are_stored_where_the_detector_put_them(run, samples):
+    from vbl_robust.campaigns.work import Settings, build_objective
+
+    with ResultStore.open_existing(run) as st:
+        rows = {r.sample_id: r for r in st.jobs(role="main")}
+        spec = CampaignSpec.from_dict(st.campaign()["spec"])
+    detector = DetectorSpec("oracle", options={"noise_px": 0.5}).build()
+    for s in samples[:2]:
+        r = rows[s.id]
+        theta = np.array([[r.worst_x[n] for n in r.box.box.names]])
+        again = build_objective(s, detector, r.box.box, Settings.from_spec(spec)).evaluate(theta)
+        assert np.allclose(np.asarray(r.worst_corners), again.keypoints[0], atol=1e-6)
+        # the oracle's corners: the true ones moved by the perturbation, off by its noise
+        moved = Perturbation(r.box.box).points(s.corners_2d, theta, K=s.K)[0]
+        assert np.abs(np.asarray(r.worst_corners) - moved).max() < 3.0
+        assert r.payload["worst"]["conf"] == pytest.approx(float(again.conf[0]))
+
+
+def test_the_first_screen_is_survival_per_box_with_its_interval(run):
+    page = build_report(run).read_text()
+    headings = re.findall(r"<h2[^>]*>(.*?)</h2>", page)
+    assert headings[:3] == ["Safe where, and how sure", "Summary", "Worst cases: the 3 most severe of 3 breached images"]
+    first = page.split("<h2", 2)[1]
+    ci = Rate(0, 3).ci
+    assert "survival % [95 % CI]" in first and f"0.0 [{ci.low:.1f}, {ci.high:.1f}]" in first
+    assert "misleading images" in first and "flagged only" in first and "bound (95 %)" in first
+
+
+def test_the_gallery_draws_each_rebuilt_image_beside_its_facts(run):
+    page = build_report(run).read_text()
+    gallery = page.split("<h2", 4)[3]
+    assert gallery.count('<div class="case">') == 3 and gallery.count("<img") == 3
+    assert gallery.count("drawn (red)") == 3 and "misleading" in gallery and "θ*" in gallery
+    pngs = sorted((run / "figures").glob("gallery_*.png"))
+    assert [p.name for p in pngs] == ["gallery_01.png", "gallery_02.png", "gallery_03.png"]
+    assert all(p.stat().st_size < 200_000 for p in pngs)
+
+
+def test_every_id_is_escaped_and_a_sample_missing_from_the_rebuilt_dataset_is_said(run, tmp_path):
+    con = copy_store(run, tmp_path / "evil")
+    for table in ("jobs", "samples", "contents"):
+        con.execute(f"UPDATE {table} SET sample_id = ? WHERE sample_id = 'synth_s5_000002'", (EVIL,))
+    con.commit()
+    con.close()
+    page = build_report(tmp_path / "evil").read_text()
+    assert EVIL not in page and f"image {html.escape(EVIL)}</h3>" in page
+    assert "No pictures: the images cannot be rebuilt here" in page and "are not in its rebuilt dataset" in page
+
+
+def test_an_old_store_without_corners_still_reports(run, tmp_path):
+    old = tmp_path / "old"
+    con = copy_store(run, old)
+    kept = ", ".join(c for c in store_module.JOB_COLUMNS if c != "worst_corners_json")
+    con.executescript(f"CREATE TABLE old_jobs AS SELECT {kept} FROM jobs; DROP TABLE jobs; "
+                      "ALTER TABLE old_jobs RENAME TO jobs;")
+    con.execute(f"PRAGMA user_version = {store_module.SCHEMA_VERSION - 1}")
+    con.commit()
+    con.close()
+    page = build_report(old).read_text()
+    assert "Safe where, and how sure" in page and "not stored (a row written before schema 4" in page
+    assert "drawn (red)" not in page and page.count('<div class="case">') == 3
+
+
+def test_a_run_whose_images_cannot_be_rebuilt_shows_the_cases_without_pictures(run, tmp_path):
+    moved = tmp_path / "elsewhere"
+    con = copy_store(run, moved)
+    con.execute("UPDATE runs SET dataset_json = ?", ('{"source": {"kind": "lard", "csv": "/nowhere/x.csv"}}',))
+    con.commit()
+    con.close()
+    page = build_report(moved).read_text()
+    gallery = page.split("<h2", 4)[3]
+    assert "No pictures: the images cannot be rebuilt here" in gallery and "<img" not in gallery
+    assert gallery.count('<div class="case">') == 3 and gallery.count("drawn (red)") == 3
+
+
+# -- the order of the cases, on rows made by hand ------------------------------------------------------------
+def _row(sid, worst, reasons_fs, level=5.0):
+    from vbl_robust.campaigns.spec import BoxSpec
+    from vbl_robust.space import ParameterBox
+
+    fs = [f for _, f in reasons_fs]
+    return JobRow(key=f"{sid}{level}", experiment="t", kind="search", role="main", method="random", sample_id=sid,
+                  sample_index=0, status="done", worst_m=worst, verdict="breach" if worst > 1000 else "no breach found",
+                  worst_x={"roll_deg": 1.0}, worst_reason="" if reasons_fs[-1][0] == "" else reasons_fs[-1][0],
+                  box=BoxSpec(ParameterBox({"roll_deg": (-level, level)}), f"±{level:g}°", level),
+                  points=Points([[0.0]] * len(fs), fs, tuple(r for r, _ in reasons_fs)))
+
+
+def test_cases_are_the_breached_images_misleading_first_then_by_error_and_capped():
+    rows = [
+        _row("flagged", 5000.0, [("no_detection", 5000.0)]),
+        _row("safe", 300.0, [("", 300.0)]),
+        _row("mis-small", 1500.0, [("", 1500.0)]),
+        _row("mis-large", 9000.0, [("", 9000.0)]),
+        # its worst point is a flagged failure, but a confident pose 2500 m off lies elsewhere: misleading, 2500 m
+        _row("mis-hidden", 5000.0, [("", 2500.0), ("low_confidence", 5000.0)]),
+        # breached at two boxes: it stands by its misleading one
+        _row("two", 5000.0, [("pnp_failed", 5000.0)], level=2.0), _row("two", 1200.0, [("", 1200.0)], level=10.0),
+    ]
+    cases, breached = worst_cases(rows, 1000.0, 5000.0)
+    assert breached == 5
+    assert [c.sample_id for c in cases] == ["mis-large", "mis-hidden", "mis-small", "two", "flagged"]
+    assert [c.kind for c in cases] == ["misleading"] * 4 + ["flagged"]
+    hidden = cases[1]
+    assert (hidden.worst_m, hidden.reason, hidden.confident_m) == (5000.0, "low_confidence", 2500.0)
+    many = [_row(f"s{i:02d}", 1001.0 + i, [("", 1001.0 + i)]) for i in range(20)]
+    cases, breached = worst_cases(many, 1000.0, 5000.0)
+    assert breached == 20 and len(cases) == WORST_CASES
+    assert [c.worst_m for c in cases] == sorted((c.worst_m for c in cases), reverse=True)
