@@ -295,18 +295,42 @@ class Stratum:
     n: int
 
 
-def stratified_interval(strata: Sequence[Stratum], level: float = LEVEL) -> tuple[float, Interval]:
-    """The stratified estimate Σ mass·k/n of a failure probability and a valid interval: each stratum's exact
-    interval at level 1 − (1 − level)/S (Bonferroni over the S strata), weighted by its mass. The masses must sum
-    to 1; a stratum with n = 0 contributes its whole mass to the top (nothing is known of it)."""
+def binomial_bounds(k: int, n: int, alpha_low: float, alpha_high: float) -> tuple[float, float]:
+    """One-sided exact (Clopper–Pearson) bounds of a binomial proportion: a lower bound that exceeds p with
+    probability ≤ ``alpha_low`` and an upper bound below p with probability ≤ ``alpha_high`` (beta quantiles; 0 for
+    k = 0 and 1 for k = n). ``clopper_pearson`` at level 1 − α is the pair with α/2 on each side."""
+    from scipy.stats import beta
+
+    if n < 0 or not 0 <= k <= max(n, 0):
+        raise ValueError(f"need 0 <= k <= n, got k={k}, n={n}")
+    if not (0.0 < alpha_low < 1.0 and 0.0 < alpha_high < 1.0):
+        raise ValueError(f"alphas must be in (0, 1), got {alpha_low!r}, {alpha_high!r}")
+    if n == 0:
+        return 0.0, 1.0
+    low = 0.0 if k == 0 else float(beta.ppf(alpha_low, k, n - k + 1))
+    high = 1.0 if k == n else float(beta.ppf(1.0 - alpha_high, k + 1, n - k))
+    return low, high
+
+
+def stratified_interval(strata: Sequence[Stratum], level: float = LEVEL,
+                        split: Sequence[tuple[float, float]] | None = None) -> tuple[float, Interval]:
+    """The stratified estimate Σ mass·k/n of a failure probability and a valid interval: each stratum's one-sided
+    exact bounds (:func:`binomial_bounds`), weighted by its mass. The error δ = 1 − ``level`` is shared among the 2S
+    one-sided bounds by ``split`` (per stratum, the shares of δ of its lower and upper bound, fixed before the draws;
+    they sum to 1), by default evenly (δ/(2S) each: Bonferroni, the two-sided exact interval at 1 − δ/S per
+    stratum). The masses must sum to 1; a stratum with n = 0 contributes its whole mass to the top."""
     total = sum(s.mass for s in strata)
     if not strata or abs(total - 1.0) > 1e-9 or any(s.mass < 0 for s in strata):
         raise ValueError(f"strata masses must be >= 0 and sum to 1, got {[s.mass for s in strata]}")
-    each = 1.0 - (1.0 - level) / len(strata)
+    delta = 1.0 - level
+    split = [(0.5 / len(strata), 0.5 / len(strata))] * len(strata) if split is None else list(split)
+    if len(split) != len(strata) or any(a <= 0 or b <= 0 for a, b in split) or abs(sum(map(sum, split)) - 1) > 1e-9:
+        raise ValueError(f"split needs a positive (low, high) share per stratum summing to 1, got {split}")
     est, low, high = 0.0, 0.0, 0.0
-    for s in strata:
-        ci = clopper_pearson(s.k, s.n, each)
+    for s, (a, b) in zip(strata, split, strict=True):
+        lo, hi = binomial_bounds(s.k, s.n, a * delta, b * delta)
         est += s.mass * (s.k / s.n if s.n else 0.0)
-        low += s.mass * ci.low
-        high += s.mass * ci.high
-    return est, Interval(low, min(high, 1.0), level, "stratified Clopper-Pearson (Bonferroni)")
+        low += s.mass * lo
+        high += s.mass * hi
+    method = "stratified Clopper-Pearson (Bonferroni" + (")" if len(set(split)) == 1 else ", δ split fixed in advance)")
+    return est, Interval(low, min(high, 1.0), level, method)
