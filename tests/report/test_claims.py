@@ -323,3 +323,25 @@ def test_first_breach_and_largest_jump():
     assert math.isnan(C.first_breach_s(_row([10, 2000]), 1000, 5000))  # no stamped times
     jump, slope = C.largest_jump(np.array([[0.1], [0.0], [0.2]]), np.array([300.0, 100.0, 5000.0]), 5000)
     assert jump == pytest.approx(4700) and slope == pytest.approx(47000)
+
+
+def test_the_index_has_one_card_per_experiment_with_its_figure_and_the_verdicts_on_it(tmp_path):
+    (tmp_path / "spatial-1d").mkdir()
+    (tmp_path / "spatial-1d" / "report.html").write_text("x")
+    (tmp_path / "spatial-1d" / "headline.png").write_bytes(b"png")
+    (tmp_path / "x<y>").mkdir()
+    claims = [C.Claim("spatial-1d", "claim A", "", "", C.HOLDS, "", 3),
+              C.Claim("spatial-1d + spatial-2d", "claim B & more", "", "", C.TIE, "", 3),
+              C.Claim("runtime-1d", "claim C", "", "", C.FAILS, "", 3)]
+    page = C.write_index(tmp_path, ["spatial-1d", "x<y>"], C.claims_html(claims), {"spatial-1d": "3 of 3 jobs"},
+                         claims=claims).read_text()
+    cards = page.split('<div class="cards">')[1].split("</div></div>")[0].split('<div class="card">')[1:]
+    assert len(cards) == 2
+    spatial, other = cards
+    assert '<a href="spatial-1d/report.html">spatial-1d</a>' in spatial and "3 of 3 jobs" in spatial
+    assert '<img src="spatial-1d/headline.png"' in spatial and "Spatial" in spatial  # the experiment's title
+    assert 'verdict-holds">holds</span> claim A' in spatial and 'verdict-tie">tie</span> claim B &amp; more' in spatial
+    assert "claim C" not in spatial and "x&lt;y&gt;" in other and "no report yet" in other and "<img" not in other
+    # the claims table below: prose left-aligned, the numbers folded under each claim
+    table = page.split('<section class="claims">')[1]
+    assert table.count('<td class="l">claim A<details>') == 1 and table.count("verdict-does-not-hold") == 1

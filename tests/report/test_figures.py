@@ -123,6 +123,21 @@ def every_figure():
     yield "gallery", F.worst_view(img, img, corners, corners + 3, corners + 6, confident=False)
 
 
+#: The widest a report shows a figure (CSS px): the page's 1100 px less its padding (a laptop's 1280 px window).
+PAGE_PX = 1068
+
+
+def smallest_text_px(fig, dpi=110):
+    """The smallest font of the drawn texts of ``fig`` (CSS px) when its PNG (at ``dpi``) is shown at most
+    :data:`PAGE_PX` wide."""
+    from matplotlib.text import Text
+
+    fig.canvas.draw()
+    scale = min(1.0, PAGE_PX / (fig.get_figwidth() * dpi)) * dpi / 72
+    sizes = [t.get_fontsize() for t in fig.findobj(Text) if t.get_visible() and t.get_text().strip()]
+    return min(sizes) * scale
+
+
 @pytest.fixture(scope="module")
 def drawn():
     return dict(every_figure())
@@ -132,3 +147,9 @@ def drawn():
                                   "risk", "gallery"])
 def test_no_title_label_or_legend_is_clipped(name, drawn):
     assert outside(drawn[name]) == (0, 0, 0, 0)
+
+
+@pytest.mark.parametrize("name", ["survival", "runtime", "distance", "progress", "landscape", "convergence", "pnp",
+                                  "risk", "gallery"])
+def test_every_text_is_readable_at_a_laptops_width(name, drawn):
+    assert smallest_text_px(drawn[name]) >= 9.0

@@ -88,6 +88,9 @@ def test_the_gallery_draws_each_rebuilt_image_beside_its_facts(run):
     pngs = sorted((run / "figures").glob("gallery_*.png"))
     assert [p.name for p in pngs] == ["gallery_01.png", "gallery_02.png", "gallery_03.png"]
     assert all(p.stat().st_size < 200_000 for p in pngs)
+    # the run's headline figure (an index card's), one of its figures, never a gallery picture
+    figures = {p.read_bytes() for p in (run / "figures").glob("*.png") if not p.name.startswith("gallery_")}
+    assert (run / "headline.png").read_bytes() in figures
 
 
 def test_every_id_is_escaped_and_a_sample_missing_from_the_rebuilt_dataset_is_said(run, tmp_path):
@@ -161,3 +164,14 @@ def test_cases_are_the_breached_images_misleading_first_then_by_error_and_capped
     cases, breached = worst_cases(many, 1000.0, 5000.0)
     assert breached == 20 and len(cases) == WORST_CASES
     assert [c.worst_m for c in cases] == sorted((c.worst_m for c in cases), reverse=True)
+
+
+def test_a_row_read_off_a_longer_run_takes_its_corners_only_where_its_worst_point_is_the_runs():
+    from vbl_robust.campaigns.spec import Budget as B
+
+    corners = ((1.0, 2.0), (3.0, 4.0), (5.0, 6.0), (7.0, 8.0))
+    run = _row("a", 2000.0, [("", 2000.0)]).replace(key="k", worst_corners=corners, payload={"worst": {"conf": 0.7}})
+    same = run.replace(key="k@1 evals", budget=B(max_evals=1), read_from="5 s", worst_corners=None, payload=None)
+    moved = same.replace(sample_id="b", worst_x={"roll_deg": 2.0})
+    cases, _ = worst_cases([same, moved], 1000.0, 5000.0, stored={"k": run})
+    assert [(c.sample_id, c.corners, c.conf) for c in cases] == [("a", corners, 0.7), ("b", None, None)]

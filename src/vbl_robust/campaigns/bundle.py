@@ -17,7 +17,8 @@ and, with ``stores=True``, ``results.sqlite.xz``: a compact copy of the store (`
 
 and ``out/status.md``: one line per experiment (jobs done / planned, images, wall and worker hours),
 ``out/claims.md``: the paper's claims checked on those stores (:mod:`vbl_robust.report.claims`), and
-``out/index.html``: a link to each report (with its jobs done) and the claims section. With
+``out/index.html``: one card per experiment (a link to its report, its jobs done, its headline figure and the
+verdicts of the claims on it) and the claims section. With
 ``reproduction=PATH`` the part of that Markdown file between :data:`BEGIN` and :data:`END` is replaced by the
 claims and status tables (the rest of it is prose kept as written). Without ``stores``
 the SQLite stores are not copied (tens of MB; a packed store already in ``out`` is kept); rerunning the command that
@@ -224,7 +225,7 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
         atomic_write(stage / "claims.md", claims)
         write_index(stage, list(totals), claims_html(checked, str(root)),
                     {n: f"{t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} of {t['images']} "
-                        f"images" for n, t in totals.items()})
+                        f"images" for n, t in totals.items()}, claims=checked)
         _publish(stage, out)
     finally:
         shutil.rmtree(stage, ignore_errors=True)

@@ -3,7 +3,8 @@
 The report is rebuilt from the store alone: every figure is drawn from the stored rows, every figure comes with
 the table of the numbers behind it (or a link to it, where another section shows the same rows), and the
 provenance of every run (code version, model SHA-256, dataset identity, configuration) closes the page. Figures
-are also written as PNG files next to the report. The one exception is the pixels of the worst-case gallery: its
+are also written as PNG files next to the report, and the run's headline figure (:data:`HEADLINE`) as
+``headline.png`` beside it (what an index card of runs shows). The one exception is the pixels of the worst-case gallery: its
 images are rebuilt from the run's dataset source (where that is not possible, the gallery says so and shows the
 stored facts alone).
 
@@ -83,6 +84,24 @@ SECTIONS: dict[str, Callable[[Context], Section | None]] = {
 }
 
 
+#: The figure that stands for a run on an index card (``headline.png`` beside the report): the first of these
+#: names drawn (a prefix matches, e.g. ``runtime_2d_time``), else the run's first figure.
+HEADLINE = ("survival_", "runtime_", "distance_profile", "families_ranking", "sequence_errors", "convergence",
+            "pnp_solvers", "risk", "landscape_", "best_vs_evals")
+HEADLINE_FILE = "headline.png"
+
+
+def _headline(figures: list[Path], out_dir: Path) -> None:
+    """Write the run's headline figure (:data:`HEADLINE`) to ``out_dir/headline.png``; none drawn: remove an
+    old one."""
+    drawn = [p for p in figures if not p.name.startswith("gallery_")] or figures
+    rank = [next((i for i, pre in enumerate(HEADLINE) if p.stem.startswith(pre)), len(HEADLINE)) for p in drawn]
+    if not drawn:
+        (out_dir / HEADLINE_FILE).unlink(missing_ok=True)
+        return
+    atomic_write(out_dir / HEADLINE_FILE, drawn[rank.index(min(rank))].read_bytes())
+
+
 def _guarded(name: str, build: Callable[..., Any], *args: Any) -> Any:
     """``build(*args)``, or a section saying it failed (logged): one broken section must not hide the others. An
     operating-system error (a full disk, no permission to write a figure) is not the section's: it ends the report."""
@@ -130,6 +149,7 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
         body.append(f'<section id="{anchor(sec.title)}"><h2>{esc(sec.title)}</h2>')
         body.extend(sec.html)
         body.append("</section>")
+    _headline(ctx.figures, out_dir)
     path = out_dir / "report.html"
     atomic_write(path, page(f"vbl-robust {spec.name}", "\n".join(body)))
     return path

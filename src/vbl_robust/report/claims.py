@@ -622,30 +622,64 @@ def claims_markdown(claims: Sequence[Claim], source: str = "ROOT") -> str:
     return "\n".join([*lines, "", GENERATED.format(f"`{source}`"), ""])
 
 
+def _badge(verdict: str) -> str:
+    return f'<span class="verdict verdict-{verdict.replace(" ", "-")}">{html.escape(verdict)}</span>'
+
+
 def claims_html(claims: Sequence[Claim], source: str = "ROOT") -> str:
-    """An HTML ``<section>`` with the claims table (every text escaped) and how it was generated."""
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in _HEADERS)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(getattr(c, k)))}</td>" for k in _COLUMNS) + "</tr>"
-                   for c in claims)
+    """An HTML ``<section>`` with the claims table (every text escaped) and how it was generated: per claim its
+    experiments, the claim, the verdict and the images; our numbers, the dense grid's and why, folded under the
+    claim (prose reads left-aligned and wraps)."""
+    head = "".join(f'<th class="l">{html.escape(h)}</th>' for h in ("experiment", "the paper's claim", "verdict",
+                                                                    "images"))
+    body = []
+    for c in claims:
+        parts = [("ours", c.ours), ("dense grid (truth)", c.truth), ("why", c.reason)]
+        dl = "".join(f"<dt>{html.escape(k)}</dt><dd>{html.escape(str(v))}</dd>" for k, v in parts if v)
+        body.append(f'<tr><td class="l">{html.escape(c.experiment)}</td><td class="l">{html.escape(c.claim)}'
+                    f"<details><summary>numbers and why</summary><dl>{dl}</dl></details></td>"
+                    f'<td class="l">{_badge(c.verdict)}</td><td>{c.images}</td></tr>')
     return (f'<section class="claims"><h2>The paper\'s claims, checked</h2><table><thead><tr>{head}</tr></thead>'
-            f"<tbody>{body}</tbody></table><p>{html.escape(GENERATED.format(source))}</p></section>")
+            f"<tbody>{''.join(body)}</tbody></table><p>{html.escape(GENERATED.format(source))}</p></section>")
+
+
+def _card(out: Path, name: str, note: str, claims: Sequence[Claim]) -> str:
+    """One experiment's card on the index: its title and link, jobs done, headline figure, the verdicts of the
+    claims on it."""
+    from ..campaigns.experiments import EXPERIMENTS
+    from .build import HEADLINE_FILE
+
+    href = quote(name)  # quoted: a folder named "javascript:…" stays a relative path
+    exp = EXPERIMENTS.get(name.removesuffix("-truth"))
+    title = exp.title if exp else ""
+    if name.endswith("-truth") and exp:
+        title = f"dense-grid truth behind {name.removesuffix('-truth')}'s survivors"
+    has_report = (out / name / "report.html").exists()
+    head = (f'<a href="{esc(href)}/report.html">{esc(name)}</a>' if has_report
+            else f"{esc(name)} <small>(no report yet: rerun to resume)</small>")
+    parts = [f"<h2>{head}</h2>"]
+    if title:
+        parts.append(f'<p class="claim">{esc(title)}</p>')
+    if note:
+        parts.append(f'<p class="claim">{esc(note)}</p>')
+    if (out / name / HEADLINE_FILE).exists():
+        img = f'<img src="{esc(href)}/{HEADLINE_FILE}" alt="{esc(name)}: headline figure" loading="lazy">'
+        parts.append(f'<a href="{esc(href)}/report.html">{img}</a>' if has_report else img)
+    mine = [c for c in claims if name in c.experiment.split(" + ")]
+    parts += [f'<p class="claim">{_badge(c.verdict)} {esc(c.claim)}</p>' for c in mine]
+    return f'<div class="card">{"".join(parts)}</div>'
 
 
 def write_index(out: str | Path, names: Sequence[str], extra: str = "",
-                notes: Mapping[str, str] | None = None) -> Path:
+                notes: Mapping[str, str] | None = None, claims: Sequence[Claim] = ()) -> Path:
     """``out/index.html``, the page of a set of experiment runs (``reproduce paper|all``) or of their bundle: one
-    link per experiment's report (those that exist; ``notes[name]``, e.g. its jobs done, after it), then ``extra``
-    HTML (the claims section, :func:`claims_html`); returns its path."""
+    card per experiment — a link to its report (when it exists), ``notes[name]`` (e.g. its jobs done), its
+    headline figure (``<experiment>/headline.png``, :func:`vbl_robust.report.build.build_report`) and the verdict
+    of each of ``claims`` on it — then ``extra`` HTML (the claims section, :func:`claims_html`); returns its path."""
     out, notes = Path(out), notes or {}
-
-    def item(n: str) -> str:
-        note = f" — {esc(notes[n])}" if n in notes else ""
-        if (out / n / "report.html").exists():  # quoted: a folder named "javascript:…" stays a relative path
-            return f'<li><a href="{esc(quote(n))}/report.html">{esc(n)}</a>{note}</li>'
-        return f"<li>{esc(n)} (no report yet: rerun to resume){note}</li>"
-
     title = "vbl-robust: the paper's experiments"
-    atomic_write(out / "index.html", page(title, f"<h1>{esc(title)}</h1><ul>{''.join(map(item, names))}</ul>{extra}"))
+    cards = "".join(_card(out, n, notes.get(n, ""), claims) for n in names)
+    atomic_write(out / "index.html", page(title, f'<h1>{esc(title)}</h1><div class="cards">{cards}</div>{extra}'))
     return out / "index.html"
 
 

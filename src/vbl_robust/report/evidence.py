@@ -112,6 +112,7 @@ class Evidence:
     boxes: tuple[BoxEvidence, ...]
     worst: tuple[WorstCase, ...]
     breached: int = 0
+    budget: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -200,9 +201,11 @@ def evidence_of(ctx: Context) -> Evidence:
     included, per budget: each budget is a box's evidence of its own only when the run has one budget; otherwise the
     largest budget stands for it)."""
     rows = [r for r in [*ctx.main, *ctx.risk] if r.chain is None and r.box is not None]
+    budget = None
     if len({r.budget_label for r in rows}) > 1:  # runtime experiments: the evidence of the largest budget
         top = max(rows, key=lambda r: (mx.budget_value(r, "max_seconds"), mx.budget_value(r, "max_evals")))
-        rows = [r for r in rows if r.budget_label == top.budget_label]
+        budget = top.budget_label
+        rows = [r for r in rows if r.budget_label == budget]
     boxes = {}
     for r in sorted(rows, key=lambda r: r.box_level or 0.0):
         boxes.setdefault(r.box_label, []).append(r)
@@ -214,7 +217,7 @@ def evidence_of(ctx: Context) -> Evidence:
     return Evidence(experiment=ctx.spec.name, eps_safe_m=ctx.eps, level=LEVEL, jobs_done=ctx.store.count(),
                     jobs_planned=runs[-1].get("jobs_total") if runs else None,
                     boxes=tuple(_box_evidence(lab, rs, ctx.eps) for lab, rs in boxes.items()), worst=tuple(cases),
-                    breached=breached)
+                    breached=breached, budget=budget)
 
 
 def _pct_ci(ci: tuple[float, float] | None) -> str:
@@ -245,6 +248,9 @@ def section_evidence(ctx: Context, ev: Evidence) -> Section | None:
     atomic_write(ctx.out_dir / "evidence.json", json.dumps(ev.to_dict(), indent=1, default=str))
     unit = ctx.spec.unit
     s = Section("Safe where, and how sure")
+    if ev.budget:
+        s.html.append(f"<p>At the largest budget per {unit}, <b>{esc(ev.budget)}</b> (the other budgets: the table "
+                      "per method, box and budget).</p>")
     lines = []
     for b in ev.boxes:
         lines.append({

@@ -195,8 +195,8 @@ def pnp_comparison(summary: Sequence[Mapping[str, Any]]) -> Figure:
     """Median and mean (MAE) relative position error per PnP solver (over its successful solves), for the
     ground-truth and the detector keypoints; tick labels give each solver's failure count."""
     sources = list(dict.fromkeys(r["source"] for r in summary))
-    fig, axes = _fig(1, len(sources), size=(5.0 * len(sources), 4.2), squeeze=False)
-    for ax, src in zip(axes[0], sources, strict=True):
+    fig, axes = _fig(1, len(sources), size=(3.8 * len(sources), 4.2), squeeze=False)
+    for k, (ax, src) in enumerate(zip(axes[0], sources, strict=True)):
         rs = [r for r in summary if r["source"] == src]
         x = np.arange(len(rs))
         ax.bar(x - 0.2, [r["median_rel_pct"] for r in rs], 0.4, label="median", color="#1f77b4")
@@ -208,7 +208,8 @@ def pnp_comparison(summary: Sequence[Mapping[str, Any]]) -> Figure:
             ax.set_yscale("log")
         else:
             ax.text(0.5, 0.5, "no successful solve", ha="center", va="center", transform=ax.transAxes)
-        ax.set_ylabel("position error (% of slant distance)")
+        if k == 0:  # each panel its own log scale, one label
+            ax.set_ylabel("position error (% of slant distance)")
         ax.set_title(f"{src} keypoints")
         ax.grid(alpha=0.3, axis="y")
     fig.legend(*axes[0][0].get_legend_handles_labels(), fontsize=8, loc="outside lower center", ncol=2)

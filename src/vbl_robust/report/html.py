@@ -57,12 +57,16 @@ details > summary { cursor: pointer; color: #1f4f7f; margin: .4em 0; }
 .case .facts dd { margin: 0; overflow-wrap: anywhere; }
 .kind-misleading { color: #b00; font-weight: 600; }
 .kind-flagged { color: #a60; font-weight: 600; }
-.cards { display: grid; grid-template-columns: repeat(auto-fill, minmax(330px, 1fr)); gap: 1em; }
+.cards { display: grid; grid-template-columns: repeat(auto-fill, minmax(440px, 1fr)); gap: 1em; }
 .card { border: 1px solid #ccd; border-radius: 6px; padding: .6em .8em; background: #fcfcfe; }
 .card h2 { margin: 0 0 .3em; font-size: 18px; border: 0; }
-.card img { display: block; margin: .4em 0; }
+.card img { display: block; margin: .4em auto; max-height: 300px; }
 .card .claim { font-size: 13px; margin: .5em 0 0; }
-.verdict { display: inline-block; padding: 0 .5em; border-radius: 4px; font-size: 13px; font-weight: 600; }
+section.claims td { vertical-align: top; }
+section.claims td:first-child { white-space: nowrap; }
+section.claims dl { display: grid; grid-template-columns: max-content 1fr; gap: .2em .8em; font-size: 12px; }
+section.claims dd { margin: 0; }
+.verdict { display: inline-block; white-space: nowrap; padding: 0 .5em; border-radius: 4px; font-size: 13px; font-weight: 600; }
 .verdict-holds { background: #dff3df; color: #135f13; }
 .verdict-partly, .verdict-tie { background: #fff1cc; color: #6b4e00; }
 .verdict-contradicted, .verdict-does-not-hold { background: #fde2e2; color: #8a1010; }
