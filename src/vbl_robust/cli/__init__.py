@@ -12,6 +12,7 @@ import typer
 from typer.core import TyperGroup
 
 from .common import set_verbosity, stop_on_sigterm
+from .config import RecordingCommand
 
 
 #: The commands that run a campaign into a store (a rerun resumes them).
@@ -91,6 +92,9 @@ def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log progr
 
 for _name in _COMMAND_MODULES:
     importlib.import_module(f"{__name__}.{_name}").register(app)
+for _info in app.registered_commands:  # a campaign's run directory keeps its configuration (config.yaml)
+    if (_info.name or _info.callback.__name__) in _CAMPAIGNS:
+        _info.cls = RecordingCommand
 
 
 def main() -> None:  # pragma: no cover - console entry

@@ -453,6 +453,7 @@ def register(app: typer.Typer) -> None:
         report: bool = o.REPORT,
         quiet: bool = o.QUIET,
         verbose: bool = o.VERBOSE,
+        config: Path | None = o.CONFIG,
         sequences: str | None = typer.Option(None, "--sequences", help="Audit approach sequences instead of images: "
                                              "a number N (generated) or a LARD V2 directory grouped into sequences; "
                                              "one θ is held over each sequence (see --sustain)."),
@@ -562,6 +563,7 @@ def register(app: typer.Typer) -> None:
         workers: int = o.WORKERS,
         quiet: bool = o.QUIET,
         verbose: bool = o.VERBOSE,
+        config: Path | None = o.CONFIG,
     ) -> None:
         """A small audit on the defaults (10 synthetic images, georobust-av / random / APGD, roll ±15° and contrast
         [0.7, 1.4], early stop at a breach) with its HTML report — a few minutes on a laptop CPU."""

@@ -50,3 +50,4 @@ RETRY_FAILED = typer.Option(False, "--retry-failed", help="Run the jobs stored a
 CSV = typer.Option(None, "--csv", help="Also export the job rows to this CSV file.")
 PARQUET = typer.Option(None, "--parquet", help="Also export the job rows to this Parquet file.")
 REPORT = typer.Option(True, "--report/--no-report", help="Write report.html into --out.")
+from .config import CONFIG  # noqa: E402  (declared beside what it reads; listed here with the other shared options)

@@ -179,6 +179,7 @@ def register(app: typer.Typer) -> None:
                                             "evaluation-rate probe runs (black box, gradient)."),
         quiet: bool = o.QUIET,
         verbose: bool = o.VERBOSE,
+        config: Path | None = o.CONFIG,
     ) -> None:
         """Run one of the paper's experiments, or all; rerunning the same command resumes it."""
         from vbl_robust.campaigns.experiments import Options, with_options

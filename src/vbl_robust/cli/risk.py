@@ -58,6 +58,7 @@ def register(app: typer.Typer) -> None:
         report: bool = o.REPORT,
         quiet: bool = o.QUIET,
         verbose: bool = o.VERBOSE,
+        config: Path | None = o.CONFIG,
     ) -> None:
         """Failure probability per image when θ is drawn from a distribution over the box (turbulence, not a worst
         case): p_fail with a valid interval, a verdict on p_fail ≤ τ, and the rate pooled over the images."""

@@ -24,6 +24,7 @@ def register(app: typer.Typer) -> None:
         report: bool = o.REPORT,
         quiet: bool = o.QUIET,
         verbose: bool = o.VERBOSE,
+        config: Path | None = o.CONFIG,
     ) -> None:
         """Dense grid on the images every method of RUN left surviving at its largest box: is "no breach found"
         true? Prints the true survival there and the true breaches each method missed."""

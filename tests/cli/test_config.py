@@ -1,0 +1,80 @@
+"""A run described by a file: --config FILE gives the options (the command line overrides them), every run
+directory keeps its full configuration as config.yaml, and that file repeats the run."""
+
+import sqlite3
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from vbl_robust.cli import app
+
+runner = CliRunner()
+
+
+def _jobs(run):
+    with sqlite3.connect(run / "results.sqlite") as con:
+        return con.execute("SELECT count(*) FROM jobs").fetchone()[0]
+
+
+def test_a_campaign_file_runs_the_command_line_overrides_it_and_the_run_keeps_its_configuration(tmp_path,
+                                                                                              monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "campaign.yaml").write_text(
+        "command: audit\nn: 2\nmax-evals: 6\nmethods: random\noracle: true\noracle_noise: 0.5\nwidth: 96\n"
+        "height: 96\nperturb: [blur_px]\nearly-stop: false\nlandscape: false\nout: runs/a\n")
+    res = runner.invoke(app, ["-q", "audit", "--config", "campaign.yaml", "--max-evals", "8"])
+    assert res.exit_code == 0, res.output
+    kept = yaml.safe_load((tmp_path / "runs/a/config.yaml").read_text())
+    assert kept["command"] == "audit" and kept["max_evals"] == 8 and kept["n"] == 2  # the override, the file
+    assert kept["perturb"] == ["blur_px"] and kept["early_stop"] is False and kept["seed"] == 0  # and a default
+    assert "config" not in kept and "quiet" not in kept
+    with sqlite3.connect(tmp_path / "runs/a/results.sqlite") as con:
+        assert {r[0] for r in con.execute("SELECT nfev FROM jobs")} == {8}  # the command line won
+    done = _jobs(tmp_path / "runs/a")
+    again = runner.invoke(app, ["-q", "audit", "--config", "runs/a/config.yaml"])  # repeats it: nothing new to run
+    assert again.exit_code == 0 and f"0 new jobs, {done} already done" in again.output, again.output
+    fresh = runner.invoke(app, ["-q", "audit", "--config", "runs/a/config.yaml", "--out", "runs/b"])
+    assert fresh.exit_code == 0 and _jobs(tmp_path / "runs/b") == done
+
+
+@pytest.mark.parametrize("text, message", [
+    ("foo: 1\n", "'foo' is not an option of audit"),
+    ("command: risk\n", "a configuration for 'risk', not 'audit'"),
+    ("[1, 2]\n", "expected a mapping of option names to values"),
+    ("max-evals: [oops\n", "not YAML"),
+    ("quiet: true\n", "'quiet' is not an option of audit"),
+    ("max_evals: abc\n", "Invalid value for '--max-evals'"),
+])
+def test_a_bad_campaign_file_is_refused_in_one_line_before_any_work(tmp_path, text, message):
+    (tmp_path / "c.yaml").write_text(text)
+    res = runner.invoke(app, ["audit", "--config", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "run")])
+    assert res.exit_code == 2 and message in res.output and "Traceback" not in res.output, res.output
+    assert not (tmp_path / "run").exists()
+
+
+def test_every_campaign_command_takes_a_file():
+    for command in ("audit", "demo", "risk", "reproduce", "truth"):
+        res = runner.invoke(app, [command, "--help"])
+        assert res.exit_code == 0 and "--config" in res.output, command
+
+
+def test_the_campaign_files_in_the_documentation_name_real_options(tmp_path):
+    """Each YAML block of docs/how-to/config.md reads as a configuration of its command (keys and command)."""
+    import re
+    from pathlib import Path
+
+    import typer
+
+    from vbl_robust.cli.config import read_config
+
+    page = Path(__file__).resolve().parents[2] / "docs" / "how-to" / "config.md"
+    blocks = re.findall(r"```yaml\n(.*?)```", page.read_text(), flags=re.S)
+    assert len(blocks) >= 4
+    group = typer.main.get_command(app)
+    for i, text in enumerate(blocks):
+        command = yaml.safe_load(text)["command"]
+        path = tmp_path / f"{i}.yaml"
+        path.write_text(text)
+        names = {p.name for p in group.commands[command].params}
+        assert read_config(path, command, names), text
