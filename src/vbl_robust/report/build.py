@@ -149,7 +149,7 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
         body.append(f'<section id="{anchor(sec.title)}"><h2>{esc(sec.title)}</h2>')
         body.extend(sec.html)
         body.append("</section>")
-    _headline(ctx.figures, out_dir)
     path = out_dir / "report.html"
     atomic_write(path, page(f"vbl-robust {spec.name}", "\n".join(body)))
+    _headline(ctx.figures, out_dir)
     return path
