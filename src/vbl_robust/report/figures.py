@@ -649,10 +649,11 @@ def worst_view(original: np.ndarray, perturbed: np.ndarray, true_before: np.ndar
                predicted: np.ndarray | None, *, confident: bool = True,
                titles: tuple[str, str] = ("unperturbed", "perturbed at θ*")) -> Figure:
     """A gallery entry: the unperturbed image with its true corners beside the perturbed one with the true corners
-    moved by the perturbation (``true_after``) and the corners the detector predicted (``predicted``, None when
-    none; dashed legend "below τ_conf" unless ``confident``). Images ``(H, W, 3)``, corners ``(4, 2)`` pixels (TR,
-    TL, BL, BR); each panel is a square crop around its corners (:func:`crop_window`), both at one scale (the
-    larger of their :func:`crop_side`) unless one is over 3× the other (predicted corners far off)."""
+    moved by the perturbation (``true_after``) and the corners the detector predicted (``predicted``; None: only
+    the true corners are drawn; ``confident`` False: they gave no pose, a flagged failure). Images ``(H, W, 3)``,
+    corners ``(4, 2)`` pixels (TR, TL, BL, BR); each panel is a square crop around its corners
+    (:func:`crop_window`), both at one scale (the larger of their :func:`crop_side`) unless one is over 3× the
+    other (predicted corners far off)."""
     fig, axes = _fig(1, 2, size=(6.4, 3.6))
     h, w = original.shape[:2]
     panels = ((original, true_before, None), (perturbed, true_after, predicted))
@@ -672,8 +673,9 @@ def worst_view(original: np.ndarray, perturbed: np.ndarray, true_before: np.ndar
         ax.set_yticks([])
         ax.set_title(title, fontsize=10)
         ax.set_xlabel(f"{x1 - x0:.0f} px crop of the {w}×{h} image", fontsize=8)
-    handles = [Line2D([], [], color=TRUE_CORNERS["color"], marker="o", label="true corners"),
-               Line2D([], [], color=PREDICTED_CORNERS["color"], marker="x", linestyle="--",
-                      label="predicted corners" + ("" if confident else " (below τ_conf)"))]
+    handles = [Line2D([], [], color=TRUE_CORNERS["color"], marker="o", label="true corners")]
+    if predicted is not None:
+        handles.append(Line2D([], [], color=PREDICTED_CORNERS["color"], marker="x", linestyle="--",
+                              label="predicted corners" + ("" if confident else " (no pose: flagged)")))
     fig.legend(handles=handles, fontsize=8, loc="outside lower center", ncol=2, frameon=False)
     return fig
