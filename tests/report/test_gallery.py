@@ -175,3 +175,18 @@ def test_a_row_read_off_a_longer_run_takes_its_corners_only_where_its_worst_poin
     moved = same.replace(sample_id="b", worst_x={"roll_deg": 2.0})
     cases, _ = worst_cases([same, moved], 1000.0, 5000.0, stored={"k": run})
     assert [(c.sample_id, c.corners, c.conf) for c in cases] == [("a", corners, 0.7), ("b", None, None)]
+
+
+def test_a_risk_runs_first_screen_gives_its_pooled_failure_probability(tmp_path, samples):
+    from vbl_robust.campaigns.experiments import risk_spec
+    from vbl_robust.campaigns.risk import pooled_risk
+    from vbl_robust.campaigns.spec import roll_box
+
+    spec = risk_spec(roll_box(20), methods=("mc",), max_evals=16, guide_evals=4)
+    with ResultStore(tmp_path / "results.sqlite") as st:
+        run_campaign(spec, samples[:2], st, detector=DetectorSpec("oracle", options={"noise_px": 1.0}),
+                     dataset_source=SOURCE)
+        (p,) = pooled_risk(st.jobs(kind="risk", with_points=True))
+    first = build_report(tmp_path).read_text().split("<h2", 2)[1]
+    assert first.startswith(">Safe where, and how sure")
+    assert f"p_fail {100 * p.p_fail:.3g} % [{100 * p.ci.low:.3g}, {100 * p.ci.high:.3g}] (mc, 95 %)" in first

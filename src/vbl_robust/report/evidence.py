@@ -232,7 +232,7 @@ def _bound_text(b: BoxEvidence) -> str:
     """The bound cell: each risk estimator's pooled p_fail with its interval, else random search's bound on the
     breached share of Θ over its no-breach images."""
     if b.risk:
-        return "; ".join(f"p_fail {r.p_fail_pct:.2g} % [{r.ci_pct[0]:.2g}, {r.ci_pct[1]:.2g}] ({r.method}, "
+        return "; ".join(f"p_fail {r.p_fail_pct:.3g} % [{r.ci_pct[0]:.3g}, {r.ci_pct[1]:.3g}] ({r.method}, "
                          f"{100 * r.level:g} %)" for r in b.risk)
     return "–" if b.residual_bound is None else f"< {100 * b.residual_bound:.2g} % of Θ (random search)"
 
