@@ -266,20 +266,36 @@ class Perturbation:
             qu, qv = fam.source_coords(qu, qv, self._values(theta, params, qu), ctx)
         return qu, qv
 
+    def source_matrices(self, theta: np.ndarray, center, K=None) -> np.ndarray | None:
+        """The inverse geometric map of NumPy θ rows ``(B, d)`` as homographies ``(B, 3, 3)`` float64 (perturbed-frame
+        OpenCV pixels → source pixels, unreflected; :meth:`source_coords` as matrices), or None when some geometric
+        family has none (:meth:`Family.source_matrix <vbl_robust.perturb.family.Family.source_matrix>`). The
+        identity when no parameter is geometric."""
+        m = np.broadcast_to(np.eye(3), (theta.shape[0], 3, 3))
+        ctx = FrameContext(center=center, K=K)
+        for fam, params in reversed(self._of_kind("geometric")):  # the inverse: last map first
+            h = fam.source_matrix(self._values(theta, params), ctx)
+            if h is None:
+                return None
+            m = h @ m
+        return np.array(m, dtype=np.float64)
+
     def photometric_stats(self, values: torch.Tensor) -> torch.Tensor:
         """``(B,)`` statistics the photometric families need, from samples ``(B, 3, n, n)`` of the geometrically
         perturbed frames (the grey mean of the contrast)."""
         return gray_mean(values)
 
-    def photometric_torch(self, values: torch.Tensor, theta, stats: torch.Tensor | None) -> torch.Tensor:
+    def photometric_torch(self, values: torch.Tensor, theta, stats: torch.Tensor | None, *,
+                          inplace: bool = False) -> torch.Tensor:
         """The pointwise photometric families (haze, contrast, brightness, gamma) on pixel values ``(B, 3, …)`` of
-        the geometrically perturbed frames; ``stats`` from :meth:`photometric_stats` (needed by the contrast)."""
+        the geometrically perturbed frames; ``stats`` from :meth:`photometric_stats` (needed by the contrast).
+        ``inplace``: overwrite ``values`` (no gradient; the same values)."""
         for fam, params in self._of_kind("photometric"):
             v = self._values(theta, params, values)
             if fam.needs_stats and stats is None:
                 raise ValueError(f"Perturbation.photometric_torch: {fam!r} needs the frames' grey means (stats), "
                                  "and no exact grey mean is known at this point")
-            values = fam.pointwise(values, v, stats)
+            values = fam.pointwise_(values, v, stats) if inplace else fam.pointwise(values, v, stats)
             if stats is not None:
                 stats = fam.stats_after(stats, v, values.shape[1])
         return values

@@ -13,7 +13,8 @@ the images' device, or NumPy arrays in :meth:`Family.points`) elsewhere.
 What each kind implements (``kind`` lives in the registry entry):
 
 * ``geometric`` — :meth:`~Family.frame_numpy`, :meth:`~Family.frame_torch`, :meth:`~Family.points` (forward) and
-  :meth:`~Family.source_coords` (inverse, for views sampled straight from the source);
+  :meth:`~Family.source_coords` (inverse, for views sampled straight from the source); optionally
+  :meth:`~Family.source_matrix` (the inverse as homographies: the black-box path then warps with OpenCV);
 * ``optical`` and ``noise`` — the two frame maps (they act on whole frames);
 * ``photometric`` — the two frame maps and :meth:`~Family.pointwise` (on pixel values sampled from the
   geometrically perturbed frame, with the frame's grey mean ``stats`` where the family needs it:
@@ -83,10 +84,21 @@ class Family:
         """``geometric``: OpenCV coordinates in the perturbed frame ``(B, …)`` → source coordinates (unreflected)."""
         self._missing("source-coordinate map")
 
+    def source_matrix(self, v: dict, ctx: FrameContext):
+        """``geometric``, optional: the inverse map as homographies ``(N, 3, 3)`` float64 NumPy (OpenCV pixels of the
+        perturbed frame → source pixels, before reflection) for NumPy values; ``None`` (the default) when it is not
+        one: views are then sampled through :meth:`source_coords` (see :mod:`vbl_robust.perturb.warp`)."""
+        return None
+
     def pointwise(self, values, v: dict, stats):
         """``photometric``: pixel values ``(B, C, …)`` sampled from the geometrically perturbed frames → perturbed
         values; ``stats`` ``(B,)`` the frames' grey means (given when :attr:`needs_stats`)."""
         self._missing("pointwise map")
+
+    def pointwise_(self, values, v: dict, stats):
+        """:meth:`pointwise` in place on ``values`` (no gradient: the black-box path, one view at a time while it is
+        in the cache); the default copies :meth:`pointwise`'s result."""
+        return values.copy_(self.pointwise(values, v, stats))
 
     def stats_after(self, stats, v: dict, channels: int):
         """The frames' grey means after this family (``None``: not known exactly; a later family that needs them
@@ -105,11 +117,12 @@ def identity_like(column, value: float):
 
 class Pointwise(Family):
     """A one-parameter ``photometric`` family from its two functions: ``torch_fn(images, values (B,))`` and
-    ``numpy_fn(frame, value, out=)`` (the same map on whole frames and on sampled pixel values)."""
+    ``numpy_fn(frame, value, out=)`` (the same map on whole frames and on sampled pixel values), and optionally
+    ``inplace_fn(images, values (B,))``, ``torch_fn`` in place with the same operations (the same values)."""
 
-    def __init__(self, name: str, torch_fn, numpy_fn):
+    def __init__(self, name: str, torch_fn, numpy_fn, inplace_fn=None):
         self.params = (name,)
-        self._torch, self._numpy = torch_fn, numpy_fn
+        self._torch, self._numpy, self._inplace = torch_fn, numpy_fn, inplace_fn
 
     def frame_numpy(self, frame, v, ctx, out):
         return self._numpy(frame, v[self.params[0]], out=out)
@@ -119,3 +132,8 @@ class Pointwise(Family):
 
     def pointwise(self, values, v, stats):
         return self._torch(values, v[self.params[0]])
+
+    def pointwise_(self, values, v, stats):
+        if self._inplace is None:
+            return super().pointwise_(values, v, stats)
+        return self._inplace(values, v[self.params[0]])

@@ -89,6 +89,13 @@ def contrast_about(values: torch.Tensor, factor: torch.Tensor, mean: torch.Tenso
     return (f * values + (1.0 - f) * m).clamp(0.0, 1.0)
 
 
+def contrast_about_(values: torch.Tensor, factor: torch.Tensor, mean: torch.Tensor) -> torch.Tensor:
+    """:func:`contrast_about` in place on ``values`` (no gradient; the same operations, the same values)."""
+    f = torch.as_tensor(factor).to(values.dtype).reshape(-1, *([1] * (values.ndim - 1)))
+    m = torch.as_tensor(mean).to(values.dtype).reshape(-1, *([1] * (values.ndim - 1)))
+    return values.mul_(f).add_((1.0 - f) * m).clamp_(0.0, 1.0)
+
+
 def gray_mean(images: torch.Tensor) -> torch.Tensor:
     """(B,) grayscale mean of each image (ITU-R 601 luma for RGB): the grey level contrast scales about."""
     if images.shape[1] == 3:
@@ -152,6 +159,11 @@ def brightness(images: torch.Tensor, offset) -> torch.Tensor:
     return adjust_brightness(_broadcast_rows(images, f.shape[0]), f)
 
 
+def brightness_(values: torch.Tensor, offset) -> torch.Tensor:
+    """:func:`brightness` in place on ``values`` ``(B, C, …)`` (no gradient; the same values)."""
+    return values.add_(_factor(values, offset, "brightness").reshape(-1, *([1] * (values.ndim - 1)))).clamp_(0.0, 1.0)
+
+
 def brightness_numpy(image: np.ndarray, offset: float, out: np.ndarray | None = None) -> np.ndarray:
     """NumPy twin of :func:`brightness` for one float image ``(H, W, C)``; ``out`` may be ``image`` itself."""
     out = np.add(image, np.asarray(offset, dtype=image.dtype), out=out, dtype=image.dtype)
@@ -177,6 +189,11 @@ def gamma(images: torch.Tensor, exponent) -> torch.Tensor:
     if bool((f < 0).any()):
         raise ValueError(f"gamma: exponents must be >= 0, got {float(f.min()):g}")
     return adjust_gamma(_broadcast_rows(images, f.shape[0]), f)
+
+
+def gamma_(values: torch.Tensor, exponent) -> torch.Tensor:
+    """:func:`gamma` in place on ``values`` ``(B, C, …)`` (no gradient; the same values: kornia's gain is 1)."""
+    return values.pow_(_factor(values, exponent, "gamma").reshape(-1, *([1] * (values.ndim - 1)))).clamp_(0.0, 1.0)
 
 
 def gamma_numpy(image: np.ndarray, exponent: float, out: np.ndarray | None = None) -> np.ndarray:
@@ -215,10 +232,13 @@ class _Contrast(Family):
     def pointwise(self, values, v, stats):
         return contrast_about(values, v["contrast"], stats)
 
+    def pointwise_(self, values, v, stats):
+        return contrast_about_(values, v["contrast"], stats)
+
 
 #: the contrast family (registry entry ``contrast``)
 CONTRAST = _Contrast()
 #: the brightness family (registry entry ``brightness``)
-BRIGHTNESS = Pointwise("brightness", brightness, brightness_numpy)
+BRIGHTNESS = Pointwise("brightness", brightness, brightness_numpy, brightness_)
 #: the gamma family (registry entry ``gamma``)
-GAMMA = Pointwise("gamma", gamma, gamma_numpy)
+GAMMA = Pointwise("gamma", gamma, gamma_numpy, gamma_)

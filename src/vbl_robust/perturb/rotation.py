@@ -319,6 +319,20 @@ class _CameraAttitude(Family):
             return attitude_source_coords(qu, qv, *self._angles(v), ctx.K)
         return roll_source_coords(qu, qv, v["roll_deg"], ctx.center)
 
+    def source_matrix(self, v, ctx: FrameContext):
+        if self._homography(v):
+            if ctx.K is None:
+                raise ValueError("Perturbation.source_matrix: pitch_deg/yaw_deg need the intrinsics K")
+            angles = [torch.as_tensor(np.asarray(a, dtype=np.float64)) for a in self._angles(v)]
+            return attitude_homography(*angles, ctx.K, inverse=True).numpy()
+        if ctx.center is None:
+            raise ValueError("Perturbation.source_matrix: roll_deg needs the rotation centre (center=) or K")
+        roll = torch.as_tensor(np.asarray(v["roll_deg"], dtype=np.float64))
+        m = roll_matrix(-roll, torch.as_tensor(np.asarray(ctx.center, np.float64)).expand(roll.shape[0], 2))
+        out = np.zeros((roll.shape[0], 3, 3))
+        out[:, :2], out[:, 2, 2] = m.numpy(), 1.0  # the inverse of a roll by φ is the roll by −φ
+        return out
+
 
 #: the camera attitude family (registry entries ``roll_deg``, ``pitch_deg``, ``yaw_deg``)
 CAMERA_ATTITUDE = _CameraAttitude()

@@ -22,9 +22,13 @@ and moves points as the perturbation moves the image content.
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 import torch
 import torch.nn.functional as F
+
+from .warp import PooledSource, empty_output, grid_matrix, warp_view
 
 PAD_VALUE = 114.0 / 255.0
 
@@ -121,6 +125,31 @@ def pooled_source(image: torch.Tensor, p: int, cache: dict[int, torch.Tensor]) -
     return cache[p]
 
 
+#: id(source) -> (a weak reference to it, its version counter when cached, its pooled copies)
+_POOLED: dict[int, tuple[weakref.ref, int, dict]] = {}
+
+
+def source_cache(image: torch.Tensor) -> dict:
+    """The pooled copies of ``image`` (by factor: tensors; by ``("planes", factor)``: contiguous NumPy planes), kept while ``image`` lives and is not written to (its version
+    counter): the objective makes a sampler per chunk of θ from one source tensor, and pooling a full-resolution
+    frame costs as much as sampling a few views. Keyed by the tensor object the caller holds (a reshaped view of
+    it is a new object). A source that requires a gradient gets a fresh dict (no graph is
+    kept across calls)."""
+    if image.requires_grad:
+        return {}
+    key = id(image)
+    hit = _POOLED.get(key)
+    if hit is None or hit[0]() is not image or hit[1] != image._version:
+        hit = (weakref.ref(image, lambda ref, k=key, cache=_POOLED: _forget(cache, k, ref)), image._version, {})
+        _POOLED[key] = hit
+    return hit[2]
+
+
+def _forget(cache: dict, key: int, ref: weakref.ref) -> None:
+    if cache.get(key, (None,))[0] is ref:
+        del cache[key]
+
+
 def view_to_image(points: torch.Tensor, windows: torch.Tensor, size: int) -> torch.Tensor:
     """View-pixel edge coordinates (B, N, 2) → image **OpenCV** pixel coordinates (B, N, 2)."""
     windows = torch.as_tensor(windows, dtype=points.dtype, device=points.device)
@@ -204,7 +233,15 @@ class ViewSampler:
 
     Both are differentiable for a tensor θ. ``views`` is all a detector needs; :meth:`points` moves
     points like the image content (for the oracle and for crop geometry).
+
+    Kernels of the direct strategy: torch (``grid_sample``) for a tensor θ and on an accelerator; for a NumPy θ on
+    the CPU (the black box), one OpenCV warp per view plane at the exact map (:mod:`.warp`) when the geometry is one
+    homography per θ — the same views up to the torch kernel's float32 rounding, at a small fraction of its cost.
     """
+
+    #: the black-box path on the CPU samples with OpenCV (:mod:`.warp`); False: with torch, like the differentiable
+    #: path (for comparisons)
+    opencv: bool = True
 
     def __init__(self, perturbation, image, theta, center=None, *, K=None, scale=None,
                  frame: np.ndarray | None = None) -> None:
@@ -223,8 +260,9 @@ class ViewSampler:
         self.scale = scale
         self._frame_np = frame
         self._frames: torch.Tensor | None = None
-        self._pooled: dict[int, torch.Tensor] = {}
+        self._pooled = source_cache(image) if isinstance(image, torch.Tensor) else {}
         self._stats = None
+        self._matrices: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.theta.shape[0])
@@ -338,13 +376,80 @@ class ViewSampler:
         if self._stats is None:
             n, dtype = len(self), self.source.dtype
             p = pool_factor(float(max(self.height, self.width)), STATS_VIEW_SIDE)
-            t = (torch.arange(STATS_GRID, dtype=dtype, device=self.device) + 0.5) / STATS_GRID
-            xs, ys = (t * self.width).expand(n, STATS_GRID), (t * self.height).expand(n, STATS_GRID)
-            values, _ = self._sample(xs, ys, p, torch.arange(n, device=self.device))
+            values = None
+            if self._opencv():
+                zero = np.zeros(n)
+                values = self._warp(grid_matrix(zero, zero, self.width / STATS_GRID, self.height / STATS_GRID),
+                                    [p] * n, (STATS_GRID, STATS_GRID))
+            if values is None:
+                t = (torch.arange(STATS_GRID, dtype=dtype, device=self.device) + 0.5) / STATS_GRID
+                xs, ys = (t * self.width).expand(n, STATS_GRID), (t * self.height).expand(n, STATS_GRID)
+                values, _ = self._sample(xs, ys, p, torch.arange(n, device=self.device))
             self._stats = self.perturbation.photometric_stats(values)
         return self._stats
 
+    # -- the OpenCV kernel (:mod:`.warp`) ------------------------------------------------------------------------
+    def _opencv(self) -> bool:
+        """True when views are warped with OpenCV: a NumPy θ, a float32 source on the CPU, a homography per θ."""
+        if not (self.opencv and not self.differentiable and self.device.type == "cpu"
+                and self.source.dtype == torch.float32):
+            return False
+        if self._matrices is None:
+            m = self.perturbation.source_matrices(self.theta, self.center, self.K)
+            self._matrices = np.zeros(0) if m is None else m
+        return self._matrices.size > 0
+
+    def _pooled_cv(self, p: int) -> PooledSource:
+        """The source pooled by ``p`` as OpenCV reads it (cached with the source)."""
+        key = ("opencv", p)
+        if key not in self._pooled:
+            planes = np.ascontiguousarray(self._pooled_source(p)[0].numpy())
+            self._pooled[key] = PooledSource(planes, p, self.width, self.height)
+        return self._pooled[key]
+
+    def _warp(self, q: np.ndarray, pools: list[int], size: tuple[int, int], finish=None) -> torch.Tensor | None:
+        """``(N, C, ny, nx)`` samples of the geometrically perturbed frames on the grids ``q`` (N, 3, 3) (view pixel →
+        frame, :func:`~vbl_robust.perturb.warp.grid_matrix`) of ``size = (nx, ny)`` pixels, row ``b`` from the source
+        pooled by ``pools[b]`` and then handed to ``finish(b, view (1, C, ny, nx))`` (in place, while the view is in
+        the cache); None when some sample lies behind the camera (the torch path then takes the request)."""
+        h = self._matrices @ q
+        nx, ny = size
+        out = empty_output(len(self), self.source.shape[1], ny, nx, dtype=self.source.dtype)
+        o, scratch = out.numpy(), np.empty((ny, nx, 4), np.float32)
+        for b, p in enumerate(pools):
+            if not warp_view(self._pooled_cv(p), h[b], o[b], scratch):
+                return None
+            if finish is not None:
+                finish(b, out[b:b + 1])
+        return out
+
+    def _photometric_(self, b: int, view: torch.Tensor, stats) -> None:
+        """The photometric families on row ``b``'s view ``(1, C, …)`` with its statistics ``(1,)``, in place."""
+        if self.perturbation.has_photometric:
+            self.perturbation.photometric_torch(view, self._theta_on_device()[b:b + 1], stats, inplace=True)
+
+    def _direct_opencv(self, host: torch.Tensor, size: int) -> torch.Tensor | None:
+        win = host.to(torch.float64).numpy()
+        step = win[:, 2] / size
+        pools = [pool_factor(float(s), size) for s in win[:, 2]]
+        stats = self.stats() if self.perturbation.needs_stats else None
+        p = np.array(pools, dtype=np.float64)  # the part of each view outside the frame: grey (separable in x, y)
+        fx = _inside_fraction(win[:, 0], step, size, p, self.width // p)
+        fy = _inside_fraction(win[:, 1], step, size, p, self.height // p)
+        padded = (fx < 1.0).any(axis=1) | (fy < 1.0).any(axis=1)
+
+        def finish(b: int, view: torch.Tensor) -> None:
+            self._photometric_(b, view, None if stats is None else stats[b:b + 1])
+            if padded[b]:
+                _pad_outside(view[0].numpy(), fx[b], fy[b])
+
+        return self._warp(grid_matrix(win[:, 0], win[:, 1], step, step), pools, (size, size), finish)
+
     def _direct(self, windows: torch.Tensor, size: int, host: torch.Tensor) -> torch.Tensor:
+        if self._opencv():
+            out = self._direct_opencv(host, size)
+            if out is not None:
+                return out
         n, dtype = len(self), self.source.dtype
         out = torch.empty(n, self.source.shape[1], size, size, dtype=dtype, device=self.device)
         t = (torch.arange(size, dtype=dtype, device=self.device) + 0.5) / size
@@ -360,3 +465,25 @@ class ViewSampler:
                                                         self.stats()[idx] if needs_stats else None)
             out[idx] = v * mask + PAD_VALUE * (1.0 - mask)
         return out
+
+
+def _inside_fraction(x0: np.ndarray, step: np.ndarray, size: int, p: np.ndarray, pooled: np.ndarray) -> np.ndarray:
+    """``(N, size)`` float32: the fraction of each view pixel's sample inside the frame along one axis, for views
+    starting at edge coordinates ``x0`` ``(N,)`` with pixel steps ``step``, read from sources pooled by ``p`` to
+    ``pooled`` pixels (the ``mask`` of :meth:`ViewSampler._sample`, which is separable): 1 inside, falling to 0
+    over one pooled pixel outside."""
+    m = (x0[:, None] + (np.arange(size) + 0.5) * step[:, None]) / p[:, None] - 0.5  # pooled OpenCV coordinates
+    return (np.clip(1.0 + m, 0.0, 1.0) * np.clip(pooled[:, None] - m, 0.0, 1.0)).astype(np.float32)
+
+
+def _pad_outside(view: np.ndarray, fx: np.ndarray, fy: np.ndarray) -> None:
+    """Blend a view ``(C, ny, nx)`` with the grey pad where its samples lie (partly) outside the frame, in place:
+    ``v · f + PAD · (1 − f)`` with ``f = fy ⊗ fx``, computed only on the rows and columns where ``f < 1``."""
+    rows, cols = np.flatnonzero(fy < 1.0), np.flatnonzero(fx < 1.0)
+    if rows.size:
+        f = fy[rows, None] * fx[None, :]
+        view[:, rows, :] = view[:, rows, :] * f + np.float32(PAD_VALUE) * (1.0 - f)
+    if cols.size:
+        keep = np.flatnonzero(fy >= 1.0)[:, None]
+        f = fx[None, cols]
+        view[:, keep, cols] = view[:, keep, cols] * f + np.float32(PAD_VALUE) * (1.0 - f)

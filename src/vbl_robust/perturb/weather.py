@@ -75,6 +75,12 @@ def haze(images: torch.Tensor, amount) -> torch.Tensor:
     return torch.lerp(images, torch.full_like(images[:1], HAZE_AIRLIGHT), h)
 
 
+def haze_(values: torch.Tensor, amount) -> torch.Tensor:
+    """:func:`haze` in place on ``values`` ``(B, C, …)`` (no gradient; the same values)."""
+    h = torch.as_tensor(amount, device=values.device).to(values.dtype).reshape(-1, *([1] * (values.ndim - 1)))
+    return values.lerp_(values.new_full((1,) * values.ndim, HAZE_AIRLIGHT), h)
+
+
 def haze_numpy(image: np.ndarray, amount: float, out: np.ndarray | None = None) -> np.ndarray:
     """NumPy twin of :func:`haze` for one float image ``(H, W, C)``; ``out`` may be ``image`` itself."""
     h = float(amount)
@@ -180,7 +186,7 @@ class _Haze(Pointwise):
     """The registry's map of ``haze``; the blend is linear, so the frame's grey mean after it is known exactly."""
 
     def __init__(self):
-        super().__init__("haze", haze, haze_numpy)
+        super().__init__("haze", haze, haze_numpy, haze_)
 
     def stats_after(self, stats, v, channels):
         from .photometric import LUMA_WEIGHTS
