@@ -69,7 +69,7 @@ def _fmt(v, pct=False):
 
 
 def accuracy_section(dets: dict, samples: list) -> tuple[str, dict]:
-    from vbl_robust.detect.evaluate import evaluate_detector, summarize
+    from vbl_robust.detect.evaluate import evaluate_detector, range_rows
 
     lines = ["| detector | envelope | n | detection | correct (PCK 0.25) | corner median (px) | corner p95 (px) "
              "| bias u, v (px) | survival ippe_lm | pos. err % slant ippe_lm | pos. err % slant iterative "
@@ -80,7 +80,7 @@ def accuracy_section(dets: dict, samples: list) -> tuple[str, dict]:
         t = time.perf_counter()
         r = evaluate_detector(det, samples, drop_pixels=False)
         dt = (time.perf_counter() - t) / len(samples)
-        rows = summarize(r)
+        rows = range_rows(r)
         out[name] = rows
         for row in rows:
             lines.append(

@@ -60,10 +60,10 @@ def detector(model: str | None, second: str | None = None, **window):
 def evaluate(det, seed: int, n: int) -> tuple[list[dict], list[bool]]:
     """The summary rows of one seed and, per approach, whether it survived (ippe_lm) for paired comparisons."""
     from bench_detector import held_out
-    from vbl_robust.detect.evaluate import SURVIVAL_M, evaluate_detector, summarize
+    from vbl_robust.detect.evaluate import SURVIVAL_M, evaluate_detector, range_rows
 
     r = evaluate_detector(det, held_out(n, seed))
-    return summarize(r), [bool(e <= SURVIVAL_M) for e in r.pos_err_m["ippe_lm"]]
+    return range_rows(r), [bool(e <= SURVIVAL_M) for e in r.pos_err_m["ippe_lm"]]
 
 
 def compare(new: dict, old: dict, split: str = "validation") -> str:

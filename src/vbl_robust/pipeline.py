@@ -13,8 +13,8 @@ One contract for every objective (this one and :class:`~vbl_robust.sequences.Seq
 row) and :meth:`Objective.evaluate` the full :class:`EvalRecord`; the type of θ picks the mode. A NumPy θ is the
 black box (no gradient, OpenCV PnP); a torch θ the differentiable path (the detector's ``detect_top`` and the
 implicit PnP gradient; the values are a float64 tensor attached to θ; penalised rows are constant with zero
-gradient, never NaN). Each chunk of θ is two steps: :meth:`Objective.detect` (one detector call and σ_select →
-a :class:`~vbl_robust.detect.Selection`) and :meth:`Objective.score` (PnP and the error → an
+gradient, never NaN). Each chunk of θ is two steps: :meth:`Objective.select_at` (one detector call and σ_select →
+a :class:`~vbl_robust.detect.Selection`) and :meth:`Objective.locate` (PnP and the error → an
 :class:`EvalRecord`); an objective over several frames batches the first step across frames and scores each
 frame with the second. Both modes record per row why an evaluation failed
 (:data:`vbl_robust.constants.FAILURE_REASONS`): ``image_unavailable`` (the pixels cannot be loaded — every row,
@@ -305,8 +305,8 @@ class Objective:
         if self._image_error or t.shape[0] == 0:
             rec = self._all_failed(t, "image_unavailable" if self._image_error else "", self._image_error)
         else:
-            parts = [self.score(c, self.detect(c)) for c in (t[i : i + self.batch_size]
-                                                              for i in range(0, t.shape[0], self.batch_size))]
+            parts = [self.locate(c, self.select_at(c)) for c in (t[i : i + self.batch_size]
+                                                                  for i in range(0, t.shape[0], self.batch_size))]
             rec = parts[0] if len(parts) == 1 else EvalRecord.concat(parts)
         if rec.loss_t is not None:  # keeps the result attached to θ even if every row failed
             rec = dataclasses.replace(rec, loss_t=rec.loss_t + 0.0 * t.sum(dim=1).to(torch.float64))
@@ -320,7 +320,7 @@ class Objective:
                              "supports only the black-box path (a NumPy theta)")
 
     # -- the two steps of a chunk ----------------------------------------------------------------------------------
-    def detect(self, theta) -> Selection:
+    def select_at(self, theta) -> Selection:
         """Step 1: one detector call on the views of θ rows ``(B, d)`` and σ_select (:meth:`selection`)."""
         ctx = self.context(theta)
         if isinstance(theta, torch.Tensor):
@@ -329,7 +329,7 @@ class Objective:
             return self.selection(self.detector.detect(ctx), int(theta.shape[0]))
 
     def selection(self, raw, n: int) -> Selection:
-        """σ_select of a detector's output for ``n`` rows — a list of ``Detections`` (``detect``) or the top
+        """σ_select of a detector's output for ``n`` rows — a list of ``Detections`` (the detector's ``detect``) or the top
         candidates ``(conf (n,), keypoints (n, 4, 2))`` of ``detect_top`` (then ``keypoints_t`` is set) — with the
         keypoints in the sample's pixels."""
         if isinstance(raw, tuple):
@@ -345,7 +345,7 @@ class Objective:
         sel = select(dets, self.conf_threshold)
         return dataclasses.replace(sel, keypoints=self._scale.to_original(sel.keypoints))
 
-    def score(self, theta, sel: Selection) -> EvalRecord:
+    def locate(self, theta, sel: Selection) -> EvalRecord:
         """Step 2: PnP on the selected keypoints and the position error of θ rows ``(B, d)`` → :class:`EvalRecord`
         (with ``loss_t`` when ``sel`` came from the differentiable path)."""
         grad = sel.keypoints_t is not None

@@ -119,7 +119,7 @@ class _ShiftedTruth:
 
 
 def test_evaluate_scores_known_errors():
-    from vbl_robust.detect.evaluate import evaluate_detector, score, summarize
+    from vbl_robust.detect.evaluate import comparison_key, evaluate_detector, range_rows
     from vbl_robust.geometry.camera import project, rot_y, runway_corners
 
     samples = []
@@ -133,7 +133,7 @@ def test_evaluate_scores_known_errors():
     r = evaluate_detector(_ShiftedTruth(samples, [0.25, -0.5]), samples, batch=2)
     assert r.detected.all()
     assert np.allclose(r.corner_err, np.hypot(0.25, 0.5) * 2)  # 1024-px units: twice the 512-px error
-    rows = summarize(r)
+    rows = range_rows(r)
     assert [row["envelope"] for row in rows] == ["far", "medium", "close", "all"]
     assert rows[-1]["bias_u_px"] == pytest.approx(0.5) and rows[-1]["bias_v_px"] == pytest.approx(-1.0)
     assert np.all(r.pos_err_m["ippe_lm"] > 0) and np.all(np.isfinite(r.pos_err_m["ippe_lm"]))
@@ -144,7 +144,7 @@ def test_evaluate_scores_known_errors():
     assert off.correct.tolist() == list(off.box_diag * 0.25 >= 40.0) and not off.correct.all()
     exact = evaluate_detector(_ShiftedTruth(samples, [0.0, 0.0]), samples)
     assert np.all(exact.pos_err_m["ippe_lm"] < 1e-3)
-    assert score(exact) >= score(r)
+    assert comparison_key(exact) >= comparison_key(r)
 
 
 def test_new_stage_starts_from_previous_weights(tmp_path):
@@ -184,7 +184,7 @@ class _Levelled(_ShiftedTruth):
 
 
 def test_edge_tilt_slope_tells_a_roll_blind_detector_from_an_exact_one():
-    from vbl_robust.detect.evaluate import edge_angles_deg, edge_tilt_slope, evaluate_detector, summarize
+    from vbl_robust.detect.evaluate import edge_angles_deg, edge_tilt_slope, evaluate_detector, range_rows
     from vbl_robust.geometry.camera import project, rot_x, rot_y, runway_corners
 
     samples = []
@@ -201,7 +201,7 @@ def test_edge_tilt_slope_tells_a_roll_blind_detector_from_an_exact_one():
     level = evaluate_detector(_Levelled(samples, [0.0, 0.0]), samples, pnp_methods=())
     assert edge_tilt_slope(exact) == pytest.approx(1.0)
     assert abs(edge_tilt_slope(level)) < 1e-6
-    assert summarize(level)[-1]["edge_tilt_slope"] == pytest.approx(edge_tilt_slope(level))
+    assert range_rows(level)[-1]["edge_tilt_slope"] == pytest.approx(edge_tilt_slope(level))
     assert np.isnan(edge_tilt_slope(exact, np.zeros(len(samples), bool)))  # nothing to fit
 
 

@@ -138,7 +138,7 @@ def edge_tilt_slope(r: EvalResult, mask: np.ndarray | None = None) -> float:
     return float(np.dot(tc, p - p.mean()) / np.dot(tc, tc))
 
 
-def summarize(r: EvalResult, groups: Sequence[str] = ("far", "medium", "close")) -> list[dict]:
+def range_rows(r: EvalResult, groups: Sequence[str] = ("far", "medium", "close")) -> list[dict]:
     """Rows per envelope present in ``groups`` order, then ``"all"``: counts, rates, medians, percentiles."""
     rows = []
     names = [g for g in groups if np.any(r.envelope == g)] + ["all"]
@@ -161,7 +161,7 @@ def summarize(r: EvalResult, groups: Sequence[str] = ("far", "medium", "close"))
     return rows
 
 
-def score(r: EvalResult, method: str = "ippe_lm") -> tuple[float, float]:
+def comparison_key(r: EvalResult, method: str = "ippe_lm") -> tuple[float, float]:
     """Model-comparison key (higher is better): (nominal survival, − median position error % of slant)."""
     e = r.pos_err_m[method]
     return float(np.mean(e <= SURVIVAL_M)), -float(np.median(100.0 * e / r.slant_m))

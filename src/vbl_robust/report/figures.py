@@ -23,12 +23,10 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 
-from ..campaigns.metrics import Summary  # noqa: E402
+from ..campaigns.metrics import ANY_METHOD, Summary  # noqa: E402
+from ..campaigns.metrics import REFERENCE_METHOD as REFERENCE  # noqa: E402
 from ..search.zones import BREACHED, CLASSES, RULED_OUT, UNDECIDED, ZoneMap  # noqa: E402
 
-REFERENCE = "grid (reference)"
-#: The families' combined series (:data:`vbl_robust.campaigns.metrics.ANY_METHOD`).
-ANY_METHOD = "any method"
 STYLE: dict[str, dict[str, Any]] = {
     "georobust": {"color": "#1f77b4", "marker": "o"},
     "georobust-a": {"color": "#17becf", "marker": "P"},

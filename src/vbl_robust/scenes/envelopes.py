@@ -44,12 +44,13 @@ import numpy as np
 
 from vbl_robust.geometry.camera import intrinsics, lard_rotation, project, runway_corners, wrap_deg
 
+from .airports import (  # realistic runway sizes, used when none is given
+    RUNWAY_LENGTH_RANGE_M,
+    RUNWAY_WIDTH_RANGE_M,
+)
+
 #: Distance from the LTP to the glide-path anchor (aiming point) along the runway, metres (LARD: 305 m = 1000 ft).
 GLIDE_PATH_ANCHOR_M = 305.0
-
-#: Realistic runway dimension ranges (metres) used when no runway is given.
-RUNWAY_LENGTH_RANGE_M = (1500.0, 4000.0)
-RUNWAY_WIDTH_RANGE_M = (30.0, 60.0)
 
 #: Pose draws per sample before ``require_visible`` gives up.
 MAX_VISIBILITY_TRIES = 2000

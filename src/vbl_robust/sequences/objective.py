@@ -16,7 +16,7 @@ Frame batching
     frames for a θ batch go through the detector together: rows (frame, θ) are cut into chunks of ``batch_size``
     that may span frames, each chunk one ``detect`` (or ``detect_top``) call on a context whose view sampler
     stacks the frames' samplers; each frame's ``Objective`` then turns its rows into a selection
-    (:meth:`~vbl_robust.pipeline.Objective.selection`) and scores them (:meth:`~vbl_robust.pipeline.Objective.score`:
+    (:meth:`~vbl_robust.pipeline.Objective.selection`) and scores them (:meth:`~vbl_robust.pipeline.Objective.locate`:
     PnP and the error). The detector must not read ``context.sample`` or move points on such a context (the
     oracle does: it is always called per frame, as is any detector with ``uses_pixels = False``).
     ``batch_frames=False`` calls the detector per frame; both give the same detections up to the float rounding
@@ -268,7 +268,7 @@ class SequenceObjective:
         if not (int(t.shape[0]) and self.batched):
             return [obj.evaluate(t) for obj in self.frames]
         raw = self._detect_all(t)
-        return [obj.evaluate(t) if f not in raw else obj.score(t, obj.selection(raw[f], int(t.shape[0])))
+        return [obj.evaluate(t) if f not in raw else obj.locate(t, obj.selection(raw[f], int(t.shape[0])))
                 for f, obj in enumerate(self.frames)]
 
     def _detect_all(self, t) -> dict[int, object]:
