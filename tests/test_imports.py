@@ -120,3 +120,28 @@ def test_imports_point_down_the_floors():
 def test_the_floor_checker_sees_an_arrow_up():
     assert _arrows_up({"vbl_robust.search.api": {"vbl_robust.pipeline"}, "vbl_robust.pipeline": set()}) == \
         {"vbl_robust.search.api -> vbl_robust.pipeline"}
+
+
+def test_the_declared_interfaces_are_implemented_where_the_code_relies_on_them():
+    """The view samplers a detector reads (Views) and the objectives a campaign searches (SearchObjective)."""
+    import numpy as np
+    import torch
+
+    from vbl_robust.detect import DetectContext, OracleDetector, Views
+    from vbl_robust.detect.base import ImageViews
+    from vbl_robust.pipeline import Objective, SearchObjective
+    from vbl_robust.scenes import generate, generate_sequences
+    from vbl_robust.sequences import SequenceObjective
+    from vbl_robust.sequences.objective import _StackedViews
+    from vbl_robust.space import ParameterBox
+
+    box = ParameterBox({"roll_deg": (-5.0, 5.0)})
+    sample = next(iter(generate(1, seed=0, width=96, height=96)))
+    objective = Objective(sample, OracleDetector(), box)
+    sequence = SequenceObjective(generate_sequences(1, 3, 10.0, seed=0, width=96, height=96)[0], OracleDetector(), box)
+    for obj in (objective, sequence):
+        assert isinstance(obj, SearchObjective) and obj.device == torch.device("cpu") and obj.image_error == ""
+    sampler = objective.context(np.zeros((2, 1))).sampler
+    for views in (sampler, ImageViews(torch.zeros(2, 3, 8, 8)), _StackedViews([sampler, sampler])):
+        assert isinstance(views, Views)
+        assert DetectContext(None, views).device == torch.device("cpu")

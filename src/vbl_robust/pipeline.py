@@ -31,6 +31,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 import torch
@@ -46,7 +47,7 @@ from vbl_robust.space import ParameterBox
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["FAILURE_REASONS", "EvalRecord", "Objective"]
+__all__ = ["FAILURE_REASONS", "EvalRecord", "Objective", "SearchObjective"]
 
 #: The failure codes of :attr:`EvalRecord.reason` (see :data:`vbl_robust.constants.FAILURE_REASONS`).
 FAILURE_REASONS = tuple(_REASONS)
@@ -129,6 +130,27 @@ class EvalRecord:
             cat("keypoints"), cat("reproj_error_px"), sum((r.reason for r in records), ()),
             sum((r.detail for r in records), ()), r0.penalty_m, torch.cat(grad) if grad else None,
         )
+
+
+@runtime_checkable
+class SearchObjective(Protocol):
+    """What a campaign runs a search on: a batched function of θ over ``box`` (the black box for a NumPy θ, the
+    differentiable path for a torch θ), evaluated in chunks of ``batch_size`` on ``device``; ``evaluate`` gives the
+    full record of θ rows; ``image_error`` says why the pixels could not be loaded (a failed sample, not a breach).
+    :class:`Objective` (one image) and :class:`~vbl_robust.sequences.SequenceObjective` (an approach) implement it."""
+
+    box: ParameterBox
+    batch_size: int
+
+    @property
+    def device(self) -> torch.device: ...
+
+    @property
+    def image_error(self) -> str: ...
+
+    def __call__(self, theta: Any) -> Evaluations: ...
+
+    def evaluate(self, theta: Any) -> Any: ...
 
 
 class Objective:

@@ -24,7 +24,7 @@ import traceback
 from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,14 +34,22 @@ from .provenance import DetectorSpec
 from .spec import Job
 from .store import Corners, JobRow, JobStatus, Points, now_iso
 
+if TYPE_CHECKING:  # typing only: the pipeline (torch) is imported where an objective is built
+    from ..data import Sample
+    from ..data.sequence import ApproachSequence
+    from ..detect import Detector
+    from ..pipeline import SearchObjective
+    from ..search.result import SearchResult
+    from ..space import ParameterBox
+
 logger = logging.getLogger(__name__)
 
-_DETECTORS: dict[str, Any] = {}
+_DETECTORS: dict[str, Detector] = {}
 #: Points per objective call of a breach-stopped search on a CPU (:func:`breach_chunk`).
 CPU_BREACH_CHUNK = 4
 
 
-def detector_for(spec: DetectorSpec) -> Any:
+def detector_for(spec: DetectorSpec) -> Detector:
     """The detector of ``spec``, built once per process (a model is loaded once, not per job)."""
     key = json.dumps(spec.to_dict(), sort_keys=True)
     if key not in _DETECTORS:
@@ -68,7 +76,8 @@ class Settings:
                    spec.sustain, spec.monitor_px)
 
 
-def build_objective(sample: Any, detector: Any, box: Any, settings: Settings) -> Any:
+def build_objective(sample: Sample | ApproachSequence, detector: Detector, box: ParameterBox,
+                    settings: Settings) -> SearchObjective:
     """The objective a search job maximises over ``box``: the error of one image
     (:class:`~vbl_robust.pipeline.Objective`), or in a sequence campaign (``settings.sustain`` set) the error one θ
     sustains over ``sustain`` consecutive frames of an approach sequence
@@ -88,7 +97,7 @@ def build_objective(sample: Any, detector: Any, box: Any, settings: Settings) ->
 class SampleTask:
     """One sample and its pending jobs (in campaign order)."""
 
-    sample: Any
+    sample: Sample | ApproachSequence
     jobs: Sequence[Job]
 
 
@@ -144,7 +153,7 @@ def implied_row(job: Job, breach: JobRow, settings: Settings, run_id: int | None
                 worst_corners=breach.worst_corners, search_s=0.0, job_s=0.0)
 
 
-def worst_details(objective: Any, x: np.ndarray) -> tuple[dict[str, Any], Corners | None]:
+def worst_details(objective: SearchObjective, x: np.ndarray) -> tuple[dict[str, Any], Corners | None]:
     """What the pipeline gives at the worst point (one more evaluation): the payload's top confidence, position
     error and estimated position (the failure reason is the one the search recorded, ``JobRow.worst_reason``), and
     the four corners of the selected candidate in the sample's pixels (``JobRow.worst_corners``; None when the
@@ -158,7 +167,7 @@ def worst_details(objective: Any, x: np.ndarray) -> tuple[dict[str, Any], Corner
             "position": [float(v) if math.isfinite(v) else None for v in rec.position[0]]}, corners
 
 
-def sequence_details(objective: Any, x: np.ndarray, eps_safe_m: float) -> dict[str, Any]:
+def sequence_details(objective: SearchObjective, x: np.ndarray, eps_safe_m: float) -> dict[str, Any]:
     """What a sequence job stores about its worst θ (two more evaluations of the sequence): the breach facts of the
     worst θ and of the unperturbed θ (:meth:`~vbl_robust.sequences.SequenceRecord.summary` at ``eps_safe_m``, with
     each frame's error and failure reason) and the frames (image id, index, time, distance from the runway
@@ -179,7 +188,7 @@ def sequence_details(objective: Any, x: np.ndarray, eps_safe_m: float) -> dict[s
     return out
 
 
-def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
+def run_search_job(job: Job, objective: SearchObjective, settings: Settings) -> SearchResult:
     """Run one search job on a built objective; returns the :class:`~vbl_robust.search.SearchResult` (with the
     failure reason and completion time of every evaluated point).
 
@@ -189,7 +198,6 @@ def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
     budget that reads smaller budgets off the run (``Budget.reads``) passes them on: the run goes on until
     ``max(read_evals)`` evaluations are done and sizes its chunks against each of ``read_seconds``."""
     from ..search import METHODS, maximize, use_clock
-    from ..search.api import DEFAULT_CHUNK
 
     b = job.budget
     needs_gradient = METHODS[job.method].needs_gradient
@@ -197,15 +205,14 @@ def run_search_job(job: Job, objective: Any, settings: Settings) -> Any:
     timing: dict[str, Any] = {"chunk_size": breach_chunk(objective)}
     if b.max_seconds is not None:
         _warm_up(f, job.box.box, needs_gradient)
-        timing = {"min_evals": b.min_evals, "time_marks": b.read_seconds,
-                  "chunk_size": int(getattr(objective, "batch_size", DEFAULT_CHUNK))}
+        timing = {"min_evals": b.min_evals, "time_marks": b.read_seconds, "chunk_size": int(objective.batch_size)}
     kwargs = search_kwargs(job.options, b, eps_safe_m=settings.eps_safe_m, lipschitz=settings.lipschitz,
                            seed=job.seed)
     with use_clock(settings.clock):
         return maximize(f, job.box.box, job.method, max_seconds=b.max_seconds, **timing, **kwargs)
 
 
-def risk_row(job: Job, objective: Any, settings: Settings, run_id: int | None, t0: float) -> JobRow:
+def risk_row(job: Job, objective: SearchObjective, settings: Settings, run_id: int | None, t0: float) -> JobRow:
     """Run a failure-probability job (:func:`vbl_robust.campaigns.risk.estimate_risk`; options: ``dist``, ``tau``,
     ``delta``, ``guide_evals``) and its row: every draw as the row's points, the estimate, its interval and the
     verdict in the ``risk`` payload; worst error and verdict as a search row's (the largest L drawn), and the corners
@@ -245,16 +252,13 @@ def search_kwargs(options: Mapping[str, Any], budget: Any, *, eps_safe_m: float,
             "stop_above": eps_safe_m if budget.stop_at_breach else None, "seed": seed or 0, **opts}
 
 
-def breach_chunk(objective: Any) -> int:
+def breach_chunk(objective: SearchObjective) -> int:
     """Points per objective call of a search that stops at its first breach: the whole detector batch on a GPU
     (a batch costs about as much as one point there), :data:`CPU_BREACH_CHUNK` on a CPU (a point costs about the
     same in any chunk, so a small chunk wastes little after the breach). The search's record does not depend on
     it (:func:`~vbl_robust.search.maximize`)."""
-    from ..search.api import DEFAULT_CHUNK
-
-    batch = int(getattr(objective, "batch_size", DEFAULT_CHUNK))
-    device = getattr(getattr(objective, "device", None), "type", "cpu")
-    return batch if device != "cpu" else min(batch, CPU_BREACH_CHUNK)
+    batch = int(objective.batch_size)
+    return batch if objective.device.type != "cpu" else min(batch, CPU_BREACH_CHUNK)
 
 
 def _warm_up(f: Callable[[Any], Any], box: Any, needs_gradient: bool) -> None:
@@ -276,10 +280,10 @@ def _reason(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}{where}"
 
 
-def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id: int | None = None,
+def run_sample_task(task: SampleTask, detector: Detector, settings: Settings, run_id: int | None = None,
                     ) -> Iterator[list[JobRow]]:
     """Run a sample's jobs in order; yield the rows to commit after each job."""
-    objectives: dict[str, Any] = {}
+    objectives: dict[str, SearchObjective] = {}
     breached: dict[str, JobRow] = {}  # chain -> breaching row
     for job in task.jobs:
         if job.chain is not None and job.chain in breached:
@@ -296,7 +300,7 @@ def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id:
             if label not in objectives:
                 objectives[label] = build_objective(task.sample, detector, job.box.box, settings)
             objective = objectives[label]
-            image_error = getattr(objective, "image_error", "")
+            image_error = objective.image_error
             if image_error:  # the pipeline would penalise every evaluation: a failed sample, not a breach
                 yield [failed_row(job, f"image unavailable: {image_error}", settings, run_id, time.perf_counter() - t0)]
                 continue
@@ -321,5 +325,4 @@ def run_sample_task(task: SampleTask, detector: Any, settings: Settings, run_id:
             rows += [implied_row(j, row, settings, run_id) for j in task.jobs
                      if j.chain == job.chain and j.box.level > job.box.level]
         yield rows
-    if hasattr(task.sample, "drop_pixels"):
-        task.sample.drop_pixels()
+    task.sample.drop_pixels()

@@ -16,6 +16,7 @@ from .base import (
     Detector,
     DifferentiableDetector,
     Selection,
+    Views,
     select,
 )
 from .oracle import OracleDetector
@@ -27,6 +28,7 @@ __all__ = [
     "DifferentiableDetector",
     "OracleDetector",
     "Selection",
+    "Views",
     "select",
     "UltralyticsDetector",
     "OnnxDetector",

@@ -110,18 +110,47 @@ class Detections:
         return cls(np.zeros((0, 4)), np.zeros(0), np.zeros((0, 4, 2)), reason=reason)
 
 
+@runtime_checkable
+class Views(Protocol):
+    """What a detector reads a batch of perturbed images through (:attr:`DetectContext.sampler`): ``len`` rows of
+    ``theta`` (None for plain images) under ``perturbation``, full frames, views of windows, and points moved by the
+    perturbation. Implemented by :class:`~vbl_robust.perturb.ViewSampler`, :class:`ImageViews` and the sequence
+    objective's stack of frames."""
+
+    perturbation: Any
+    theta: Any
+
+    def __len__(self) -> int: ...
+
+    @property
+    def height(self) -> int: ...
+
+    @property
+    def width(self) -> int: ...
+
+    @property
+    def device(self) -> torch.device: ...
+
+    def frames(self) -> torch.Tensor: ...
+
+    def views(self, windows: Any, size: int) -> torch.Tensor: ...
+
+    def points(self, points: Any) -> Any: ...
+
+
 @dataclass(frozen=True, eq=False)
 class DetectContext:
     """What a detector is asked about: a batch of perturbed images of one sample, given as a view sampler.
 
     Attributes:
         sample: the :class:`~vbl_robust.data.sample.Sample` (None for plain images, :meth:`of_images`).
-        sampler: the :class:`~vbl_robust.perturb.ViewSampler` of ``T(x; θ)`` (or :class:`ImageViews`).
+        sampler: the :class:`Views` of ``T(x; θ)`` (a :class:`~vbl_robust.perturb.ViewSampler`, or
+            :class:`ImageViews` for plain images).
         scale: mapping from the sample's pixels to the source pixels of the sampler.
     """
 
     sample: Sample | None
-    sampler: ViewSampler | ImageViews
+    sampler: Views
     scale: PixelScale = PixelScale()
 
     @classmethod
@@ -168,7 +197,7 @@ class DetectContext:
     @property
     def device(self) -> torch.device:
         """Where the views are made (the source image's device): detectors create their windows there."""
-        return getattr(self.sampler, "device", torch.device("cpu"))  # a third-party sampler may not say
+        return self.sampler.device
 
     def views(self, windows, size: int) -> torch.Tensor:
         """``(B, 3, size, size)`` views of the perturbed images (see :meth:`ViewSampler.views`)."""

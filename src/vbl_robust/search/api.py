@@ -23,6 +23,7 @@ from __future__ import annotations
 import inspect
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -158,8 +159,8 @@ def maximize(
     chunks = _Chunks(opt, int(chunk_size), marks) if max_seconds is not None or stop_above is not None else None
     while len(x := opt.ask()):
         if chunks is None or (max_seconds is None and len(x) <= chunk_size):
-            values, grad = evaluate(x)
-            opt.tell(x, values, grad=grad)
+            b = evaluate(x)
+            opt.tell(x, b.told(), grad=b.grad)
         elif not chunks.run(x, evaluate):
             break  # cut by the time budget or at a breach (recorded by tell_partial)
         if callback is not None and callback(opt.trace[-1]) is True and not opt.done:
@@ -201,33 +202,52 @@ class _Chunks:
         rate = self.points / max(self.seconds, 1e-12)
         return max(1, min(left, self.cap, int(CHUNK_TIME_FRACTION * rate * (nxt - now))))
 
-    def run(self, x: np.ndarray, evaluate: Callable[[np.ndarray], tuple[Any, Any]]) -> bool:
+    def run(self, x: np.ndarray, evaluate: Callable[[np.ndarray], _Batch]) -> bool:
         """Evaluate and tell the batch ``x``; False when the time budget or a breach cut it (told with
         ``tell_partial``)."""
         opt, n, done = self.opt, len(x), 0
-        parts: list[tuple[np.ndarray, tuple[str, ...] | None, Any, np.ndarray]] = []
+        parts: list[_Batch] = []
+        times: list[np.ndarray] = []
         while done < n:
-            if done and (opt.time_up(done) or opt._first_breach(parts[-1][0]) is not None):
+            if done and (opt.time_up(done) or opt._first_breach(parts[-1].values) is not None):
                 break
             k = self.size(n - done)
             t0 = opt.elapsed()
-            values, grad = evaluate(x[done : done + k])
+            parts.append(evaluate(x[done : done + k]))
             t1 = opt.elapsed()
             self.points, self.seconds = self.points + k, self.seconds + (t1 - t0)
-            v, reasons = split(values)
-            parts.append((np.asarray(v, dtype=np.float64), reasons, grad, np.full(k, t1)))
+            times.append(np.full(k, t1))
             done += k
-        v = np.concatenate([p[0] for p in parts])
-        given = [p[1] for p in parts]
-        values = v if all(r is None for r in given) else Evaluations(
-            v, tuple(r for p, g in zip(parts, given, strict=True) for r in (g if g is not None else ("",) * len(p[0]))))
-        times = np.concatenate([p[3] for p in parts])
+        batch = _Batch.concat(parts)
         if done < n:
-            opt.tell_partial(x[:done], values, times=times)
+            opt.tell_partial(x[:done], batch.told(), times=np.concatenate(times))
             return False
-        grad = None if parts[0][2] is None else np.concatenate([p[2] for p in parts])
-        opt.tell(x, values, grad=grad, times=times)
+        opt.tell(x, batch.told(), grad=batch.grad, times=np.concatenate(times))
         return True
+
+
+@dataclass(frozen=True)
+class _Batch:
+    """One evaluated chunk: values, the failure reason per point (None when ``f`` gave plain values) and the
+    gradient (gradient methods); the objective's :class:`Evaluations` are split once on the way in and wrapped once
+    on the way to the optimizer (:meth:`told`)."""
+
+    values: np.ndarray
+    reasons: tuple[str, ...] | None
+    grad: np.ndarray | None = None
+
+    def told(self) -> np.ndarray | Evaluations:
+        return self.values if self.reasons is None else Evaluations(self.values, self.reasons)
+
+    @staticmethod
+    def concat(parts: Sequence[_Batch]) -> _Batch:
+        if len(parts) == 1:
+            return parts[0]
+        given = [p.reasons for p in parts]
+        reasons = None if all(r is None for r in given) else tuple(
+            r for p, g in zip(parts, given, strict=True) for r in (g if g is not None else ("",) * len(p.values)))
+        grad = None if parts[0].grad is None else np.concatenate([p.grad for p in parts])
+        return _Batch(np.concatenate([p.values for p in parts]), reasons, grad)
 
 
 def _method(method: str) -> type[Optimizer]:
@@ -246,19 +266,15 @@ def _as_values(y: Any, n: int) -> np.ndarray:
     return v
 
 
-def _with_reasons(values: np.ndarray, reasons: tuple[str, ...] | None) -> np.ndarray | Evaluations:
-    return values if reasons is None else Evaluations(values, reasons)
-
-
-def _values_only(f: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], tuple[np.ndarray | Evaluations, None]]:
-    def evaluate(x: np.ndarray) -> tuple[np.ndarray | Evaluations, None]:
+def _values_only(f: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], _Batch]:
+    def evaluate(x: np.ndarray) -> _Batch:
         y, reasons = split(f(x))
-        return _with_reasons(_as_values(y, len(x)), reasons), None
+        return _Batch(_as_values(y, len(x)), reasons)
 
     return evaluate
 
 
-def _with_gradient(f: Callable[[Any], Any], method: str) -> Callable[[np.ndarray], tuple[Any, np.ndarray]]:
+def _with_gradient(f: Callable[[Any], Any], method: str) -> Callable[[np.ndarray], _Batch]:
     import torch
 
     hint = (
@@ -266,7 +282,7 @@ def _with_gradient(f: Callable[[Any], Any], method: str) -> Callable[[np.ndarray
         "with requires_grad=True and must return a (n,) tensor computed from it with torch operations"
     )
 
-    def evaluate(x: np.ndarray) -> tuple[np.ndarray | Evaluations, np.ndarray]:
+    def evaluate(x: np.ndarray) -> _Batch:
         xt = torch.tensor(x, dtype=torch.float64, requires_grad=True)
         with torch.enable_grad():
             try:
@@ -283,6 +299,6 @@ def _with_gradient(f: Callable[[Any], Any], method: str) -> Callable[[np.ndarray
         if g is None:
             raise ValueError(f"{hint}; the returned tensor does not depend on the input")
         values = y.detach().cpu().numpy().astype(np.float64)
-        return _with_reasons(values, reasons), g.detach().cpu().numpy().astype(np.float64)
+        return _Batch(values, reasons, g.detach().cpu().numpy().astype(np.float64))
 
     return evaluate

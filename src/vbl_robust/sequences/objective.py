@@ -213,6 +213,11 @@ class SequenceObjective:
         return self.box.dim
 
     @property
+    def device(self) -> torch.device:
+        """Where the frames are evaluated (every frame's objective runs on the same device)."""
+        return self.frames[0].device
+
+    @property
     def image_error(self) -> str:
         """Why a frame's pixels could not be loaded (``""`` when every frame's could): a sequence with a missing
         frame is a failed sample of a campaign, not a breach (its frame would count the penalty)."""
