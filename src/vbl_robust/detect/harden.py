@@ -127,9 +127,8 @@ def harden(out_dir: str | Path, box: ParameterBox, *, train_samples: Sequence[Sa
     import time
 
     from ..constants import EPS_SAFE_M
-    from .shipped import DEFAULT_MODEL, default_detector, with_design
+    from .shipped import DEFAULT_MODEL, DetectorSpec
     from .train import FINE_TUNE, train
-    from .ultralytics import UltralyticsDetector
 
     if rounds < 1 or epochs < 1:
         raise ValueError(f"harden: rounds and epochs must be >= 1, got {rounds} and {epochs}")
@@ -155,8 +154,8 @@ def harden(out_dir: str | Path, box: ParameterBox, *, train_samples: Sequence[Sa
             if from_record and not trust_rounds:  # the next round loads a recorded round's weights
                 raise ValueError(f"harden: resuming loads {current}, a pickle that runs code when loaded; pass "
                                  f"--trust-model if you trust the rounds in {out}")
-            det = (default_detector(design="twostage") if current is None
-                   else with_design(UltralyticsDetector(current, trust=True, imgsz=imgsz), "twostage"))
+            det = DetectorSpec.from_choice("default" if current is None else current, design="twostage", trust=True,
+                                           options=None if current is None else {"imgsz": imgsz}).build()
             t0 = time.perf_counter()
             worst: list[list[float] | None] = []
             values: list[float] = []

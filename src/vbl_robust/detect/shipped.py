@@ -18,7 +18,7 @@ from __future__ import annotations
 import importlib
 import json
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +30,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["DEFAULT_MODEL", "DESIGNS", "DETECTOR_KINDS", "MODELS_DIR", "SHIPPED_MODELS", "DetectorSpec",
            "default_detector", "default_model_caveats", "default_model_info", "default_model_path",
-           "default_model_status", "shipped_model_dir", "with_design"]
+           "default_model_status", "refuse_untrusted", "shipped_model_dir", "with_design"]
 
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 DEFAULT_MODEL = MODELS_DIR / "runway_yolov8n_pose.pt"
@@ -128,6 +128,49 @@ def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str |
     return with_design(with_engine(det, engine, trust=True), design, **window)
 
 
+def refuse_untrusted(what: str | Path, trust: bool) -> None:
+    """Unless ``trust``, ``ValueError`` naming ``what``: a ``.pt`` file is a pickle, and loading it runs code (the
+    one refusal every command gives; ``--trust-model``)."""
+    if not trust:
+        raise ValueError(f"{what}: a .pt file is a pickle that runs code when loaded; pass --trust-model if you "
+                         "trust it")
+
+
+def _model_options(oracle: bool, oracle_noise: float, design: str, engine: str, device: str,
+                   noise_needs_oracle: bool) -> dict[str, Any]:
+    """:meth:`DetectorSpec.from_choice`'s checks of the detector options; a model's spec options (its design,
+    engine and device where they are not the defaults)."""
+    if design != "auto" and design not in DESIGNS:
+        raise ValueError(f"--detector {design}: choose auto, {' or '.join(DESIGNS)}")
+    if oracle and design != "auto":
+        raise ValueError("--detector applies to a model, not to --oracle")
+    if oracle and engine not in ("auto", "torch"):
+        raise ValueError(f"--engine {engine} applies to a model, not to --oracle")
+    if oracle and device != "cpu":
+        raise ValueError(f"--device {device} applies to a model, not to --oracle (the oracle needs no device)")
+    if oracle_noise and not oracle and noise_needs_oracle:
+        raise ValueError(f"--oracle-noise {oracle_noise:g} applies to --oracle only")
+    opts: dict[str, Any] = {} if design == "auto" else {"design": design}
+    if oracle:
+        return opts
+    from .device import resolve_device
+    from .engines import resolve_engine
+
+    try:
+        dev = resolve_device(device)
+    except ValueError as exc:
+        raise ValueError(f"--device {device}: {exc}") from None
+    try:
+        resolved = resolve_engine(engine, dev)
+    except ValueError as exc:
+        raise ValueError(f"--engine {engine}: {exc}") from None
+    if resolved != "torch":  # torch is every spec's default engine
+        opts["engine"] = resolved
+    if dev != "cpu":  # the CPU is every spec's default device
+        opts["device"] = dev
+    return opts
+
+
 # -- naming and building detectors ------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class DetectorSpec:
@@ -187,13 +230,53 @@ class DetectorSpec:
         return cls("oracle", options={"noise_px": noise_px} if noise_px else {})
 
     @classmethod
-    def from_path(cls, path: str | Path, *, trust: bool = False) -> DetectorSpec:
+    def from_path(cls, path: str | Path, *, trust: bool = False, option: str = "--model") -> DetectorSpec:
+        """A user's model file: ``.onnx`` or ``.pt`` (ultralytics; loads only with ``trust``); ``option`` names it
+        in the messages."""
         p = Path(path)
         if p.suffix.lower() == ".onnx":
             return cls("onnx", str(p))
         if p.suffix.lower() == ".pt":
             return cls("ultralytics", str(p), trust=trust)
-        raise ValueError(f"--model {path}: expected a .pt (ultralytics) or .onnx file")
+        raise ValueError(f"{option} {path}: expected a .pt (ultralytics) or .onnx file")
+
+    @classmethod
+    def from_choice(cls, model: str | Path | None = None, *, oracle: bool = False, oracle_noise: float = 0.0,
+                    design: str = "auto", engine: str = "torch", device: str = "cpu", trust: bool = False,
+                    options: dict[str, Any] | None = None, noise_needs_oracle: bool = True,
+                    option: str = "--model") -> DetectorSpec:
+        """The detector a user chose — the one way every command and workflow makes one.
+
+        ``oracle``: the oracle, with ``oracle_noise`` px of fixed corner noise; else ``model``: a shipped model's
+        name (:data:`SHIPPED_MODELS`) or a ``.pt`` / ``.onnx`` file (a ``.pt`` only with ``trust``: it is a
+        pickle); else :meth:`choose` (the shipped model once validated, else the oracle with ``oracle_noise``:
+        ``kind == "oracle"`` without ``oracle`` says it stands in, :func:`default_model_status` says why).
+        ``design``: ``auto`` (the shipped model's own; a user's model as one pass), ``single`` or ``twostage``;
+        ``engine`` (:mod:`.engines`) and ``device`` (:mod:`.device`) of a model, resolved here; ``options``: more
+        model options (``imgsz``, a crop window). An ``oracle_noise`` without ``oracle`` is refused (it would be
+        ignored) unless ``noise_needs_oracle`` is False (the noise of an oracle standing in).
+
+        Raises:
+            ValueError: one line naming the command-line option at fault (``option``: the model's own);
+                ``FileNotFoundError`` for a model file that is not there.
+        """
+        opts = _model_options(oracle, oracle_noise, design, engine, device, noise_needs_oracle)
+        if oracle and model is not None:
+            raise ValueError(f"--oracle and {option} are exclusive")
+        if oracle:
+            return cls.oracle(oracle_noise)
+        opts.update(options or {})
+        name = None if model is None else str(model)
+        if name in SHIPPED_MODELS:
+            if name != "default" and default_model_path(name) is None:
+                raise ValueError(f"{option} {name}: {default_model_status(name)}")
+            return cls.shipped(name, opts)
+        if model is None:
+            return cls.choose(oracle_noise_px=oracle_noise, options=opts)[0]
+        spec = cls.from_path(model, trust=trust, option=option)
+        if spec.kind == "ultralytics":
+            refuse_untrusted(f"{option} {model}", trust)
+        return replace(spec, options=opts) if opts else spec
 
     @classmethod
     def from_identity(cls, ident: dict[str, Any], *, trust: bool = False) -> DetectorSpec:
