@@ -7,7 +7,7 @@ import pytest
 from typer.testing import CliRunner
 
 from vbl_robust.cli import app
-from vbl_robust.cli.audit import parse_perturb
+from vbl_robust.cli.common import parse_perturb
 from vbl_robust.perturb import PERTURBATIONS
 
 runner = CliRunner()

@@ -168,3 +168,13 @@ def test_shipped_detector_outputs_move_less_than_a_thousandth_of_a_pixel(scene, 
     assert fast.reason == old.reason
     np.testing.assert_allclose(fast.keypoints, old.keypoints, atol=1e-3)
     np.testing.assert_allclose(fast.conf, old.conf, atol=1e-4)
+
+
+@pytest.mark.parametrize("names", CASES, ids=["+".join(c) for c in CASES])
+def test_frames_channels_first_are_the_frames_transposed(image, names):
+    """The single pass's frames, rendered one scratch frame at a time and split into planes: the same numbers."""
+    K = np.array([[140.0, 0.0, 83.0], [0.0, 140.0, 57.5], [0.0, 0.0, 1.0]])
+    p, theta = Perturbation(list(names)), _theta(names)
+    hwc = p.images_numpy(image, theta, K=K)
+    chw = p.images_numpy(image, theta, K=K, channels_first=True)
+    assert chw.flags["C_CONTIGUOUS"] and np.array_equal(chw, hwc.transpose(0, 3, 1, 2))

@@ -1,19 +1,21 @@
-"""The ``vbl-robust`` command line (typer). Each sub-command lives in its own module of this package.
+"""The ``vbl-robust`` command line (typer). Each command is a module-level function of a module of this package
+(its options: :mod:`.options` for those several commands share, its own module for the rest), registered below in
+one line.
 
 Heavy imports (torch, ultralytics, OpenCV) happen inside the commands, so ``vbl-robust --help`` is instant.
 """
 
 from __future__ import annotations
 
-import importlib
 import warnings
+from typing import Annotated
 
 import typer
 from typer.core import TyperGroup
 
+from . import audit, report, reproduce, risk, scenes, train, truth, zones
 from .common import set_verbosity, stop_on_sigterm
 from .config import RecordingCommand
-
 
 #: The commands that run a campaign into a store (a rerun resumes them).
 _CAMPAIGNS = frozenset({"audit", "demo", "risk", "reproduce", "truth"})
@@ -75,26 +77,27 @@ def _version(value: bool) -> None:
         typer.echo(f"vbl-robust {version('vbl-robust')}")
         raise typer.Exit()
 
-# Sub-command modules; each defines `register(app)`.
-_COMMAND_MODULES = ("scenes", "audit", "risk", "reproduce", "truth", "report", "train", "zones")
-
 
 @app.callback()
-def _main(verbose: bool = typer.Option(False, "--verbose", "-v", help="Log progress details (INFO); also after the command."),
-          quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars or tables; also after the command."),
-          version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
-                               help="Print the version and exit.")) -> None:
+def _main(
+    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Log progress details (INFO); also after the "
+                                          "command.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars or tables; also after the "
+                                        "command.")] = False,
+    version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and "
+                                          "exit.")] = False,
+) -> None:
     set_verbosity(quiet=quiet, verbose=verbose, before_command=True)
     from vbl_robust.constants import TORCH_JIT_WARNING
 
     warnings.filterwarnings("ignore", message=TORCH_JIT_WARNING, category=FutureWarning)
 
 
-for _name in _COMMAND_MODULES:
-    importlib.import_module(f"{__name__}.{_name}").register(app)
-for _info in app.registered_commands:  # a campaign's run directory keeps its configuration (config.yaml)
-    if (_info.name or _info.callback.__name__) in _CAMPAIGNS:
-        _info.cls = RecordingCommand
+#: The commands, in the order ``vbl-robust --help`` lists them.
+COMMANDS = (scenes.scenes, audit.audit, audit.demo, risk.risk, reproduce.reproduce, truth.truth, report.report,
+            report.bundle, report.merge, train.train, train.ship, train.harden, zones.zones)
+for _command in COMMANDS:  # a campaign's run directory keeps its configuration (config.yaml)
+    app.command(cls=RecordingCommand if _command.__name__ in _CAMPAIGNS else None)(_command)
 
 
 def main() -> None:  # pragma: no cover - console entry

@@ -1,11 +1,19 @@
-"""Helpers shared by the CLI commands: one-line errors, verbosity (the shared options: :mod:`.options`)."""
+"""Helpers shared by the CLI commands: one-line errors, verbosity, and the user's input read into the library's
+objects — ranges, a perturbation box, search methods and their options, the detector (the shared options:
+:mod:`.options`; running a campaign: :mod:`.run`)."""
 
 from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
 
 import typer
+
+from vbl_robust.perturb.registry import PERTURBATIONS, known
 
 #: what the options before the command said (``vbl-robust -q audit …``)
 _GLOBAL = {"quiet": False, "verbose": False}
@@ -42,6 +50,17 @@ def fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
+@contextmanager
+def one_line(*errors: type[Exception], prefix: str = "") -> Iterator[None]:
+    """Inside: ``errors`` (default ``ValueError``, ``FileNotFoundError``: the library's refusals) end the command in
+    one line, ``prefix`` before the message, exit 2."""
+    caught = errors or (ValueError, FileNotFoundError)
+    try:
+        yield
+    except caught as exc:
+        fail(f"{prefix}{exc}")
+
+
 def parse_range(text: str, *, name: str, symmetric: bool = False) -> tuple[float, float]:
     """Parse ``"15"`` (→ ±15 when ``symmetric``) or ``"0.7,1.4"`` into ``(lower, upper)``."""
     parts = [p.strip() for p in text.split(",") if p.strip()]
@@ -73,3 +92,135 @@ def parse_lipschitz(text: str | None) -> float | tuple[float, ...] | None:
     if not vals or any(not math.isfinite(v) or v < 0 for v in vals):
         fail(f"--lipschitz {text}: expected a finite number >= 0, or one per parameter")
     return vals[0] if len(vals) == 1 else vals
+
+
+def parse_perturb(items: list[str] | None) -> dict[str, tuple[float, float]]:
+    """``--perturb NAME=LO,HI`` (repeatable; a bare ``NAME`` takes the family's plausible default range) →
+    ``{name: (lo, hi)}`` in the order given; a one-line error naming the flag and the value on bad input."""
+    out: dict[str, tuple[float, float]] = {}
+    for item in items or ():
+        name, sep, text = (part.strip() for part in item.partition("="))
+        if name not in PERTURBATIONS:
+            fail(f"--perturb {item}: unknown perturbation {name!r}; known perturbations: {known()}")
+        if name in out:
+            fail(f"--perturb {item}: {name} is given more than once")
+        spec = PERTURBATIONS[name]
+        if not sep:
+            out[name] = spec.default
+            continue
+        try:
+            lo, hi = (float(v) for v in text.split(","))
+        except ValueError:
+            fail(f"--perturb {item}: expected {name}=LOWER,UPPER (two numbers), got {text!r}")
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            fail(f"--perturb {item}: expected finite bounds with LOWER < UPPER, got {text!r}")
+        if lo < spec.minimum or hi > spec.maximum:
+            fail(f"--perturb {item}: {name} must lie within [{spec.minimum:g}, {spec.maximum:g}] ({spec.description})")
+        out[name] = (lo, hi)
+    return out
+
+
+def parse_box(roll: str, contrast: str | None, perturb: list[str] | None) -> Any:
+    """The :class:`~vbl_robust.campaigns.spec.BoxSpec` of ``--roll``, ``--contrast`` and ``--perturb`` (level: the
+    roll half-width, 0 without roll), or one line naming the option at fault."""
+    from vbl_robust.campaigns import BoxSpec
+    from vbl_robust.campaigns.spec import box_label
+    from vbl_robust.space import ParameterBox
+
+    bounds: dict[str, tuple[float, float]] = {}
+    extra = parse_perturb(perturb)
+    if roll.strip().lower() != "none" and "roll_deg" not in extra:
+        bounds["roll_deg"] = parse_range(roll, name="--roll", symmetric=True)
+    if contrast is not None:
+        if "contrast" in extra:
+            fail("--contrast and --perturb contrast=...: give the contrast range once")
+        bounds["contrast"] = parse_range(contrast, name="--contrast")
+    bounds.update(extra)
+    if not bounds:
+        fail("give at least one of --roll, --contrast, --perturb")
+    with one_line(ValueError):
+        box = ParameterBox(bounds)
+    level = max(abs(v) for v in bounds["roll_deg"]) if "roll_deg" in bounds else 0.0
+    return BoxSpec(box, box_label(bounds), level)
+
+
+def parse_methods(text: str) -> tuple[str, ...]:
+    """``--methods a,b``: search methods, each known and given once."""
+    from vbl_robust.search import METHODS
+
+    methods = tuple(m.strip() for m in text.split(",") if m.strip())
+    bad = [m for m in methods if m not in METHODS]
+    if not methods or bad:
+        raise typer.BadParameter(f"--methods: unknown method(s) {bad or text!r}; methods are {', '.join(METHODS)}")
+    twice = sorted({m for m in methods if methods.count(m) > 1})
+    if twice:
+        raise typer.BadParameter(f"--methods {text}: {', '.join(twice)} given more than once")
+    return methods
+
+
+def parse_method_options(values: list[str] | None) -> dict[str, dict[str, Any]]:
+    """``--method-option METHOD.OPTION=VALUE`` (repeatable) → ``{method: {option: value}}``; a one-line error
+    naming the flag and the value for an unknown method or option or an unreadable value."""
+    import yaml
+
+    from vbl_robust.search import METHODS, method_options
+
+    out: dict[str, dict[str, Any]] = {}
+    for text in values or []:
+        key, sep, raw = text.partition("=")
+        method, dot, name = key.strip().rpartition(".")
+        if not sep or not dot or not method or not name or not raw.strip():
+            fail(f"--method-option {text!r}: expected METHOD.OPTION=VALUE, e.g. georobust-a.min_ratio=9")
+        if method not in METHODS:
+            fail(f"--method-option {text!r}: unknown method {method!r}; methods are {', '.join(METHODS)}")
+        allowed = method_options(method)
+        if name not in allowed:
+            fail(f"--method-option {text!r}: method {method!r} has no option {name!r}; options are "
+                 f"{', '.join(allowed)}")
+        try:
+            value = yaml.safe_load(raw)
+        except yaml.YAMLError:
+            fail(f"--method-option {text!r}: value {raw!r} is not a number, boolean, string or list")
+        if name in out.setdefault(method, {}):
+            fail(f"--method-option {text!r}: {method}.{name} is given twice")
+        out[method][name] = value
+    return out
+
+
+def with_method_options(spec: Any, options: dict[str, dict[str, Any]], strict: bool = True) -> Any:
+    """``spec`` with the parsed ``--method-option`` values, or a one-line error."""
+    if not options:
+        return spec
+    with one_line(ValueError, prefix="--method-option: "):
+        return spec.with_method_options(options, strict=strict)
+
+
+def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_noise: float,
+                  design: str = "auto", engine: str = "torch", device: str = "cpu", *,
+                  noise_needs_oracle: bool = True) -> Any:
+    """:meth:`DetectorSpec.from_choice <vbl_robust.detect.shipped.DetectorSpec.from_choice>` of the detector
+    options, or one line; notes on standard error when the oracle stands in for the shipped model (and why) or
+    when the shipped model has open accuracy goals."""
+    from vbl_robust.detect.shipped import DetectorSpec, default_model_status
+
+    with one_line():
+        spec = DetectorSpec.from_choice(model, oracle=oracle, oracle_noise=oracle_noise, design=design, engine=engine,
+                                        device=device, trust=trust_model, noise_needs_oracle=noise_needs_oracle)
+    if spec.kind == "default":
+        _note_open_goals(spec.shipped_name)
+    elif spec.kind == "oracle" and not oracle:
+        noise = f", {oracle_noise:g} px fixed corner noise" if oracle_noise else ""
+        typer.secho(f"note: {default_model_status()}; using the oracle detector (ground-truth corners{noise}). "
+                    "Pass --model PATH for your model, or --model default to audit the shipped one anyway.",
+                    fg=typer.colors.YELLOW, err=True)
+    return spec
+
+
+def _note_open_goals(name: str = "default") -> None:
+    """Tell the user which accuracy goals the shipped model ``name`` has not reached (also in the report)."""
+    from vbl_robust.detect.shipped import default_model_caveats
+
+    which = "" if name == "default" else f"{name} "
+    for goal in default_model_caveats(name=name):
+        typer.secho(f"note: the shipped {which}detector model has an open accuracy goal: {goal} (see its MODEL_CARD.md)",
+                    fg=typer.colors.YELLOW, err=True)

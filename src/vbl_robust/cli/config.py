@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import typer
 from typer.core import TyperCommand
@@ -74,9 +74,10 @@ def apply_config(ctx: typer.Context, value: Path | None) -> Path | None:
     return value
 
 
-CONFIG = typer.Option(None, "--config", is_eager=True, callback=apply_config, help="Read the options from this "
-                      "YAML file (option: value; the command line overrides it); every run directory keeps its "
-                      "own as config.yaml.")
+#: The ``--config FILE`` option (eager: the file is read before the other options are converted).
+Config = Annotated[Path | None, typer.Option("--config", is_eager=True, callback=apply_config, help="Read the options "
+                                             "from this YAML file (option: value; the command line overrides it); "
+                                             "every run directory keeps its own as config.yaml.")]
 
 
 def run_directory(command: str, params: dict[str, Any]) -> Path | None:

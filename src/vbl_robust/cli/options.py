@@ -1,53 +1,93 @@
-"""The options several commands take, declared once: a command writes ``seed: int = o.SEED`` after
-``from . import options as o``."""
+"""The options several commands take, declared once as typer ``Annotated`` types: a command writes
+``seed: o.Seed = 0`` after ``from . import options as o`` (the default stays at the parameter, as typer wants it).
+A command's own options are declared beside it, in its module."""
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Annotated
+
 import typer
 
-from ..constants import MAX_IMAGE_SIDE, MAX_SEED
+from ..constants import MAX_IMAGE_SIDE, MAX_IMAGES, MAX_SEED
+from .config import Config
 
-QUIET = typer.Option(False, "--quiet", "-q", help="No progress bar or tables (also accepted before the command: "
-                     "vbl-robust -q COMMAND).")
-VERBOSE = typer.Option(False, "--verbose", "-v", help="Log progress details (INFO) (also accepted before the "
-                       "command: vbl-robust -v COMMAND).")
-SEED = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the image choice and of the searches.")
-LARD = typer.Option(None, "--lard", help="LARD V2 dataset directory (CSV + runway DB JSON) instead of generated "
-                    "synthetic approaches.")
-WIDTH = typer.Option(1024, "--width", min=16, max=MAX_IMAGE_SIDE, help=f"Synthetic image width (px, at most "
-                     f"{MAX_IMAGE_SIDE}).")
-HEIGHT = typer.Option(1024, "--height", min=16, max=MAX_IMAGE_SIDE, help=f"Synthetic image height (px, at most "
-                      f"{MAX_IMAGE_SIDE}).")
-MODEL = typer.Option(None, "--model", help="Detector: a YOLO-pose .pt or .onnx file, 'default' for the shipped "
-                     "model, or 'hardened' for the shipped model hardened by vbl-robust harden once installed "
-                     "(default: the shipped model once it is validated, else the oracle).")
-TRUST_MODEL = typer.Option(False, "--trust-model", help="Allow loading a .pt pickle from outside the package.")
-DESIGN = typer.Option("auto", "--detector", help="Detector design: auto (the shipped model's own; a user's model as "
-                      "one pass), single (one pass: the paper's pipeline) or twostage.")
-ENGINE = typer.Option("auto", "--engine", help="Inference engine of the black-box path: auto (ONNX Runtime when "
-                      "installed), torch, onnxruntime or openvino — always fp32; the outputs stay within 1e-3 px of "
-                      "torch's, APGD stays on torch.")
-DEVICE = typer.Option("cpu", "--device", help="Where the pipeline runs: cpu (default), cuda, cuda:N, or auto (CUDA "
-                      "when available). On a GPU the perturbation, views, detector and differentiable PnP run there; "
-                      "--engine auto then means torch.")
-ORACLE = typer.Option(False, "--oracle", help="Use the oracle detector (exact projected corners).")
-ORACLE_NOISE = typer.Option(0.0, "--oracle-noise", min=0.0, help="Oracle: fixed per-image corner noise (px).")
-METHOD_OPTION = typer.Option(None, "--method-option", help="A search method's option, METHOD.OPTION=VALUE "
-                             "(repeatable; VALUE read as YAML: 9, 0.5, true, [3, 5]), e.g. georobust-a.min_ratio=9 or "
-                             "georobust.alpha=3; recorded in the store and the job keys.")
-EXECUTOR = typer.Option("local", "--executor", help="local or ray.")
-ADDRESS = typer.Option(None, "--address", help="Ray cluster address (default: start a local Ray); checked before "
-                       "the run (10 s).")
-WORKERS = typer.Option(0, "--workers", help="Worker processes of a local run, one torch thread each (default 0: one "
-                       "per core, or $VBL_ROBUST_WORKERS); 1 runs in this process.")
-CLOCK = typer.Option("auto", "--clock", help="Clock of time budgets: process (CPU seconds of the evaluating process, "
-                     "which other work on the machine does not move), wall, or auto (process on a CPU, wall on a "
-                     "GPU). Recorded with the results.")
-WAIT = typer.Option(False, "--wait", help="When another run is writing the same --out, wait for it to end instead of "
-                    "refusing.")
-RETRY_FAILED = typer.Option(False, "--retry-failed", help="Run the jobs stored as failed again (e.g. after a missing "
-                            "image was restored); a plain rerun skips them.")
-CSV = typer.Option(None, "--csv", help="Also export the job rows to this CSV file.")
-PARQUET = typer.Option(None, "--parquet", help="Also export the job rows to this Parquet file.")
-REPORT = typer.Option(True, "--report/--no-report", help="Write report.html into --out.")
-from .config import CONFIG  # noqa: E402  (declared beside what it reads; listed here with the other shared options)
+__all__ = ["DEFAULT_IMAGES", "Address", "Batch", "Clock", "Config", "Csv", "Design", "Device", "Engine", "Executor",
+           "Height", "Images", "Imgsz", "Lard", "MethodOption", "Model", "Oracle", "OracleNoise", "Out", "Parquet", "Pnp",
+           "Quiet", "Report", "RetryFailed", "Roll", "Seed", "StoredRun", "Threads", "TrustModel", "Verbose", "Wait",
+           "Width", "Workers"]
+
+#: Images of an audit or a risk run when ``--n`` is not given (all rows of a smaller ``--lard`` dataset).
+DEFAULT_IMAGES = 20
+
+# -- every campaign: what it prints and where ---------------------------------------------------------------
+Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or tables (also accepted before the "
+                                     "command: vbl-robust -q COMMAND).")]
+Verbose = Annotated[bool, typer.Option("--verbose", "-v", help="Log progress details (INFO) (also accepted before the "
+                                       "command: vbl-robust -v COMMAND).")]
+Out = Annotated[Path, typer.Option("--out", help="Run directory (results.sqlite, report.html).")]
+#: A stored run, read (report, zones).
+StoredRun = Annotated[Path, typer.Argument(help="Run directory (holding results.sqlite) or the .sqlite file.")]
+
+# -- the images ---------------------------------------------------------------------------------------------------
+Images = Annotated[int | None, typer.Option("--n", "--images", min=1, max=MAX_IMAGES, show_default=False,
+                                            help=f"Number of images (default {DEFAULT_IMAGES}, or all rows of a "
+                                                 "smaller --lard dataset).")]
+Seed = Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Seed of the image choice and of the searches.")]
+Lard = Annotated[Path | None, typer.Option("--lard", help="LARD V2 dataset directory (CSV + runway DB JSON) instead "
+                                           "of generated synthetic approaches.")]
+Width = Annotated[int, typer.Option("--width", min=16, max=MAX_IMAGE_SIDE, help=f"Synthetic image width (px, at most "
+                                    f"{MAX_IMAGE_SIDE}).")]
+Height = Annotated[int, typer.Option("--height", min=16, max=MAX_IMAGE_SIDE, help=f"Synthetic image height (px, at "
+                                     f"most {MAX_IMAGE_SIDE}).")]
+
+# -- the detector (vbl_robust.detect.shipped.DetectorSpec.from_choice) --------------------------------------------
+Model = Annotated[Path | None, typer.Option("--model", help="Detector: a YOLO-pose .pt or .onnx file, 'default' for "
+                                            "the shipped model, or 'hardened' for the shipped model hardened by "
+                                            "vbl-robust harden once installed (default: the shipped model once it is "
+                                            "validated, else the oracle).")]
+TrustModel = Annotated[bool, typer.Option("--trust-model", help="Allow loading a .pt pickle from outside the package.")]
+Design = Annotated[str, typer.Option("--detector", help="Detector design: auto (the shipped model's own; a user's "
+                                     "model as one pass), single (one pass: the paper's pipeline) or twostage.")]
+Engine = Annotated[str, typer.Option("--engine", help="Inference engine of the black-box path: auto (ONNX Runtime when "
+                                     "installed), torch, onnxruntime or openvino — always fp32; the outputs stay "
+                                     "within 1e-3 px of torch's, APGD stays on torch.")]
+Device = Annotated[str, typer.Option("--device", help="Where the pipeline runs: cpu (default), cuda, cuda:N, or auto "
+                                     "(CUDA when available). On a GPU the perturbation, views, detector and "
+                                     "differentiable PnP run there; --engine auto then means torch.")]
+Oracle = Annotated[bool, typer.Option("--oracle", help="Use the oracle detector (exact projected corners).")]
+OracleNoise = Annotated[float, typer.Option("--oracle-noise", min=0.0, help="Oracle: fixed per-image corner noise "
+                                            "(px).")]
+
+# -- the searches -------------------------------------------------------------------------------------------------
+Roll = Annotated[str, typer.Option("--roll", help="Roll range in degrees: '15' (= ±15) or 'lo,hi'; 'none' to omit.")]
+Pnp = Annotated[str, typer.Option("--pnp", help="PnP solver: ippe_lm, iterative, sqpnp, ippe.")]
+MethodOption = Annotated[list[str] | None, typer.Option(
+    "--method-option", help="A search method's option, METHOD.OPTION=VALUE (repeatable; VALUE read as YAML: 9, 0.5, "
+    "true, [3, 5]), e.g. georobust-a.min_ratio=9 or georobust.alpha=3; recorded in the store and the job keys.")]
+
+# -- how a campaign runs ------------------------------------------------------------------------------------------
+Executor = Annotated[str, typer.Option("--executor", help="local or ray.")]
+Address = Annotated[str | None, typer.Option("--address", help="Ray cluster address (default: start a local Ray); "
+                                             "checked before the run (10 s).")]
+Workers = Annotated[int, typer.Option("--workers", help="Worker processes of a local run, one torch thread each "
+                                      "(default 0: one per core, or $VBL_ROBUST_WORKERS); 1 runs in this process.")]
+Clock = Annotated[str, typer.Option("--clock", help="Clock of time budgets: process (CPU seconds of the evaluating "
+                                    "process, which other work on the machine does not move), wall, or auto (process "
+                                    "on a CPU, wall on a GPU). Recorded with the results.")]
+Wait = Annotated[bool, typer.Option("--wait", help="When another run is writing the same --out, wait for it to end "
+                                    "instead of refusing.")]
+RetryFailed = Annotated[bool, typer.Option("--retry-failed", help="Run the jobs stored as failed again (e.g. after a "
+                                           "missing image was restored); a plain rerun skips them.")]
+
+# -- what a campaign writes ---------------------------------------------------------------------------------------
+Csv = Annotated[Path | None, typer.Option("--csv", help="Also export the job rows to this CSV file.")]
+Parquet = Annotated[Path | None, typer.Option("--parquet", help="Also export the job rows to this Parquet file.")]
+Report = Annotated[bool, typer.Option("--report/--no-report", help="Write report.html into --out.")]
+
+# -- training (train, harden) -------------------------------------------------------------------------------------
+Imgsz = Annotated[int, typer.Option("--imgsz", min=32, max=4096, help="Network input size (a multiple of 32, 32 to "
+                                    "4096).")]
+Batch = Annotated[int, typer.Option("--batch", min=1, help="Training batch size (views per optimizer step).")]
+Threads = Annotated[int | None, typer.Option("--threads", min=1, help="Torch threads for CPU training (default: all "
+                                             "cores).")]

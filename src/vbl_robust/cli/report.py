@@ -7,139 +7,133 @@ run (:meth:`vbl_robust.campaigns.store.ResultStore.merge`)."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated
 
 import typer
 
-from .common import fail
+from . import options as o
+from .common import fail, one_line
+
+ReportOut = Annotated[Path | None, typer.Option("--out", help="Directory for report.html and figures/ (default: RUN).")]
+Csv = Annotated[Path | None, typer.Option("--csv", help="Also export the job rows to CSV.")]
+Parquet = Annotated[Path | None, typer.Option("--parquet", help="Also export the job rows to Parquet.")]
+Format = Annotated[str, typer.Option(
+    "--format", help="html (the report); md: print the survival tables (and a families run's ranking) as Markdown "
+    "instead, on the images every method completed; csv or json: print the summary table, one row per method, box "
+    "and budget (images, survivors, survival_pct, survival_ci_low, survival_ci_high, breaches, misleading, flagged, "
+    "…).")]
+With = Annotated[list[Path] | None, typer.Option("--with", help="--format md: another run of the same experiment and "
+                                                 "seed whose methods join the table (repeatable).")]
+Compare = Annotated[Path | None, typer.Option(
+    "--compare", help="Another run of the same experiment, seed and images (e.g. after `vbl-robust harden`): "
+    "survival before (RUN) and after, paired per image, with exact McNemar p — compare.html with the curves overlaid "
+    "and the images that changed (in --out, default: that run's directory), or with --format md the table.")]
 
 
-def register(app: typer.Typer) -> None:
-    @app.command()
-    def report(
-        run: Path = typer.Argument(..., help="Run directory (holding results.sqlite) or the .sqlite file."),
-        out: Path | None = typer.Option(None, "--out", help="Directory for report.html and figures/ (default: RUN)."),
-        csv: Path | None = typer.Option(None, "--csv", help="Also export the job rows to CSV."),
-        parquet: Path | None = typer.Option(None, "--parquet", help="Also export the job rows to Parquet."),
-        fmt: str = typer.Option("html", "--format", help="html (the report); md: print the survival tables "
-                                "(and a families run's ranking) as Markdown instead, on the images every method "
-                                "completed; csv or json: print the summary table, one row per method, box and "
-                                "budget (images, survivors, survival_pct, survival_ci_low, survival_ci_high, "
-                                "breaches, misleading, flagged, …)."),
-        others: list[Path] | None = typer.Option(None, "--with", help="--format md: another run of the same "
-                                                 "experiment and seed whose methods join the table (repeatable)."),
-        compare: Path | None = typer.Option(None, "--compare", help="Another run of the same experiment, seed and "
-                                            "images (e.g. after `vbl-robust harden`): survival before (RUN) and "
-                                            "after, paired per image, with exact McNemar p — compare.html with the "
-                                            "curves overlaid and the images that changed (in --out, default: that "
-                                            "run's directory), or with --format md the table."),
-    ) -> None:
-        """Regenerate a run's self-contained HTML report (figures, tables, provenance) from its store."""
-        from vbl_robust.campaigns import ResultStore, export
-        from vbl_robust.report import build_report
+def report(
+    run: o.StoredRun, out: ReportOut = None, csv: Csv = None, parquet: Parquet = None, fmt: Format = "html",
+    others: With = None, compare: Compare = None,
+) -> None:
+    """Regenerate a run's self-contained HTML report (figures, tables, provenance) from its store."""
+    from vbl_robust.campaigns import ResultStore, export
+    from vbl_robust.report import build_report
 
-        if fmt not in ("html", "md", "csv", "json"):
-            fail(f"--format {fmt}: choose html, md, csv or json")
-        if fmt in ("csv", "json"):
-            if out is not None or csv is not None or parquet is not None or others or compare is not None:
-                fail(f"--format {fmt} prints the summary table: --out, --csv, --parquet, --with and --compare "
-                     "belong to the other formats")
-            _summary(run, fmt)
-            return
-        if fmt == "md":
-            if out is not None or csv is not None or parquet is not None:
-                fail("--format md prints to standard output: --out, --csv and --parquet belong to --format html")
-            typer.echo(_markdown(run, others or [], compare), nl=False)
-            return
-        if others:
-            fail("--with belongs to --format md")
-        if out is not None and out.exists() and not out.is_dir():
-            fail(f"--out {out}: is a file; the report goes into a directory (report.html and figures/)")
-        if compare is not None:
-            if csv or parquet:
-                fail("--csv and --parquet export one run: not with --compare")
-            from vbl_robust.report.compare import compare_html
+    if fmt not in ("html", "md", "csv", "json"):
+        fail(f"--format {fmt}: choose html, md, csv or json")
+    if fmt in ("csv", "json"):
+        if out is not None or csv is not None or parquet is not None or others or compare is not None:
+            fail(f"--format {fmt} prints the summary table: --out, --csv, --parquet, --with and --compare "
+                 "belong to the other formats")
+        _summary(run, fmt)
+        return
+    if fmt == "md":
+        if out is not None or csv is not None or parquet is not None:
+            fail("--format md prints to standard output: --out, --csv and --parquet belong to --format html")
+        typer.echo(_markdown(run, others or [], compare), nl=False)
+        return
+    if others:
+        fail("--with belongs to --format md")
+    if out is not None and out.exists() and not out.is_dir():
+        fail(f"--out {out}: is a file; the report goes into a directory (report.html and figures/)")
+    if compare is not None:
+        if csv or parquet:
+            fail("--csv and --parquet export one run: not with --compare")
+        from vbl_robust.report.compare import compare_html
 
-            try:
-                typer.echo(f"compare: {compare_html(run, compare, out)}")
-            except (ValueError, FileNotFoundError) as exc:
-                fail(str(exc))
-            return
-        try:
-            path = build_report(run, out)
-            if csv or parquet:
-                with ResultStore.open_existing(run) as store:
-                    for p in (csv, parquet):
-                        if p is not None:
-                            typer.echo(f"exported {export(store, p)}")
-        except (ValueError, FileNotFoundError) as exc:
-            fail(str(exc))
-        typer.echo(f"report: {path}")
-
-    @app.command()
-    def bundle(
-        root: Path = typer.Argument(..., help="Directory of experiment run directories (the --out of reproduce "
-                                    "paper|all)."),
-        out: Path = typer.Option(..., "--out", help="Bundle directory (e.g. results/paper)."),
-        reproduction: Path | None = typer.Option(None, "--reproduction", help="A Markdown file (REPRODUCTION.md) "
-                                                 "whose part between '<!-- bundle:begin -->' and "
-                                                 "'<!-- bundle:end -->' is replaced by the claims and status tables."),
-        stores: bool = typer.Option(False, "--stores", help="Also a compact copy of each store (results.sqlite.xz), "
-                                    "from which `reproduce --resume-from DIR` resumes an unfinished run elsewhere."),
-    ) -> None:
-        """Write a results bundle: per experiment the job table (Parquet), the report and the provenance, and a
-        status table; runs still in progress are bundled as they stand (rerun to refresh)."""
-        from vbl_robust.campaigns.bundle import write_bundle
-
-        if out.exists() and not out.is_dir():
-            fail(f"--out {out}: is a file; a bundle is a directory")
-        try:
-            totals = write_bundle(root, out, reproduction=reproduction, stores=stores)
-        except (ValueError, FileNotFoundError) as exc:
-            fail(str(exc))
-        for name, t in totals.items():
-            typer.echo(f"{name}: {t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} images")
-        typer.echo(f"bundle: {out}")
+        with one_line():
+            typer.echo(f"compare: {compare_html(run, compare, out)}")
+        return
+    with one_line():
+        path = build_report(run, out)
+        if csv or parquet:
+            with ResultStore.open_existing(run) as store:
+                for p in (csv, parquet):
+                    if p is not None:
+                        typer.echo(f"exported {export(store, p)}")
+    typer.echo(f"report: {path}")
 
 
-    @app.command()
-    def merge(
-        sources: list[Path] = typer.Argument(..., help="Run directories, .sqlite files, or packed stores "
-                                             "(.sqlite.xz, as `bundle --stores` writes them) computed elsewhere."),
-        into: Path = typer.Option(..., "--into", help="The run directory (or .sqlite file) they join; created when "
-                                  "missing."),
-    ) -> None:
-        """Copy into one run the jobs that other runs of the same campaign and detector computed (another machine,
-        a GPU, a cluster without a shared disk): rows it lacks, their samples and runs; rows it holds stay. Refused
-        while a run writes it."""
-        import lzma
-        import tempfile
+Root = Annotated[Path, typer.Argument(help="Directory of experiment run directories (the --out of reproduce "
+                                      "paper|all).")]
+BundleOut = Annotated[Path, typer.Option("--out", help="Bundle directory (e.g. results/paper).")]
+Reproduction = Annotated[Path | None, typer.Option(
+    "--reproduction", help="A Markdown file (REPRODUCTION.md) whose part between '<!-- bundle:begin -->' and "
+    "'<!-- bundle:end -->' is replaced by the claims and status tables.")]
+Stores = Annotated[bool, typer.Option("--stores", help="Also a compact copy of each store (results.sqlite.xz), from "
+                                      "which `reproduce --resume-from DIR` resumes an unfinished run elsewhere.")]
 
-        from vbl_robust.campaigns.bundle import restore_store
-        from vbl_robust.campaigns.store import ResultStore, WriterLock
 
-        dst = into / "results.sqlite" if into.is_dir() or not into.suffix else into
-        try:
-            dst.parent.mkdir(parents=True, exist_ok=True)
-            with WriterLock(dst), ResultStore(dst) as store, tempfile.TemporaryDirectory() as tmp:
-                paths = []
-                for i, src in enumerate(sources):
-                    path = src
-                    if src.name.endswith(".xz"):  # a packed store: unpacked beside, never in place
-                        if not src.is_file():
-                            raise FileNotFoundError(f"{src}: no such packed store")
-                        path = Path(tmp) / str(i)
-                        restore_store(src, path)
-                    paths.append(path)
-                first = None
-                for path in paths:  # every source checked (against the first) before anything is written
-                    with ResultStore.open_existing(path) as other:
-                        first = store.check_mergeable(other, first)
-                for src, path in zip(sources, paths, strict=True):
-                    with ResultStore.open_existing(path) as other:
-                        new, had = store.merge(other, source=str(src))
-                    typer.echo(f"{src}: {new} job rows merged, {had} already in {dst}")
-        except (ValueError, FileNotFoundError, OSError, EOFError, lzma.LZMAError) as exc:
-            fail(str(exc))
+def bundle(root: Root, out: BundleOut, reproduction: Reproduction = None, stores: Stores = False) -> None:
+    """Write a results bundle: per experiment the job table (Parquet), the report and the provenance, and a
+    status table; runs still in progress are bundled as they stand (rerun to refresh)."""
+    from vbl_robust.campaigns.bundle import write_bundle
+
+    if out.exists() and not out.is_dir():
+        fail(f"--out {out}: is a file; a bundle is a directory")
+    with one_line():
+        totals = write_bundle(root, out, reproduction=reproduction, stores=stores)
+    for name, t in totals.items():
+        typer.echo(f"{name}: {t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} images")
+    typer.echo(f"bundle: {out}")
+
+
+Sources = Annotated[list[Path], typer.Argument(help="Run directories, .sqlite files, or packed stores (.sqlite.xz, as "
+                                               "`bundle --stores` writes them) computed elsewhere.")]
+Into = Annotated[Path, typer.Option("--into", help="The run directory (or .sqlite file) they join; created when "
+                                    "missing.")]
+
+
+def merge(sources: Sources, into: Into) -> None:
+    """Copy into one run the jobs that other runs of the same campaign and detector computed (another machine,
+    a GPU, a cluster without a shared disk): rows it lacks, their samples and runs; rows it holds stay. Refused
+    while a run writes it."""
+    import lzma
+    import tempfile
+
+    from vbl_robust.campaigns.bundle import restore_store
+    from vbl_robust.campaigns.store import ResultStore, WriterLock
+
+    dst = into / "results.sqlite" if into.is_dir() or not into.suffix else into
+    with one_line(ValueError, FileNotFoundError, OSError, EOFError, lzma.LZMAError):
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        with WriterLock(dst), ResultStore(dst) as store, tempfile.TemporaryDirectory() as tmp:
+            paths = []
+            for i, src in enumerate(sources):
+                path = src
+                if src.name.endswith(".xz"):  # a packed store: unpacked beside, never in place
+                    if not src.is_file():
+                        raise FileNotFoundError(f"{src}: no such packed store")
+                    path = Path(tmp) / str(i)
+                    restore_store(src, path)
+                paths.append(path)
+            first = None
+            for path in paths:  # every source checked (against the first) before anything is written
+                with ResultStore.open_existing(path) as other:
+                    first = store.check_mergeable(other, first)
+            for src, path in zip(sources, paths, strict=True):
+                with ResultStore.open_existing(path) as other:
+                    new, had = store.merge(other, source=str(src))
+                typer.echo(f"{src}: {new} job rows merged, {had} already in {dst}")
 
 
 def _summary(run: Path, fmt: str) -> None:
@@ -149,11 +143,8 @@ def _summary(run: Path, fmt: str) -> None:
     from vbl_robust.campaigns import ResultStore
     from vbl_robust.campaigns.tables import SUMMARY_COLUMNS, summary_records, write_records
 
-    try:
-        with ResultStore.open_existing(run) as store:
-            records = summary_records(store)
-    except (ValueError, FileNotFoundError) as exc:
-        fail(str(exc))
+    with one_line(), ResultStore.open_existing(run) as store:
+        records = summary_records(store)
     write_records(records, SUMMARY_COLUMNS, fmt, sys.stdout)
 
 
@@ -162,7 +153,7 @@ def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:
     from vbl_robust.campaigns.spec import CampaignSpec
     from vbl_robust.report.markdown import compare_markdown, families_markdown, survival_markdown
 
-    try:
+    with one_line():
         if compare is not None:
             return compare_markdown(run, compare)
         text = survival_markdown(run, others)
@@ -170,6 +161,4 @@ def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:
             name = CampaignSpec.from_dict(store.campaign()["spec"]).name
         if name == "families":
             text += "\n" + families_markdown(run)
-    except (ValueError, FileNotFoundError) as exc:
-        fail(str(exc))
     return text

@@ -10,27 +10,157 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import typer
 
+from ..campaigns.experiments import EXPERIMENTS, PAPER
 from ..constants import MAX_EVALS, MAX_IMAGES
 from . import options as o
-from .audit import (
-    check_exports,
+from .common import (
     detector_spec,
-    finish,
-    load,
+    fail,
+    one_line,
     parse_method_options,
     parse_methods,
-    run_settings,
-    run_with_progress,
+    set_verbosity,
     with_method_options,
 )
-from .common import (
-    fail,
-    set_verbosity,
-)
+from .run import check_executor, check_exports, finish, load, run_settings, run_with_progress
+
+Experiment = Annotated[str, typer.Argument(help=f"One of: {', '.join(EXPERIMENTS)}; 'paper' (the paper's seven) or "
+                                           "'all'.")]
+Out = Annotated[Path | None, typer.Option("--out", help="Run directory (default runs/<experiment>).")]
+Images = Annotated[int | None, typer.Option("--images", min=1, max=MAX_IMAGES, help="Number of images (default: the "
+                                            "paper's, 100; 1000 for pnp-validation).")]
+Methods = Annotated[str | None, typer.Option("--methods", help="Comma-separated methods (default "
+                                             "georobust,georobust-av,random,apgd; families: the same less apgd).")]
+Landscape = Annotated[bool, typer.Option("--landscape/--no-landscape", help="spatial-2d / runtime-2d: the dense "
+                                         "61 × 36 grid on the first image (the report's heat map, about 2200 "
+                                         "evaluations).")]
+MaxEvals = Annotated[int | None, typer.Option("--max-evals", min=1, max=MAX_EVALS, help="Per-image evaluations of the "
+                                              "spatial experiments (default 200).")]
+GridStep = Annotated[float | None, typer.Option("--grid-step", min=0.0, help="1-D dense-grid reference step in degrees "
+                                                "(default 0.05; 0 = no reference).")]
+TimeBudgets = Annotated[str | None, typer.Option("--time-budgets", help="Runtime experiments: seconds per image, "
+                                                 "comma-separated (default 0.1,0.5,1,2,5).")]
+EvalBudgets = Annotated[str | None, typer.Option("--eval-budgets", help="Runtime experiments: evaluations per image "
+                                                 "(default 10,25,50,100,200).")]
+Iterations = Annotated[int | None, typer.Option("--iterations", min=1, help="Convergence: GeoRobust iterations (30).")]
+FamilyGrid = Annotated[int | None, typer.Option("--family-grid", min=0, help="Families: fewest points of each "
+                                                "family's dense-grid reference over its largest level (default 201; "
+                                                "0 = none).")]
+ResumeFrom = Annotated[Path | None, typer.Option(
+    "--resume-from", help="A bundle written with `vbl-robust bundle --stores`: its stores seed the run directories "
+    "under --out that have none yet, so the run goes on where the bundle's ended.")]
+CheckAgainst = Annotated[Path | None, typer.Option(
+    "--check-against", help="After each experiment, check that its rows are those of an earlier run or bundle of it "
+    "(a run directory or a `vbl-robust bundle` output; for paper/all the directory holding one per experiment): same "
+    "keys, verdicts, counts and worst points, worst errors within 1e-3 relative; rows of time budgets are not "
+    "compared. Exit code 1 when one differs.")]
+Estimate = Annotated[bool, typer.Option("--estimate", help="Print each experiment's expected duration (from a measured "
+                                        "probe of the detector here and the breach rates of the first images) and its "
+                                        "upper bound, and exit.")]
+ProbeSeconds = Annotated[float, typer.Option("--probe-seconds", min=0.01, help="--estimate: seconds each "
+                                             "evaluation-rate probe runs (black box, gradient).")]
+
+
+def reproduce(
+    experiment: Experiment, out: Out = None, images: Images = None, seed: o.Seed = 0, lard: o.Lard = None,
+    width: o.Width = 1024, height: o.Height = 1024,
+    model: o.Model = None, trust_model: o.TrustModel = False, design: o.Design = "auto", engine: o.Engine = "auto",
+    device: o.Device = "cpu", oracle: o.Oracle = False, oracle_noise: o.OracleNoise = 0.0,
+    methods: Methods = None, method_option: o.MethodOption = None, landscape: Landscape = True,
+    max_evals: MaxEvals = None, grid_step: GridStep = None, time_budgets: TimeBudgets = None,
+    eval_budgets: EvalBudgets = None, iterations: Iterations = None, family_grid: FamilyGrid = None,
+    executor: o.Executor = "local", workers: o.Workers = 0, clock: o.Clock = "auto", wait: o.Wait = False,
+    retry_failed: o.RetryFailed = False, resume_from: ResumeFrom = None, check_against: CheckAgainst = None,
+    address: o.Address = None, csv: o.Csv = None, parquet: o.Parquet = None, report: o.Report = True,
+    estimate: Estimate = False, probe_seconds: ProbeSeconds = 5.0,
+    quiet: o.Quiet = False, verbose: o.Verbose = False, config: o.Config = None,
+) -> None:
+    """Run one of the paper's experiments, or all; rerunning the same command resumes it."""
+    from vbl_robust.campaigns.experiments import Options, with_options
+
+    quiet = set_verbosity(quiet=quiet, verbose=verbose)
+    check_executor(executor, address)
+    group, exps = _experiments(experiment)
+    eb = _floats(eval_budgets, "--eval-budgets")
+    opts = with_options(
+        Options(), methods=parse_methods(methods) if methods else None, max_evals=max_evals, grid_step_deg=grid_step,
+        time_budgets=_floats(time_budgets, "--time-budgets"), eval_budgets=tuple(int(v) for v in eb) if eb else None,
+        iterations=iterations, family_grid=family_grid, landscape=None if landscape else (0, 0),
+    )
+    check_exports(csv, parquet, out)
+    method_opts = parse_method_options(method_option)
+    _check_method_options(method_opts, [exp.build(seed, opts) for exp in exps])
+    det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
+    root = out or Path("runs") / (experiment if group else exps[0].name)
+    if estimate:
+        from vbl_robust.campaigns.estimate import PROBE_IMAGES
+
+        run_spec, n_workers = run_settings(exps[0].build(seed, opts), clock, device, workers)
+        probe_samples = load(None, seed, lard, width, height, default=PROBE_IMAGES)[0]
+        _estimate(exps, opts, seed, images, det, probe_samples, n_workers, experiment if group else "", probe_seconds,
+                  run_spec.clock, root)
+        return
+    if resume_from is not None and not resume_from.is_dir():
+        fail(f"--resume-from {resume_from}: not a directory")
+    references = {exp.name: _reference(check_against, exp.name) for exp in exps} if check_against else {}
+    differ = incomplete = False  # an incomplete experiment does not stop the next ones; the exit code says it
+    for exp in exps:
+        spec = with_method_options(exp.build(seed, opts), method_opts, strict=False)  # checked over all above
+        spec, n_workers = run_settings(spec, clock, device, workers)
+        out_dir = root / exp.name if group else root
+        if resume_from is not None:
+            _restore(resume_from, exp.name, out_dir)
+        samples, source = load(images, seed, lard, width, height, default=exp.images)
+        config = {"command": "reproduce", "experiment": exp.name, "images": len(samples), "seed": seed,
+                  "lard": str(lard) if lard else None, "options": repr(opts), "width": width, "height": height,
+                  **({"method_options": method_opts} if method_opts else {})}
+        summary = run_with_progress(spec, samples, out_dir, det, executor=executor, address=address, source=source,
+                                    config=config, quiet=quiet, workers=n_workers, wait=wait,
+                                    retry_failed=retry_failed)
+        incomplete |= not finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
+        if references:
+            differ |= _check(exp.name, out_dir, references[exp.name])
+    if group:
+        from vbl_robust.report.claims import claims_html, claims_of, write_claims, write_index
+
+        typer.echo(f"claims: {write_claims(root)}")
+        typer.echo(f"index: {write_index(root, [e.name for e in exps], claims_html(claims_of(root), str(root)))}")
+    if differ or incomplete:
+        raise typer.Exit(1)
+
+
+def _experiments(name: str) -> tuple[tuple[str, ...] | None, list]:
+    """``reproduce NAME``'s experiments: the group's names (``all``, ``paper``; None for one experiment) and the
+    experiments, or one line."""
+    from vbl_robust.campaigns.experiments import experiment
+
+    group = {"all": tuple(EXPERIMENTS), "paper": PAPER}.get(name)
+    with one_line(ValueError):
+        return group, [EXPERIMENTS[n] for n in group] if group else [experiment(name)]
+
+
+def _check_method_options(options: dict, specs: list) -> None:
+    """Every ``--method-option`` names a method that some experiment here runs."""
+    ran = set().union(*(spec.search_methods() for spec in specs))
+    missing = sorted(set(options) - ran)
+    if missing:
+        fail(f"--method-option: no experiment here runs method(s) {missing} (they run {sorted(ran)}; see --methods)")
+
+
+def _restore(bundle: Path, name: str, out_dir: Path) -> None:
+    """``--resume-from``: the bundle's packed store of experiment ``name`` seeds ``out_dir`` if it has none yet."""
+    from vbl_robust.campaigns.bundle import PACKED, restore_store
+
+    packed = bundle / name / PACKED
+    with one_line(ValueError, prefix=f"--resume-from {bundle}: "):
+        restored = restore_store(packed, out_dir)
+    if restored:
+        typer.echo(f"{name}: store restored from {packed}")
+
 
 
 def _floats(text: str | None, name: str) -> tuple[float, ...] | None:
@@ -105,150 +235,3 @@ def _check(name: str, run: Path, reference: Path) -> bool:
     typer.echo(f"{name}: checked against {reference}: {c['rows']} rows, {c['common']} found there, "
                f"{len(c['differ'])} with another finding{first}{drift}")
     return bool(c["differ"])
-
-
-def register(app: typer.Typer) -> None:
-    from vbl_robust.campaigns.experiments import EXPERIMENTS, PAPER
-
-    names = ", ".join(EXPERIMENTS)
-
-    def _check_method_options(options: dict, specs: list) -> None:
-        ran = set().union(*(spec.search_methods() for spec in specs))
-        missing = sorted(set(options) - ran)
-        if missing:
-            fail(f"--method-option: no experiment here runs method(s) {missing} (they run {sorted(ran)}; see "
-                 "--methods)")
-
-    @app.command()
-    def reproduce(
-        experiment: str = typer.Argument(..., help=f"One of: {names}; 'paper' (the paper's seven) or 'all'."),
-        out: Path | None = typer.Option(None, "--out", help="Run directory (default runs/<experiment>)."),
-        images: int | None = typer.Option(None, "--images", min=1, max=MAX_IMAGES, help="Number of images (default: the paper's, "
-                                          "100; 1000 for pnp-validation)."),
-        seed: int = o.SEED,
-        lard: Path | None = o.LARD,
-        width: int = o.WIDTH,
-        height: int = o.HEIGHT,
-        model: Path | None = o.MODEL,
-        trust_model: bool = o.TRUST_MODEL,
-        design: str = o.DESIGN,
-        engine: str = o.ENGINE,
-        device: str = o.DEVICE,
-        oracle: bool = o.ORACLE,
-        oracle_noise: float = o.ORACLE_NOISE,
-        methods: str | None = typer.Option(None, "--methods", help="Comma-separated methods (default "
-                                           "georobust,georobust-av,random,apgd; families: the same less apgd)."),
-        method_option: list[str] | None = o.METHOD_OPTION,
-        landscape: bool = typer.Option(True, "--landscape/--no-landscape", help="spatial-2d / runtime-2d: the dense "
-                                       "61 × 36 grid on the first image (the report's heat map, about 2200 "
-                                       "evaluations)."),
-        max_evals: int | None = typer.Option(None, "--max-evals", min=1, max=MAX_EVALS, help="Per-image evaluations of the spatial "
-                                             "experiments (default 200)."),
-        grid_step: float | None = typer.Option(None, "--grid-step", min=0.0, help="1-D dense-grid reference step in "
-                                               "degrees (default 0.05; 0 = no reference)."),
-        time_budgets: str | None = typer.Option(None, "--time-budgets", help="Runtime experiments: seconds per image, "
-                                                "comma-separated (default 0.1,0.5,1,2,5)."),
-        eval_budgets: str | None = typer.Option(None, "--eval-budgets", help="Runtime experiments: evaluations per "
-                                                "image (default 10,25,50,100,200)."),
-        iterations: int | None = typer.Option(None, "--iterations", min=1, help="Convergence: GeoRobust iterations (30)."),
-        family_grid: int | None = typer.Option(None, "--family-grid", min=0, help="Families: fewest points of each "
-                                               "family's dense-grid reference over its largest level (default 201; "
-                                               "0 = none)."),
-        executor: str = o.EXECUTOR,
-        workers: int = o.WORKERS,
-        clock: str = o.CLOCK,
-        wait: bool = o.WAIT,
-        retry_failed: bool = o.RETRY_FAILED,
-        resume_from: Path | None = typer.Option(None, "--resume-from", help="A bundle written with `vbl-robust "
-                                                "bundle --stores`: its stores seed the run directories under --out "
-                                                "that have none yet, so the run goes on where the bundle's ended."),
-        check_against: Path | None = typer.Option(None, "--check-against", help="After each experiment, check "
-                                                  "that its rows are those of an earlier run or bundle of it (a run "
-                                                  "directory or a `vbl-robust bundle` output; for paper/all the "
-                                                  "directory holding one per experiment): same keys, verdicts, "
-                                                  "counts and worst points, worst errors within 1e-3 relative; rows "
-                                                  "of time budgets are not compared. Exit code 1 when one differs."),
-        address: str | None = o.ADDRESS,
-        csv: Path | None = o.CSV,
-        parquet: Path | None = o.PARQUET,
-        report: bool = o.REPORT,
-        estimate: bool = typer.Option(False, "--estimate", help="Print each experiment's expected duration "
-                                      "(from a measured probe of the detector here and the breach rates of the first "
-                                      "images) and its upper bound, and exit."),
-        probe_seconds: float = typer.Option(5.0, "--probe-seconds", min=0.01, help="--estimate: seconds each "
-                                            "evaluation-rate probe runs (black box, gradient)."),
-        quiet: bool = o.QUIET,
-        verbose: bool = o.VERBOSE,
-        config: Path | None = o.CONFIG,
-    ) -> None:
-        """Run one of the paper's experiments, or all; rerunning the same command resumes it."""
-        from vbl_robust.campaigns.experiments import Options, with_options
-        from vbl_robust.campaigns.experiments import experiment as get_experiment
-
-        quiet = set_verbosity(quiet=quiet, verbose=verbose)
-
-        from vbl_robust.campaigns.runner import check_executor
-
-        try:
-            check_executor(executor, address)
-        except ValueError as exc:
-            fail(str(exc))
-        try:
-            group = {"all": tuple(EXPERIMENTS), "paper": PAPER}.get(experiment)
-            exps = [EXPERIMENTS[n] for n in group] if group else [get_experiment(experiment)]
-        except ValueError as exc:
-            fail(str(exc))
-        eb = _floats(eval_budgets, "--eval-budgets")
-        opts = with_options(
-            Options(), methods=parse_methods(methods) if methods else None, max_evals=max_evals, grid_step_deg=grid_step,
-            time_budgets=_floats(time_budgets, "--time-budgets"), eval_budgets=tuple(int(v) for v in eb) if eb else None,
-            iterations=iterations, family_grid=family_grid, landscape=None if landscape else (0, 0),
-        )
-        check_exports(csv, parquet, out)
-        method_opts = parse_method_options(method_option)
-        _check_method_options(method_opts, [exp.build(seed, opts) for exp in exps])
-        det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
-        root = out or Path("runs") / (experiment if group else exps[0].name)
-        if estimate:
-            from vbl_robust.campaigns.estimate import PROBE_IMAGES
-
-            run_spec, n_workers = run_settings(exps[0].build(seed, opts), clock, device, workers)
-            _estimate(exps, opts, seed, images, det, load(None, seed, lard, width, height, default=PROBE_IMAGES)[0], n_workers,
-                      experiment if group else "", probe_seconds, run_spec.clock, root)
-            return
-        if resume_from is not None and not resume_from.is_dir():
-            fail(f"--resume-from {resume_from}: not a directory")
-        references = {exp.name: _reference(check_against, exp.name) for exp in exps} if check_against else {}
-        differ = incomplete = False  # an incomplete experiment does not stop the next ones; the exit code says it
-        for exp in exps:
-            spec = exp.build(seed, opts)
-            spec = with_method_options(spec, method_opts, strict=False)  # checked over all experiments above
-            spec, n_workers = run_settings(spec, clock, device, workers)
-            out_dir = root / exp.name if group else root
-            if resume_from is not None:
-                from vbl_robust.campaigns.bundle import PACKED, restore_store
-
-                try:
-                    restored = restore_store(resume_from / exp.name / PACKED, out_dir)
-                except ValueError as exc:
-                    fail(f"--resume-from {resume_from}: {exc}")
-                if restored:
-                    typer.echo(f"{exp.name}: store restored from {resume_from / exp.name / PACKED}")
-            samples, source = load(images, seed, lard, width, height, default=exp.images)
-            config = {"command": "reproduce", "experiment": exp.name, "images": len(samples), "seed": seed,
-                      "lard": str(lard) if lard else None, "options": repr(opts), "width": width, "height": height}
-            if method_opts:
-                config["method_options"] = method_opts
-            summary = run_with_progress(spec, samples, out_dir, det, executor=executor, address=address,
-                                        source=source, config=config, quiet=quiet, workers=n_workers, wait=wait,
-                                        retry_failed=retry_failed)
-            incomplete |= not finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
-            if references:
-                differ |= _check(exp.name, out_dir, references[exp.name])
-        if group:
-            from vbl_robust.report.claims import claims_html, claims_of, write_claims, write_index
-
-            typer.echo(f"claims: {write_claims(root)}")
-            typer.echo(f"index: {write_index(root, [e.name for e in exps], claims_html(claims_of(root), str(root)))}")
-        if differ or incomplete:
-            raise typer.Exit(1)

@@ -6,106 +6,76 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Annotated
 
 import typer
 
-from ..constants import MAX_IMAGES
 from . import options as o
-from .common import fail, set_verbosity
+from .common import detector_spec, fail, one_line, parse_box, set_verbosity
+from .run import check_executor, check_exports, finish, load, run_settings, run_with_progress
+
+Contrast = Annotated[str | None, typer.Option("--contrast", help="Contrast factor range 'lo,hi'.")]
+Perturb = Annotated[list[str] | None, typer.Option("--perturb", help="Another perturbation family and its range, "
+                                                   "NAME=LO,HI (repeatable), as for audit.")]
+Dist = Annotated[list[str] | None, typer.Option("--dist", help="A parameter's distribution over its range: "
+                                                "NAME=normal:MEAN,SD (truncated to the range) or NAME=uniform "
+                                                "(repeatable; default uniform).")]
+Methods = Annotated[str, typer.Option("--methods", help="Estimators: mc (Monte Carlo with a sequential test, stops "
+                                      "once decided) and guided (stratified over a worst-case search's cells).")]
+MaxEvals = Annotated[int, typer.Option("--max-evals", min=2, max=1_000_000, help="Evaluations per image and estimator "
+                                       "(at most 1,000,000).")]
+Tau = Annotated[float, typer.Option("--tau", help="The limit on p_fail of the verdict (a fraction, e.g. 0.01).")]
+Delta = Annotated[float, typer.Option("--delta", help="1 − confidence of the intervals and the verdict.")]
+GuideEvals = Annotated[int, typer.Option("--guide-evals", min=1, help="guided: evaluations of its worst-case search "
+                                         "(they count in --max-evals).")]
 
 
-def register(app: typer.Typer) -> None:
-    @app.command()
-    def risk(
-        out: Path = typer.Option(Path("runs/risk"), "--out", help="Run directory (results.sqlite, report.html)."),
-        n: int | None = typer.Option(None, "--n", "--images", min=1, max=MAX_IMAGES, show_default=False,
-                                     help="Number of images (default 20, or all rows of a smaller --lard dataset)."),
-        seed: int = o.SEED,
-        lard: Path | None = o.LARD,
-        width: int = o.WIDTH,
-        height: int = o.HEIGHT,
-        model: Path | None = o.MODEL,
-        trust_model: bool = o.TRUST_MODEL,
-        design: str = o.DESIGN,
-        engine: str = o.ENGINE,
-        device: str = o.DEVICE,
-        oracle: bool = o.ORACLE,
-        oracle_noise: float = o.ORACLE_NOISE,
-        roll: str = typer.Option("15", "--roll", help="Roll range in degrees: '15' (= ±15) or 'lo,hi'; 'none' to omit."),
-        contrast: str | None = typer.Option(None, "--contrast", help="Contrast factor range 'lo,hi'."),
-        perturb: list[str] | None = typer.Option(None, "--perturb", help="Another perturbation family and its range, "
-                                                 "NAME=LO,HI (repeatable), as for audit."),
-        dist: list[str] | None = typer.Option(None, "--dist", help="A parameter's distribution over its range: "
-                                              "NAME=normal:MEAN,SD (truncated to the range) or NAME=uniform "
-                                              "(repeatable; default uniform)."),
-        methods: str = typer.Option("mc,guided", "--methods", help="Estimators: mc (Monte Carlo with a sequential "
-                                    "test, stops once decided) and guided (stratified over a worst-case search's "
-                                    "cells)."),
-        max_evals: int = typer.Option(1024, "--max-evals", min=2, max=1_000_000, help="Evaluations per image and "
-                                      "estimator (at most 1,000,000)."),
-        tau: float = typer.Option(0.01, "--tau", help="The limit on p_fail of the verdict (a fraction, e.g. 0.01)."),
-        delta: float = typer.Option(0.05, "--delta", help="1 − confidence of the intervals and the verdict."),
-        guide_evals: int = typer.Option(64, "--guide-evals", min=1, help="guided: evaluations of its worst-case "
-                                        "search (they count in --max-evals)."),
-        pnp: str = typer.Option("ippe_lm", "--pnp", help="PnP solver: ippe_lm, iterative, sqpnp, ippe."),
-        executor: str = o.EXECUTOR,
-        workers: int = o.WORKERS,
-        wait: bool = o.WAIT,
-        retry_failed: bool = o.RETRY_FAILED,
-        address: str | None = o.ADDRESS,
-        csv: Path | None = o.CSV,
-        parquet: Path | None = o.PARQUET,
-        report: bool = o.REPORT,
-        quiet: bool = o.QUIET,
-        verbose: bool = o.VERBOSE,
-        config: Path | None = o.CONFIG,
-    ) -> None:
-        """Failure probability per image when θ is drawn from a distribution over the box (turbulence, not a worst
-        case): p_fail with a valid interval, a verdict on p_fail ≤ τ, and the rate pooled over the images."""
-        from vbl_robust.campaigns import risk_spec
-        from vbl_robust.campaigns.risk import RISK_METHODS, parse_dist
-        from vbl_robust.campaigns.runner import check_executor
+def risk(
+    out: o.Out = Path("runs/risk"), n: o.Images = None, seed: o.Seed = 0, lard: o.Lard = None,
+    width: o.Width = 1024, height: o.Height = 1024,
+    model: o.Model = None, trust_model: o.TrustModel = False, design: o.Design = "auto", engine: o.Engine = "auto",
+    device: o.Device = "cpu", oracle: o.Oracle = False, oracle_noise: o.OracleNoise = 0.0,
+    roll: o.Roll = "15", contrast: Contrast = None, perturb: Perturb = None, dist: Dist = None,
+    methods: Methods = "mc,guided", max_evals: MaxEvals = 1024, tau: Tau = 0.01, delta: Delta = 0.05,
+    guide_evals: GuideEvals = 64, pnp: o.Pnp = "ippe_lm",
+    executor: o.Executor = "local", workers: o.Workers = 0, wait: o.Wait = False,
+    retry_failed: o.RetryFailed = False, address: o.Address = None,
+    csv: o.Csv = None, parquet: o.Parquet = None, report: o.Report = True,
+    quiet: o.Quiet = False, verbose: o.Verbose = False, config: o.Config = None,
+) -> None:
+    """Failure probability per image when θ is drawn from a distribution over the box (turbulence, not a worst
+    case): p_fail with a valid interval, a verdict on p_fail ≤ τ, and the rate pooled over the images."""
+    from vbl_robust.campaigns import risk_spec
+    from vbl_robust.campaigns.risk import RISK_METHODS, parse_dist
 
-        from .audit import (
-            check_exports,
-            detector_spec,
-            finish,
-            load,
-            parse_box,
-            run_settings,
-            run_with_progress,
-        )
-
-        quiet = set_verbosity(quiet=quiet, verbose=verbose)
-        box = parse_box(roll, contrast, perturb)
-        method_list = tuple(m.strip() for m in methods.split(",") if m.strip())
-        bad = [m for m in method_list if m not in RISK_METHODS]
-        if bad or not method_list or len(set(method_list)) != len(method_list):
-            fail(f"--methods {methods}: choose among {', '.join(RISK_METHODS)}, each once")
-        for name, v in (("--tau", tau), ("--delta", delta)):
-            if not math.isfinite(v):
-                fail(f"{name} {v}: must be finite")
-        try:
-            check_executor(executor, address)
-            spec = risk_spec(box, methods=method_list, max_evals=max_evals, seed=seed, dist=parse_dist(dist),
-                             tau=tau, delta=delta, guide_evals=guide_evals, pnp=pnp)
-        except ValueError as exc:
-            fail(str(exc))
-        spec, workers = run_settings(spec, "auto", device, workers)
-        check_exports(csv, parquet, out)
-        det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
-        samples, source = load(n, seed, lard, width, height)
-        config = {"command": "risk", "n": len(samples), "seed": seed, "lard": str(lard) if lard else None,
-                  "roll": roll, "contrast": contrast, "perturb": list(perturb or []), "dist": list(dist or []),
-                  "methods": list(method_list), "max_evals": max_evals, "tau": tau, "delta": delta,
-                  "guide_evals": guide_evals, "pnp": pnp, "width": width, "height": height}
-        summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
-                                    config=config, quiet=quiet, workers=workers, wait=wait, retry_failed=retry_failed)
-        complete = finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
-        if not quiet:
-            _print_pooled(out)
-        if not complete:
-            raise typer.Exit(1)
+    quiet = set_verbosity(quiet=quiet, verbose=verbose)
+    box = parse_box(roll, contrast, perturb)
+    method_list = tuple(m.strip() for m in methods.split(",") if m.strip())
+    bad = [m for m in method_list if m not in RISK_METHODS]
+    if bad or not method_list or len(set(method_list)) != len(method_list):
+        fail(f"--methods {methods}: choose among {', '.join(RISK_METHODS)}, each once")
+    for name, v in (("--tau", tau), ("--delta", delta)):
+        if not math.isfinite(v):
+            fail(f"{name} {v}: must be finite")
+    check_executor(executor, address)
+    with one_line(ValueError):
+        spec = risk_spec(box, methods=method_list, max_evals=max_evals, seed=seed, dist=parse_dist(dist),
+                         tau=tau, delta=delta, guide_evals=guide_evals, pnp=pnp)
+    spec, workers = run_settings(spec, "auto", device, workers)
+    check_exports(csv, parquet, out)
+    det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
+    samples, source = load(n, seed, lard, width, height)
+    config = {"command": "risk", "n": len(samples), "seed": seed, "lard": str(lard) if lard else None,
+              "roll": roll, "contrast": contrast, "perturb": list(perturb or []), "dist": list(dist or []),
+              "methods": list(method_list), "max_evals": max_evals, "tau": tau, "delta": delta,
+              "guide_evals": guide_evals, "pnp": pnp, "width": width, "height": height}
+    summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
+                                config=config, quiet=quiet, workers=workers, wait=wait, retry_failed=retry_failed)
+    complete = finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
+    if not quiet:
+        _print_pooled(out)
+    if not complete:
+        raise typer.Exit(1)
 
 
 def _print_pooled(out: Path) -> None:

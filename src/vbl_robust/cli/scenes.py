@@ -3,44 +3,43 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated
 
 import typer
 
 from ..constants import MAX_IMAGES
-from .common import fail
+from .common import one_line
+
+N = Annotated[int, typer.Option("--n", min=1, max=MAX_IMAGES, help="Number of approach images (without --sequences).")]
+Seed = Annotated[int, typer.Option("--seed", min=0, help="Seed; the same seed gives the same dataset.")]
+Out = Annotated[Path, typer.Option("--out", help="Output directory (images/, metadata CSV, runway DB JSON).")]
+Width = Annotated[int, typer.Option(help="Image width in pixels.")]
+Height = Annotated[int, typer.Option(help="Image height in pixels.")]
+Fov = Annotated[float, typer.Option("--fov", help="Horizontal field of view in degrees.")]
+Envelopes = Annotated[str, typer.Option(help="Comma-separated LARD V2 envelopes to sample (single images only).")]
+Sequences = Annotated[int | None, typer.Option("--sequences", min=1, help="Write this many approach sequences (one "
+                                               "airport each) instead of single images; CSV columns sequence_id, "
+                                               "frame_index, time_s.")]
+Frames = Annotated[int, typer.Option("--frames", min=1, help="Frames per sequence.")]
+Rate = Annotated[float, typer.Option("--rate", help="Frame rate of a sequence, Hz.")]
+Speed = Annotated[float, typer.Option("--speed", help="Ground speed along the glide path, m/s (20 frames at 10 Hz fly "
+                                      "133 m; 80 frames at 1 Hz fly most of the far → close approach).")]
 
 
-def register(app: typer.Typer) -> None:
-    @app.command()
-    def scenes(
-        n: int = typer.Option(100, "--n", min=1, max=MAX_IMAGES, help="Number of approach images (without --sequences)."),
-        seed: int = typer.Option(0, "--seed", min=0, help="Seed; the same seed gives the same dataset."),
-        out: Path = typer.Option(..., "--out", help="Output directory (images/, metadata CSV, runway DB JSON)."),
-        width: int = typer.Option(1024, help="Image width in pixels."),
-        height: int = typer.Option(1024, help="Image height in pixels."),
-        fov: float = typer.Option(60.0, "--fov", help="Horizontal field of view in degrees."),
-        envelopes: str = typer.Option("far,medium,close", help="Comma-separated LARD V2 envelopes to sample "
-                                      "(single images only)."),
-        sequences: int | None = typer.Option(None, "--sequences", min=1, help="Write this many approach sequences "
-                                             "(one airport each) instead of single images; CSV columns sequence_id, "
-                                             "frame_index, time_s."),
-        frames: int = typer.Option(20, "--frames", min=1, help="Frames per sequence."),
-        rate: float = typer.Option(10.0, "--rate", help="Frame rate of a sequence, Hz."),
-        speed: float = typer.Option(70.0, "--speed", help="Ground speed along the glide path, m/s (20 frames at "
-                                    "10 Hz fly 133 m; 80 frames at 1 Hz fly most of the far → close approach)."),
-    ) -> None:
-        """Generate approach scenes with exact ground truth, written in LARD V2 format."""
-        from vbl_robust import scenes as sc
+def scenes(
+    n: N = 100, seed: Seed = 0, out: Out = ...,  # ``...``: required (typer), in its place in the help
+    width: Width = 1024, height: Height = 1024, fov: Fov = 60.0, envelopes: Envelopes = "far,medium,close",
+    sequences: Sequences = None, frames: Frames = 20, rate: Rate = 10.0, speed: Speed = 70.0,
+) -> None:
+    """Generate approach scenes with exact ground truth, written in LARD V2 format."""
+    from vbl_robust import scenes as sc
 
-        try:
-            if sequences is not None:
-                csv_path = sc.write_sequences(out, sequences, frames, rate, seed=seed, width=width, height=height,
-                                              fov_deg=fov, ground_speed_mps=speed)
-            else:
-                envs = tuple(e.strip() for e in envelopes.split(",") if e.strip())
-                csv_path = sc.write_dataset(out, n, seed=seed, width=width, height=height, fov_deg=fov,
-                                            envelopes=envs)
-        except (ValueError, FileNotFoundError, RuntimeError) as exc:
-            fail(str(exc))
-        what = f"{sequences} sequences of {frames} frames at {rate:g} Hz" if sequences is not None else f"{n} scenes"
-        typer.echo(f"wrote {what}: {csv_path}")
+    with one_line(ValueError, FileNotFoundError, RuntimeError):
+        if sequences is not None:
+            csv_path = sc.write_sequences(out, sequences, frames, rate, seed=seed, width=width, height=height,
+                                          fov_deg=fov, ground_speed_mps=speed)
+        else:
+            envs = tuple(e.strip() for e in envelopes.split(",") if e.strip())
+            csv_path = sc.write_dataset(out, n, seed=seed, width=width, height=height, fov_deg=fov, envelopes=envs)
+    what = f"{sequences} sequences of {frames} frames at {rate:g} Hz" if sequences is not None else f"{n} scenes"
+    typer.echo(f"wrote {what}: {csv_path}")

@@ -4,75 +4,68 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated
 
 import typer
 
 from . import options as o
-from .common import fail, set_verbosity
+from .common import fail, one_line, set_verbosity
+from .run import finish, run_settings, run_with_progress
+
+Run = Annotated[Path, typer.Argument(help="A run directory (e.g. runs/paper/spatial-2d).")]
+Counts = Annotated[str, typer.Option("--counts", help="Grid points per parameter of the run's largest box, "
+                                     "comma-separated (e.g. 61,31: 1° × 0.07 over ±30° × [0.4, 2.5]).")]
+Out = Annotated[Path | None, typer.Option("--out", help="The truth run's directory (default: RUN-truth).")]
 
 
-def register(app: typer.Typer) -> None:
-    @app.command()
-    def truth(
-        run: Path = typer.Argument(..., help="A run directory (e.g. runs/paper/spatial-2d)."),
-        counts: str = typer.Option(..., "--counts", help="Grid points per parameter of the run's largest box, "
-                                   "comma-separated (e.g. 61,31: 1° × 0.07 over ±30° × [0.4, 2.5])."),
-        out: Path | None = typer.Option(None, "--out", help="The truth run's directory (default: RUN-truth)."),
-        trust_model: bool = o.TRUST_MODEL,
-        workers: int = o.WORKERS,
-        wait: bool = o.WAIT,
-        report: bool = o.REPORT,
-        quiet: bool = o.QUIET,
-        verbose: bool = o.VERBOSE,
-        config: Path | None = o.CONFIG,
-    ) -> None:
-        """Dense grid on the images every method of RUN left surviving at its largest box: is "no breach found"
-        true? Prints the true survival there and the true breaches each method missed."""
-        from vbl_robust.campaigns import ResultStore
-        from vbl_robust.campaigns.truth import (
-            TRUTH_SUFFIX,
-            load_run_samples,
-            survivors_of_every_method,
-            true_survival,
-            truth_spec,
-        )
-        from vbl_robust.detect.shipped import DetectorSpec
+def truth(
+    run: Run, counts: Counts, out: Out = None, trust_model: o.TrustModel = False, workers: o.Workers = 0,
+    wait: o.Wait = False, report: o.Report = True, quiet: o.Quiet = False, verbose: o.Verbose = False,
+    config: o.Config = None,
+) -> None:
+    """Dense grid on the images every method of RUN left surviving at its largest box: is "no breach found"
+    true? Prints the true survival there and the true breaches each method missed."""
+    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.campaigns.truth import (
+        TRUTH_SUFFIX,
+        load_run_samples,
+        survivors_of_every_method,
+        true_survival,
+        truth_spec,
+    )
+    from vbl_robust.detect.shipped import DetectorSpec, refuse_untrusted
 
-        from .audit import finish, run_settings, run_with_progress
-
-        quiet = set_verbosity(quiet=quiet, verbose=verbose)
-        try:
-            grid = tuple(int(c) for c in counts.split(","))
-        except ValueError:
-            fail(f"--counts {counts}: expected comma-separated integers")
-        out = out if out is not None else run.with_name(run.name + TRUTH_SUFFIX)
-        try:
-            with ResultStore.open_existing(run) as store:
-                run_spec, box, methods, keep = survivors_of_every_method(store)
-                ident = store.campaign()["detector"]
-                samples = load_run_samples(store, keep)
-            spec = truth_spec(run_spec, box, grid)
-            spec.check()
-            det = DetectorSpec.from_identity(ident, trust=trust_model)
-        except (ValueError, FileNotFoundError) as exc:
-            fail(str(exc))
-        if det.kind == "ultralytics" and not trust_model:
-            fail(f"the run's model {det.path} is a pickle that runs code when loaded; pass --trust-model if you trust it")
-        if not samples:
-            typer.echo(f"{run}: every image is breached by some method at {box.label}; nothing to grid")
-            return
-        spec, n_workers = run_settings(spec, "auto", str(det.options.get("device", "cpu")), workers)
-        typer.echo(f"{len(samples)} images every method ({', '.join(methods)}) left surviving at {box.label}; "
-                   f"grid {' × '.join(map(str, grid))}")
-        summary = run_with_progress(spec, samples, out, det, executor="local", address=None,
-                                    source={"kind": "truth", "run": str(run), "samples": keep},
-                                    config={"command": "truth", "run": str(run), "counts": list(grid)},
-                                    quiet=quiet, workers=n_workers, wait=wait)
-        complete = finish(out, summary, csv=None, parquet=None, report=report, quiet=True)
-        t = true_survival(run, out)
-        typer.echo(f"{t.box_label}: {t.gridded} of {t.survivors_any} survivors gridded, {t.grid_breaches} breached "
-                   f"by the grid; true survival "
-                   + (f"{t.true_survivors} of {t.images}" if t.true_survivors is not None else "not known yet")
-                   + "; true breaches missed: " + ", ".join(f"{m} {k}" for m, k in t.missed.items()))
-        if not complete:
-            raise typer.Exit(1)
+    quiet = set_verbosity(quiet=quiet, verbose=verbose)
+    try:
+        grid = tuple(int(c) for c in counts.split(","))
+    except ValueError:
+        fail(f"--counts {counts}: expected comma-separated integers")
+    out = out if out is not None else run.with_name(run.name + TRUTH_SUFFIX)
+    with one_line():
+        with ResultStore.open_existing(run) as store:
+            run_spec, box, methods, keep = survivors_of_every_method(store)
+            ident = store.campaign()["detector"]
+            samples = load_run_samples(store, keep)
+        spec = truth_spec(run_spec, box, grid)
+        spec.check()
+        det = DetectorSpec.from_identity(ident, trust=trust_model)
+        if det.kind == "ultralytics":
+            refuse_untrusted(f"the run's model {det.path}", trust_model)
+    if not samples:
+        typer.echo(f"{run}: every image is breached by some method at {box.label}; nothing to grid")
+        return
+    spec, n_workers = run_settings(spec, "auto", str(det.options.get("device", "cpu")), workers)
+    typer.echo(f"{len(samples)} images every method ({', '.join(methods)}) left surviving at {box.label}; "
+               f"grid {' × '.join(map(str, grid))}")
+    summary = run_with_progress(spec, samples, out, det, executor="local", address=None,
+                                source={"kind": "truth", "run": str(run), "samples": keep},
+                                config={"command": "truth", "run": str(run), "counts": list(grid)},
+                                quiet=quiet, workers=n_workers, wait=wait)
+    complete = finish(out, summary, csv=None, parquet=None, report=report, quiet=True)
+    t = true_survival(run, out)
+    typer.echo(f"{t.box_label}: {t.gridded} of {t.survivors_any} survivors gridded, {t.grid_breaches} breached "
+               f"by the grid; true survival "
+               + (f"{t.true_survivors} of {t.images}" if t.true_survivors is not None else "not known yet")
+               + "; true breaches missed: " + ", ".join(f"{m} {k}" for m, k in t.missed.items()))
+    if not complete:
+        raise typer.Exit(1)

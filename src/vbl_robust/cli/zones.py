@@ -15,72 +15,73 @@ import io
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import typer
 
 from ..atomic import atomic_write
+from . import options as o
 from .common import fail, parse_lipschitz
 
 FORMATS = ("json", "csv", "md")
 
+Lipschitz = Annotated[str | None, typer.Option(
+    "--lipschitz", help="A Lipschitz constant of the error (m per unit; one number with --norm, or one per "
+    "parameter): sound zones under that assumption. Default: the run's own --lipschitz, if any.")]
+Norm = Annotated[str, typer.Option("--norm", help="Norm of a scalar --lipschitz: 2, inf or 1 (real units).")]
+Estimate = Annotated[bool, typer.Option("--estimate", help="Classify with each search's own slope estimate "
+                                        "(GeoRobust's K̂: NOT sound; labelled an estimate).")]
+Threshold = Annotated[float | None, typer.Option("--threshold", help="ε in metres (default: the run's ε_safe).")]
+Role = Annotated[str, typer.Option("--role", help="Jobs of this role only: main, reference, landscape or all.")]
+Format = Annotated[str, typer.Option("--format", help="json, csv or md (the mean fractions per method and box).")]
+Out = Annotated[Path | None, typer.Option("--out", help="Write to this file (default: standard output).")]
+Plot = Annotated[Path | None, typer.Option("--plot", help="Also draw each 1-D/2-D job's zones to DIR/<key>.png.")]
 
-def register(app: typer.Typer) -> None:
-    @app.command()
-    def zones(
-        run: Path = typer.Argument(..., help="Run directory (holding results.sqlite) or the .sqlite file."),
-        lipschitz: str | None = typer.Option(None, "--lipschitz", help="A Lipschitz constant of the error (m per "
-                                             "unit; one number with --norm, or one per parameter): sound zones "
-                                             "under that assumption. Default: the run's own --lipschitz, if any."),
-        norm: str = typer.Option("2", "--norm", help="Norm of a scalar --lipschitz: 2, inf or 1 (real units)."),
-        estimate: bool = typer.Option(False, "--estimate", help="Classify with each search's own slope estimate "
-                                      "(GeoRobust's K̂: NOT sound; labelled an estimate)."),
-        threshold: float | None = typer.Option(None, "--threshold", help="ε in metres (default: the run's ε_safe)."),
-        role: str = typer.Option("all", "--role", help="Jobs of this role only: main, reference, landscape or all."),
-        fmt: str = typer.Option("json", "--format", help="json, csv or md (the mean fractions per method and box)."),
-        out: Path | None = typer.Option(None, "--out", help="Write to this file (default: standard output)."),
-        plot: Path | None = typer.Option(None, "--plot", help="Also draw each 1-D/2-D job's zones to DIR/<key>.png."),
-    ) -> None:
-        """Breached / undecided / ruled-out zones of Θ for each search job of a run (replayed, not re-evaluated)."""
-        from vbl_robust.campaigns.replay import ReplayError, zones_of_run
-        from vbl_robust.report.figures import plot_zones
 
-        if fmt not in FORMATS:
-            fail(f"--format {fmt}: choose json, csv or md")
-        if role not in ("all", "main", "reference", "landscape"):
-            fail(f"--role {role}: choose main, reference, landscape or all")
-        if lipschitz is not None and estimate:
-            fail("--lipschitz and --estimate are exclusive (a sound constant, or the searches' own estimate)")
-        if norm not in ("2", "inf", "1"):
-            fail(f"--norm {norm}: choose 2, inf or 1")
-        lip = parse_lipschitz(lipschitz)
-        try:
-            jobs = zones_of_run(run, roles=None if role == "all" else (role,), threshold=threshold, lipschitz=lip,
-                                norm=norm, estimate=estimate)
-        except ReplayError as exc:
-            fail(f"replay failed: {exc}")
-        except (ValueError, FileNotFoundError) as exc:
-            fail(str(exc))
-        done = [j for j in jobs if j.zones is not None]
-        for line in _notes(jobs):
-            typer.secho(line, err=True, fg=typer.colors.YELLOW)
-        if fmt == "md":
-            from vbl_robust.report.markdown import zones_markdown
+def zones(
+    run: o.StoredRun, lipschitz: Lipschitz = None, norm: Norm = "2", estimate: Estimate = False,
+    threshold: Threshold = None, role: Role = "all", fmt: Format = "json", out: Out = None, plot: Plot = None,
+) -> None:
+    """Breached / undecided / ruled-out zones of Θ for each search job of a run (replayed, not re-evaluated)."""
+    from vbl_robust.campaigns.replay import ReplayError, zones_of_run
+    from vbl_robust.report.figures import plot_zones
 
-            text = zones_markdown(jobs)
-        else:
-            text = _as_json(run, jobs) if fmt == "json" else _as_csv(done)
-        if out is None:
-            typer.echo(text, nl=False)
-        else:
-            out.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write(out, text)
-            typer.echo(f"zones of {len(done)} job(s) ({len(jobs) - len(done)} skipped): {out}", err=True)
-        if plot is not None:
-            for j in done:
-                if j.box is not None and j.box.dim <= 2:
-                    plot_zones(j.zones, plot / f"{j.key[:16]}.png",
-                               title=f"{j.method}, {j.sample_id}, {j.box_label}: {j.zones.describe()[:60]}")
+    if fmt not in FORMATS:
+        fail(f"--format {fmt}: choose json, csv or md")
+    if role not in ("all", "main", "reference", "landscape"):
+        fail(f"--role {role}: choose main, reference, landscape or all")
+    if lipschitz is not None and estimate:
+        fail("--lipschitz and --estimate are exclusive (a sound constant, or the searches' own estimate)")
+    if norm not in ("2", "inf", "1"):
+        fail(f"--norm {norm}: choose 2, inf or 1")
+    lip = parse_lipschitz(lipschitz)
+    try:
+        jobs = zones_of_run(run, roles=None if role == "all" else (role,), threshold=threshold, lipschitz=lip,
+                            norm=norm, estimate=estimate)
+    except ReplayError as exc:
+        fail(f"replay failed: {exc}")
+    except (ValueError, FileNotFoundError) as exc:
+        fail(str(exc))
+    done = [j for j in jobs if j.zones is not None]
+    for line in _notes(jobs):
+        typer.secho(line, err=True, fg=typer.colors.YELLOW)
+    if fmt == "md":
+        from vbl_robust.report.markdown import zones_markdown
+
+        text = zones_markdown(jobs)
+    else:
+        text = _as_json(run, jobs) if fmt == "json" else _as_csv(done)
+    if out is None:
+        typer.echo(text, nl=False)
+    else:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write(out, text)
+        typer.echo(f"zones of {len(done)} job(s) ({len(jobs) - len(done)} skipped): {out}", err=True)
+    if plot is not None:
+        for j in done:
+            if j.box is not None and j.box.dim <= 2:
+                plot_zones(j.zones, plot / f"{j.key[:16]}.png",
+                           title=f"{j.method}, {j.sample_id}, {j.box_label}: {j.zones.describe()[:60]}")
 
 
 def _notes(jobs: list[Any]) -> list[str]:

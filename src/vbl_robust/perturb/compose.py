@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import cv2
 import numpy as np
 import torch
 
@@ -28,6 +29,7 @@ from .family import Family, FrameContext
 from .photometric import gray_mean
 from .registry import PERTURBATIONS, family_of, known
 from .resample import PixelScale
+from .warp import empty_output
 
 __all__ = ["Perturbation"]
 
@@ -189,8 +191,11 @@ class Perturbation:
 
     __call__ = images
 
-    def images_numpy(self, image: np.ndarray, theta, *, center=None, K=None, scale=None) -> np.ndarray:
-        """No-gradient path (OpenCV): ``image (H, W, C)`` uint8 or float in [0, 1] → ``(N, H, W, C)`` float32.
+    def images_numpy(self, image: np.ndarray, theta, *, center=None, K=None, scale=None,
+                     channels_first: bool = False) -> np.ndarray:
+        """No-gradient path (OpenCV): ``image (H, W, C)`` uint8 or float in [0, 1] → ``(N, H, W, C)`` float32, or
+        ``(N, C, H, W)`` with ``channels_first`` (each frame rendered in one scratch frame and split into its planes
+        while in the cache: the layout a network reads, without a strided copy of the batch).
 
         Camera arguments: see the class docstring.
         """
@@ -204,9 +209,11 @@ class Perturbation:
         ctx = FrameContext(center=center, K=K, scale=sc)
         steps = [(fam, kind == "geometric", params, self._values(t, params),
                   tuple(PERTURBATIONS[n].identity for n in params)) for fam, kind, params in self._groups]
-        out = np.empty((t.shape[0], *base.shape), dtype=np.float32)
+        n, (_, _, c) = t.shape[0], base.shape
+        out = empty_output(n, c, h, w).numpy() if channels_first else empty_output(n, h, w, c).numpy()
+        scratch = np.empty_like(base) if channels_first else None
         for k in range(t.shape[0]):
-            frame, src = out[k], base
+            frame, src = (out[k] if scratch is None else scratch), base
             for fam, moves, params, cols, identity in steps:
                 v = {n: cols[n][k] for n in params}
                 if all(v[n] == i for n, i in zip(params, identity, strict=True)):
@@ -224,6 +231,8 @@ class Perturbation:
                 src = frame
             if src is not frame:
                 frame[...] = src
+            if scratch is not None:
+                cv2.mixChannels([scratch], list(out[k]), [i for ch in range(c) for i in (ch, ch)])
         return out
 
     def images_torch(self, image, theta, *, center=None, K=None, scale=None) -> torch.Tensor:

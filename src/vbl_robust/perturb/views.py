@@ -305,9 +305,8 @@ class ViewSampler:
                 if base is None:
                     base = self.source[0].permute(1, 2, 0).contiguous().cpu().numpy()
                 imgs = self.perturbation.images_numpy(base, self.theta, center=self.center, K=self.K,
-                                                      scale=self.scale)
-                # a view on the CPU (detectors copy if needed); one transfer to an accelerator
-                self._frames = torch.from_numpy(imgs).permute(0, 3, 1, 2).to(self.device)
+                                                      scale=self.scale, channels_first=True)
+                self._frames = torch.from_numpy(imgs).to(self.device)  # one transfer to an accelerator
         return self._frames
 
     def views(self, windows, size: int, *, strategy: str = "auto") -> torch.Tensor:

@@ -1,0 +1,195 @@
+"""Running a campaign from the command line: its settings (clock, workers, executor), the run into
+``--out/results.sqlite`` with a rich progress bar, the summary table, the exports and the report; the images it
+runs on (used by audit, demo, risk, reproduce and truth)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from .common import fail, one_line
+from .options import DEFAULT_IMAGES
+
+
+def check_executor(executor: str, address: str | None) -> None:
+    """``--executor`` and ``--address`` checked before any work (a Ray address must answer), or one line."""
+    from vbl_robust.campaigns.runner import check_executor as check
+
+    with one_line(ValueError):
+        check(executor, address)
+
+
+def run_settings(spec: Any, clock: str, device: str, workers: int) -> tuple[Any, int]:
+    """``spec`` on the clock the user chose (``auto``: process time on a CPU, wall time on a GPU) and the worker
+    count (0: :func:`~vbl_robust.campaigns.runner.default_workers`); a bad value fails with one line."""
+    from dataclasses import replace
+
+    from vbl_robust.campaigns.runner import default_workers
+    from vbl_robust.search import CLOCKS
+
+    if clock == "auto":
+        clock = "process" if device == "cpu" else "wall"
+    if clock not in CLOCKS:
+        fail(f"--clock must be auto, {' or '.join(sorted(CLOCKS))}, got {clock!r}")
+    if workers < 0:
+        fail(f"--workers must be >= 0 (0 = one per core), got {workers}")
+    with one_line(ValueError):
+        return replace(spec, clock=clock), workers or default_workers()
+
+
+def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, executor: str, address: str | None,
+                      source: dict, config: dict, quiet: bool = False, workers: int = 1, wait: bool = False,
+                      retry_failed: bool = False) -> Any:
+    """Run ``spec`` into ``out/results.sqlite`` with a rich progress bar (``workers`` processes for the local
+    executor; ``wait``: wait for another run writing the same store instead of refusing); returns the run
+    summary."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    from vbl_robust.campaigns import ResultStore, run_campaign
+
+    with one_line(ValueError):
+        spec.check()  # before anything is created or run
+        spec.check_samples(samples)
+    with one_line(ValueError, OSError, prefix=f"--out {out}: "):
+        out.mkdir(parents=True, exist_ok=True)
+        ResultStore(out / "results.sqlite").close()  # a store that cannot be opened fails here, in one line
+    columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("jobs"),
+               TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), TextColumn("{task.fields[status]}"))
+    with ResultStore(out / "results.sqlite") as store, Progress(*columns, disable=quiet, transient=False) as bar:
+        task = bar.add_task(spec.name, total=None, status="")
+
+        def on_progress(p: Any) -> None:
+            bar.update(task, total=p.total, completed=p.done,
+                       status=f"breaches {p.breaches}" + (f", failed {p.failed}" if p.failed else "")
+                       + (f" ({p.skipped} resumed)" if p.skipped else ""))
+
+        try:
+            summary = run_campaign(spec, samples, store, detector=detector, executor=executor, workers=workers,
+                                   address=address, progress=on_progress, dataset_source=source, config=config,
+                                   wait=wait, retry_failed=retry_failed)
+        except (ValueError, FileNotFoundError) as exc:
+            fail(str(exc))
+        except KeyboardInterrupt:
+            bar.stop()
+            fail(f"interrupted; finished jobs are saved in {out / 'results.sqlite'}: rerun the same command to resume",
+                 code=130)
+    return summary
+
+
+def check_exports(csv: Path | None, parquet: Path | None, out: Path | None = None) -> None:
+    """Refuse, before a run, an export the run could not write at its end: a ``--csv`` / ``--parquet`` name with
+    another suffix, a directory, or a place that cannot be created or written; also an ``--out`` that is a file."""
+    import os
+
+    if out is not None and out.exists() and not out.is_dir():
+        fail(f"--out {out}: is a file, not a run directory")
+    for option, path, suffix in (("--csv", csv, ".csv"), ("--parquet", parquet, ".parquet")):
+        if path is None:
+            continue
+        if path.suffix.lower() != suffix:
+            fail(f"{option} {path}: the file name must end in {suffix}")
+        if path.is_dir():
+            fail(f"{option} {path}: is a directory")
+        parent = next((p for p in (path.parent, *path.parent.parents) if p.exists()), Path("."))
+        if not parent.is_dir() or not os.access(parent, os.W_OK):
+            fail(f"{option} {path}: cannot write there ({parent} is not a writable directory)")
+
+
+def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, report: bool, quiet: bool = False) -> bool:
+    """Print the summary table, export, and write the HTML report; False when the run is incomplete (its caller
+    ends with exit code 1 once it has done what else it can: a run that did not finish never exits 0)."""
+    from vbl_robust.campaigns import ResultStore, export
+    from vbl_robust.campaigns.metrics import main_rows
+    from vbl_robust.campaigns.spec import CampaignSpec
+
+    with ResultStore.open_existing(out) as store:
+        spec = CampaignSpec.from_dict(store.campaign()["spec"])
+        rows = main_rows(store, spec, with_trace=False)  # runs that read smaller budgets off their trace: per budget
+        for path in (csv, parquet):
+            if path is not None:
+                with one_line(ValueError):
+                    export(store, path)
+                typer.echo(f"exported {path}")
+    if rows and not quiet:
+        print_summary(spec, rows)
+    status = f"{summary.done} new jobs, {summary.skipped} already done, {summary.failed} failed, {summary.seconds:.0f} s"
+    typer.echo(f"{spec.name}: {status}; results in {out / 'results.sqlite'}")
+    if summary.status != "finished":
+        typer.secho(f"run {summary.status}: rerun the same command to resume", fg=typer.colors.YELLOW, err=True)
+    if report:
+        from vbl_robust.report import build_report
+
+        typer.echo(f"report: {build_report(out)}")
+    if summary.done and summary.failed == summary.done and summary.status == "finished":
+        typer.secho(f"every job failed ({summary.failed}): nothing was measured — see the reasons in the report",
+                    fg=typer.colors.RED, err=True)
+        return False
+    return summary.status == "finished"
+
+
+def print_summary(spec: Any, rows: list) -> None:
+    """The survival table of a campaign's main rows (per method, and per box or budget where they vary) and its
+    legend."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from vbl_robust.campaigns import summarize
+
+    lines = summarize(rows, spec.eps_safe_m)
+    cols = ["method"] + [c for c in ("box_label", "budget_label") if len({getattr(ln, c) for ln in lines}) > 1]
+    fixed = ", ".join(str(getattr(lines[0], c)) for c in ("box_label", "budget_label") if c not in cols)
+    table = Table(title=f"{spec.name}: survival (worst error ≤ {spec.eps_safe_m:g} m)" + (f" — {fixed}" if fixed else ""))
+    heads = {"method": "method", "box_label": "box", "budget_label": "budget"}
+    for c in cols:  # a method's name is never cut (georobust and georobust-av must stay apart)
+        table.add_column(heads[c], no_wrap=c == "method", min_width=max(len(str(ln.method)) for ln in lines)
+                         if c == "method" else None)
+    empty = any(line.n_empty for line in lines)  # survivors never searched (no evaluation in a time budget)
+    heads = ["n", "survival % [95 % CI]", *(["no eval in time"] if empty else []), "median (m)", "breaches",
+             "failed"]
+    cells = []
+    for line in lines:
+        fe, med = line.failed_evals, line.median_worst_m
+        kinds = "?" if line.misleading is None else f"{line.misleading} / {line.flagged}"
+        cells.append([str(line.n), line.survival_rate.text(1, percent=False),
+                      *([str(line.n_empty)] if empty else []), "–" if math.isnan(med) else f"{med:.1f}",
+                      f"{line.breaches} ({kinds})", f"{line.failed} / {'–' if fe is None else fe}"])
+    for j, col in enumerate(heads):  # values are never cut: a column is at least as wide as its widest value
+        table.add_column(col, justify="right", min_width=max(len(c[j]) for c in cells))
+    for line, row in zip(lines, cells, strict=True):
+        table.add_row(*(str(getattr(line, c)) for c in cols), *row)
+    Console().print(table)
+    typer.echo(f"n: {spec.unit}s; median: of the worst errors found; failed: jobs / evaluations; breaches: all "
+               "(m / f): m misleading — a confident pose off by more than ε_safe; f flagged only — every "
+               "breach a failure the system sees (no detection, low confidence, PnP failed …)")
+    if empty:
+        typer.echo("no eval in time: searches that completed no evaluation within their time budget; they "
+                   "found nothing and count as survivors")
+
+
+def load_sequence_samples(source: str, frames: int, rate: float, seed: int, width: int, height: int,
+                          ) -> tuple[list, dict]:
+    """The approach sequences of ``--sequences`` (:func:`vbl_robust.campaigns.load_sequences`), or one line."""
+    from vbl_robust.campaigns import load_sequences
+
+    with one_line(ValueError, FileNotFoundError, RuntimeError):
+        return load_sequences(source, frames=frames, rate_hz=rate, seed=seed, width=width, height=height)
+
+
+def load(n: int | None, seed: int, lard: Path | None, width: int, height: int, *,
+         default: int = DEFAULT_IMAGES) -> tuple[list, dict]:
+    """``n`` samples (``None``: ``default``, or all rows of a smaller ``lard`` dataset), or one line."""
+    from vbl_robust.campaigns import load_samples
+
+    with one_line():
+        return load_samples(default if n is None else n, seed, lard=lard, width=width, height=height,
+                            at_most=n is None)
