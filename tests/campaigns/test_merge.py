@@ -1,4 +1,4 @@
-"""``ResultStore.merge`` / ``vbl-robust merge``: parts of one campaign computed elsewhere joined into one run."""
+"""``merge_runs`` / ``merge_store`` / ``vbl-robust merge``: parts of one campaign computed elsewhere joined into one run."""
 
 import pytest
 from typer.testing import CliRunner
@@ -12,8 +12,16 @@ from vbl_robust.campaigns import (
     roll_box,
     run_campaign,
 )
-from vbl_robust.campaigns.bundle import compare_runs, pack_store
-from vbl_robust.campaigns.store import WriterLock
+from vbl_robust.campaigns.bundle import compare_runs
+from vbl_robust.campaigns.store import (
+    MergedSource,
+    MergeReport,
+    RunStatus,
+    WriterLock,
+    merge_runs,
+    merge_store,
+    pack_store,
+)
 from vbl_robust.cli import app
 from vbl_robust.scenes import generate
 
@@ -46,8 +54,8 @@ def test_two_parts_merge_into_the_whole_run(tmp_path):
         runs = st.runs()
         rows = st.jobs()
         assert len(st.samples()) == 3
-    assert [r["config"]["merged_from"] for r in runs] == [str(packed), str(tmp_path / "part2")]
-    assert {r.run_id for r in rows} == {runs[0]["run_id"], runs[1]["run_id"]}
+    assert [r.provenance.config["merged_from"] for r in runs] == [str(packed), str(tmp_path / "part2")]
+    assert {r.run_id for r in rows} == {runs[0].run_id, runs[1].run_id}
     assert _run(tmp_path / "joined", samples).done == 0  # the joined run resumes: nothing left to do
 
 
@@ -58,7 +66,7 @@ def test_merge_refuses_another_campaign_a_held_store_and_an_empty_source(tmp_pat
     with ResultStore(tmp_path / "a" / "results.sqlite") as a, ResultStore.open_existing(tmp_path / "b") as b:
         before = a.count()
         with pytest.raises(ValueError, match="other settings"):
-            a.merge(b)
+            merge_store(a, b)
         assert a.count() == before
     runner = CliRunner()
     res = runner.invoke(app, ["merge", str(tmp_path / "a"), str(tmp_path / "b"), "--into", str(tmp_path / "new")])
@@ -96,4 +104,49 @@ def test_a_merge_refuses_other_pixels_under_the_same_names(tmp_path):
     with ResultStore(tmp_path / "a" / "results.sqlite") as a, ResultStore.open_existing(tmp_path / "b") as b:
         assert a.differing_pixels(b) == [base.id]
         with pytest.raises(ValueError, match="image files of samples .* differ"):
-            a.merge(b)
+            merge_store(a, b)
+
+
+def test_merge_runs_returns_a_typed_report_and_unpacks_packed_stores_beside(tmp_path):
+    samples = list(generate(2, seed=0, width=96, height=96))
+    _run(tmp_path / "part1", samples[:1])  # 1 image x 2 boxes x 2 methods
+    _run(tmp_path / "part2", samples)      # both images
+    with ResultStore.open_existing(tmp_path / "part1") as st:
+        packed = pack_store(st, tmp_path / "part1.sqlite.xz")
+    part2 = tmp_path / "part2" / "results.sqlite"
+    seen = []
+    report = merge_runs([packed, part2], tmp_path / "joined", progress=seen.append)
+    into = tmp_path / "joined" / "results.sqlite"
+    assert report == MergeReport(into, (MergedSource(str(packed), 4, 0), MergedSource(str(part2), 4, 4)))
+    assert (report.copied, report.already) == (8, 4) and [len(r.sources) for r in seen] == [1, 2]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["joined", "part1", "part1.sqlite.xz", "part2"]
+    again = merge_runs([packed], into)  # a .sqlite file as the target; everything already there
+    assert again == MergeReport(into, (MergedSource(str(packed), 0, 4),))
+    with ResultStore.open_existing(into) as st:
+        assert st.count() == 8 and [r.provenance.config["merged_from"] for r in st.runs()] == [str(packed), str(part2)]
+    with pytest.raises(FileNotFoundError, match="no such packed store"):
+        merge_runs([tmp_path / "gone.sqlite.xz"], into)
+    (tmp_path / "bad.sqlite.xz").write_bytes(b"not xz")
+    with pytest.raises(ValueError, match="not a complete packed store"):
+        merge_runs([tmp_path / "bad.sqlite.xz"], into)
+
+
+def test_a_merged_run_without_its_run_row_is_recorded_as_unknown(tmp_path):
+    import shutil
+    import sqlite3
+
+    samples = list(generate(1, seed=0, width=96, height=96))
+    _run(tmp_path / "a", samples)
+    (tmp_path / "b").mkdir()
+    shutil.copy(tmp_path / "a" / "results.sqlite", tmp_path / "b" / "results.sqlite")
+    con = sqlite3.connect(tmp_path / "b" / "results.sqlite")
+    con.execute("DELETE FROM runs")  # the jobs stay, pointing to a run the store no longer holds
+    con.commit()
+    con.close()
+    with ResultStore(tmp_path / "c" / "results.sqlite") as c, ResultStore.open_existing(tmp_path / "b") as b:
+        assert merge_store(c, b) == MergedSource(str(b.path), 4, 0)
+        (run,) = c.runs()
+        rows = c.jobs()
+    assert run.status is RunStatus.UNKNOWN and run.provenance.config == {"merged_from": str(b.path)}
+    assert run.jobs_done is None and run.provenance.code_version is None
+    assert {r.run_id for r in rows} == {run.run_id}

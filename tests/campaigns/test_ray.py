@@ -28,7 +28,7 @@ def test_ray_and_local_executors_agree(tmp_path, small_samples, oracle):
                 results[executor] = {r.key: (r.worst_m, r.nfev, r.worst_x, r.verdict)
                                      for r in st.jobs(with_trace=False)}
                 assert summary.status == "finished" and summary.done == 4
-                assert {r["executor"] for r in st.runs()} == {executor}
+                assert {r.provenance.executor for r in st.runs()} == {executor}
         finally:
             if executor == "ray":
                 ray.shutdown()

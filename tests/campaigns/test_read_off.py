@@ -13,7 +13,7 @@ from vbl_robust.campaigns import BoxSpec, Budget, ResultStore
 from vbl_robust.campaigns import metrics as mx
 from vbl_robust.campaigns import store as store_module
 from vbl_robust.campaigns.spec import CampaignSpec, Job, roll_box
-from vbl_robust.campaigns.store import JobStatus, Points
+from vbl_robust.campaigns.store import JobStatus, Points, schema
 from vbl_robust.campaigns.work import Settings, search_row
 from vbl_robust.constants import Verdict
 from vbl_robust.search import at_budget, maximize
@@ -54,7 +54,7 @@ def test_points_keep_their_times_and_an_old_blob_has_none():
 
 def test_a_schema_2_store_opens_as_the_current_schema(tmp_path):
     con = sqlite3.connect(tmp_path / "r.sqlite")
-    con.executescript(store_module._SCHEMA)
+    con.executescript(schema.DDL)
     con.execute("PRAGMA user_version = 2")
     con.commit()
     con.close()

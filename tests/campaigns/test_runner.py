@@ -13,7 +13,7 @@ from vbl_robust.campaigns import (
     roll_box,
     run_campaign,
 )
-from vbl_robust.campaigns.store import JobStatus
+from vbl_robust.campaigns.store import JobStatus, RunStatus
 from vbl_robust.constants import FAILURE_REASONS, Verdict
 from vbl_robust.data.sample import Sample
 
@@ -49,13 +49,13 @@ def test_local_run_records_rows_and_a_rerun_skips_them(tmp_path, small_samples, 
         assert set(r.failures) <= set(FAILURE_REASONS)
         i = int(np.argmax(r.points.fs))
         assert r.worst_reason == r.points.reasons[i]
-    assert [r["status"] for r in runs] == ["finished", "finished"]
-    assert runs[0]["dataset"]["source"] == {"kind": "test"} and runs[0]["config"]["user"] == {"x": 1}
+    assert [r.status for r in runs] == [RunStatus.FINISHED, RunStatus.FINISHED]
+    assert runs[0].provenance.dataset["source"] == {"kind": "test"} and runs[0].provenance.config["user"] == {"x": 1}
     from importlib.metadata import version
 
-    libraries = runs[0]["config"]["libraries"]  # the versions that can move a result's last digits
+    libraries = runs[0].provenance.config["libraries"]  # the versions that can move a result's last digits
     assert libraries["torch"] == version("torch") and libraries["opencv-python"] == version("opencv-python")
-    assert runs[0]["code_version"] and runs[1]["jobs_skipped"] == 6
+    assert runs[0].provenance.code_version and runs[1].provenance.jobs_skipped == 6
 
 
 def test_same_seed_same_results(tmp_path, small_samples, oracle):
@@ -156,7 +156,7 @@ def test_worker_processes_give_the_rows_of_one_process(tmp_path, small_samples, 
             assert (s.total, s.done, s.status) == (9, 9, "finished")
             got[workers] = {r.key: (r.nfev, r.nit, r.verdict, r.worst_x, r.worst_m, tuple(r.points.fs))
                             for r in st.jobs(with_points=True)}
-            assert st.runs()[0]["config"]["workers"] == workers
+            assert st.runs()[0].provenance.config["workers"] == workers
     assert got[1] == got[2]
 
 

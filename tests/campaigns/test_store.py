@@ -12,7 +12,16 @@ from hypothesis import strategies as st
 from vbl_robust.campaigns import BoxSpec, Budget, ResultStore
 from vbl_robust.campaigns import store as store_module
 from vbl_robust.campaigns.spec import JOB_KINDS, ROLES
-from vbl_robust.campaigns.store import JobRow, JobStatus, Points, decode_points, encode_points
+from vbl_robust.campaigns.store import (
+    JobRow,
+    JobStatus,
+    Points,
+    RunProvenance,
+    RunStatus,
+    decode_points,
+    encode_points,
+    schema,
+)
 from vbl_robust.constants import Verdict
 from vbl_robust.search import TraceRow
 from vbl_robust.space import ParameterBox
@@ -79,12 +88,16 @@ def test_campaign_binding_refuses_other_settings_once_a_job_is_stored(tmp_path):
 
 def test_runs_record_provenance(tmp_path):
     with ResultStore(tmp_path / "r.sqlite") as st:
-        rid = st.begin_run({"code_version": "1.0", "model_sha256": "ab", "config": {"n": 3}, "seed": 7,
-                            "dataset": {"n": 3}, "jobs_total": 5, "jobs_skipped": 0})
-        st.end_run(rid, "finished", 5, 1.5)
+        rid = st.begin_run(RunProvenance(code_version="1.0", model_sha256="ab", config={"n": 3}, seed=7,
+                                         dataset={"n": 3}, jobs_total=5, jobs_skipped=0))
+        (running,) = st.runs()
+        st.end_run(rid, RunStatus.FINISHED, 5, 1.5)
         (run,) = st.runs()
-    assert run["code_version"] == "1.0" and run["config"] == {"n": 3} and run["seed"] == 7
-    assert run["status"] == "finished" and run["jobs_done"] == 5 and run["finished_at"]
+    assert running.status is RunStatus.RUNNING and running.jobs_done == 0 and running.finished_at is None
+    p = run.provenance
+    assert p.code_version == "1.0" and p.config == {"n": 3} and p.seed == 7 and p.dataset == {"n": 3}
+    assert run.status is RunStatus.FINISHED and run.jobs_done == 5 and run.finished_at and run.seconds == 1.5
+    assert run.run_id == rid and run.started_at == running.started_at
 
 
 def test_open_existing_names_the_missing_store(tmp_path):
@@ -95,7 +108,7 @@ def test_open_existing_names_the_missing_store(tmp_path):
 def old_store(path, *added, version=0):
     """A store of an older layout at ``path``: today's schema without the columns of the schema versions ``added``
     (their comments say "(schema N)"), one job row (worst 12.5 m, 4 evaluations), ``user_version`` = ``version``."""
-    lines = [ln for ln in store_module._SCHEMA.splitlines() if not any(f"(schema {v})" in ln for v in added)]
+    lines = [ln for ln in schema.DDL.splitlines() if not any(f"(schema {v})" in ln for v in added)]
     con = sqlite3.connect(path)
     con.executescript(re.sub(r",(\s*(--[^\n]*)?\n\))", r"\1", "\n".join(lines)))  # no comma after the last column
     con.execute("INSERT INTO jobs (key, experiment, kind, role, method, sample_id, sample_index, status, worst_m, "
@@ -207,3 +220,38 @@ def test_worst_corners_are_stored_and_a_schema_3_store_reads_them_as_none(tmp_pa
         assert [r.worst_corners for r in st.jobs()] == [None, corners]
     con = sqlite3.connect(tmp_path / "old.sqlite")
     assert con.execute("PRAGMA user_version").fetchone()[0] == store_module.SCHEMA_VERSION == 4
+
+
+def test_run_status_strings_are_the_stored_values_and_a_run_reads_back_flat(tmp_path):
+    assert [s.value for s in RunStatus] == ["running", "finished", "incomplete", "interrupted", "killed", "unknown"]
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        rid = st.begin_run(RunProvenance(detector={"name": "d", "kind": "oracle"}, host="h", jobs_total=2))
+        st.end_run(rid, "incomplete", 1, 2.0)  # the stored string is accepted as well as the enum
+        (run,) = st.runs()
+    con = sqlite3.connect(tmp_path / "r.sqlite")
+    stored = con.execute("SELECT status, detector_json, jobs_done FROM runs").fetchone()
+    con.close()
+    assert stored == ("incomplete", '{"kind": "oracle", "name": "d"}', 1) and run.status is RunStatus.INCOMPLETE
+    d = run.to_dict()  # a bundle's provenance.json: the columns, JSON ones under their names without "_json"
+    assert set(d) == {c.removesuffix("_json") for c in schema.RUNS.names}
+    assert d["status"] == "incomplete" and type(d["status"]) is str and d["detector"] == {"name": "d", "kind": "oracle"}
+    assert d["host"] == "h" and d["jobs_total"] == 2 and d["run_id"] == rid and d["seconds"] == 2.0
+    with pytest.raises(ValueError):
+        RunStatus("done")
+
+
+def test_the_schema_declares_each_table_once_and_its_ddl_is_what_stores_hold(tmp_path):
+    """The DDL is generated from the column tables; the text SQLite keeps for each table is the one earlier versions
+    wrote (a store's bytes do not depend on which version created it)."""
+    assert [t.name for t in schema.TABLES] == ["campaign", "runs", "samples", "contents", "jobs"]
+    ResultStore(tmp_path / "r.sqlite").close()
+    con = sqlite3.connect(tmp_path / "r.sqlite")
+    for t in schema.TABLES:
+        assert [r[1] for r in con.execute(f"PRAGMA table_info({t.name})")] == list(t.names)
+    contents = con.execute("SELECT sql FROM sqlite_master WHERE name = 'contents'").fetchone()[0]
+    con.close()
+    assert contents == ("CREATE TABLE contents (\n"
+                        "    sample_id TEXT PRIMARY KEY,     -- a sample read from an image file: what its pixels were\n"
+                        "    path TEXT, size INTEGER, mtime_ns INTEGER,\n"
+                        "    sha256 TEXT                     -- of the file's bytes; recomputed only when size or mtime "
+                        "changed\n)")

@@ -31,8 +31,9 @@ def test_a_count_beyond_its_bound_is_refused_before_any_work(tmp_path, args, msg
 
 def test_a_stored_blob_may_not_inflate_past_its_bound(monkeypatch):
     from vbl_robust.campaigns import store
+    from vbl_robust.campaigns.store import rows
 
-    monkeypatch.setattr(store, "MAX_BLOB_BYTES", 1000)
+    monkeypatch.setattr(rows, "MAX_BLOB_BYTES", 1000)
     bomb = zlib.compress(b"[" + b"0," * 5000 + b"0]")  # tiny compressed, 10 kB inflated
     with pytest.raises(ValueError, match="decompresses to more than 1000 bytes"):
         store.Points.from_blob(bomb)

@@ -137,7 +137,7 @@ def test_two_workers_and_the_process_clock_are_recorded(tmp_path):
     assert res.exit_code == 0, res.output
     with ResultStore.open_existing(out) as store:
         run = store.runs()[0]
-        assert run["config"]["workers"] == 2 and run["config"]["clock"] == "process"
+        assert run.provenance.config["workers"] == 2 and run.provenance.config["clock"] == "process"
         assert store.campaign()["spec"]["clock"] == "process"
 
 

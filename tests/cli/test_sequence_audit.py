@@ -47,7 +47,7 @@ def test_audit_sequences_writes_a_store_with_the_frames_and_resumes(tmp_path):
         spec = store.campaign()["spec"]
         samples = store.samples()
         run = store.runs()[-1]
-    assert spec["sustain"] == 2 and run["config"]["user"]["sequences"] == "2"
+    assert spec["sustain"] == 2 and run.provenance.config["user"]["sequences"] == "2"
     assert samples["synth_q0_0000"]["width"] == 96
     seq = next(iter(rows.values())).payload["sequence"]
     assert len(seq["frames"]["distance_m"]) == len(seq["worst"]["errors_m"]) == len(seq["nominal"]["reasons"]) == 5
@@ -115,7 +115,7 @@ def test_scenes_sequences_then_audit_the_dataset_directory(tmp_path):
         run = store.runs()[-1]
         contents = {r[0] for r in store._con.execute("SELECT sample_id FROM contents")}
     assert [r.sample_id for r in rows] == ["synth_q0_0000", "synth_q0_0001"]
-    assert len(rows[0].payload["sequence"]["frames"]["image"]) == 3 and run["dataset"]["source"]["kind"] == "lard sequences"
+    assert len(rows[0].payload["sequence"]["frames"]["image"]) == 3 and run.provenance.dataset["source"]["kind"] == "lard sequences"
     assert len(contents) == 6  # every frame's file digest is recorded (a changed frame is refused on resume)
 
 

@@ -52,9 +52,9 @@ def _check_complete(res, out, jobs_expected):
     assert "unfinished" not in res.output and "Traceback" not in res.output, res.output
     rows, runs = _stored(out)
     assert len(rows) == jobs_expected and all(r.status.value == "done" for r in rows)
-    assert [r["config"]["workers"] for r in runs] == [default_workers()]
+    assert [r.provenance.config["workers"] for r in runs] == [default_workers()]
     # what moves the numerics between machines is in the provenance (issue 45 item 8)
-    machine = runs[0]["config"]["machine"]
+    machine = runs[0].provenance.config["machine"]
     assert machine["cpu"] and isinstance(machine["simd"], list) and machine["cores"] == default_workers()
     return rows
 
@@ -110,7 +110,7 @@ def test_audit_of_a_lard_directory_on_ray(lard_dir, tmp_path):
     assert res.exit_code == 0, res.output
     rows, runs = _stored(out)
     assert len(rows) == 3 and all(r.status.value == "done" for r in rows)
-    assert [r["executor"] for r in runs] == ["ray"]
+    assert [r.provenance.executor for r in runs] == ["ray"]
 
 
 def test_a_run_where_every_job_failed_exits_non_zero(lard_dir, tmp_path):

@@ -14,6 +14,7 @@ from vbl_robust.campaigns import (
 )
 from vbl_robust.campaigns.experiments import audit_spec
 from vbl_robust.campaigns.spec import roll_contrast_box
+from vbl_robust.campaigns.store import RunProvenance
 from vbl_robust.report import build_report
 
 
@@ -46,7 +47,7 @@ def test_report_warns_about_incomplete_runs_and_failures(tmp_path, samples):
     missing = dataclasses.replace(samples[0], id="gone", image_path=tmp_path / "gone.png", _image=None, _loader=None)
     with ResultStore(tmp_path / "results.sqlite") as st:
         run_campaign(spec, [missing], st, detector=DetectorSpec("oracle"))
-        rid = st.begin_run({"jobs_total": 9, "jobs_skipped": 1})
+        rid = st.begin_run(RunProvenance(jobs_total=9, jobs_skipped=1))
         st.end_run(rid, "interrupted", 0, 1.0)
     html = build_report(tmp_path).read_text()
     assert "job(s) failed" in html and "gone.png" in html

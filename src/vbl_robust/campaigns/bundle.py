@@ -40,9 +40,10 @@ from pathlib import Path
 from typing import Any
 
 from ..atomic import atomic_write
-from .store import ResultStore
 
-STORE = "results.sqlite"
+# pack_store / restore_store live beside the store; imported here by the callers of a bundle's packed stores
+from .store import PACKED, STORE, ResultStore, RunRecord, pack_store, restore_store  # noqa: F401
+
 #: Markers of the generated part of a REPRODUCTION.md (:func:`write_bundle`).
 BEGIN, END = "<!-- bundle:begin -->", "<!-- bundle:end -->"
 
@@ -55,14 +56,14 @@ def run_dirs(root: Path, names: Sequence[str] | None = None) -> list[Path]:
     return [root / n for n in names if (root / n / STORE).is_file()]
 
 
-def _wall_seconds(run: dict[str, Any], last_job: dict[int, str]) -> float:
+def _wall_seconds(run: RunRecord, last_job: dict[int, str]) -> float:
     """A run's wall seconds. A run without ``seconds`` is still going or was killed before it could record its end
     (SIGKILL, a session's end): its wall time runs from its start to its last stored job (``last_job``: run id →
     ISO time of its newest job), not to now — a killed run's idle years must not count."""
-    if run.get("seconds") is not None:
-        return float(run["seconds"])
-    started = dt.datetime.fromisoformat(run["started_at"])
-    last = last_job.get(run["run_id"])
+    if run.seconds is not None:
+        return float(run.seconds)
+    started = dt.datetime.fromisoformat(run.started_at)
+    last = last_job.get(run.run_id)
     if last is None:
         return 0.0
     return max(0.0, (dt.datetime.fromisoformat(last) - started).total_seconds())
@@ -76,11 +77,11 @@ def provenance(store: ResultStore) -> dict[str, Any]:
     for r in jobs:
         if r.run_id is not None and r.finished_at is not None:
             last_job[r.run_id] = max(last_job.get(r.run_id, r.finished_at), r.finished_at)
-    planned = max((int(r["jobs_total"] or 0) for r in runs), default=0)
+    planned = max((int(r.provenance.jobs_total or 0) for r in runs), default=0)
     campaign = store.campaign()
     return {
         "campaign": campaign,
-        "runs": runs,
+        "runs": [r.to_dict() for r in runs],
         "totals": {
             "jobs_done": len(jobs),
             "jobs_planned": planned,
@@ -90,50 +91,9 @@ def provenance(store: ResultStore) -> dict[str, Any]:
             "worker_s": sum(float(r.job_s or 0.0) for r in jobs),
             "search_s": sum(float(r.search_s or 0.0) for r in jobs),
             "clock": (campaign or {}).get("spec", {}).get("clock", "wall"),
-            "workers": sorted({r["config"].get("workers") for r in runs if r.get("config")} - {None}),
+            "workers": sorted({r.provenance.config.get("workers") for r in runs if r.provenance.config} - {None}),
         },
     }
-
-
-#: File name of a packed store in a bundle (:func:`pack_store`).
-PACKED = STORE + ".xz"
-
-
-def pack_store(store: ResultStore, path: Path) -> Path:
-    """A compact copy of ``store`` at ``path`` (xz): ``VACUUM INTO`` a temporary file (a consistent snapshot even
-    while a run writes), then xz. :func:`restore_store` unpacks it."""
-    import lzma
-    import sqlite3
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as d:
-        tmp = Path(d) / STORE
-        con = sqlite3.connect(str(store.path))
-        try:
-            con.execute("VACUUM INTO ?", (str(tmp),))
-        finally:
-            con.close()
-        path.write_bytes(lzma.compress(tmp.read_bytes(), preset=9))
-    return path
-
-
-def restore_store(packed: Path, run: Path) -> bool:
-    """Unpack the packed store ``packed`` into the run directory ``run`` if it holds no store yet (an existing
-    store is never replaced); True when it did."""
-    import lzma
-
-    target = Path(run) / STORE
-    if target.exists() or not Path(packed).is_file():
-        return False
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(STORE + ".restoring")
-    try:
-        tmp.write_bytes(lzma.decompress(Path(packed).read_bytes()))
-    except (lzma.LZMAError, EOFError) as exc:
-        tmp.unlink(missing_ok=True)
-        raise ValueError(f"{packed}: not a complete packed store ({exc})") from None
-    tmp.replace(target)
-    return True
 
 
 def write_experiment(run: Path, out: Path, stores: bool = False, keep: Path | None = None) -> dict[str, Any]:

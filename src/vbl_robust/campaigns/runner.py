@@ -33,7 +33,7 @@ from .provenance import (
     sample_fingerprint,
 )
 from .spec import CampaignSpec, Job
-from .store import JobRow, JobStatus, ResultStore, WriterLock
+from .store import JobRow, JobStatus, ResultStore, RunProvenance, RunStatus, WriterLock
 from .work import SampleTask, Settings, detector_for, run_sample_task
 
 logger = logging.getLogger(__name__)
@@ -76,7 +76,7 @@ class RunSummary:
     failed: int
     breaches: int
     seconds: float
-    status: str
+    status: RunStatus
 
 
 #: Seconds to wait for a Ray cluster's address to accept a connection before a run is refused.
@@ -224,14 +224,14 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
     pending = [j for j in jobs if j.key not in done_keys]
     skipped = len(jobs) - len(pending)
     dataset = dataset_identity(samples, dataset_source or {})
-    run_id = store.begin_run({
-        "code_version": code_version(), "model_sha256": det_identity["sha256"], "detector": det_identity,
-        "dataset_id": dataset["sha256"], "dataset": dataset, "seed": spec.seed, "executor": executor,
-        "config": {"campaign": spec.to_dict(), "user": config or {}, "executor": executor, "address": address,
-                   "workers": workers if executor == "local" else None, "clock": spec.clock,
-                   "libraries": library_versions(), "machine": machine_identity()},
-        "host": platform.node(), "jobs_total": len(jobs), "jobs_skipped": skipped,
-    })
+    run_id = store.begin_run(RunProvenance(
+        code_version=code_version(), model_sha256=det_identity["sha256"], detector=det_identity,
+        dataset_id=dataset["sha256"], dataset=dataset, seed=spec.seed, executor=executor,
+        config={"campaign": spec.to_dict(), "user": config or {}, "executor": executor, "address": address,
+                "workers": workers if executor == "local" else None, "clock": spec.clock,
+                "libraries": library_versions(), "machine": machine_identity()},
+        host=platform.node(), jobs_total=len(jobs), jobs_skipped=skipped,
+    ))
     logger.info("campaign %s: %d jobs, %d already done, %d to run (%s executor)", spec.name, len(jobs), skipped,
                 len(pending), executor)
 
@@ -255,7 +255,7 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
 
     if progress is not None:
         progress(Progress(skipped, len(jobs), skipped, state["breaches"], 0, 0.0, None))
-    status = "finished"
+    status = RunStatus.FINISHED
     try:
         if executor == "local" and (workers == 1 or len(tasks) <= 1):
             det = detector_for(detector) if tasks else None
@@ -269,12 +269,12 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
             for rows in _ray_rows(tasks, detector, settings, run_id, address, ray_num_cpus):
                 on_rows(rows)
     except BaseException:
-        status = "interrupted"
+        status = RunStatus.INTERRUPTED
         raise
     finally:
         seconds = time.perf_counter() - t0
-        if status == "finished" and skipped + state["new"] < len(jobs):
-            status = "incomplete"
+        if status is RunStatus.FINISHED and skipped + state["new"] < len(jobs):
+            status = RunStatus.INCOMPLETE
         store.end_run(run_id, status, state["new"], seconds)
     return RunSummary(run_id, len(jobs), skipped, state["new"], state["failed"], state["breaches"], seconds, status)
 

@@ -130,7 +130,7 @@ def load_run_samples(store: ResultStore, ids: Sequence[str]) -> list[Any]:
     from .samples import load_samples
 
     runs = store.runs()
-    source = ((runs[-1] if runs else {}).get("dataset") or {}).get("source") or {}
+    source = ((runs[-1].provenance.dataset if runs else None) or {}).get("source") or {}
     if source.get("kind") == "synthetic":
         samples, _ = load_samples(int(source["n"]), int(source["seed"]), width=int(source["width"]),
                                   height=int(source["height"]))

@@ -2,7 +2,7 @@
 print its tables as Markdown (``--format md``, :mod:`vbl_robust.report.markdown`);
 ``vbl-robust bundle ROOT --out DIR``: the committable bundle of a set of experiment runs
 (:mod:`vbl_robust.campaigns.bundle`); ``vbl-robust merge SRC… --into RUN``: jobs computed elsewhere joined into one
-run (:meth:`vbl_robust.campaigns.store.ResultStore.merge`)."""
+run (:func:`vbl_robust.campaigns.store.merge_runs`)."""
 
 from __future__ import annotations
 
@@ -107,33 +107,14 @@ def merge(sources: Sources, into: Into) -> None:
     """Copy into one run the jobs that other runs of the same campaign and detector computed (another machine,
     a GPU, a cluster without a shared disk): rows it lacks, their samples and runs; rows it holds stay. Refused
     while a run writes it."""
-    import lzma
-    import tempfile
+    from vbl_robust.campaigns.store import MergeReport, merge_runs
 
-    from vbl_robust.campaigns.bundle import restore_store
-    from vbl_robust.campaigns.store import ResultStore, WriterLock
+    def merged(report: MergeReport) -> None:
+        part = report.sources[-1]
+        typer.echo(f"{part.source}: {part.copied} job rows merged, {part.already} already in {report.into}")
 
-    dst = into / "results.sqlite" if into.is_dir() or not into.suffix else into
-    with one_line(ValueError, FileNotFoundError, OSError, EOFError, lzma.LZMAError):
-        dst.parent.mkdir(parents=True, exist_ok=True)
-        with WriterLock(dst), ResultStore(dst) as store, tempfile.TemporaryDirectory() as tmp:
-            paths = []
-            for i, src in enumerate(sources):
-                path = src
-                if src.name.endswith(".xz"):  # a packed store: unpacked beside, never in place
-                    if not src.is_file():
-                        raise FileNotFoundError(f"{src}: no such packed store")
-                    path = Path(tmp) / str(i)
-                    restore_store(src, path)
-                paths.append(path)
-            first = None
-            for path in paths:  # every source checked (against the first) before anything is written
-                with ResultStore.open_existing(path) as other:
-                    first = store.check_mergeable(other, first)
-            for src, path in zip(sources, paths, strict=True):
-                with ResultStore.open_existing(path) as other:
-                    new, had = store.merge(other, source=str(src))
-                typer.echo(f"{src}: {new} job rows merged, {had} already in {dst}")
+    with one_line(ValueError, OSError):
+        merge_runs(sources, into, progress=merged)
 
 
 def _summary(run: Path, fmt: str) -> None:

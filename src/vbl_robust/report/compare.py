@@ -94,7 +94,7 @@ def _read(run: str | Path) -> tuple[CampaignSpec, list[JobRow], str, dict[str, s
             raise ValueError(f"{run}: the results store holds no campaign yet")
         spec = CampaignSpec.from_dict(camp["spec"])
         runs = store.runs()
-        det = str(((runs[-1] if runs else {}).get("detector") or {}).get("name", "?"))
+        det = str(((runs[-1].provenance.detector if runs else None) or {}).get("name", "?"))
         envelopes = {sid: str(rec["envelope"]) for sid, rec in store.samples().items() if rec.get("envelope")}
         return spec, mx.main_rows(store, spec, with_trace=False), det, envelopes
 

@@ -215,7 +215,7 @@ def evidence_of(ctx: Context) -> Evidence:
     cases, breached = worst_cases(rows, ctx.eps, ctx.spec.penalty_m, stored=stored)
     runs = ctx.store.runs()
     return Evidence(experiment=ctx.spec.name, eps_safe_m=ctx.eps, level=LEVEL, jobs_done=ctx.store.count(),
-                    jobs_planned=runs[-1].get("jobs_total") if runs else None,
+                    jobs_planned=runs[-1].provenance.jobs_total if runs else None,
                     boxes=tuple(_box_evidence(lab, rs, ctx.eps) for lab, rs in boxes.items()), worst=tuple(cases),
                     breached=breached, budget=budget)
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..campaigns import metrics as mx
 from ..campaigns.experiments import range_text
-from ..campaigns.store import JobRow, JobStatus
+from ..campaigns.store import JobRow, JobStatus, RunProvenance
 from ..constants import FAILURE_REASONS, Verdict
 from ..search import NON_FINITE
 from . import figures as F
@@ -70,10 +70,10 @@ def _failures_table(summary: Sequence[mx.Summary], penalty_m: float) -> str:
 def section_overview(ctx: Context, title: str) -> Section:
     s = Section("Summary")
     runs = ctx.store.runs()
-    last = runs[-1] if runs else {}
-    det = (last.get("detector") or {})
+    last = runs[-1].provenance if runs else RunProvenance()
+    det = last.detector or {}
     n_done = ctx.store.count()
-    total = last.get("jobs_total")
+    total = last.jobs_total
     s.html.append(
         f"<p><b>{esc(title)}</b>. Detector: <b>{esc(det.get('name', '?'))}</b>; {len(ctx.samples)} {ctx.spec.unit}s; "
         f"ε_safe = {ctx.eps:g} m, τ_conf = {ctx.spec.conf_threshold:g}, failure penalty {ctx.spec.penalty_m:g} m, "
@@ -449,19 +449,19 @@ def section_per_image(ctx: Context) -> Section | None:
 def section_provenance(ctx: Context) -> Section:
     s = Section("Provenance")
     runs = ctx.store.runs()
-    s.html.append(table(runs, [("run_id", "run", None), ("started_at", "started (UTC)", None),
+    s.html.append(table([r.to_dict() for r in runs], [("run_id", "run", None), ("started_at", "started (UTC)", None),
                                ("finished_at", "finished", None), ("status", "status", None),
                                ("code_version", "code version", None), ("executor", "executor", None),
                                ("host", "host", None), ("jobs_total", "jobs", None), ("jobs_skipped", "already done", None),
                                ("jobs_done", "done in run", None), ("seconds", "seconds", None)],
                         left=("started_at", "finished_at", "status", "code_version", "executor", "host")))
     if runs:
-        last = runs[-1]
-        det = last.get("detector") or {}
-        ds = last.get("dataset") or {}
+        last = runs[-1].provenance
+        det = last.detector or {}
+        ds = last.dataset or {}
         s.html.append(f"<p>Detector: {esc(det.get('name'))}; model file SHA-256 <code>{esc(det.get('sha256'))}</code>.<br>"
                       f"Dataset: {esc(json.dumps(ds.get('source')))}; {ds.get('n')} images; identity "
                       f"<code>{esc(ds.get('sha256'))}</code>.</p>")
         s.html.append("<details><summary>Full configuration of the last run (JSON)</summary><pre>"
-                      f"{esc(json.dumps(last.get('config'), indent=1))}</pre></details>")
+                      f"{esc(json.dumps(last.config, indent=1))}</pre></details>")
     return s

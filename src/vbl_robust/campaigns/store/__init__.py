@@ -1,0 +1,60 @@
+"""The SQLite results store of a campaign: one :class:`JobRow` per finished job, a :class:`RunRecord` per run,
+resumable and crash-safe.
+
+Modules, each importing only those above it:
+
+- :mod:`.rows` — the typed rows: :class:`JobRow`, :class:`Points`, :class:`JobStatus`, :class:`RunRecord` (a
+  :class:`RunProvenance` and how the run ended, :class:`RunStatus`);
+- :mod:`.schema` — the tables, each declared once as columns (DDL, migrations, row ↔ columns), :data:`SCHEMA_VERSION`;
+- :mod:`.identity` — what makes two runs parts of one campaign (spec, detector identity);
+- :mod:`.lock` — :class:`WriterLock`, one writer per store;
+- :mod:`.core` — :class:`ResultStore`: open (read-only too), migrate, campaign binding, writes and queries;
+- :mod:`.pack` — packed stores (``results.sqlite.xz``): :func:`pack_store`, :func:`restore_store`;
+- :mod:`.merge` — :func:`merge_runs`: parts of one campaign computed elsewhere joined into one store.
+"""
+
+from .core import STORE, ResultStore
+from .identity import PRESENTATION_KEYS
+from .lock import WriterLock
+from .merge import MergedSource, MergeReport, check_mergeable, merge_runs, merge_store
+from .pack import PACKED, pack_store, restore_store
+from .rows import (
+    Corners,
+    JobRow,
+    JobStatus,
+    Points,
+    RunProvenance,
+    RunRecord,
+    RunStatus,
+    decode_points,
+    encode_points,
+    now_iso,
+)
+from .schema import JOB_COLUMNS, SCHEMA_VERSION
+
+__all__ = [
+    "JOB_COLUMNS",
+    "PACKED",
+    "PRESENTATION_KEYS",
+    "SCHEMA_VERSION",
+    "STORE",
+    "Corners",
+    "JobRow",
+    "JobStatus",
+    "MergeReport",
+    "MergedSource",
+    "Points",
+    "ResultStore",
+    "RunProvenance",
+    "RunRecord",
+    "RunStatus",
+    "WriterLock",
+    "check_mergeable",
+    "decode_points",
+    "encode_points",
+    "merge_runs",
+    "merge_store",
+    "now_iso",
+    "pack_store",
+    "restore_store",
+]

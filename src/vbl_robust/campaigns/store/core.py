@@ -1,0 +1,294 @@
+"""The SQLite results store: one :class:`~vbl_robust.campaigns.store.rows.JobRow` per finished job, provenance per
+run, resumable and crash-safe (the tables: :mod:`~vbl_robust.campaigns.store.schema`).
+
+Crash safety: WAL journal, one transaction per finished job (``INSERT OR IGNORE`` on the key). A process killed at
+any moment (``kill -9``) loses only the job in progress; committed rows stay and a rerun inserts no duplicates.
+Only a writer holding the store's :class:`~vbl_robust.campaigns.store.lock.WriterLock` writes.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from .identity import check_same
+from .rows import JobRow, JobStatus, RunProvenance, RunRecord, RunStatus, now_iso
+from .schema import (
+    CAMPAIGN,
+    CONTENTS,
+    JOBS,
+    RUNS,
+    SAMPLES,
+    SCHEMA_VERSION,
+    Transaction,
+    job_row,
+    migrate,
+    run_record,
+    schema_version,
+    to_columns,
+)
+
+#: File name of the store in a run directory.
+STORE = "results.sqlite"
+
+
+class ResultStore:
+    """A campaign's results in one SQLite file (see :mod:`~vbl_robust.campaigns.store.schema` for the layout).
+
+    >>> import tempfile, pathlib
+    >>> store = ResultStore(pathlib.Path(tempfile.mkdtemp()) / "results.sqlite")
+    >>> store.count()
+    0
+    """
+
+    def __init__(self, path: str | Path, *, readonly: bool = False):
+        self.path = Path(path)
+        self.readonly = readonly
+        try:
+            if readonly:
+                self._con = self._open_readonly()
+                return
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            # isolation_level=None: we open transactions ourselves (BEGIN IMMEDIATE … COMMIT).
+            self._con = sqlite3.connect(str(self.path), isolation_level=None, timeout=30.0)
+            try:
+                self._con.execute("PRAGMA journal_mode=WAL")
+                self._con.execute("PRAGMA synchronous=NORMAL")  # durable against process kills (not power loss)
+                migrate(self._con, self.path)
+            except BaseException:
+                self._con.close()
+                raise
+        except sqlite3.DatabaseError as exc:  # truncated, or not SQLite at all: one line, not a traceback
+            raise ValueError(f"{self.path}: not a readable vbl-robust results store ({exc})") from None
+
+    def _open_readonly(self) -> sqlite3.Connection:
+        """A connection that writes nothing. Without a write-ahead log beside the file (no writer, nothing left to
+        replay) the file is read as it stands (``immutable``: no ``-shm``/``-wal`` file is made, so it works in a
+        read-only directory; a writer that starts meanwhile writes its log, not this file, until a checkpoint);
+        with one, SQLite's read-only mode reads the log too (and falls back to the file alone where the log's
+        shared memory cannot be opened). A store of an older layout is copied into memory and updated there."""
+        uri = self.path.resolve().as_uri()
+        con = None
+        if Path(f"{self.path}-wal").exists():
+            con = sqlite3.connect(f"{uri}?mode=ro", uri=True, isolation_level=None, timeout=30.0)
+            try:
+                version = schema_version(con, self.path)
+            except sqlite3.OperationalError:
+                con.close()
+                con = None
+        if con is None:
+            con = sqlite3.connect(f"{uri}?mode=ro&immutable=1", uri=True, isolation_level=None)
+            version = schema_version(con, self.path)
+        if version < SCHEMA_VERSION:
+            mem = sqlite3.connect(":memory:", isolation_level=None)
+            con.backup(mem)
+            con.close()
+            con = mem
+            migrate(con, self.path)
+        con.execute("PRAGMA query_only = ON")
+        return con
+
+    @classmethod
+    def open_existing(cls, path: str | Path, *, readonly: bool = True) -> ResultStore:
+        """Open a store that must exist (a run directory or the ``.sqlite`` file itself) — read-only unless told
+        otherwise: reading a run (report, zones, tables, bundles) never writes it, and works where it cannot."""
+        p = Path(path)
+        if p.is_dir():
+            p = p / STORE
+        if not p.is_file():
+            raise FileNotFoundError(f"{p}: no results store (run `vbl-robust audit` or `reproduce` with --out first)")
+        return cls(p, readonly=readonly)
+
+    def close(self) -> None:
+        self._con.close()
+
+    def __enter__(self) -> ResultStore:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def transaction(self) -> Transaction:
+        """One write transaction (``with store.transaction(): …``): all of it or nothing."""
+        return Transaction(self._con)
+
+    # -- campaign -------------------------------------------------------------------------------------------
+    def campaign(self) -> dict[str, Any] | None:
+        """The stored campaign ``{"name", "spec", "detector", "created_at"}`` or None for a new store."""
+        row = self._con.execute("SELECT name, spec_json, detector_json, created_at FROM campaign WHERE id = 1").fetchone()
+        if row is None:
+            return None
+        return {"name": row[0], "spec": json.loads(row[1]), "detector": json.loads(row[2]), "created_at": row[3]}
+
+    def bind_campaign(self, name: str, spec: Mapping[str, Any], detector: Mapping[str, Any]) -> None:
+        """Bind the store to a campaign and detector, or check that it holds this one.
+
+        A store is bound by what was computed in it: while it holds no job row (a new store, or a run that
+        failed before its first job, e.g. on a refused model file), the campaign and detector are recorded
+        anew and samples recorded by that run are forgotten. Once it holds a job row, another campaign (spec,
+        :data:`~vbl_robust.campaigns.store.identity.PRESENTATION_KEYS` aside) or another detector (kind, model
+        SHA-256 and options such as the design or the oracle's noise:
+        :func:`~vbl_robust.campaigns.store.identity.detector_identity`) is refused (``ValueError``).
+        """
+        have = self.campaign()
+        spec_j = json.dumps(spec, sort_keys=True)
+        det_j = json.dumps(detector, sort_keys=True)
+        bound = have is not None and self.count() > 0
+        if bound:
+            check_same(self.path, have, spec, detector)
+        with self.transaction():
+            if not bound:
+                self._con.execute("DELETE FROM samples")
+            created = have["created_at"] if bound else now_iso()
+            self._con.execute(CAMPAIGN.insert(verb="INSERT OR REPLACE"), (1, name, spec_j, det_j, created))
+
+    # -- runs -----------------------------------------------------------------------------------------------
+    def begin_run(self, provenance: RunProvenance) -> int:
+        """Insert a run row (status "running") and return its id. Called under the store's writer lock
+        (:func:`~vbl_robust.campaigns.runner.run_campaign`), so an earlier run still marked "running" has ended
+        without recording it (SIGKILL, a machine's or session's end): it is closed first as "killed", finished at
+        its last stored job, its seconds up to that job (:meth:`close_killed_runs`)."""
+        self.close_killed_runs()
+        with self.transaction():
+            return self.insert_run(RunRecord(None, now_iso(), RunStatus.RUNNING, provenance, jobs_done=0))
+
+    def insert_run(self, run: RunRecord) -> int:
+        """Store ``run`` as a new run (its ``run_id`` aside: a new one is given), inside the caller's transaction;
+        returns its id."""
+        names = RUNS.names[1:]
+        return int(self._con.execute(RUNS.insert(names), to_columns(RUNS, run, names)).lastrowid)
+
+    def close_killed_runs(self) -> int:
+        """Mark every run still "running" as "killed": finished at its last stored job (its start if none), its
+        jobs done and its seconds up to then. Only a writer holding the store's lock may call it (a run in progress
+        elsewhere would be closed too); returns how many runs it closed."""
+        last = "(SELECT max(j.finished_at) FROM jobs j WHERE j.run_id = runs.run_id)"
+        with self.transaction():
+            cur = self._con.execute(
+                f"UPDATE runs SET status = ?, finished_at = coalesce({last}, started_at), "
+                "jobs_done = (SELECT count(*) FROM jobs j WHERE j.run_id = runs.run_id), "
+                f"seconds = max(0.0, 86400.0 * (julianday(coalesce({last}, started_at)) - julianday(started_at))) "
+                "WHERE status = ?", (RunStatus.KILLED.value, RunStatus.RUNNING.value))
+        return cur.rowcount
+
+    def end_run(self, run_id: int, status: RunStatus, jobs_done: int, seconds: float) -> None:
+        with self.transaction():
+            self._con.execute("UPDATE runs SET finished_at = ?, status = ?, jobs_done = ?, seconds = ? WHERE run_id = ?",
+                              (now_iso(), RunStatus(status).value, jobs_done, seconds, run_id))
+
+    def runs(self) -> list[RunRecord]:
+        """Every run, oldest first."""
+        cur = self._con.execute(f"SELECT {', '.join(RUNS.names)} FROM runs ORDER BY run_id")
+        return [run_record(dict(zip(RUNS.names, r, strict=True))) for r in cur.fetchall()]
+
+    # -- samples ------------------------------------------------------------------------------------------
+    def add_samples(self, rows: Iterable[Mapping[str, Any]]) -> None:
+        with self.transaction():
+            self.insert_samples(rows)
+
+    def insert_samples(self, rows: Iterable[Mapping[str, Any]]) -> None:
+        """The samples' rows (``{column: value}``; a sample already stored is kept), inside the caller's
+        transaction."""
+        self._con.executemany(SAMPLES.insert(verb="INSERT OR IGNORE"), [tuple(r.get(c) for c in SAMPLES.names)
+                                                                        for r in rows])
+
+    def samples(self) -> dict[str, dict[str, Any]]:
+        cur = self._con.execute("SELECT * FROM samples ORDER BY sample_index")
+        names = [c[0] for c in cur.description]
+        return {r[0]: dict(zip(names, r, strict=True)) for r in cur.fetchall()}
+
+    def check_contents(self, samples: Iterable[Any]) -> None:
+        """Record the image-file digest of each sample (each frame of a sequence) read from a file (``image_path``), and refuse
+        (``ValueError`` naming them) samples whose file's bytes differ from those their stored jobs were computed
+        on. Every file is hashed on every run: a size and mtime that did not change prove nothing (``cp -p``,
+        ``tar x`` and ``rsync -a`` keep them for other bytes); samples rendered in memory have no file (their pixels
+        follow from their geometry and the generator, both in the job keys and the provenance)."""
+        from ...digest import file_sha256
+
+        stored = {r[0]: r[1:] for r in self.contents()}
+        with_jobs = {r[0] for r in self._con.execute("SELECT DISTINCT sample_id FROM jobs")}
+        changed, rows = [], []
+        for owner in samples:  # a sequence campaign's sample is an approach sequence: each frame has its file
+            for s in getattr(owner, "samples", None) or (owner,):
+                path = getattr(s, "image_path", None)
+                if path is None or not Path(path).is_file():
+                    continue  # rendered in memory, or missing (the job records that failure)
+                st = Path(path).stat()
+                old = stored.get(s.id)
+                digest = file_sha256(path)
+                if old is not None and old[3] != digest and owner.id in with_jobs:
+                    changed.append(f"{s.id} ({path})")
+                    continue
+                rows.append((s.id, str(path), st.st_size, st.st_mtime_ns, digest))
+        if changed:
+            raise ValueError(f"{self.path}: the pixels of {len(changed)} sample(s) changed since their results were "
+                             f"stored: {', '.join(changed[:5])}{' …' if len(changed) > 5 else ''}; run them into "
+                             "another --out (the stored results describe the old images)")
+        with self.transaction():
+            self.insert_contents(rows, replace=True)
+
+    def contents(self) -> list[tuple[Any, ...]]:
+        """The ``contents`` rows: ``(sample_id, path, size, mtime_ns, sha256)`` of each sample read from a file."""
+        return self._con.execute(f"SELECT {', '.join(CONTENTS.names)} FROM contents").fetchall()
+
+    def insert_contents(self, rows: Iterable[Sequence[Any]], *, replace: bool = False) -> None:
+        """``contents`` rows (as :meth:`contents` gives them), inside the caller's transaction; a sample's stored
+        row is kept unless ``replace``."""
+        self._con.executemany(CONTENTS.insert(verb="INSERT OR REPLACE" if replace else "INSERT OR IGNORE"), rows)
+
+    def image_digests(self) -> dict[str, str]:
+        """The SHA-256 of each sample's image file as its jobs read it (samples read from files only)."""
+        return {r[0]: r[1] for r in self._con.execute("SELECT sample_id, sha256 FROM contents") if r[1]}
+
+    def differing_pixels(self, other: ResultStore) -> list[str]:
+        """The samples both stores read from files whose bytes differ (the same id, other pixels)."""
+        mine, theirs = self.image_digests(), other.image_digests()
+        return sorted(sid for sid, d in theirs.items() if sid in mine and mine[sid] != d)
+
+    # -- jobs ---------------------------------------------------------------------------------------------
+    def done_keys(self) -> set[str]:
+        return {r[0] for r in self._con.execute("SELECT key FROM jobs")}
+
+    def count(self) -> int:
+        return int(self._con.execute("SELECT COUNT(*) FROM jobs").fetchone()[0])
+
+    def forget_failed(self) -> int:
+        """Delete the rows of failed jobs (status "failed": the pipeline could not run them), so that a rerun runs
+        them again; returns how many were deleted."""
+        with self.transaction():
+            before = self._con.total_changes
+            self._con.execute("DELETE FROM jobs WHERE status = ?", (JobStatus.FAILED.value,))
+            return self._con.total_changes - before
+
+    def commit(self, rows: Sequence[JobRow]) -> int:
+        """Insert the rows of finished jobs in one transaction; returns how many were new (duplicates ignored)."""
+        if not rows:
+            return 0
+        with self.transaction():
+            return self.insert_jobs(rows)
+
+    def insert_jobs(self, rows: Iterable[JobRow]) -> int:
+        """Job rows (a key already stored is kept as it is), inside the caller's transaction; returns how many were
+        new."""
+        before = self._con.total_changes
+        self._con.executemany(JOBS.insert(verb="INSERT OR IGNORE"), [to_columns(JOBS, r) for r in rows])
+        return self._con.total_changes - before
+
+    def jobs(self, *, kind: str | None = None, role: str | None = None, with_points: bool = False,
+             with_trace: bool = True) -> list[JobRow]:
+        """The stored :class:`JobRow` s, ordered by sample index, then insertion; ``points`` only when
+        ``with_points`` (else None), ``trace`` only when ``with_trace`` (else empty)."""
+        where, args = [], []
+        if kind is not None:
+            where.append("kind = ?")
+            args.append(kind)
+        if role is not None:
+            where.append("role = ?")
+            args.append(role)
+        cols = [c for c in JOBS.names if (with_points or c != "points") and (with_trace or c != "trace_json")]
+        sql = f"SELECT {', '.join(cols)} FROM jobs" + (f" WHERE {' AND '.join(where)}" if where else "")
+        sql += " ORDER BY sample_index, rowid"
+        return [job_row(dict(zip(cols, r, strict=True))) for r in self._con.execute(sql, args)]

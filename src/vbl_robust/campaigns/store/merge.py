@@ -1,0 +1,138 @@
+"""Parts of one campaign computed elsewhere (another machine, a GPU, a cluster without a shared disk) joined into one
+store: :func:`merge_runs` for run directories, ``.sqlite`` files and packed stores (``.sqlite.xz``), on top of
+:func:`check_mergeable` and :func:`merge_store` for two open stores."""
+
+from __future__ import annotations
+
+import dataclasses
+import tempfile
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .core import STORE, ResultStore
+from .identity import check_same
+from .lock import WriterLock
+from .pack import restore_store
+from .rows import RunRecord, RunStatus, now_iso
+
+
+@dataclass(frozen=True)
+class MergedSource:
+    """What one source brought: ``copied`` job rows, and ``already`` rows the store held (the same keys)."""
+
+    source: str
+    copied: int
+    already: int
+
+
+@dataclass(frozen=True)
+class MergeReport:
+    """A merge: the store written (``into``, a ``.sqlite`` file) and each source's share, in the order given."""
+
+    into: Path
+    sources: tuple[MergedSource, ...] = ()
+
+    @property
+    def copied(self) -> int:
+        return sum(s.copied for s in self.sources)
+
+    @property
+    def already(self) -> int:
+        return sum(s.already for s in self.sources)
+
+
+def check_mergeable(store: ResultStore, other: ResultStore,
+                    campaign: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """``ValueError`` unless ``other`` holds job rows of ``store``'s campaign and detector (or of ``campaign``, when
+    given: several sources checked against the first before anything is written) on samples that agree with
+    ``store``'s; returns ``other``'s campaign."""
+    theirs = other.campaign()
+    if theirs is None or other.count() == 0:
+        raise ValueError(f"{other.path}: holds no job rows to merge")
+    mine = campaign if campaign is not None else (store.campaign() if store.count() else None)
+    if mine is not None:
+        check_same(store.path, mine, theirs["spec"], theirs["detector"],
+                   hint=f"{other.path} belongs to another campaign or detector: merge only runs of one")
+    here = store.samples()
+    clash = [sid for sid, s in other.samples().items() if sid in here
+             and (here[sid]["fingerprint"], here[sid]["sample_index"]) != (s["fingerprint"], s["sample_index"])]
+    if clash:
+        raise ValueError(f"{other.path}: samples {clash[:5]} differ from {store.path}'s (another image set)")
+    pixels = store.differing_pixels(other)
+    if pixels:
+        raise ValueError(f"{other.path}: the image files of samples {pixels[:5]} differ from those {store.path}'s "
+                         "jobs read (other pixels under the same names)")
+    return theirs
+
+
+def merge_store(store: ResultStore, other: ResultStore, *, source: str = "") -> MergedSource:
+    """Copy into ``store`` the job rows of ``other`` that it lacks, with their samples, image digests and runs.
+
+    ``other`` must hold the same campaign and detector (checked as a resuming run is: ``ValueError``); a sample
+    both hold must have the same fingerprint and index (:func:`check_mergeable`). ``store``, when new, is bound to
+    ``other``'s campaign. Each run of ``other`` that brought rows is recorded anew (its provenance kept,
+    ``config["merged_from"]`` = ``source``, default ``other``'s path), and the copied rows point to it. Rows already
+    there (the same key: the same job, context and sample) are kept as they are. One transaction: all of it or
+    nothing. The caller holds ``store``'s writer lock."""
+    theirs = check_mergeable(store, other)
+    if store.campaign() is None or store.count() == 0:
+        store.bind_campaign(theirs["name"], theirs["spec"], theirs["detector"])
+    have = store.done_keys()
+    rows = [r for r in other.jobs(with_points=True) if r.key not in have]
+    runs = {r.run_id: r for r in other.runs()}
+    new_id: dict[int | None, int | None] = {None: None}
+    with store.transaction():
+        for rid in sorted({r.run_id for r in rows if r.run_id is not None}):
+            run = runs.get(rid) or RunRecord(rid, now_iso(), RunStatus.UNKNOWN)
+            config = {**(run.provenance.config or {}), "merged_from": source or str(other.path)}
+            new_id[rid] = store.insert_run(dataclasses.replace(
+                run, provenance=dataclasses.replace(run.provenance, config=config)))
+        store.insert_jobs(r.replace(run_id=new_id.get(r.run_id)) for r in rows)
+        store.insert_contents(other.contents())
+        store.insert_samples(other.samples().values())
+    return MergedSource(source or str(other.path), len(rows), other.count() - len(rows))
+
+
+def _store_path(into: Path) -> Path:
+    """The store file a merge writes: ``into`` itself when it names a file, else ``into/results.sqlite``."""
+    return into / STORE if into.is_dir() or not into.suffix else into
+
+
+def _unpacked(source: Path, scratch: Path) -> Path:
+    """Where a source's store is read: a packed one (``….xz``) unpacked into ``scratch``, never in place."""
+    if not source.name.endswith(".xz"):
+        return source
+    if not source.is_file():
+        raise FileNotFoundError(f"{source}: no such packed store")
+    restore_store(source, scratch)
+    return scratch
+
+
+def merge_runs(sources: Sequence[str | Path], into: str | Path, *,
+               progress: Callable[[MergeReport], None] | None = None) -> MergeReport:
+    """Merge the job rows of ``sources`` (run directories, ``.sqlite`` files or packed stores ``.sqlite.xz`` as
+    ``bundle --stores`` writes them) into the run ``into`` (a directory or ``.sqlite`` file; created when missing)
+    with :func:`merge_store`, each source recorded under the name given.
+
+    Every source is checked against the first and against ``into`` before anything is written (``ValueError``);
+    ``into`` is refused while a run writes it (:class:`~vbl_robust.campaigns.store.lock.WriterLock`:
+    ``ValueError``); a missing packed store is a ``FileNotFoundError``, a damaged one a ``ValueError``.
+    ``progress`` is called with the report so far after each source is merged (its last entry: that source)."""
+    dst = _store_path(Path(into))
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    report = MergeReport(dst)
+    with WriterLock(dst), ResultStore(dst) as store, tempfile.TemporaryDirectory() as tmp:
+        paths = [_unpacked(Path(src), Path(tmp) / str(i)) for i, src in enumerate(sources)]
+        first = None
+        for path in paths:  # every source checked (against the first) before anything is written
+            with ResultStore.open_existing(path) as other:
+                first = check_mergeable(store, other, first)
+        for src, path in zip(sources, paths, strict=True):
+            with ResultStore.open_existing(path) as other:
+                part = merge_store(store, other, source=str(src))
+            report = dataclasses.replace(report, sources=(*report.sources, part))
+            if progress is not None:
+                progress(report)
+    return report

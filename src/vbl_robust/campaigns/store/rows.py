@@ -1,0 +1,282 @@
+"""What a results store holds, as typed rows: a finished job (:class:`JobRow`, its evaluated :class:`Points`) and a
+run (:class:`RunRecord`: its :class:`RunProvenance` and how it ended, :class:`RunStatus`). No SQL here: how each
+field is stored is :mod:`~vbl_robust.campaigns.store.schema`'s business.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+import json
+import math
+import zlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+
+from ...constants import MAX_BLOB_BYTES, Verdict
+from ...search.result import TraceRow
+from ..spec import BoxSpec, Budget
+
+
+def now_iso() -> str:
+    """Now, UTC, ISO 8601 to the second: the stores' timestamps."""
+    return dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+
+
+class JobStatus(StrEnum):
+    """How a job ended: searched (``DONE``), could not run (``FAILED``), or implied by a breach in a chain."""
+
+    DONE = "done"
+    FAILED = "failed"
+    IMPLIED = "implied"
+
+
+class RunStatus(StrEnum):
+    """Where a run stands (the stored strings are the values)."""
+
+    RUNNING = "running"  #: begun, not ended (or ended without recording it: closed as KILLED by the next writer)
+    FINISHED = "finished"  #: every planned job is stored
+    INCOMPLETE = "incomplete"  #: ended normally with planned jobs left (e.g. a chain stopped early)
+    INTERRUPTED = "interrupted"  #: ended by an exception or Ctrl-C
+    KILLED = "killed"  #: found still "running" by a later writer: SIGKILL, a machine's or session's end
+    UNKNOWN = "unknown"  #: a merged run whose source held its jobs but not its run row
+
+
+#: Four predicted runway corners ``((u, v), …)`` in the sample's pixels, keypoint order TR, TL, BL, BR.
+Corners = tuple[tuple[float, float], ...]
+
+
+@dataclass(frozen=True, eq=False)
+class Points:
+    """Every point one search evaluated, in evaluation order.
+
+    Attributes:
+        xs: ``(n, d)`` points, real units (columns ordered as the box's names).
+        fs: ``(n,)`` values, metres (NaN where the value was not finite).
+        reasons: ``n`` failure reasons, ``""`` = success (all ``""`` when not given).
+        times: ``(n,)`` completion time of each evaluation, seconds on the search's clock (None: not recorded,
+            rows stored before schema 3).
+    """
+
+    xs: np.ndarray
+    fs: np.ndarray
+    reasons: tuple[str, ...] = ()
+    times: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        fs = np.asarray(self.fs, dtype=np.float64).reshape(-1)
+        xs = np.asarray(self.xs, dtype=np.float64)
+        xs = xs.reshape(len(fs), -1) if len(fs) else xs.reshape(0, xs.shape[-1] if xs.ndim == 2 else 0)
+        reasons = tuple(self.reasons) or ("",) * len(fs)
+        if len(reasons) != len(fs):
+            raise ValueError(f"Points: {len(reasons)} reasons for {len(fs)} values")
+        object.__setattr__(self, "xs", xs)
+        object.__setattr__(self, "fs", fs)
+        object.__setattr__(self, "reasons", reasons)
+        if self.times is not None:
+            ts = np.asarray(self.times, dtype=np.float64).reshape(-1)
+            if len(ts) != len(fs):
+                raise ValueError(f"Points: {len(ts)} times for {len(fs)} values")
+            object.__setattr__(self, "times", ts)
+
+    def __len__(self) -> int:
+        return len(self.fs)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Points):
+            return NotImplemented
+        return (self.xs.shape == other.xs.shape and np.array_equal(self.xs, other.xs)
+                and np.array_equal(self.fs, other.fs, equal_nan=True) and self.reasons == other.reasons
+                and (self.times is None) == (other.times is None)
+                and (self.times is None or np.array_equal(self.times, other.times, equal_nan=True)))
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def to_blob(self) -> bytes:
+        """zlib-compressed JSON; non-finite values as null, reasons only when some point failed, times when known."""
+        d: dict[str, Any] = {"xs": self.xs.tolist(), "fs": [v if math.isfinite(v) else None for v in self.fs.tolist()],
+                             "d": self.xs.shape[1]}
+        if any(self.reasons):
+            d["reasons"] = list(self.reasons)
+        if self.times is not None:
+            d["ts"] = [v if math.isfinite(v) else None for v in self.times.tolist()]
+        return zlib.compress(json.dumps(d).encode(), 6)
+
+    @classmethod
+    def from_blob(cls, blob: bytes) -> Points:
+        """Inverse of :meth:`to_blob` (null values come back as NaN, missing reasons as ``""``, missing times as
+        None)."""
+        d = json.loads(_inflate(blob))
+        fs = np.array([math.nan if v is None else v for v in d["fs"]], dtype=np.float64)
+        xs = np.asarray(d["xs"], dtype=np.float64).reshape(len(fs), d.get("d", -1 if len(fs) else 0))
+        ts = d.get("ts")
+        times = None if ts is None else np.array([math.nan if v is None else v for v in ts], dtype=np.float64)
+        return cls(xs, fs, tuple(d.get("reasons", ())), times)
+
+
+def encode_points(xs: np.ndarray, fs: np.ndarray, reasons: Sequence[str] = ()) -> bytes:
+    """Compress evaluated points ``(n, d)``, values ``(n,)`` and reasons (see :meth:`Points.to_blob`)."""
+    return Points(xs, fs, tuple(reasons)).to_blob()
+
+
+def _inflate(blob: bytes) -> bytes:
+    """``zlib`` decompression that refuses to grow past :data:`~vbl_robust.constants.MAX_BLOB_BYTES` (a crafted
+    store must not exhaust memory): ``ValueError`` naming the bound."""
+    d = zlib.decompressobj()
+    out = d.decompress(blob, MAX_BLOB_BYTES)
+    if d.unconsumed_tail:
+        raise ValueError(f"a stored blob decompresses to more than {MAX_BLOB_BYTES} bytes (a damaged or crafted store)")
+    return out + d.flush()
+
+
+def decode_points(blob: bytes | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(xs, fs)`` of :func:`encode_points` (null values come back as NaN); empty arrays for None."""
+    if not blob:
+        return np.zeros((0, 0)), np.zeros(0)
+    p = Points.from_blob(blob)
+    return p.xs, p.fs
+
+
+@dataclass(frozen=True)
+class JobRow:
+    """One finished job as the store holds it (what a worker produces and ``ResultStore.jobs`` returns).
+
+    Identity (from the :class:`~vbl_robust.campaigns.spec.Job`): ``key``, ``experiment``, ``kind`` ("search" |
+    "pnp"), ``role`` ("main" | "reference" | "landscape"), ``method``, ``sample_id``, ``sample_index``, ``box``,
+    ``budget``, ``seed``, ``options``, ``chain``; ``run_id`` = the run that computed it.
+
+    Outcome: ``status``; ``reason`` (why a job failed / what implied it); ``worst_m`` = worst error found,
+    metres (the penalty for a failed job); ``worst_x`` = ``{name: value}`` of the worst point, real units;
+    ``verdict`` (None for a PnP job); ``nfev``/``nit`` = evaluations / iterations; ``n_failed`` = failed
+    evaluations and ``failures`` = their counts per reason (None / ``{}`` in rows stored before failures were
+    recorded); ``worst_reason`` = failure reason at the worst point (``""`` = a successful evaluation, None
+    unknown); ``worst_corners`` = the four corners the detector's selected candidate gave at the worst point, in the
+    sample's pixels of the perturbed view (TR, TL, BL, BR; main search jobs from schema 4 on, None when no candidate
+    was found, for other jobs and in older rows; its confidence is ``payload["worst"]["conf"]``);
+    ``search_status``/``message`` = why the search stopped; ``search_s``/``job_s`` = seconds in the
+    search / in the whole job; ``upper_bound`` (sound, metres; 1e300 for "unbounded"), ``bound_estimate``,
+    ``lipschitz_estimate``; ``trace`` = the search's iterations (empty unless asked for); ``points`` = every
+    evaluated point (None unless asked for); ``payload`` = PnP comparison or details of the worst point;
+    ``finished_at`` (ISO time, UTC). ``read_from`` is set only on rows *derived* from a stored run at a smaller
+    budget (:func:`vbl_robust.campaigns.metrics.read_off_rows`; never stored): the budget label of that run.
+
+    Floats are finite or None (SQLite stores NaN as NULL).
+    """
+
+    key: str
+    experiment: str
+    kind: str
+    role: str
+    method: str
+    sample_id: str
+    sample_index: int
+    status: JobStatus
+    run_id: int | None = None
+    box: BoxSpec | None = None
+    budget: Budget | None = None
+    seed: int | None = None
+    options: Mapping[str, Any] = field(default_factory=dict)
+    chain: str | None = None
+    reason: str | None = None
+    worst_m: float | None = None
+    worst_x: Mapping[str, float] | None = None
+    verdict: Verdict | None = None
+    nfev: int = 0
+    nit: int = 0
+    n_failed: int | None = None
+    failures: Mapping[str, int] = field(default_factory=dict)
+    worst_reason: str | None = None
+    worst_corners: Corners | None = None
+    search_status: str | None = None
+    message: str | None = None
+    search_s: float | None = None
+    job_s: float | None = None
+    upper_bound: float | None = None
+    bound_estimate: float | None = None
+    lipschitz_estimate: float | None = None
+    trace: tuple[TraceRow, ...] = ()
+    points: Points | None = None
+    payload: Mapping[str, Any] | None = None
+    finished_at: str | None = None
+    read_from: str | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "status", JobStatus(self.status))
+        if self.verdict is not None:
+            object.__setattr__(self, "verdict", Verdict(self.verdict))
+        object.__setattr__(self, "trace", tuple(self.trace))
+
+    @property
+    def box_label(self) -> str | None:
+        return None if self.box is None else self.box.label
+
+    @property
+    def box_level(self) -> float | None:
+        return None if self.box is None else self.box.level
+
+    @property
+    def budget_label(self) -> str | None:
+        return None if self.budget is None else self.budget.label
+
+    def replace(self, **changes: Any) -> JobRow:
+        """A copy with ``changes`` (``dataclasses.replace``)."""
+        return dataclasses.replace(self, **changes)
+
+
+
+@dataclass(frozen=True)
+class RunProvenance:
+    """What one run of a campaign was, as recorded when it begins (:meth:`ResultStore.begin_run`).
+
+    Attributes:
+        code_version: the vbl-robust version (and git state) that ran it.
+        model_sha256: the detector's model file SHA-256 (None for the oracle).
+        detector: the detector's identity (:meth:`~vbl_robust.campaigns.DetectorSpec.identity`).
+        dataset_id: SHA-256 of the dataset's identity; ``dataset`` that identity (source, image count, …).
+        config: the full configuration (campaign, user options, executor, workers, clock, library versions,
+            machine; ``merged_from`` on a run merged from another store).
+        seed: the campaign's seed; ``executor`` / ``host``: where it ran.
+        jobs_total: jobs planned; ``jobs_skipped``: of those, already stored when it began.
+    """
+
+    code_version: str | None = None
+    model_sha256: str | None = None
+    detector: Mapping[str, Any] | None = None
+    dataset_id: str | None = None
+    dataset: Mapping[str, Any] | None = None
+    config: Mapping[str, Any] | None = None
+    seed: int | None = None
+    executor: str | None = None
+    host: str | None = None
+    jobs_total: int | None = None
+    jobs_skipped: int | None = None
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """One stored run: its provenance and how it ended (``ResultStore.runs``).
+
+    ``run_id`` is None for a run not stored yet; ``started_at`` / ``finished_at`` are ISO times (UTC; no
+    ``finished_at`` while running); ``jobs_done`` = jobs it stored; ``seconds`` = its wall seconds (None until it
+    ends)."""
+
+    run_id: int | None
+    started_at: str
+    status: RunStatus
+    provenance: RunProvenance = field(default_factory=RunProvenance)
+    finished_at: str | None = None
+    jobs_done: int | None = None
+    seconds: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "status", RunStatus(self.status))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Its fields and its provenance's as one flat JSON-able dict (a bundle's ``provenance.json``, tables)."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "provenance"}
+        d["status"] = self.status.value
+        return {**d, **dataclasses.asdict(self.provenance)}
