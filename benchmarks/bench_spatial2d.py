@@ -13,7 +13,7 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from vbl_robust.campaigns.bundle import PACKED, STORE, restore_store
+from vbl_robust.campaigns.store import PACKED, STORE, restore_store
 from vbl_robust.report.markdown import survival_markdown
 
 ROOT = Path(__file__).resolve().parents[1]

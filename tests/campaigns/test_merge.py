@@ -12,7 +12,7 @@ from vbl_robust.campaigns import (
     roll_box,
     run_campaign,
 )
-from vbl_robust.campaigns.bundle import compare_runs
+from vbl_robust.report.bundle import compare_runs
 from vbl_robust.campaigns.store import (
     MergedSource,
     MergeReport,

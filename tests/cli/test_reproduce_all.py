@@ -60,12 +60,14 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
         assert name != "spatial-1d" or "data:image/png;base64," in page  # figures are embedded
         assert not (bundle / name / "figures").exists() and not (bundle / name / "results.sqlite").exists()
         assert (bundle / name / "results.sqlite.xz").stat().st_size > 0
-        assert f"| {name} | {n_jobs} / {n_jobs} |" in status and f"{name}</a> — {n_jobs} of {n_jobs} jobs" in index
+        assert f"| {name} | {n_jobs} / {n_jobs} |" in status
+        card = index.split(f'<a href="{name}/report.html">{name}</a>')[1].split('<div class="card">')[0]
+        assert f">{n_jobs} of {n_jobs} jobs, " in card  # the bundle index: one card per experiment
         t = prov["totals"]  # the searches' hours on the campaign's clock beside the wall and worker hours
         assert f"| {t['search_s'] / 3600:.2f} | {t['clock']} |" in status
     # a smaller run reproduces the bundle's rows (the issue's check: reproduce EXPERIMENT --images 3), checked
     # against the bundle's job table (what stays committed) and against the store
-    from vbl_robust.campaigns.bundle import compare_runs
+    from vbl_robust.report.bundle import compare_runs
 
     again = tmp_path / "again"
     res = runner.invoke(app, ["reproduce", "spatial-1d", "--out", str(again), "--workers", "1", "--check-against",

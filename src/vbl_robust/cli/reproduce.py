@@ -153,7 +153,7 @@ def _check_method_options(options: dict, specs: list) -> None:
 
 def _restore(bundle: Path, name: str, out_dir: Path) -> None:
     """``--resume-from``: the bundle's packed store of experiment ``name`` seeds ``out_dir`` if it has none yet."""
-    from vbl_robust.campaigns.bundle import PACKED, restore_store
+    from vbl_robust.campaigns.store import PACKED, restore_store
 
     packed = bundle / name / PACKED
     with one_line(ValueError, prefix=f"--resume-from {bundle}: "):
@@ -212,7 +212,7 @@ def _reference(root: Path, name: str) -> Path:
     """``--check-against``: where experiment ``name``'s earlier rows are (``root/name`` or ``root`` itself: a run
     directory with a results store, a bundle's experiment directory with ``jobs.parquet``, or that file); refused
     before any work when there is none."""
-    from vbl_robust.campaigns.bundle import STORE
+    from vbl_robust.campaigns.store import STORE
 
     for p in (root / name, root):
         if (p.is_dir() and ((p / STORE).is_file() or (p / "jobs.parquet").is_file())) or (
@@ -223,10 +223,10 @@ def _reference(root: Path, name: str) -> Path:
 
 
 def _check(name: str, run: Path, reference: Path) -> bool:
-    """Print how the rows of ``run`` compare with ``reference``'s (:func:`~vbl_robust.campaigns.bundle.compare_runs`):
+    """Print how the rows of ``run`` compare with ``reference``'s (:func:`~vbl_robust.report.bundle.compare_runs`):
     findings changed (status, verdict, a row missing) apart from numeric drift (same findings, other counts or
     worst errors); True only when a finding changed."""
-    from vbl_robust.campaigns.bundle import compare_runs
+    from vbl_robust.report.bundle import compare_runs
 
     c = compare_runs(run, reference)
     first = f" (first: {', '.join(c['differ'][:3])})" if c["differ"] else ""

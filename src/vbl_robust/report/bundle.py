@@ -40,9 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from ..atomic import atomic_write
-
-# pack_store / restore_store live beside the store; imported here by the callers of a bundle's packed stores
-from .store import PACKED, STORE, ResultStore, RunRecord, pack_store, restore_store  # noqa: F401
+from ..campaigns.store import PACKED, STORE, ResultStore, RunRecord, pack_store
 
 #: Markers of the generated part of a REPRODUCTION.md (:func:`write_bundle`).
 BEGIN, END = "<!-- bundle:begin -->", "<!-- bundle:end -->"
@@ -100,8 +98,8 @@ def write_experiment(run: Path, out: Path, stores: bool = False, keep: Path | No
     """Bundle one run directory into ``out`` (created; with its packed store when ``stores``, else the packed store
     of the bundle ``keep`` — the experiment's previous bundle directory — when it has one); returns its provenance
     totals."""
-    from ..report import build_report
-    from .tables import export
+    from ..campaigns.tables import export
+    from . import build_report
 
     out.mkdir(parents=True, exist_ok=True)
     with ResultStore.open_existing(run) as store:
@@ -162,7 +160,7 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
     if Path(out).resolve() == Path(root).resolve():
         raise ValueError(f"--out {out}: the bundle goes beside the runs, not into their directory (it would replace "
                          "each run's report)")
-    from ..report.claims import claims_html, claims_markdown, claims_of, write_index
+    from .claims import claims_html, claims_markdown, claims_of, write_index
 
     runs = run_dirs(root, names)
     if not runs:
@@ -201,7 +199,7 @@ def _table_rows(source: Path) -> dict[tuple[str, str], dict[str, Any]]:
     """The flat job rows (:func:`~vbl_robust.campaigns.tables.flat_rows`) of a run directory or store, or of a
     bundle's job table (an experiment directory of the bundle holding ``jobs.parquet``, or that file), by
     ``(key, budget_label)`` (a read-off budget shares its run's key)."""
-    from .tables import flat_rows
+    from ..campaigns.tables import flat_rows
 
     source = Path(source)
     table = source / "jobs.parquet" if source.is_dir() and not (source / STORE).is_file() else source

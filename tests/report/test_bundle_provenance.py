@@ -1,4 +1,4 @@
-"""``campaigns.bundle.provenance``: the wall time of runs, including those killed before they recorded their end."""
+"""``report.bundle.provenance``: the wall time of runs, including those killed before they recorded their end."""
 
 import sqlite3
 from pathlib import Path
@@ -14,7 +14,7 @@ from vbl_robust.campaigns import (
     roll_box,
     run_campaign,
 )
-from vbl_robust.campaigns.bundle import provenance
+from vbl_robust.report.bundle import provenance
 from vbl_robust.scenes import generate
 
 
@@ -49,7 +49,7 @@ def test_a_check_tells_a_changed_finding_from_numeric_drift(tmp_path):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from vbl_robust.campaigns.bundle import compare_runs
+    from vbl_robust.report.bundle import compare_runs
 
     base = {"key": ["a", "b", "c"], "budget_label": ["x", "x", "x"], "max_seconds": [None, None, None],
             "status": ["done"] * 3, "verdict": ["breach", "no breach found", "no breach found"],
@@ -66,7 +66,8 @@ def test_a_check_tells_a_changed_finding_from_numeric_drift(tmp_path):
 
 
 def test_bundle_index_links_stay_relative_and_a_bundle_never_overwrites_its_runs(tmp_path):
-    from vbl_robust.campaigns.bundle import restore_store, write_bundle
+    from vbl_robust.campaigns.store import restore_store
+    from vbl_robust.report.bundle import write_bundle
     from vbl_robust.report.claims import write_index
 
     name = "javascript:alert(1)"
@@ -89,7 +90,8 @@ def test_a_bundle_killed_midway_leaves_the_previous_bundle_whole(tmp_path, monke
     """A bundle killed after its first experiment left experiments without index.html / claims.md; now it is
     written into a staging directory and published only when complete; a packed store is kept without --stores."""
     import vbl_robust.report as report
-    from vbl_robust.campaigns.bundle import PACKED, write_bundle
+    from vbl_robust.campaigns.store import PACKED
+    from vbl_robust.report.bundle import write_bundle
 
     spec = CampaignSpec("bundle-kill", (Block(boxes=(roll_box(5),), methods=("random",),
                                               budgets=(Budget(max_evals=4),)),), seed=1)
