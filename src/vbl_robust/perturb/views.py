@@ -13,7 +13,9 @@ Mapping between a view pixel (edge coordinates ``p`` in ``[0, size]``) and the i
 Resampling: bilinear ``grid_sample`` (``align_corners=False``, which samples the exact view-pixel centres).
 When a window shrinks the image by ``k = side / size ≥ 2``, the image is first average-pooled by ``⌊k⌋`` (an
 anti-aliasing prefilter; pooled pixel ``j`` covers image edge coordinates ``[j·p, (j+1)·p)``, so the mapping
-above still holds). Everything is differentiable with respect to the image and the window.
+above still holds). Everything is differentiable with respect to the image and the window. The black box on
+the CPU (a NumPy θ) samples the same views with OpenCV instead (:mod:`.warp`: bilinear at the exact map, no
+gradient, a small fraction of the cost).
 
 :class:`ViewSampler` is the one boundary between a perturbation and a detector: built from the unperturbed image,
 a :class:`~vbl_robust.perturb.Perturbation` and a batch θ, it gives the views of ``T(x; θ)`` a detector asks for
