@@ -225,3 +225,21 @@ def test_deleting_the_lock_file_does_not_let_a_second_writer_in(tmp_path):
         with pytest.raises(ValueError, match="in use by"):
             WriterLock(store).acquire()
     WriterLock(store).acquire().release()  # free once the first writer has let go
+
+
+def test_a_worker_computes_on_one_core():
+    """torch and OpenCV each on one thread in a worker (OpenCV's warps make the black-box views since issue 50: left
+    at its default, every worker would spread over every core)."""
+    import cv2
+    import torch
+
+    from vbl_robust.campaigns.runner import _one_core
+
+    before = torch.get_num_threads(), cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(2)
+        _one_core()
+        assert (torch.get_num_threads(), cv2.getNumThreads()) == (1, 1)
+    finally:
+        torch.set_num_threads(before[0])
+        cv2.setNumThreads(before[1])
