@@ -106,6 +106,7 @@ def test_estimate_prints_an_upper_bound_per_experiment():
     # on a CPU the run's clock is the process clock: the probe's rates are per CPU second (an idle core's)
     assert "evaluations per CPU second (process clock" in res.output and all(n in res.output for n in EXPERIMENTS)
     assert "h expected" in res.output and "upper bound" in res.output
+    assert "probe rates: black box best of" in res.output  # how the rate was obtained (issue 50)
     paper = runner.invoke(app, ["reproduce", "paper", "--estimate", "--oracle", "--images", "2",
                                    "--probe-seconds", "0.2", "--clock", "wall"])
     assert paper.exit_code == 0, paper.output

@@ -188,6 +188,8 @@ def _estimate(exps: list, opts: Any, seed: int, images: int | None, det: Any, pr
     typer.echo(f"probe: {pr.rate:.1f} evaluations per {unit} black box, {pr.grad_rate:.1f} with a gradient "
                f"({det.name}, one thread); breach shares of {len(pr.breach)} early-stopping boxes on "
                f"{len(probe_samples)} probe images; {workers} worker(s)")
+    if pr.how:
+        typer.echo(f"probe rates: {pr.how}")
     total = bound = 0.0
     for exp, spec in zip(exps, specs, strict=True):
         n = images or exp.images
