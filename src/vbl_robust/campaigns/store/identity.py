@@ -28,10 +28,11 @@ def check_same(path: str | Path, have: Mapping[str, Any], spec: Mapping[str, Any
     mine, theirs = detector_identity(have["detector"]), detector_identity(detector)
     if mine != theirs:
         diff = first_difference(mine, theirs)
-        raise ValueError(
-            f"{path}: holds results of detector {have['detector'].get('name')!r} "
-            f"(sha256 {str(have['detector'].get('sha256'))[:12]}…), not of {detector.get('name')!r} ({diff}); "
-            + ("use another --out" if hint.startswith("rerun") else hint))
+        name, sha = have["detector"].get("name"), have["detector"].get("sha256")
+        held = f"{name!r}" + (f" (sha256 {str(sha)[:12]}…)" if sha else "")
+        other = "the same detector with other options" if detector.get("name") == name else repr(detector.get("name"))
+        raise ValueError(f"{path}: holds results of detector {held}, not of {other} ({diff}); "
+                         + ("use another --out" if hint.startswith("rerun") else hint))
 
 
 def detector_identity(detector: Mapping[str, Any]) -> dict[str, Any]:
