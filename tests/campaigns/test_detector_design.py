@@ -5,7 +5,7 @@ from typer.testing import CliRunner
 
 from vbl_robust.campaigns.provenance import DetectorSpec
 from vbl_robust.cli import app
-from vbl_robust.cli.audit import detector_spec
+from vbl_robust.cli.common import detector_spec
 from vbl_robust.detect.shipped import DEFAULT_MODEL, with_design
 from vbl_robust.detect.twostage import TwoStageDetector
 from vbl_robust.detect.ultralytics import UltralyticsDetector

@@ -109,7 +109,7 @@ def test_searches_with_no_evaluation_in_time_are_counted_apart_in_the_report_and
     from types import SimpleNamespace
 
     from vbl_robust.campaigns.store import JobRow
-    from vbl_robust.cli.audit import finish
+    from vbl_robust.cli.run import finish
 
     budget = Budget(max_seconds=0.1, stop_at_breach=False)
     spec = CampaignSpec("audit", (Block(boxes=(roll_box(5),), methods=("apgd", "random"), budgets=(budget,)),))

@@ -187,9 +187,10 @@ def harden(
     trust_model: HardenTrust = False, rounds: Rounds = 2, k: K = 8, epochs: HardenEpochs = 2,
     n_train: HardenNTrain = 300, n_val: HardenNVal = 60, seed: HardenSeed = None, clean: Clean = True,
     data: Data = "audit", imgsz: o.Imgsz = 320, batch: o.Batch = 16, threads: o.Threads = None,
+    engine: o.Engine = "torch", device: o.Device = "cpu",
 ) -> None:
     """Fine-tune a detector on the worst of k perturbed views per image, scored by the audit's error (rounds)."""
-    from vbl_robust.detect.harden import harden as run_harden
+    from vbl_robust.campaigns.harden import harden as run_harden
     from vbl_robust.detect.protocol import HARDEN_FORBIDDEN_SEEDS, HARDEN_SEED
     from vbl_robust.detect.train import SHIPPED_DATA, VAL_SEED_OFFSET
     from vbl_robust.scenes import generate
@@ -208,7 +209,8 @@ def harden(
         rs = run_harden(out, box, train_samples=generate(n_train, seed=seed, **scenes[data]),
                         val_samples=generate(n_val, seed=seed + VAL_SEED_OFFSET, **scenes[data]), init_weights=weights,
                         rounds=rounds, k=k, epochs=epochs, seed=seed, imgsz=imgsz, batch=batch, threads=threads,
-                        clean=clean, trust_rounds=trust_model)  # the user's word on the .pt files of --out
+                        clean=clean, engine=engine, device=device,
+                        trust_rounds=trust_model)  # the user's word on the .pt files of --out
     for r in rs:
         took = "" if r.train_s is None else f" (search {r.search_s:.0f} s, training {r.train_s:.0f} s)"
         typer.echo(f"round {r.index}: {r.breaches} of {len(r.worst)} training images breached by their worst "
