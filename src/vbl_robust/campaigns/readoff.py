@@ -1,0 +1,82 @@
+"""Budgets read off a trace: a stored run whose budget reads smaller budgets (``Budget.reads``, the runtime
+experiments' anytime methods) stands for one result per read budget; :func:`read_off_rows` derives those rows
+(``JobRow.read_from`` = the run's budget label) from the run's stamped evaluations
+(:func:`vbl_robust.search.at_budget`): at a time budget t only the evaluations completed by t count.
+Re-exported by :mod:`vbl_robust.campaigns.metrics`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+from .spec import Budget
+from .store import JobRow, JobStatus, Points
+
+
+def row_result(row: JobRow) -> Any:
+    """The :class:`~vbl_robust.search.SearchResult` a stored search row stands for, rebuilt from its points and
+    trace (``row`` needs ``points``: ``store.jobs(with_points=True)``)."""
+    from ..search import SearchResult, Status
+
+    if row.points is None or row.box is None:
+        raise ValueError(f"row {row.key}: a result needs the row's box and points (load with with_points=True)")
+    p = row.points
+    finite = np.isfinite(p.fs)
+    i = int(np.argmax(np.where(finite, p.fs, -np.inf))) if finite.any() else None
+    ub = row.upper_bound
+    return SearchResult(
+        x=None if i is None else p.xs[i].copy(), fun=math.nan if i is None else float(p.fs[i]), nfev=len(p),
+        nit=row.nit, status=Status(row.search_status or "running"), message=row.message or "",
+        elapsed=row.search_s or 0.0, trace=row.trace, xs=p.xs, fs=p.fs, method=row.method, names=row.box.box.names,
+        seed=row.seed, n_failed=sum(1 for r in p.reasons if r), reasons=p.reasons,
+        x_reason="" if i is None else p.reasons[i],
+        lipschitz_estimate=row.lipschitz_estimate, bound_estimate=row.bound_estimate,
+        upper_bound=None if ub is None else (math.inf if ub >= 1e300 else ub), times=p.times,
+    )
+
+
+def read_off(row: JobRow, budget: Budget, eps_safe_m: float, penalty_m: float) -> JobRow:
+    """The row of ``budget`` (a time or an evaluation budget) read off the stored run ``row`` (with points): the
+    best value and point, counts and trace of the evaluations within the budget; ``read_from`` = the run's
+    budget label. A failed run gives a failed row for the budget."""
+    from ..search import at_budget
+    from .work import result_fields
+
+    base = row.replace(budget=budget, key=f"{row.key}@{budget.label}", read_from=row.budget_label, payload=None)
+    if row.status is not JobStatus.DONE:
+        return base
+    r = at_budget(row_result(row), seconds=budget.max_seconds, evals=budget.max_evals)
+    fields = result_fields(r, eps_safe_m, penalty_m)
+    if row.points is not None and row.points.times is None:
+        fields["points"] = Points(r.xs, r.fs, r.reasons)
+    return base.replace(**fields)
+
+
+def read_off_rows(rows: Iterable[JobRow], eps_safe_m: float, penalty_m: float) -> list[JobRow]:
+    """``rows`` with every run that reads smaller budgets (``row.budget.reads``) replaced by one row per read
+    budget (:func:`read_off`; such rows need their points); other rows unchanged, order kept."""
+    out: list[JobRow] = []
+    for r in rows:
+        if r.budget is None or not r.budget.reads:
+            out.append(r)
+            continue
+        out.extend(read_off(r, b, eps_safe_m, penalty_m) for b in r.budget.read_budgets())
+    return out
+
+
+def reads_trace(spec: Any) -> bool:
+    """True when a campaign spec holds a budget read off a trace (its main rows need :func:`read_off_rows`)."""
+    return any(b.reads for blk in spec.blocks for b in blk.budgets)
+
+
+def main_rows(store: Any, spec: Any, *, with_trace: bool = True) -> list[JobRow]:
+    """The main search rows of a campaign as its tables and figures show them: stored rows with their points (the
+    kind of each breach, :func:`breach_kind`), with every run that reads smaller budgets off its trace replaced by
+    its read-off rows (:func:`read_off_rows`)."""
+    reads = reads_trace(spec)
+    rows = store.jobs(kind="search", role="main", with_points=True, with_trace=with_trace or reads)
+    return read_off_rows(rows, spec.eps_safe_m, spec.penalty_m) if reads else rows
