@@ -41,8 +41,6 @@ or two images out of a hundred is a tie, not a verdict either way.
 
 from __future__ import annotations
 
-import dataclasses
-import html
 import logging
 import math
 import sqlite3
@@ -51,7 +49,6 @@ from collections.abc import Callable, Mapping, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from urllib.parse import quote
 
 import numpy as np
 
@@ -63,200 +60,56 @@ from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import JobRow, JobStatus, ResultStore
 from ..constants import Verdict
 from ..search import direct_family
-from ..stats import ALPHA, ClaimVerdict, Rate, claim_verdict, holm, paired
-from .html import esc, fmt_num, page
+from ..stats import Rate
+from .claim_rules import (
+    ABOUT_AS_ACCURATE,
+    CONTRADICTED,
+    CROSS_BY_S,
+    FAILS,
+    HOLDS,
+    NEAR_M,
+    NEAR_ZERO_PCT,
+    NOT_RUN,
+    PARTLY,
+    PHI_TOL_DEG,
+    PLATEAU_CHANGE,
+    PLATEAU_FACTOR,
+    PLATEAU_M,
+    PO_SPREAD,
+    RA_BY_ITER,
+    RA_PCT,
+    TIE,
+    TIME_FACTOR,
+    VERDICTS,
+    Claim,
+    Outcome,
+    at_most,
+    behind,
+    combine,
+    crosses_by,
+    fewer_evals,
+    first_breach_s,
+    judge,
+    largest_jump,
+    phi_near,
+    plateaus_near,
+    ra_below,
+    rate_part,
+    rises_then_plateaus,
+    rough_verdict,
+    survival_parts,
+    times_differ,
+)
+from .claims_page import claims_html, claims_markdown, write_index
+from .html import fmt_num
 from .rows import Context, main_boxes, reference
 
-__all__ = ["CLAIMS", "VERDICTS", "Claim", "at_most", "behind", "claims_html", "claims_markdown", "claims_of", "combine",
-           "crosses_by", "fewer_evals", "first_breach_s", "largest_jump", "phi_near", "plateaus_near", "ra_below",
-           "rate_part", "rises_then_plateaus", "rough_verdict", "survival_parts", "times_differ", "write_claims",
-           "write_index"]
+__all__ = ["CLAIMS", "CONTRADICTED", "FAILS", "HOLDS", "NOT_RUN", "PARTLY", "TIE", "VERDICTS", "Claim", "at_most",
+           "behind", "claims_html", "claims_markdown", "claims_of", "combine", "crosses_by", "fewer_evals",
+           "first_breach_s", "largest_jump", "phi_near", "plateaus_near", "ra_below", "rate_part",
+           "rises_then_plateaus", "rough_verdict", "survival_parts", "times_differ", "write_claims", "write_index"]
 
 logger = logging.getLogger(__name__)
-
-VERDICTS = ("holds", "partly", "tie", "contradicted", "does not hold", "not run yet")
-HOLDS, PARTLY, TIE, CONTRADICTED, FAILS, NOT_RUN = VERDICTS
-#: A part's outcome: a rule's True / False, a test's verdict, or None (not measurable).
-Outcome = bool | ClaimVerdict | None
-ABOUT_AS_ACCURATE = 1.25
-TIME_FACTOR = 2.0
-NEAR_ZERO_PCT = 5.0
-PLATEAU_M, PLATEAU_FACTOR, PLATEAU_CHANGE, CROSS_BY_S = 500.0, 2.0, 0.2, 2.0
-NEAR_M, PHI_TOL_DEG = 2600.0, 5.0
-RA_PCT, RA_BY_ITER, PO_SPREAD = 20.0, 10, 0.25
-
-
-@dataclass(frozen=True)
-class Claim:
-    """One row of the claims table: the paper's statement, our and the dense grid's numbers, the verdict (one of
-    :data:`VERDICTS`), why, and the number of images it is computed on."""
-
-    experiment: str
-    claim: str
-    ours: str
-    truth: str
-    verdict: str
-    reason: str
-    images: int
-
-
-# -- verdict rules: pure functions of numbers (None = not measurable) ------------------------------------------
-def combine(parts: Sequence[Outcome]) -> str:
-    """The verdict of a claim from its parts' outcomes (see the module docstring)."""
-    known = [p for p in parts if p is not None]
-    if not known:
-        return NOT_RUN
-    if any(p is ClaimVerdict.CONTRADICTED for p in known):
-        return CONTRADICTED
-    held = [p is True or p is ClaimVerdict.HOLDS for p in known]
-    if len(known) == len(parts) and all(held):
-        return HOLDS
-    if any(held):
-        return PARTLY
-    return TIE if any(p is ClaimVerdict.TIE for p in known) else FAILS
-
-
-def survival_parts(rows: Sequence[JobRow], eps_safe_m: float, pairs: Sequence[tuple[str, str]],
-                   labels: Sequence[str]) -> list[tuple[list[Outcome], str]]:
-    """The claim "``low`` survives less than ``high`` at every box of ``labels``" for each ``(low, high)`` of
-    ``pairs``, judged with its noise: per box the exact McNemar test of their survival on the images both have a
-    row for, Holm-adjusted over every test of ``pairs`` × ``labels``, and its :class:`ClaimVerdict`. One group per
-    pair: (the boxes' outcomes, ``"georobust < random: ±2° tie (3 vs 1 of 100, p = 1); …"``)."""
-    ok = {(r.method, r.box_label, r.sample_id): mx.survived(r, eps_safe_m) for r in rows}
-    tests = []
-    for low, high in pairs:
-        for lab in labels:
-            ids = [sid for (m, b, sid) in ok if m == low and b == lab and (high, lab, sid) in ok]
-            tests.append((low, high, lab,
-                          paired([ok[(low, lab, i)] for i in ids], [ok[(high, lab, i)] for i in ids]) if ids else None))
-    adjusted = iter(holm([t.p_value for *_, t in tests if t is not None]))
-    groups: dict[tuple[str, str], tuple[list[Outcome], list[str]]] = {}
-    for low, high, lab, t in tests:
-        outcomes, texts = groups.setdefault((low, high), ([], []))
-        if t is None:
-            outcomes.append(None)
-            texts.append(f"{lab} not measured")
-            continue
-        t = dataclasses.replace(t, p_value=next(adjusted))
-        v = claim_verdict(t, a_better=False)
-        outcomes.append(v)
-        texts.append(f"{lab} {v.value} ({t.only_a} vs {t.only_b} of {t.n}, p = {t.p_value:.2g})")
-    return [(out, f"{low} survives less than {high}: " + ", ".join(texts))
-            for (low, high), (out, texts) in groups.items()]
-
-
-def rate_part(k: int, n: int, limit_pct: float) -> tuple[Outcome, str]:
-    """The claim "the rate k/n is at most ``limit_pct`` %" judged with its exact 95 % interval: holds when the
-    interval's top is ≤ the limit, contradicted when its bottom is above it, a tie when it straddles it."""
-    if n == 0:
-        return None, f"≤ {limit_pct:g} %: no images"
-    r = Rate(k, n)
-    ci = r.ci
-    v = (ClaimVerdict.HOLDS if ci.high <= limit_pct else
-         ClaimVerdict.CONTRADICTED if ci.low > limit_pct else ClaimVerdict.TIE)
-    return v, f"{r.text(1)} of {n} ≤ {limit_pct:g} %: {v.value}"
-
-
-def at_most(a: Sequence[float], b: Sequence[float]) -> bool | None:
-    """True when ``a[i] ≤ b[i]`` at every i where both are known (NaN: unknown); None when none is. Claims 1 (``a``
-    = ippe_lm's median, ``b`` = 1.25 × iterative's), 2, 4, 6 and 8 are made of such comparisons."""
-    p = [(x, y) for x, y in zip(a, b, strict=True) if not (math.isnan(x) or math.isnan(y))]
-    return all(x <= y for x, y in p) if p else None
-
-
-def behind(a: Sequence[float], b: Sequence[float]) -> bool | None:
-    """True when survival ``a`` ≥ ``b`` at every known budget and > at some (None when none is known)."""
-    ok = at_most(b, a)
-    return ok and not at_most(a, b)
-
-
-def fewer_evals(a: Sequence[float], b: Sequence[float]) -> tuple[Outcome, str]:
-    """The claim "method A needs fewer evaluations to a breach than B" on pairs ``(a[i], b[i])`` (the same image and
-    box), judged by the Wilcoxon signed-rank test (``scipy.stats.wilcoxon``, two-sided, zero differences dropped):
-    holds / tie / contradicted as :func:`vbl_robust.stats.claim_verdict` at α = 5 %."""
-    from scipy.stats import rankdata, wilcoxon
-
-    d = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
-    d = d[d != 0]
-    if d.size == 0:
-        return (None if len(a) == 0 else ClaimVerdict.TIE), f"evals to a breach: {len(a)} shared pairs, no difference"
-    p = float(wilcoxon(d).pvalue)
-    signed = float(np.sum(np.sign(d) * rankdata(np.abs(d))))  # the direction the test measures
-    v = (ClaimVerdict.TIE if p >= ALPHA else ClaimVerdict.HOLDS if signed < 0 else ClaimVerdict.CONTRADICTED)
-    mean = float(np.mean(np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)))
-    return v, (f"evals to a breach over {len(a)} shared (image, box) pairs: mean difference {fmt_num(mean)}, "
-               f"Wilcoxon signed-rank p = {p:.2g}: {v.value}")
-
-
-def times_differ(medians: Mapping[str, float], factor: float = TIME_FACTOR) -> bool | None:
-    """True when the slowest and fastest methods' median times to a breach (∞: never) differ by ≥ ``factor``×;
-    False when no method breaches; None for fewer than two methods."""
-    if len(medians) < 2:
-        return None
-    finite = [v for v in medians.values() if math.isfinite(v)]
-    if not finite:
-        return False
-    return len(finite) < len(medians) or (max(finite) > 0 and max(finite) >= factor * min(finite))
-
-
-def plateaus_near(values: Sequence[float], level: float = PLATEAU_M) -> bool | None:
-    """True when the last two known values (ascending budgets) lie in [level / f, level · f]
-    (f = :data:`PLATEAU_FACTOR`) and differ by ≤ :data:`PLATEAU_CHANGE` × the larger (None for < 2 values)."""
-    v = [x for x in values if math.isfinite(x)][-2:]
-    if len(v) < 2:
-        return None
-    near = all(level / PLATEAU_FACTOR <= x <= level * PLATEAU_FACTOR for x in v)
-    return near and abs(v[1] - v[0]) <= PLATEAU_CHANGE * max(v)
-
-
-def crosses_by(budgets: Sequence[float], values: Sequence[float], threshold: float,
-               by: float = CROSS_BY_S) -> bool | None:
-    """True when some value at a budget ≤ ``by`` is > ``threshold`` (None when no such budget has a value)."""
-    v = [x for b, x in zip(budgets, values, strict=True) if b <= by and math.isfinite(x)]
-    return any(x > threshold for x in v) if v else None
-
-
-def phi_near(phis: Sequence[float], target: float, tol: float = PHI_TOL_DEG) -> bool | None:
-    """True when every φ_crit is within ``tol`` of ``target`` (∞ never is; None for no quartile)."""
-    return all(abs(p - target) <= tol for p in phis) if phis else None
-
-
-def ra_below(ra: Mapping[int, float], pct: float = RA_PCT, by: int = RA_BY_ITER) -> bool | None:
-    """True when RA(k) (%, per iteration k) is < ``pct`` at some k ≤ ``by``; None when it is not and fewer than
-    ``by`` iterations ran."""
-    early = [v for k, v in ra.items() if k <= by and math.isfinite(v)]
-    if early and min(early) < pct:
-        return True
-    return None if max(ra, default=0) < by else False
-
-
-def rises_then_plateaus(po: Sequence[float]) -> bool | None:
-    """True when |PO_k| (k = 1, 2, …) rises above its first value and, over the second half of the iterations,
-    varies by ≤ :data:`PO_SPREAD` × that rise (max − first); None for fewer than 4 iterations."""
-    if len(po) < 4:
-        return None
-    rise, tail = max(po) - po[0], po[len(po) // 2:]
-    return rise > 0 and max(tail) - min(tail) <= PO_SPREAD * rise
-
-
-def rough_verdict(jumps: Sequence[float], eps_safe_m: float) -> str:
-    """Claim 9: "holds" when at least half the images' largest jumps are > ``eps_safe_m``, "partly" when some
-    are, "does not hold" when none is, "not run yet" without images."""
-    if not jumps:
-        return NOT_RUN
-    share = float(np.mean(np.asarray(jumps) > eps_safe_m))
-    return HOLDS if share >= 0.5 else PARTLY if share > 0 else FAILS
-
-
-def _judge(parts: Sequence[tuple[Outcome, str]], groups: Sequence[tuple[list[Outcome], str]] = ()) -> tuple[str, str]:
-    """(verdict, reason) of a claim's parts ``(outcome, what was compared)`` and tested groups (:func:`survival_parts`:
-    several outcomes, one text each)."""
-    mark = {True: "yes", False: "no", None: "not measured"}
-    outcomes = [ok for ok, _ in parts] + [o for out, _ in groups for o in out]
-    held = sum(o is True or o is ClaimVerdict.HOLDS for o in outcomes)
-    texts = [t if isinstance(ok, ClaimVerdict) else f"{t} — {mark[ok]}" for ok, t in parts]
-    texts += [f"{t} — {combine(out)}" for out, t in groups]
-    return combine(outcomes), f"{held} of {len(outcomes)} parts hold: " + "; ".join(texts) + "."
 
 
 # -- reading the stores ------------------------------------------------------------------------------------
@@ -332,24 +185,6 @@ def _last_ci(rows: Sequence[JobRow], eps: float, label: str) -> dict[str, str]:
     return out
 
 
-def first_breach_s(row: JobRow, eps_safe_m: float, penalty_m: float) -> float:
-    """Seconds on the search's clock to the row's first evaluation above ``eps_safe_m`` (non-finite values count
-    as ``penalty_m``); ∞ when none; NaN without stamped times (``row`` needs its points)."""
-    p = row.points
-    if p is None or p.times is None:
-        return math.nan
-    hit = np.flatnonzero(np.where(np.isfinite(p.fs), p.fs, penalty_m) > eps_safe_m)
-    return float(p.times[hit[0]]) if hit.size else math.inf
-
-
-def largest_jump(xs: np.ndarray, fs: np.ndarray, penalty_m: float) -> tuple[float, float]:
-    """(largest |ΔL| between neighbouring points of a 1-D grid (m), the slope it implies (m per unit of x))."""
-    order = np.argsort(xs[:, 0])
-    x, f = xs[order, 0], np.where(np.isfinite(fs), fs, penalty_m)[order]
-    d, dx = np.abs(np.diff(f)), np.diff(x)
-    i = int(np.argmax(d))
-    return float(d[i]), float(d[i] / dx[i]) if dx[i] > 0 else math.inf
-
 
 # -- one function per claim, each returning a Row ------------------------------------------------------------
 #: What a claim's function returns: (ours, truth, verdict, reason, images it is computed on).
@@ -368,7 +203,7 @@ def _pnp(e: _Exp) -> Row:
         parts.append((at_most([a], [ABOUT_AS_ACCURATE * b]), f"{src}: {fmt_num(a)} % ≤ {ABOUT_AS_ACCURATE:g} × "
                                                             f"{fmt_num(b)} %"))
     n = max((s["n"] for s in summary), default=0)
-    return ("; ".join(ours), "", *_judge(parts), n)
+    return ("; ".join(ours), "", *judge(parts), n)
 
 
 def _spatial_1d(e: _Exp) -> Row:
@@ -384,7 +219,7 @@ def _spatial_1d(e: _Exp) -> Row:
     groups = survival_parts(rows, e.eps, (("georobust", "random"), ("georobust", "apgd"), ("random", "apgd")),
                             labels)
     cis = _last_ci(rows, e.eps, labels[-1]) if labels else {}
-    return (_text(s, labels, *PAPER_METHODS, cis=cis), truth, *_judge([], groups), len(e.ids))
+    return (_text(s, labels, *PAPER_METHODS, cis=cis), truth, *judge([], groups), len(e.ids))
 
 
 def _runtime_1d(e: _Exp) -> Row:
@@ -406,7 +241,7 @@ def _runtime_1d(e: _Exp) -> Row:
     fin = [v for v in medians.values() if math.isfinite(v)]
     spread = f"slowest/fastest = {fmt_num(max(medians.values()) / min(fin))}" if fin and min(fin) > 0 else "no breach"
     return ("median time to first breach: " + "; ".join(ours), truth,
-            *_judge([(ok, f"{spread} (≥ {TIME_FACTOR:g} needed)")]), len(e.ids))
+            *judge([(ok, f"{spread} (≥ {TIME_FACTOR:g} needed)")]), len(e.ids))
 
 
 def truth_2d(e: _Exp) -> str:
@@ -435,7 +270,7 @@ def _spatial_2d(e: _Exp) -> Row:
     ok, text = rate_part(alive, len(geo), NEAR_ZERO_PCT)
     cis = _last_ci(rows, e.eps, labels[-1]) if labels else {}
     return (_text(s, labels, *PAPER_METHODS, cis=cis), truth_2d(e),
-            *_judge([(ok, f"georobust at the largest box {text}")],
+            *judge([(ok, f"georobust at the largest box {text}")],
                     survival_parts(rows, e.eps, (("random", "apgd"),), labels)), len(e.ids))
 
 
@@ -450,7 +285,7 @@ def _runtime_2d(e: _Exp) -> Row:
     last = [fmt_num(w) for _, w in apgd if math.isfinite(w)][-2:]
     early = [fmt_num(w) for t, w in geo if t <= CROSS_BY_S and math.isfinite(w)]
     return ("median worst error: " + ours, truth_2d(e),
-            *_judge([(plateaus_near([w for _, w in apgd]), f"apgd's last two medians ({', '.join(last) or '–'} m) "
+            *judge([(plateaus_near([w for _, w in apgd]), f"apgd's last two medians ({', '.join(last) or '–'} m) "
                       f"within ×{PLATEAU_FACTOR:g} of {PLATEAU_M:g} m, changing ≤ {100 * PLATEAU_CHANGE:g} %"),
                      (crosses_by([t for t, _ in geo], [w for _, w in geo], e.eps),
                       f"georobust's medians at budgets ≤ {CROSS_BY_S:g} s ({', '.join(early) or '–'} m) exceed "
@@ -481,7 +316,7 @@ def _distance(e: _Exp) -> Row:
     apgd = [p["phi_crit"] for p in of("apgd")]
     return ("φ_crit: " + "; ".join(text(m) for m in ("georobust", "apgd") if of(m)),
             text(mx.REFERENCE_METHOD) if of(mx.REFERENCE_METHOD) else "",
-            *_judge([(phi_near(near, 15.0), f"georobust within {PHI_TOL_DEG:g}° of 15° below {NEAR_M:g} m "
+            *judge([(phi_near(near, 15.0), f"georobust within {PHI_TOL_DEG:g}° of 15° below {NEAR_M:g} m "
                       f"({', '.join(_phi(v, limit) for v in near) or 'no quartile'})"),
                      (phi_near(far, 30.0), f"within {PHI_TOL_DEG:g}° of 30° beyond "
                       f"({', '.join(_phi(v, limit) for v in far) or 'no quartile'})"),
@@ -501,7 +336,7 @@ def _convergence(e: _Exp) -> Row:
     pos = (f"mean |PO_k| {fmt_num(po[0])} → max {fmt_num(max(po))}, {fmt_num(min(tail))}–{fmt_num(max(tail))} over "
            f"k = {len(po) - len(tail) + 1}…{len(po)}" if po else "no |PO_k|")
     return (f"{low}; {pos}", "",
-            *_judge([(ra_below(ra), f"{low} < {RA_PCT:g} % ({len(ra)} iterations ran)"),
+            *judge([(ra_below(ra), f"{low} < {RA_PCT:g} % ({len(ra)} iterations ran)"),
                      (rises_then_plateaus(po), f"{pos}: rises, then varies ≤ {100 * PO_SPREAD:g} % of the rise")]),
             len(e.ids))
 
@@ -529,7 +364,7 @@ def _av(s1: _Exp | None, s2: _Exp | None) -> Row:
     g, a = (float(np.mean([p[i] for p in both])) if both else math.nan for i in (0, 1))
     ours.append(f"mean evals to a breach: georobust {fmt_num(g)}, georobust-av {fmt_num(a)} ({len(both)} shared)")
     parts.append(fewer_evals([p[1] for p in both], [p[0] for p in both]))
-    return ("; ".join(ours), "", *_judge(parts, groups), len(ids))
+    return ("; ".join(ours), "", *judge(parts, groups), len(ids))
 
 
 def _rough(e: _Exp) -> Row:
@@ -601,86 +436,6 @@ def claims_of(root: str | Path) -> list[Claim]:
     with ExitStack() as stack:
         exps = {name: _open(root, name, stack) for name in PAPER}
         return [_row(names, text, fn, exps) for names, text, fn in CLAIMS]
-
-
-_COLUMNS = ("experiment", "claim", "ours", "truth", "verdict", "reason", "images")
-_HEADERS = ("experiment", "the paper's claim", "ours", "dense grid (truth)", "verdict", "why", "images")
-
-
-#: How the table was generated (the line under it); ``{}``: the root of the stores.
-GENERATED = ("Generated by `vbl_robust.report.claims.write_claims` from the results stores under {} (rules in that "
-             "module's docstring); rerun it after a run, never edit by hand.")
-
-
-def claims_markdown(claims: Sequence[Claim], source: str = "ROOT") -> str:
-    """A Markdown table, one row per claim, then the line saying how it was generated (``source``: the root)."""
-    def cell(v: object) -> str:
-        return str(v).replace("|", "\\|").replace("\n", " ") or " "
-
-    lines = ["| " + " | ".join(_HEADERS) + " |", "|" + "---|" * len(_HEADERS)]
-    lines += ["| " + " | ".join(cell(getattr(c, k)) for k in _COLUMNS) + " |" for c in claims]
-    return "\n".join([*lines, "", GENERATED.format(f"`{source}`"), ""])
-
-
-def _badge(verdict: str) -> str:
-    return f'<span class="verdict verdict-{verdict.replace(" ", "-")}">{html.escape(verdict)}</span>'
-
-
-def claims_html(claims: Sequence[Claim], source: str = "ROOT") -> str:
-    """An HTML ``<section>`` with the claims table (every text escaped) and how it was generated: per claim its
-    experiments, the claim, the verdict and the images; our numbers, the dense grid's and why, folded under the
-    claim (prose reads left-aligned and wraps)."""
-    head = "".join(f'<th class="l">{html.escape(h)}</th>' for h in ("experiment", "the paper's claim", "verdict",
-                                                                    "images"))
-    body = []
-    for c in claims:
-        parts = [("ours", c.ours), ("dense grid (truth)", c.truth), ("why", c.reason)]
-        dl = "".join(f"<dt>{html.escape(k)}</dt><dd>{html.escape(str(v))}</dd>" for k, v in parts if v)
-        body.append(f'<tr><td class="l">{html.escape(c.experiment)}</td><td class="l">{html.escape(c.claim)}'
-                    f"<details><summary>numbers and why</summary><dl>{dl}</dl></details></td>"
-                    f'<td class="l">{_badge(c.verdict)}</td><td>{c.images}</td></tr>')
-    return (f'<section class="claims"><h2>The paper\'s claims, checked</h2><table><thead><tr>{head}</tr></thead>'
-            f"<tbody>{''.join(body)}</tbody></table><p>{html.escape(GENERATED.format(source))}</p></section>")
-
-
-def _card(out: Path, name: str, note: str, claims: Sequence[Claim]) -> str:
-    """One experiment's card on the index: its title and link, jobs done, headline figure, the verdicts of the
-    claims on it."""
-    from ..campaigns.experiments import EXPERIMENTS
-    from .build import HEADLINE_FILE
-
-    href = quote(name)  # quoted: a folder named "javascript:…" stays a relative path
-    exp = EXPERIMENTS.get(name.removesuffix("-truth"))
-    title = exp.title if exp else ""
-    if name.endswith("-truth") and exp:
-        title = f"dense-grid truth behind {name.removesuffix('-truth')}'s survivors"
-    has_report = (out / name / "report.html").exists()
-    head = (f'<a href="{esc(href)}/report.html">{esc(name)}</a>' if has_report
-            else f"{esc(name)} <small>(no report yet: rerun to resume)</small>")
-    parts = [f"<h2>{head}</h2>"]
-    if title:
-        parts.append(f'<p class="claim">{esc(title)}</p>')
-    if note:
-        parts.append(f'<p class="claim">{esc(note)}</p>')
-    if (out / name / HEADLINE_FILE).exists():
-        img = f'<img src="{esc(href)}/{HEADLINE_FILE}" alt="{esc(name)}: headline figure" loading="lazy">'
-        parts.append(f'<a href="{esc(href)}/report.html">{img}</a>' if has_report else img)
-    mine = [c for c in claims if name in c.experiment.split(" + ")]
-    parts += [f'<p class="claim">{_badge(c.verdict)} {esc(c.claim)}</p>' for c in mine]
-    return f'<div class="card">{"".join(parts)}</div>'
-
-
-def write_index(out: str | Path, names: Sequence[str], extra: str = "",
-                notes: Mapping[str, str] | None = None, claims: Sequence[Claim] = ()) -> Path:
-    """``out/index.html``, the page of a set of experiment runs (``reproduce paper|all``) or of their bundle: one
-    card per experiment — a link to its report (when it exists), ``notes[name]`` (e.g. its jobs done), its
-    headline figure (``<experiment>/headline.png``, :func:`vbl_robust.report.build.build_report`) and the verdict
-    of each of ``claims`` on it — then ``extra`` HTML (the claims section, :func:`claims_html`); returns its path."""
-    out, notes = Path(out), notes or {}
-    title = "vbl-robust: the paper's experiments"
-    cards = "".join(_card(out, n, notes.get(n, ""), claims) for n in names)
-    atomic_write(out / "index.html", page(title, f'<h1>{esc(title)}</h1><div class="cards">{cards}</div>{extra}'))
-    return out / "index.html"
 
 
 def write_claims(root: str | Path, out: str | Path | None = None) -> Path:
