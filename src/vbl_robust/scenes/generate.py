@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -36,6 +37,29 @@ def render_sample(approach: Approach, airport: Airport, K: np.ndarray, width: in
     world, offset = _world_of(airport)
     look = sample_look(rng, world, offset, airport.azimuth_deg)
     return render_scene(approach.R, approach.position, K, width, height, _layout(airport), look, rng)
+
+
+def _sample_meta(app: Approach, airport: Airport, envelope: str, fov_deg: float, render_seed: int) -> dict[str, Any]:
+    """The ``meta`` of a synthetic sample (keys of :func:`generate`'s Returns, in that order)."""
+    return {
+        "envelope": envelope,
+        "airport": airport.icao,
+        "runway": airport.runway,
+        "runway_azimuth_deg": airport.azimuth_deg,
+        "runway_length_m": airport.length_m,
+        "runway_width_m": airport.width_m,
+        "yaw": app.yaw_deg,
+        "pitch": app.pitch_deg,
+        "roll": app.roll_deg,
+        "distance_m": app.distance_m,
+        "lateral_angle_deg": app.lateral_angle_deg,
+        "vertical_angle_deg": app.vertical_angle_deg,
+        "ltp_lat": airport.ltp_lat,
+        "ltp_lon": airport.ltp_lon,
+        "ltp_alt": airport.ltp_alt,
+        "fov_deg": float(fov_deg),
+        "render_seed": render_seed,
+    }
 
 
 def generate(
@@ -96,36 +120,10 @@ def generate(
                               require_visible=require_visible, K=K, width=width, height=height,
                               margin_px=margin_px)
         render_seed = int(rng.integers(0, 2**63))
-        corners_3d = app.corners_3d
-        meta = {
-            "envelope": env.name,
-            "airport": airport.icao,
-            "runway": airport.runway,
-            "runway_azimuth_deg": airport.azimuth_deg,
-            "runway_length_m": airport.length_m,
-            "runway_width_m": airport.width_m,
-            "yaw": app.yaw_deg,
-            "pitch": app.pitch_deg,
-            "roll": app.roll_deg,
-            "distance_m": app.distance_m,
-            "lateral_angle_deg": app.lateral_angle_deg,
-            "vertical_angle_deg": app.vertical_angle_deg,
-            "ltp_lat": airport.ltp_lat,
-            "ltp_lon": airport.ltp_lon,
-            "ltp_alt": airport.ltp_alt,
-            "fov_deg": float(fov_deg),
-            "render_seed": render_seed,
-        }
         s = Sample(
-            id=f"synth_s{seed}_{i:06d}",
-            K=K,
-            corners_3d=corners_3d,
-            corners_2d=project(corners_3d, app.R, app.position, K),
-            position=app.position,
-            width=width,
-            height=height,
-            R=app.R,
-            meta=meta,
+            id=f"synth_s{seed}_{i:06d}", K=K, corners_3d=app.corners_3d,
+            corners_2d=project(app.corners_3d, app.R, app.position, K), position=app.position, width=width,
+            height=height, R=app.R, meta=_sample_meta(app, airport, env.name, fov_deg, render_seed),
             _loader=functools.partial(render_sample, app, airport, K, width, height, render_seed, debug),
         )
         if eager:

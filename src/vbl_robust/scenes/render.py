@@ -235,6 +235,40 @@ def _warp_smooth(src: np.ndarray, M: np.ndarray, size: tuple[int, int], mode: in
     return up[q:q + size[1], q:q + size[0]]
 
 
+def _shade_chunk(world: np.ndarray, rgba: np.ndarray | None, hz: np.ndarray, detail: tuple, Md: np.ndarray,
+                 box: tuple, HT: np.ndarray, size: tuple[int, int], amp_w: float, amp_t: float, noise_lut: np.ndarray,
+                 gain: list) -> np.ndarray:
+    """One chunk's colour (float32 RGBA) of :func:`_render_ground`: the warped ``world`` raster under the airport
+    tile ``rgba`` (None where the chunk does not see the airport), with detail noise (``detail`` = a level of
+    :func:`.textures.detail_tiles`), the ground gain and the chunk's haze ``hz``."""
+    # per-pixel weights (one channel): f = transmittance × detail, a1 = f × (1 − airport coverage)
+    f = hz[..., 3].copy()
+    if amp_w > 0:
+        Mp, mode = _placement(detail[0], Md, box, period=detail[1])
+        d8 = _warp(detail[0], HT @ Mp, size, mode, 128)
+        if rgba is not None:  # 1 + noise·(amp_w + (amp_t − amp_w)·coverage)
+            det = cv2.LUT(d8, noise_lut)
+            amp = rgba[..., 3] * np.float32(amp_t - amp_w)
+            amp += np.float32(amp_w)
+            det *= amp
+            det += 1.0
+        else:
+            det = cv2.LUT(d8, 1.0 + np.float32(amp_w) * noise_lut)
+        det *= f
+        f = det
+    if rgba is not None:
+        a1 = 1.0 - rgba[..., 3]
+        a1 *= f
+    else:
+        a1 = f
+    # (OpenCV multiplies and adds 4-channel images by 1-channel maps much faster than numpy broadcasts)
+    col = cv2.multiply(world, cv2.merge([a1 * gain[0], a1 * gain[1], a1 * gain[2], a1]), dtype=cv2.CV_32F)
+    if rgba is not None:
+        cv2.add(col, cv2.multiply(rgba, cv2.cvtColor(f, cv2.COLOR_GRAY2RGBA), dst=rgba), dst=col)
+    cv2.add(col, hz, dst=col)  # (adds w to the unused A)
+    return col
+
+
 def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max: float, out: np.ndarray,
                    haze: np.ndarray | None) -> None:
     """Draw the ground cells within ``r_max`` into ``out`` (height, width, 4) uint8 (RGB, A unused), band by band.
@@ -293,32 +327,8 @@ def _render_ground(H: np.ndarray, layout: np.ndarray, look: Look, g: Grid, r_max
             else:
                 Mp, mode = _placement(pyr[m], Mw, box)
                 world = _warp_smooth(pyr[m], HT @ Mp, size, mode, border, q)
-                # per-pixel weights (one channel): f = transmittance × detail, a1 = f × (1 − airport coverage)
-                hz = haze[v0:v1, u0:u1]
-                f = hz[..., 3].copy()
-                if amp_w > 0:
-                    Mp, mode = _placement(dpyr[dl][0], Md, box, period=dpyr[dl][1])
-                    d8 = _warp(dpyr[dl][0], HT @ Mp, size, mode, 128)
-                    if tile is not None:  # 1 + noise·(amp_w + (amp_t − amp_w)·coverage)
-                        det = cv2.LUT(d8, noise_lut)
-                        amp = rgba[..., 3] * np.float32(amp_t - amp_w)
-                        amp += np.float32(amp_w)
-                        det *= amp
-                        det += 1.0
-                    else:
-                        det = cv2.LUT(d8, 1.0 + np.float32(amp_w) * noise_lut)
-                    det *= f
-                    f = det
-                if tile is not None:
-                    a1 = 1.0 - rgba[..., 3]
-                    a1 *= f
-                else:
-                    a1 = f
-                # (OpenCV multiplies and adds 4-channel images by 1-channel maps much faster than numpy broadcasts)
-                col = cv2.multiply(world, cv2.merge([a1 * gain[0], a1 * gain[1], a1 * gain[2], a1]), dtype=cv2.CV_32F)
-                if tile is not None:
-                    cv2.add(col, cv2.multiply(rgba, cv2.cvtColor(f, cv2.COLOR_GRAY2RGBA), dst=rgba), dst=col)
-                cv2.add(col, hz, dst=col)  # (adds w to the unused A)
+                col = _shade_chunk(world, rgba if tile is not None else None, haze[v0:v1, u0:u1], dpyr[dl], Md, box,
+                                   HT, size, amp_w, amp_t, noise_lut, gain)
             col8 = cv2.convertScaleAbs(col, alpha=255.0)  # rounds and saturates to uint8 (values are >= 0)
             if cells.all():
                 out[v0:v1, u0:u1] = col8

@@ -42,7 +42,7 @@ from vbl_robust.geometry.geodesy import runway_db_entry
 from .airports import MAX_POOL, REFERENCE_LAT_LON_ALT, RUNWAY_LENGTH_RANGE_M, Airport, make_airport
 from .envelopes import ENVELOPES, Approach, approach_from_angles, corners_visible
 from .export import _streamed
-from .generate import _layout, _world_of, render_sample
+from .generate import _layout, _sample_meta, _world_of, render_sample
 from .render import render_scene, sample_look
 
 __all__ = ["SEQUENCE_STREAM", "envelope_of", "generate_sequences", "write_sequences"]
@@ -91,6 +91,75 @@ def _check_positive(name: str, value, *, integer: bool = False, zero: bool = Fal
     if not ok:
         kind = "an integer" if integer else "a finite number"
         raise ValueError(f"{name}: need {kind} {'>= 0' if zero else '> 0'}, got {value!r}")
+
+
+def _check_arguments(n, frames, rate_hz, seed, width, height, ground_speed_mps, distance_range_m, glide_deg,
+                     glide_jitter_deg, lateral_deg, crab_deg, pitch_range_deg,
+                     attitude_noise_deg) -> tuple[float, float, float]:
+    """Check :func:`generate_sequences`' arguments (``ValueError`` naming the bad one); the distance range's
+    ``(low, high)`` and the metres one sequence flies."""
+    for name, value, integer, zero in (("n", n, True, True), ("frames", frames, True, False),
+                                       ("rate_hz", rate_hz, False, False), ("seed", seed, True, True),
+                                       ("ground_speed_mps", ground_speed_mps, False, False),
+                                       ("glide_jitter_deg", glide_jitter_deg, False, True),
+                                       ("lateral_deg", lateral_deg, False, True), ("crab_deg", crab_deg, False, True),
+                                       ("attitude_noise_deg", attitude_noise_deg, False, True)):
+        _check_positive(name, value, integer=integer, zero=zero)
+    if int(n) > MAX_POOL:
+        raise ValueError(f"n: at most {MAX_POOL} sequences (one synthetic airport each), got {n}")
+    if int(width) != width or int(height) != height or width < 16 or height < 16:
+        raise ValueError(f"width/height: need integers >= 16, got {width} x {height}")
+    if not (0.5 <= glide_deg - glide_jitter_deg and glide_deg + glide_jitter_deg <= 15.0):
+        raise ValueError(f"glide_deg: need 0.5 <= glide_deg ± glide_jitter_deg <= 15 degrees, got {glide_deg} ± "
+                         f"{glide_jitter_deg}")
+    lo, hi = (float(v) for v in distance_range_m)
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
+        raise ValueError(f"distance_range_m: need 0 < low <= high metres, got {distance_range_m!r}")
+    if not pitch_range_deg[0] <= pitch_range_deg[1]:
+        raise ValueError(f"pitch_range_deg: need low <= high, got {pitch_range_deg!r}")
+    frames = int(frames)
+    span = ground_speed_mps * (frames - 1) / rate_hz
+    if span > hi - lo:
+        raise ValueError(f"frames/rate_hz: {frames} frames at {rate_hz:g} Hz fly {span:.0f} m at {ground_speed_mps:g} "
+                         f"m/s, more than distance_range_m {lo:g}-{hi:g} m allows; use fewer frames or a higher rate")
+    return lo, hi, span
+
+
+def _draw_trajectory(rng: np.random.Generator, i: int, airport: Airport, K: np.ndarray, t: np.ndarray, width: int,
+                     height: int, lo: float, hi: float, span: float, *, fov_deg: float, ground_speed_mps: float,
+                     glide_deg: float, glide_jitter_deg: float, lateral_deg: float, crab_deg: float,
+                     pitch_range_deg: tuple[float, float], attitude_noise_deg: float, require_visible: bool,
+                     margin_px: float) -> tuple[list[Approach], float, float, int]:
+    """Sequence ``i``'s approaches, one per frame time ``t``, drawn from ``rng`` until the runway stays in view
+    (``require_visible``); with its glide-path angle, lateral path angle and the number of draws."""
+    frames = len(t)
+    for tries in range(1, MAX_SEQUENCE_TRIES + 1):
+        d_end = float(rng.uniform(lo, hi - span))
+        gamma = glide_deg + float(rng.uniform(-glide_jitter_deg, glide_jitter_deg))
+        lateral = float(rng.uniform(-lateral_deg, lateral_deg))
+        yaw = float(rng.uniform(-crab_deg, crab_deg)) + _smooth_noise(rng, attitude_noise_deg, t)
+        pitch = float(rng.uniform(*pitch_range_deg)) + _smooth_noise(rng, attitude_noise_deg, t)
+        roll = _smooth_noise(rng, attitude_noise_deg, t)
+        distance = d_end + ground_speed_mps * (t[-1] - t)
+        apps = [approach_from_angles(envelope_of(float(distance[f])), float(distance[f]), lateral, -gamma,
+                                     float(yaw[f]), float(pitch[f]), float(roll[f]), airport.length_m,
+                                     airport.width_m, airport.azimuth_deg, tries=tries) for f in range(frames)]
+        if not require_visible or all(corners_visible(a, K, width, height, margin_px) for a in apps):
+            return apps, gamma, lateral, tries
+    raise RuntimeError(f"generate_sequences: sequence {i}: no trajectory keeps the whole runway of "
+                       f"{airport.icao} in a {width}x{height} image (fov {fov_deg:g}°, margin {margin_px} px) "
+                       f"after {MAX_SEQUENCE_TRIES} tries; use a wider field of view or a smaller margin")
+
+
+def _frame_sample(seq_id: str, f: int, app: Approach, airport: Airport, K: np.ndarray, width: int, height: int,
+                  fov_deg: float, look_seed: int, digits: int, debug: bool, extra: dict) -> Sample:
+    """Frame ``f`` of sequence ``seq_id`` as a lazily rendered sample; ``extra``: the sequence's meta keys."""
+    return Sample(
+        id=f"{seq_id}_{f:0{digits}d}", K=K, corners_3d=app.corners_3d,
+        corners_2d=project(app.corners_3d, app.R, app.position, K), position=app.position, width=width,
+        height=height, R=app.R, meta={**_sample_meta(app, airport, app.envelope, fov_deg, look_seed), **extra},
+        _loader=functools.partial(_render_frame, app, airport, K, width, height, look_seed, f, debug),
+    )
 
 
 def generate_sequences(
@@ -142,30 +211,10 @@ def generate_sequences(
         ValueError: a bad argument (named), or a sequence longer than ``distance_range_m`` at that speed.
         RuntimeError: no trajectory keeps the runway in view (narrow camera, large margin).
     """
-    for name, value, integer, zero in (("n", n, True, True), ("frames", frames, True, False),
-                                       ("rate_hz", rate_hz, False, False), ("seed", seed, True, True),
-                                       ("ground_speed_mps", ground_speed_mps, False, False),
-                                       ("glide_jitter_deg", glide_jitter_deg, False, True),
-                                       ("lateral_deg", lateral_deg, False, True), ("crab_deg", crab_deg, False, True),
-                                       ("attitude_noise_deg", attitude_noise_deg, False, True)):
-        _check_positive(name, value, integer=integer, zero=zero)
-    if int(n) > MAX_POOL:
-        raise ValueError(f"n: at most {MAX_POOL} sequences (one synthetic airport each), got {n}")
-    if int(width) != width or int(height) != height or width < 16 or height < 16:
-        raise ValueError(f"width/height: need integers >= 16, got {width} x {height}")
-    if not (0.5 <= glide_deg - glide_jitter_deg and glide_deg + glide_jitter_deg <= 15.0):
-        raise ValueError(f"glide_deg: need 0.5 <= glide_deg ± glide_jitter_deg <= 15 degrees, got {glide_deg} ± "
-                         f"{glide_jitter_deg}")
-    lo, hi = (float(v) for v in distance_range_m)
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
-        raise ValueError(f"distance_range_m: need 0 < low <= high metres, got {distance_range_m!r}")
-    if not pitch_range_deg[0] <= pitch_range_deg[1]:
-        raise ValueError(f"pitch_range_deg: need low <= high, got {pitch_range_deg!r}")
+    lo, hi, span = _check_arguments(n, frames, rate_hz, seed, width, height, ground_speed_mps, distance_range_m,
+                                    glide_deg, glide_jitter_deg, lateral_deg, crab_deg, pitch_range_deg,
+                                    attitude_noise_deg)
     width, height, frames = int(width), int(height), int(frames)
-    span = ground_speed_mps * (frames - 1) / rate_hz
-    if span > hi - lo:
-        raise ValueError(f"frames/rate_hz: {frames} frames at {rate_hz:g} Hz fly {span:.0f} m at {ground_speed_mps:g} "
-                         f"m/s, more than distance_range_m {lo:g}-{hi:g} m allows; use fewer frames or a higher rate")
     K = intrinsics(width, height, fov_deg)
     t = np.arange(frames) / float(rate_hz)
     digits = max(4, len(str(frames - 1)))
@@ -173,43 +222,17 @@ def generate_sequences(
     for i in range(int(n)):
         airport = make_airport(i, seed, length_range_m=tuple(runway_length_range_m))
         rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(SEQUENCE_STREAM, i)))
-        for tries in range(1, MAX_SEQUENCE_TRIES + 1):
-            d_end = float(rng.uniform(lo, hi - span))
-            gamma = glide_deg + float(rng.uniform(-glide_jitter_deg, glide_jitter_deg))
-            lateral = float(rng.uniform(-lateral_deg, lateral_deg))
-            yaw = float(rng.uniform(-crab_deg, crab_deg)) + _smooth_noise(rng, attitude_noise_deg, t)
-            pitch = float(rng.uniform(*pitch_range_deg)) + _smooth_noise(rng, attitude_noise_deg, t)
-            roll = _smooth_noise(rng, attitude_noise_deg, t)
-            distance = d_end + ground_speed_mps * (t[-1] - t)
-            apps = [approach_from_angles(envelope_of(float(distance[f])), float(distance[f]), lateral, -gamma,
-                                         float(yaw[f]), float(pitch[f]), float(roll[f]), airport.length_m,
-                                         airport.width_m, airport.azimuth_deg, tries=tries) for f in range(frames)]
-            if not require_visible or all(corners_visible(a, K, width, height, margin_px) for a in apps):
-                break
-        else:
-            raise RuntimeError(f"generate_sequences: sequence {i}: no trajectory keeps the whole runway of "
-                               f"{airport.icao} in a {width}x{height} image (fov {fov_deg:g}°, margin {margin_px} px) "
-                               f"after {MAX_SEQUENCE_TRIES} tries; use a wider field of view or a smaller margin")
+        apps, gamma, lateral, tries = _draw_trajectory(
+            rng, i, airport, K, t, width, height, lo, hi, span, fov_deg=fov_deg, ground_speed_mps=ground_speed_mps,
+            glide_deg=glide_deg, glide_jitter_deg=glide_jitter_deg, lateral_deg=lateral_deg, crab_deg=crab_deg,
+            pitch_range_deg=pitch_range_deg, attitude_noise_deg=attitude_noise_deg, require_visible=require_visible,
+            margin_px=margin_px)
         look_seed = int(rng.integers(0, 2**63))
         seq_id = f"synth_q{seed}_{i:04d}"
-        samples = []
-        for f, app in enumerate(apps):
-            meta = {
-                "envelope": app.envelope, "airport": airport.icao, "runway": airport.runway,
-                "runway_azimuth_deg": airport.azimuth_deg, "runway_length_m": airport.length_m,
-                "runway_width_m": airport.width_m, "yaw": app.yaw_deg, "pitch": app.pitch_deg, "roll": app.roll_deg,
-                "distance_m": app.distance_m, "lateral_angle_deg": app.lateral_angle_deg,
-                "vertical_angle_deg": app.vertical_angle_deg, "ltp_lat": airport.ltp_lat, "ltp_lon": airport.ltp_lon,
-                "ltp_alt": airport.ltp_alt, "fov_deg": float(fov_deg), "render_seed": look_seed,
-                "sequence_id": seq_id, "frame_index": f, "time_s": float(t[f]), "glide_path_deg": gamma,
-                "ground_speed_mps": float(ground_speed_mps),
-            }
-            samples.append(Sample(
-                id=f"{seq_id}_{f:0{digits}d}", K=K, corners_3d=app.corners_3d,
-                corners_2d=project(app.corners_3d, app.R, app.position, K), position=app.position, width=width,
-                height=height, R=app.R, meta=meta,
-                _loader=functools.partial(_render_frame, app, airport, K, width, height, look_seed, f, debug),
-            ))
+        samples = [_frame_sample(seq_id, f, app, airport, K, width, height, fov_deg, look_seed, digits, debug, {
+            "sequence_id": seq_id, "frame_index": f, "time_s": float(t[f]), "glide_path_deg": gamma,
+            "ground_speed_mps": float(ground_speed_mps)})
+            for f, app in enumerate(apps)]
         out.append(ApproachSequence(seq_id, samples, t.copy(), np.arange(frames), meta={
             "airport": airport.icao, "runway": airport.runway, "glide_path_deg": gamma,
             "lateral_angle_deg": lateral, "ground_speed_mps": float(ground_speed_mps), "rate_hz": float(rate_hz),
