@@ -1,0 +1,73 @@
+"""The conventions every report figure shares (:mod:`.figures`): one colour and marker per method
+(:data:`STYLE`), the plotting order of methods, axis labels, the ε line, plain numbers on log axes, a new figure
+and exact-interval error bars."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.ticker import FuncFormatter  # noqa: E402
+
+from ..campaigns.metrics import ANY_METHOD, Summary  # noqa: E402
+from ..campaigns.metrics import REFERENCE_METHOD as REFERENCE  # noqa: E402
+
+STYLE: dict[str, dict[str, Any]] = {
+    "georobust": {"color": "#1f77b4", "marker": "o"},
+    "georobust-a": {"color": "#17becf", "marker": "P"},
+    "georobust-av": {"color": "#ff7f0e", "marker": "X"},
+    "random": {"color": "#2ca02c", "marker": "s"},
+    "apgd": {"color": "#d62728", "marker": "^"},
+    "sobol": {"color": "#9467bd", "marker": "D"},
+    "direct": {"color": "#8c564b", "marker": "v"},
+    "direct-l": {"color": "#e377c2", "marker": "<"},
+    "grid": {"color": "black", "marker": "."},
+    REFERENCE: {"color": "black", "marker": "", "label": "grid (true worst case)", "linestyle": "--"},
+    ANY_METHOD: {"color": "#7f7f7f", "marker": "", "label": "any method (grid included)", "linestyle": ":"},
+}
+AXIS_LABELS = {"roll_deg": "roll φ (°)", "contrast": "contrast factor α"}
+EPS_STYLE = {"color": "#d62728", "linestyle": ":", "linewidth": 1.2}
+
+
+def style(method: str) -> dict[str, Any]:
+    """Plot style of a method (a grey default for unknown names); its label is the optimizer class's."""
+    from ..search import METHODS
+
+    s = STYLE.get(method, {"color": "grey", "marker": "x"})
+    label = s.get("label") or (METHODS[method].label if method in METHODS else method)
+    return {"linestyle": "-", **s, "label": label}
+
+
+def method_order(methods: Iterable[str]) -> list[str]:
+    """The distinct ``methods`` in plotting order (the order of :data:`STYLE`, the reference and the combined
+    series last)."""
+    ms = list(dict.fromkeys(methods))
+    return sorted(ms, key=lambda m: (m in (REFERENCE, ANY_METHOD), list(STYLE).index(m) if m in STYLE else 99, m))
+
+
+PLAIN = FuncFormatter(lambda v, _: f"{v:g}")
+
+
+def plain_log_axis(axis: Any) -> None:
+    """Plain numbers (1000, 1500) instead of 1.5×10³ on a log axis."""
+    axis.set_major_formatter(PLAIN)
+    axis.set_minor_formatter(PLAIN)
+
+
+def new_fig(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (6.4, 4.0), **kw: Any) -> tuple[Figure, Any]:
+    """A new figure of ``nrows`` × ``ncols`` axes, ``size`` inches, in the constrained layout."""
+    fig, ax = plt.subplots(nrows, ncols, figsize=size, layout="constrained", **kw)
+    return fig, ax
+
+
+def ci_bars(rows: Sequence[Summary]) -> np.ndarray:
+    """``(2, N)`` distances from each row's survival % down and up to its exact 95 % interval (error bars)."""
+    cis = [r.survival_rate.ci for r in rows]
+    return np.array([[max(r.survival - c.low, 0.0) for r, c in zip(rows, cis, strict=True)],
+                     [max(c.high - r.survival, 0.0) for r, c in zip(rows, cis, strict=True)]]).reshape(2, len(rows))
