@@ -137,6 +137,20 @@ def read_lard(
     if fov_deg is not None and not (_real(fov_deg) and 0.0 < fov_deg < 180.0):
         raise ValueError(f"read_lard: fov_deg must be a number in (0, 180), got {fov_deg!r}")
 
+    records = _read_rows(csv_file, db_file, db, base, in_odd_only, fov_deg, width, height)
+    records = _keep(records, csv_file, in_odd_only, target_runway_only, corners_in_image)
+    flagged = [s for s in records if s.meta["lard_check"]]
+    if flagged:
+        s = flagged[0]
+        logger.warning("%s: %d row(s) have derived columns or corner labels disagreeing with the geometry, e.g. "
+                       "row %d: %s", csv_file, len(flagged), s.meta["row"], s.meta["lard_check"])
+    return records
+
+
+def _read_rows(csv_file: Path, db_file: Path, db, base: Path, in_odd_only: bool, fov_deg: float | None,
+               width: int | None, height: int | None) -> list[Sample]:
+    """Every data row of ``csv_file`` as a sample (:func:`_parse_row`), in CSV order; ``ValueError`` for a
+    malformed file or row, or an image and runway given twice."""
     records = []
     line = 0
     try:
@@ -170,7 +184,12 @@ def read_lard(
         raise ValueError(f"{csv_file}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except csv.Error as exc:
         raise ValueError(f"{csv_file}: line {line + 1}: malformed CSV ({exc})") from None
+    return records
 
+
+def _keep(records: list[Sample], csv_file: Path, in_odd_only: bool, target_runway_only: bool,
+          corners_in_image: bool) -> list[Sample]:
+    """The rows :func:`read_lard` keeps (its ``in_odd_only``, ``target_runway_only`` and ``corners_in_image``)."""
     if in_odd_only:
         for s in records:
             value = s.meta.get("runway_in_cone", "")
@@ -190,12 +209,6 @@ def read_lard(
         records = [s for s in records if s.meta.get("runway_in_cone", "").strip() == "IN_ODD"]
     if corners_in_image:
         records = [s for s in records if s.corners_in_image()]
-
-    flagged = [s for s in records if s.meta["lard_check"]]
-    if flagged:
-        s = flagged[0]
-        logger.warning("%s: %d row(s) have derived columns or corner labels disagreeing with the geometry, e.g. "
-                       "row %d: %s", csv_file, len(flagged), s.meta["row"], s.meta["lard_check"])
     return records
 
 

@@ -53,31 +53,10 @@ def _tri(ax, ay, bx, by, cx, cy):  # noqa: ANN001, ANN202 - arrays of one shape
     return (bx - ax) * (cy - ay) - (cx - ax) * (by - ay)
 
 
-def ippe_poses(z: np.ndarray, x: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The two IPPE poses of each row.
-
-    Args:
-        z: (4, 3) coplanar object points (runway corners), metres; no three collinear.
-        x: (B, 4, 2) float64 pixels (OpenCV convention) of the points, no three collinear per row.
-        K: (3, 3) pinhole intrinsics.
-
-    Returns:
-        ``(R, t)``: (B, 2, 3, 3) world → camera rotations and (B, 2, 3) translations (OpenCV axes), the two
-        solutions of the planar ambiguity in no particular order. Non-finite where a row has no IPPE pose.
-
-    Example:
-        >>> from vbl_robust.geometry.camera import intrinsics, lard_rotation, project, runway_corners, world_to_cv
-        >>> Z, K = runway_corners(3000.0, 45.0), intrinsics()
-        >>> Rw, C = lard_rotation(4.0, 86.0, 3.0, 0.0), np.array([-1500.0, 20.0, 95.0])
-        >>> R, t = ippe_poses(Z, project(Z, Rw, C, K)[None], K)
-        >>> R_true, t_true = world_to_cv(Rw, C)
-        >>> bool(min(np.abs(R[0, i] - R_true).max() for i in range(2)) < 1e-9)
-        True
-    """
-    Rc, c, u = plane_frame(z)
-    su = np.sqrt(np.mean(np.sum(u * u, axis=1)))
-    Ainv = _basis_inverse(u / su)  # plane side of the homography, the same for every row
-
+def _image_side(x: np.ndarray, K: np.ndarray, Ainv: np.ndarray, su: float) -> tuple:
+    """The image side of :func:`ippe_poses`: normalised image coordinates ``mx, my`` (4, B), the Jacobian
+    ``(j00, j01, j10, j11)`` of the plane → image homography at the plane points' centroid (unnormalised units)
+    and the centroid's image ``p, q``."""
     # normalised image coordinates m = K⁻¹ (x, 1), points first: (4, B)
     Ki = np.linalg.inv(K)
     xu, xv = x[:, :, 0].T, x[:, :, 1].T
@@ -111,6 +90,35 @@ def ippe_poses(z: np.ndarray, x: np.ndarray, K: np.ndarray) -> tuple[np.ndarray,
     j00, j01 = (H0[0] - vx_n * H2[0]) * scale, (H0[1] - vx_n * H2[1]) * scale
     j10, j11 = (H1[0] - vy_n * H2[0]) * scale, (H1[1] - vy_n * H2[1]) * scale
     p, q = cx + sm * vx_n, cy + sm * vy_n
+    return mx, my, (j00, j01, j10, j11), p, q
+
+
+def ippe_poses(z: np.ndarray, x: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two IPPE poses of each row.
+
+    Args:
+        z: (4, 3) coplanar object points (runway corners), metres; no three collinear.
+        x: (B, 4, 2) float64 pixels (OpenCV convention) of the points, no three collinear per row.
+        K: (3, 3) pinhole intrinsics.
+
+    Returns:
+        ``(R, t)``: (B, 2, 3, 3) world → camera rotations and (B, 2, 3) translations (OpenCV axes), the two
+        solutions of the planar ambiguity in no particular order. Non-finite where a row has no IPPE pose.
+
+    Example:
+        >>> from vbl_robust.geometry.camera import intrinsics, lard_rotation, project, runway_corners, world_to_cv
+        >>> Z, K = runway_corners(3000.0, 45.0), intrinsics()
+        >>> Rw, C = lard_rotation(4.0, 86.0, 3.0, 0.0), np.array([-1500.0, 20.0, 95.0])
+        >>> R, t = ippe_poses(Z, project(Z, Rw, C, K)[None], K)
+        >>> R_true, t_true = world_to_cv(Rw, C)
+        >>> bool(min(np.abs(R[0, i] - R_true).max() for i in range(2)) < 1e-9)
+        True
+    """
+    Rc, c, u = plane_frame(z)
+    su = np.sqrt(np.mean(np.sum(u * u, axis=1)))
+    Ainv = _basis_inverse(u / su)  # plane side of the homography, the same for every row
+
+    mx, my, (j00, j01, j10, j11), p, q = _image_side(x, K, Ainv, su)
 
     # Rv: the rotation about e₃ × a taking e₃ to the line of sight a = (p, q, 1)/‖·‖
     n = np.sqrt(p * p + q * q + 1.0)

@@ -272,6 +272,44 @@ def _rotate(w: np.ndarray, R: np.ndarray) -> np.ndarray:
     return _add(E[:, :, None] * R[None], axis=1)
 
 
+def _try_step(model: _Model, Rw: np.ndarray, tw: np.ndarray, um: np.ndarray, cost: np.ndarray, A: np.ndarray,
+              g: np.ndarray, lam: np.ndarray) -> tuple:
+    """One damped, Jacobi-scaled step of :func:`refine_candidates` for every active pose: whether it is accepted,
+    the step, its predicted reduction, the new poses, their cost, JᵀJ and Jᵀr."""
+    s = 1.0 / np.sqrt(np.maximum(A[:, _D6, _D6], 1e-300))  # Jacobi scaling (n, 6)
+    sg = s * g
+    Ms = A * (s[:, :, None] * s[:, None])
+    Ms[:, _D6, _D6] += lam[:, None]
+    y = -_solve_each(Ms, sg)
+    predicted = lam * _add(y * y, axis=1) - _add(sg * y, axis=1)  # = −(2 gᵀδ + δᵀAδ)
+    step = (s * y).T
+    R_new = _rotate(step[:3], Rw)
+    t_new = tw + step[3:]
+    Y, iz, un, r, cost_new = model.residuals(R_new, t_new, um)
+    A_new, g_new = model.derivatives(Y, iz, un, r)
+    # equal within rounding counts as progress (as in refine_lm); below the cost's resolution, a lower
+    # scaled gradient does
+    flat = (predicted <= FLAT_RTOL * cost) & (_max(np.abs(s * g_new), axis=1) < _max(np.abs(sg), axis=1))
+    accept = (cost_new <= cost * (1.0 + COST_RTOL) + 1e-300) | flat  # False for NaN
+    return accept, step, predicted, R_new, t_new, cost_new, A_new, g_new
+
+
+def _stops(step: np.ndarray, tw: np.ndarray, lam: np.ndarray, cost: np.ndarray, predicted: np.ndarray,
+           cost_all: np.ndarray, B: int, C: int, rows: np.ndarray) -> np.ndarray:
+    """Which active poses of :func:`refine_candidates` leave the working set: converged, damped out, diverged or
+    hopeless (their cost above the best candidate of their row, ``rows``, by more than the step could gain)."""
+    best = cost_all[:B]
+    for c in range(1, C):
+        best = np.fmin(best, cost_all[c * B:(c + 1) * B])  # ignores NaN costs
+    ad = np.abs(step)
+    t_tol = STEP_TOL * (1.0 + np.sqrt(_add(tw * tw, axis=0)))
+    # a NaN predicted reduction never makes a pose hopeless (refine_lm: margin ∞)
+    stop = (((_max(ad[:3], axis=0) <= STEP_TOL) & (_max(ad[3:], axis=0) <= t_tol))
+            | (lam > LAMBDA_STOP) | ~(_max(ad, axis=0) < np.inf)
+            | (cost > best[rows] * (1.0 + 1e-9) + HOPELESS_FACTOR * np.maximum(predicted, 0.0)))
+    return stop
+
+
 def refine_candidates(
     z: np.ndarray,
     x: np.ndarray,
@@ -330,21 +368,8 @@ def refine_candidates(
         for _ in range(max_iter):
             if idx.size == 0:
                 break
-            s = 1.0 / np.sqrt(np.maximum(A[:, _D6, _D6], 1e-300))  # Jacobi scaling (n, 6)
-            sg = s * g
-            Ms = A * (s[:, :, None] * s[:, None])
-            Ms[:, _D6, _D6] += lam[:, None]
-            y = -_solve_each(Ms, sg)
-            predicted = lam * _add(y * y, axis=1) - _add(sg * y, axis=1)  # = −(2 gᵀδ + δᵀAδ)
-            step = (s * y).T
-            R_new = _rotate(step[:3], Rw)
-            t_new = tw + step[3:]
-            Y, iz, un, r, cost_new = model.residuals(R_new, t_new, um)
-            A_new, g_new = model.derivatives(Y, iz, un, r)
-            # equal within rounding counts as progress (as in refine_lm); below the cost's resolution, a lower
-            # scaled gradient does
-            flat = (predicted <= FLAT_RTOL * cost) & (_max(np.abs(s * g_new), axis=1) < _max(np.abs(sg), axis=1))
-            accept = (cost_new <= cost * (1.0 + COST_RTOL) + 1e-300) | flat  # False for NaN
+            accept, step, predicted, R_new, t_new, cost_new, A_new, g_new = _try_step(model, Rw, tw, um, cost, A, g,
+                                                                                       lam)
             Rw = np.where(accept, R_new, Rw)
             tw = np.where(accept, t_new, tw)
             cost = np.where(accept, cost_new, cost)
@@ -352,15 +377,7 @@ def refine_candidates(
             g = np.where(accept[:, None], g_new, g)
             lam = np.where(accept, np.maximum(lam / 3.0, LAMBDA_MIN), lam * 4.0)
             cost_all[idx] = cost
-            best = cost_all[:B]
-            for c in range(1, C):
-                best = np.fmin(best, cost_all[c * B:(c + 1) * B])  # ignores NaN costs
-            ad = np.abs(step)
-            t_tol = STEP_TOL * (1.0 + np.sqrt(_add(tw * tw, axis=0)))
-            # a NaN predicted reduction never makes a pose hopeless (refine_lm: margin ∞)
-            stop = (((_max(ad[:3], axis=0) <= STEP_TOL) & (_max(ad[3:], axis=0) <= t_tol))
-                    | (lam > LAMBDA_STOP) | ~(_max(ad, axis=0) < np.inf)
-                    | (cost > best[row[idx]] * (1.0 + 1e-9) + HOPELESS_FACTOR * np.maximum(predicted, 0.0)))
+            stop = _stops(step, tw, lam, cost, predicted, cost_all, B, C, row[idx])
             if stop.any():
                 R_all[..., idx], t_all[:, idx] = Rw, tw
                 k = np.flatnonzero(~stop)
