@@ -158,46 +158,7 @@ def section_zones(ctx: Context) -> Section | None:
                       "the largest between neighbouring nodes), which under-estimates the true constant: ruled-out "
                       "zones are a guess, not a certificate. Give the audit <code>--lipschitz</code> for sound "
                       "zones.</p>")
-    by_key = {j.row.key: j for j in jobs}
-    if g is None or g.box.box.dim > 2:
-        s.html.append('<p class="note">No 1-D or 2-D landscape grid in this run: the zones are not drawn '
-                      "(<code>vbl-robust zones RUN --plot DIR</code> draws each job's).</p>")
-    else:
-        drawn, not_drawn = [], []
-        for m, r in landscape_runs(ctx, g).items():
-            j = by_key.get(r.key)
-            if j is None or j.map is None:
-                if j is not None:
-                    not_drawn.append(f"{F.style(m)['label']} ({j.reason})")
-                continue
-            zm = j.map
-            box = r.box.box
-            inside = np.all((g.points.xs >= box.lower) & (g.points.xs <= box.upper), axis=1)
-            name = f"zones_{m}"
-            label = basis_label(zm)
-            png = plot_zones(zm, ctx.out_dir / "figures" / f"{name}.png",
-                             landscape=(g.points.xs[inside], g.points.fs[inside]),
-                             title=f"{F.style(m)['label']} zones on {r.box_label}, image {r.sample_id} — "
-                                   f"{label.split(' (')[0]}")
-            outside = len(j.zones.outside_breaches)
-            ground = ("the dense grid's L(θ) (line)" if box.dim == 1
-                      else "the dense grid's L(θ) (heat map; dashed: ε_safe)")
-            s.html.append(ctx.figure_file(png, name, (
-                f"{esc(F.style(m)['label'])} on {esc(r.box_label)} (budget {esc(r.budget_label)}; {r.nfev} evaluated), "
-                f"{esc(where(ctx, r.sample_id))}: "
-                f"{len(zm.zones)} cells over {ground}. Red: breached; grey: undecided; green: ruled out. Basis: "
-                f"<b>{esc(label)}</b>." + (f" {outside} breaching evaluation(s) are no cell's centre (not drawn as "
-                                           "zones)." if outside else ""))))
-            drawn.append({"method": F.style(m)["label"], "box": r.box_label, "budget": r.budget_label,
-                          "nfev": r.nfev, "cells": len(zm.zones),
-                          **{c: 100.0 * zm.fractions[c] for c in CLASSES}, "basis": label})
-        if not_drawn:
-            s.html.append(f'<p class="warn">Not drawn (no zones): {esc("; ".join(not_drawn))}.</p>')
-        if drawn:
-            s.html.append(table(drawn, [("method", "method", None), ("box", "box", None), ("budget", "budget", None),
-                                        ("nfev", "evals", None), ("cells", "cells", None),
-                                        *[(c, f"{c.replace('_', ' ')} %", None) for c in CLASSES],
-                                        ("basis", "basis", esc)], left=("method", "box", "budget", "basis")))
+    s.html.extend(_zone_figures(ctx, g, {j.row.key: j for j in jobs}))
     done = sorted({j.row.sample_id for j in jobs})
     s.html.append(f"<p>Over all main jobs of covering methods ({len(done)} images"
                   + (f"; the other {len(left_out)} image(s) were not replayed: the report replays at most "
@@ -221,3 +182,48 @@ def section_zones(ctx: Context) -> Section | None:
                              ("budget", "budget", None), ("reason", "reason", None)],
                             left=("sample_id", "method", "box", "budget", "reason")))
     return s
+
+
+def _zone_figures(ctx: Context, g: JobRow | None, by_key: dict[Any, JobZones]) -> list[str]:
+    """The HTML of the drawn zones: each method's job on the landscape grid ``g``'s image over it, then the table
+    of those drawn (a note instead when there is no 1-D or 2-D grid)."""
+    if g is None or g.box.box.dim > 2:
+        return ['<p class="note">No 1-D or 2-D landscape grid in this run: the zones are not drawn '
+                "(<code>vbl-robust zones RUN --plot DIR</code> draws each job's).</p>"]
+    out: list[str] = []
+    drawn, not_drawn = [], []
+    for m, r in landscape_runs(ctx, g).items():
+        j = by_key.get(r.key)
+        if j is None or j.map is None:
+            if j is not None:
+                not_drawn.append(f"{F.style(m)['label']} ({j.reason})")
+            continue
+        zm = j.map
+        box = r.box.box
+        inside = np.all((g.points.xs >= box.lower) & (g.points.xs <= box.upper), axis=1)
+        name = f"zones_{m}"
+        label = basis_label(zm)
+        png = plot_zones(zm, ctx.out_dir / "figures" / f"{name}.png",
+                         landscape=(g.points.xs[inside], g.points.fs[inside]),
+                         title=f"{F.style(m)['label']} zones on {r.box_label}, image {r.sample_id} — "
+                               f"{label.split(' (')[0]}")
+        outside = len(j.zones.outside_breaches)
+        ground = ("the dense grid's L(θ) (line)" if box.dim == 1
+                  else "the dense grid's L(θ) (heat map; dashed: ε_safe)")
+        out.append(ctx.figure_file(png, name, (
+            f"{esc(F.style(m)['label'])} on {esc(r.box_label)} (budget {esc(r.budget_label)}; {r.nfev} evaluated), "
+            f"{esc(where(ctx, r.sample_id))}: "
+            f"{len(zm.zones)} cells over {ground}. Red: breached; grey: undecided; green: ruled out. Basis: "
+            f"<b>{esc(label)}</b>." + (f" {outside} breaching evaluation(s) are no cell's centre (not drawn as "
+                                       "zones)." if outside else ""))))
+        drawn.append({"method": F.style(m)["label"], "box": r.box_label, "budget": r.budget_label,
+                      "nfev": r.nfev, "cells": len(zm.zones),
+                      **{c: 100.0 * zm.fractions[c] for c in CLASSES}, "basis": label})
+    if not_drawn:
+        out.append(f'<p class="warn">Not drawn (no zones): {esc("; ".join(not_drawn))}.</p>')
+    if drawn:
+        out.append(table(drawn, [("method", "method", None), ("box", "box", None), ("budget", "budget", None),
+                                 ("nfev", "evals", None), ("cells", "cells", None),
+                                 *[(c, f"{c.replace('_', ' ')} %", None) for c in CLASSES],
+                                 ("basis", "basis", esc)], left=("method", "box", "budget", "basis")))
+    return out
