@@ -67,6 +67,7 @@ def test_the_campaign_files_in_the_documentation_name_real_options(tmp_path):
     import typer
 
     from vbl_robust.cli.config import read_config
+    from vbl_robust.perturb.registry import PERTURBATIONS
 
     page = Path(__file__).resolve().parents[2] / "docs" / "how-to" / "config.md"
     blocks = re.findall(r"```yaml\n(.*?)```", page.read_text(), flags=re.S)
@@ -77,4 +78,7 @@ def test_the_campaign_files_in_the_documentation_name_real_options(tmp_path):
         path = tmp_path / f"{i}.yaml"
         path.write_text(text)
         names = {p.name for p in group.commands[command].params}
-        assert read_config(path, command, names), text
+        options = read_config(path, command, names)
+        assert options, text
+        for item in options.get("perturb", []):  # a flow list splits at commas: "haze=0,0.3" must be quoted
+            assert item.split("=")[0] in PERTURBATIONS, (item, text)

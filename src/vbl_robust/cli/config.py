@@ -2,7 +2,8 @@
 the full configuration it ran with as ``config.yaml``.
 
 The file is a mapping of option names to values, as on the command line without the dashes (``max-evals: 400`` or
-``max_evals: 400``; a repeatable option takes a list: ``perturb: [blur_sigma, haze=0,0.3]``; a flag ``true`` or
+``max_evals: 400``; a repeatable option takes a list: ``perturb: [blur_px, "haze=0,0.3"]`` — quoted, as a comma
+ends an item of a YAML list; a flag ``true`` or
 ``false``); an optional ``command:`` key names the command it is for. Options given on the command line override
 the file: the file's values become the command's defaults (click's ``default_map``), so every value still goes
 through the option's own conversion and checks (a bad value is refused naming the option). An unknown key, a
