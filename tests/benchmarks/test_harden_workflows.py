@@ -12,12 +12,16 @@ def _names(commands: list[list[str]]) -> list[str]:
 
 def test_the_measurement_runs_what_is_missing_and_nothing_else(script, tmp_path, monkeypatch):
     m = script("benchmarks/measure_harden.py")
+    # a new checkout: the paper's packed spatial-1d store is there, its run directory not (restored first)
+    monkeypatch.setattr(m, "ROOT", tmp_path)
+    (tmp_path / "results" / "paper" / "spatial-1d").mkdir(parents=True)
+    (tmp_path / "results" / "paper" / "spatial-1d" / "results.sqlite.xz").write_bytes(b"")
     monkeypatch.setattr(m, "RES", tmp_path / "res")
     monkeypatch.setattr(m, "SHIPPED", tmp_path / "shipped.pt")
     s = m.Steps(dry_run=True)
     m.measure(s, tmp_path / "h", tmp_path / "audits", tmp_path / "keep")
     assert _names(s.commands) == ["harden", "detector_protocol.py", "ship",
-                                  *["reproduce", "bundle", "report", "report"],
+                                  *["merge", "reproduce", "bundle", "report", "report"],
                                   *(["audit", "audit", "bundle", "report", "report"] * 2)]
     harden = s.commands[0]
     assert harden[2:] == [*m.TRAINING, "--trust-model", "--out", str(tmp_path / "h")]  # resumes its own rounds
@@ -29,6 +33,8 @@ def test_the_measurement_runs_what_is_missing_and_nothing_else(script, tmp_path,
         (tmp_path / "res" / name).write_text("")
     (tmp_path / "keep" / "box2d_hardened").mkdir(parents=True)
     (tmp_path / "keep" / "box2d_hardened" / "compare.html").write_text("")
+    (tmp_path / "runs" / "paper" / "spatial-1d").mkdir(parents=True)
+    (tmp_path / "runs" / "paper" / "spatial-1d" / "results.sqlite").write_bytes(b"")  # restored before
     s = m.Steps(dry_run=True)
     m.measure(s, tmp_path / "h", tmp_path / "audits", tmp_path / "keep")
     assert _names(s.commands) == ["reproduce", "bundle", "report", "report", "audit", "audit", "bundle", "report",
