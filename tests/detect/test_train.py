@@ -285,3 +285,24 @@ def test_ship_validates_the_checkpoint_before_writing_anything(tmp_path):
     # the shipped model itself ships (a pose model with 4 corners)
     out = ship(DEFAULT_MODEL, detector="twostage", imgsz=320, info={"version": 10}, models_dir=models)
     assert out.stat().st_size > 1000 and '"version": 10' in (models / "default.json").read_text()
+
+
+def test_a_first_stage_can_be_yolo26_pose_and_runs_in_the_pipeline(tmp_path):
+    """Issue 49: YOLO26-pose (residual log-likelihood keypoints) built offline from its .yaml, trained on the
+    corners, loaded as a detector and evaluated by the pipeline (4 corners per row; one tiny epoch: no accuracy)."""
+    import numpy as np
+
+    from vbl_robust.detect.ultralytics import UltralyticsDetector
+    from vbl_robust.pipeline import Objective
+    from vbl_robust.space import ParameterBox
+
+    with pytest.raises(ValueError, match="architecture must be one of yolov8n-pose, yolo26n-pose"):
+        train(tmp_path / "bad", samples=_samples(8), architecture="yolo99-pose")
+    samples = _samples(8)
+    r = train(tmp_path / "run", samples=samples, n_val=2, imgsz=64, epochs=1, batch=4, workers=0, seed=0,
+              architecture="yolo26n-pose")
+    det = UltralyticsDetector(r.best, trust=True, imgsz=64)
+    head = det.model.model[-1]
+    assert type(head).__name__ == "Pose26" and list(head.kpt_shape) == [4, 3]
+    rec = Objective(samples[0], det, ParameterBox({"roll_deg": (-5.0, 5.0)})).evaluate(np.array([[0.0], [2.0]]))
+    assert np.asarray(rec.keypoints).shape == (2, 4, 2) and len(rec.reason) == 2

@@ -42,6 +42,9 @@ Optimizer = Annotated[str, typer.Option("--optimizer", help="Ultralytics optimiz
 LoaderWorkers = Annotated[int, typer.Option("--workers", min=0, help="Data-loader worker processes.")]
 CropsOnly = Annotated[bool, typer.Option("--crops-only", help="Train on the crops alone (a pass-2 network of its own; "
                                          "full views still rendered and validated).")]
+Arch = Annotated[str, typer.Option("--arch", help="Network of a first stage trained from scratch: yolov8n-pose (every "
+                                   "shipped model so far) or yolo26n-pose (YOLO26: residual log-likelihood keypoints); "
+                                   "ignored with --init or --resume.")]
 Appearance = Annotated[bool, typer.Option("--appearance", help="Random blur, haze, contrast, brightness, gamma and "
                                           "sensor noise on half of the training images (vbl_robust.detect.augment; "
                                           "validation untouched).")]
@@ -54,6 +57,7 @@ def train(
     init: Init = None, trust_model: TrainTrust = False, crops: Crops = 2, crops_used: CropsUsed = None,
     min_box: MinBox = None, lr0: Lr0 = None, optimizer: Optimizer = "auto", workers: LoaderWorkers = 2,
     threads: o.Threads = None, crops_only: CropsOnly = False, appearance: Appearance = False,
+    arch: Arch = "yolov8n-pose",
 ) -> None:
     """Train the default detector from our synthetic scenes (or your LARD V2 data); every call adds a stage."""
     from vbl_robust.detect import train as tr
@@ -75,7 +79,8 @@ def train(
                        crops_per_sample=crops, crops_used=crops_used, min_box=min_box, lr0=lr0,
                        optimizer=optimizer, workers=workers, threads=threads,
                        n_airports=airports or DEFAULT_POOL,
-                       appearance=tr.AppearanceJitter() if appearance else None, full_views=not crops_only)
+                       appearance=tr.AppearanceJitter() if appearance else None, full_views=not crops_only,
+                       architecture=arch)
     typer.echo(f"stage {res.stage_dir.name}: best weights {res.best} (measure it with "
                "benchmarks/detector_protocol.py --model ... --json P.json, then vbl-robust ship)")
 

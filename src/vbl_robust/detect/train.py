@@ -46,6 +46,9 @@ from .windows import box_window, letterbox_window
 logger = logging.getLogger(__name__)
 
 #: ultralytics overrides that keep labels exact and the run offline
+#: Networks a first stage can be trained from (ultralytics model files, built offline from their .yaml).
+ARCHITECTURES = ("yolov8n-pose", "yolo26n-pose")
+
 TRAIN_DEFAULTS = dict(
     mosaic=0.0, mixup=0.0, copy_paste=0.0, degrees=0.0, shear=0.0, perspective=0.0, scale=0.0,
     translate=0.1, fliplr=0.5, flipud=0.0, hsv_h=0.015, hsv_s=0.5, hsv_v=0.4, erasing=0.0,
@@ -248,7 +251,7 @@ def train(
     threads: int | None = None, n_airports: int = DEFAULT_POOL, generate_options: dict | None = None,
     appearance: AppearanceJitter | dict | None = None, crop_jitter: CropJitter | dict | None = None,
     width_loss: float = 0.0, width_loss_min_px: float = 8.0, full_views: bool = True,
-    val_samples: Sequence[Sample] | None = None, **overrides,
+    val_samples: Sequence[Sample] | None = None, architecture: str = "yolov8n-pose", **overrides,
 ) -> TrainResult:
     """Train (or continue training) the runway-corner YOLOv8n-pose.
 
@@ -266,7 +269,11 @@ def train(
         trust_checkpoints: resuming loads the stage's checkpoints, pickles that run code: refused (``ValueError``)
             unless the caller says it trusts them (``--trust-model``).
         init_weights: initial weights of a new first stage (e.g. the shipped model); None → from
-            ``yolov8n-pose.yaml`` (random init, no hub weights).
+            ``architecture``'s ultralytics model file (random init, no hub weights).
+        architecture: the network of a first stage trained from scratch, one of :data:`ARCHITECTURES`:
+            ``yolov8n-pose`` (every shipped model so far) or ``yolo26n-pose`` (ultralytics' YOLO26: residual
+            log-likelihood keypoint loss, issue 49); its head takes the dataset's 4 corners and 1 class. Ignored
+            when a stage starts from weights.
         detector: ``"twostage"`` (full views + crops) or ``"single"`` (full views only).
         crops_per_sample: crops per training sample for ``"twostage"`` (rendered).
         crops_used: train on only the first ``crops_used`` of them (more weight on full views, which teach the
@@ -305,6 +312,8 @@ def train(
     """
     if detector not in ("single", "twostage"):
         raise ValueError(f"train: detector must be 'single' or 'twostage', got {detector!r}")
+    if architecture not in ARCHITECTURES:
+        raise ValueError(f"train: architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
     if not full_views and (detector != "twostage" or crops_per_sample < 1 or crops_used == 0):
         raise ValueError("train: full_views=False (crops only) needs detector='twostage' and at least one crop")
     if imgsz % 32:
@@ -380,14 +389,14 @@ def train(
         data = _subset_yaml(data, len(tr), ([0] if full_views else []) + list(range(1, used + 1)))
 
     _use_threads(threads)
-    model = YOLO(str(init)) if init is not None else YOLO("yolov8n-pose.yaml")
+    model = YOLO(str(init)) if init is not None else YOLO(f"{architecture}.yaml")
     args = dict(TRAIN_DEFAULTS)
     args.update(data=str(data), imgsz=imgsz, epochs=epochs, batch=batch, workers=workers, seed=seed,
                 project=str(out_dir), name=stage.name, exist_ok=True, pretrained=_pretrained_arg(init))
     if lr0 is not None:
         args["lr0"] = lr0
     args.update(overrides)
-    logger.info("training %s from %s%s", stage, init or "yolov8n-pose.yaml",
+    logger.info("training %s from %s%s", stage, init or f"{architecture}.yaml",
                 f" with threshold-width loss {width_loss:g}" if width_loss else "")
     with threshold_width_loss(width_loss, width_loss_min_px):
         model.train(**args)
