@@ -310,19 +310,8 @@ def train(
     Returns:
         :class:`TrainResult`.
     """
-    if detector not in ("single", "twostage"):
-        raise ValueError(f"train: detector must be 'single' or 'twostage', got {detector!r}")
-    if architecture not in ARCHITECTURES:
-        raise ValueError(f"train: architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
-    if not full_views and (detector != "twostage" or crops_per_sample < 1 or crops_used == 0):
-        raise ValueError("train: full_views=False (crops only) needs detector='twostage' and at least one crop")
-    if imgsz % 32:
-        raise ValueError(f"train: imgsz must be a multiple of 32, got {imgsz}")
-    if val_samples is not None and samples is None:
-        raise ValueError("train: val_samples needs samples (the training data they validate)")
-    opt = overrides.get("optimizer", "auto")
-    if opt not in OPTIMIZERS:
-        raise ValueError(f"train: optimizer must be one of {', '.join(OPTIMIZERS)}, got {opt!r}")
+    _check_arguments(detector, architecture, full_views, crops_per_sample, crops_used, imgsz, samples, val_samples,
+                     overrides.get("optimizer", "auto"))
     out_dir = Path(out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     import_ultralytics()
@@ -334,59 +323,21 @@ def train(
     if stages and not trust_checkpoints:  # resuming unpickles the stage's last.pt / best.pt: only with consent
         raise ValueError(f"train --resume: the checkpoints in {stages[-1] / 'weights'} are pickles that run code when "
                          "loaded; pass --trust-model if you trust them (e.g. you wrote them)")
-    if stages:
+    if stages and (stages[-1] / "weights" / "last.pt").exists() and not _finished(stages[-1] / "weights" / "last.pt"):
         last = stages[-1] / "weights" / "last.pt"
-        if last.exists() and not _finished(last):
-            logger.info("resuming %s", last)
-            _use_threads(threads)
-            with threshold_width_loss(width_loss, width_loss_min_px):
-                YOLO(str(last)).train(resume=True)
-            w = stages[-1] / "weights"
-            return TrainResult(stages[-1], w / "best.pt", w / "last.pt", True)
-        prev = stages[-1] / "weights" / "best.pt"
-        init = prev if prev.exists() else init_weights
-        stage = out_dir / f"stage{len(stages):02d}"
-    else:
-        init = init_weights
-        stage = out_dir / "stage00"
+        logger.info("resuming %s", last)
+        _use_threads(threads)
+        with threshold_width_loss(width_loss, width_loss_min_px):
+            YOLO(str(last)).train(resume=True)
+        return TrainResult(stages[-1], last.with_name("best.pt"), last, True)
+    prev = stages[-1] / "weights" / "best.pt" if stages else None
+    init = prev if prev is not None and prev.exists() else init_weights
+    stage = out_dir / f"stage{len(stages):02d}"
 
-    if isinstance(crop_jitter, dict):
-        crop_jitter = CropJitter(**crop_jitter)
-    if crop_jitter == CropJitter():
-        crop_jitter = None  # the default window: same directory as before the option existed
-    if isinstance(appearance, dict):
-        appearance = AppearanceJitter(**{k: tuple(v) if isinstance(v, list) else v for k, v in appearance.items()})
-    crops = crops_per_sample if detector == "twostage" else 0
-    if min_box is None:
-        min_box = round(MIN_BOX_FRACTION * imgsz)
-    data_root = out_dir / (f"dataset_{imgsz}px_{crops}crops" + (f"_box{min_box:g}" if min_box else "")
-                           + (f"_ap{n_airports}" if samples is None and n_airports != DEFAULT_POOL else "")
-                           + (_options_tag(generate_options) if samples is None and generate_options else "")
-                           + (_options_tag(appearance.to_dict(), "_app") if appearance is not None else "")
-                           + (_options_tag(crop_jitter.__dict__, "_crop") if crop_jitter is not None else ""))
-    if samples is None:
-        from ..scenes import generate
-
-        gen = dict(generate_options or {})
-        tr = generate(n_train, seed=seed, n_airports=n_airports, **gen)
-        va = generate(n_val, seed=seed + VAL_SEED_OFFSET, n_airports=n_airports, **gen)
-    elif val_samples is not None:
-        tr, va = list(samples), list(val_samples)
-        if not tr or not va:
-            raise ValueError(f"train: need training and validation samples, got {len(tr)} and {len(va)}")
-    else:
-        samples = list(samples)
-        if len(samples) < 2:
-            raise ValueError(f"train: need at least 2 samples, got {len(samples)}")
-        order = np.random.default_rng(seed).permutation(len(samples))
-        nv = max(1, min(n_val, len(samples) // 5))
-        va = [samples[i] for i in order[:nv]]
-        tr = [samples[i] for i in order[nv:]]
-    data = build_dataset(tr, va, data_root, imgsz=imgsz, crops_per_sample=crops, seed=seed, min_box=min_box,
-                         appearance=appearance, jitter=crop_jitter)
-    used = crops if crops_used is None else min(crops_used, crops)
-    if used < crops or not full_views:
-        data = _subset_yaml(data, len(tr), ([0] if full_views else []) + list(range(1, used + 1)))
+    data = _prepare_data(out_dir, samples, val_samples, n_train=n_train, n_val=n_val, imgsz=imgsz, seed=seed,
+                         crops=crops_per_sample if detector == "twostage" else 0, crops_used=crops_used,
+                         min_box=min_box, n_airports=n_airports, generate_options=generate_options,
+                         appearance=appearance, crop_jitter=crop_jitter, full_views=full_views)
 
     _use_threads(threads)
     model = YOLO(str(init)) if init is not None else YOLO(f"{architecture}.yaml")
@@ -402,6 +353,76 @@ def train(
         model.train(**args)
     w = stage / "weights"
     return TrainResult(stage, w / "best.pt", w / "last.pt", False)
+
+
+def _prepare_data(out_dir: Path, samples: Sequence[Sample] | None, val_samples: Sequence[Sample] | None, *,
+                  n_train: int, n_val: int, imgsz: int, seed: int, crops: int, crops_used: int | None,
+                  min_box: float | None, n_airports: int, generate_options: dict | None,
+                  appearance: AppearanceJitter | dict | None, crop_jitter: CropJitter | dict | None,
+                  full_views: bool) -> Path:
+    """The ``data.yaml`` :func:`train` trains on: the dataset rendered once into a directory of ``out_dir`` named
+    by what decides its pixels (reused by later stages), restricted to the views used."""
+    if isinstance(crop_jitter, dict):
+        crop_jitter = CropJitter(**crop_jitter)
+    if crop_jitter == CropJitter():
+        crop_jitter = None  # the default window: same directory as before the option existed
+    if isinstance(appearance, dict):
+        appearance = AppearanceJitter(**{k: tuple(v) if isinstance(v, list) else v for k, v in appearance.items()})
+    if min_box is None:
+        min_box = round(MIN_BOX_FRACTION * imgsz)
+    data_root = out_dir / (f"dataset_{imgsz}px_{crops}crops" + (f"_box{min_box:g}" if min_box else "")
+                           + (f"_ap{n_airports}" if samples is None and n_airports != DEFAULT_POOL else "")
+                           + (_options_tag(generate_options) if samples is None and generate_options else "")
+                           + (_options_tag(appearance.to_dict(), "_app") if appearance is not None else "")
+                           + (_options_tag(crop_jitter.__dict__, "_crop") if crop_jitter is not None else ""))
+    tr, va = _split(samples, val_samples, n_train, n_val, seed, n_airports, generate_options)
+    data = build_dataset(tr, va, data_root, imgsz=imgsz, crops_per_sample=crops, seed=seed, min_box=min_box,
+                         appearance=appearance, jitter=crop_jitter)
+    used = crops if crops_used is None else min(crops_used, crops)
+    if used < crops or not full_views:
+        data = _subset_yaml(data, len(tr), ([0] if full_views else []) + list(range(1, used + 1)))
+    return data
+
+
+def _check_arguments(detector: str, architecture: str, full_views: bool, crops_per_sample: int,
+                     crops_used: int | None, imgsz: int, samples: Sequence[Sample] | None,
+                     val_samples: Sequence[Sample] | None, optimizer: str) -> None:
+    """``ValueError`` naming the argument for a :func:`train` call that cannot work (before anything is written)."""
+    if detector not in ("single", "twostage"):
+        raise ValueError(f"train: detector must be 'single' or 'twostage', got {detector!r}")
+    if architecture not in ARCHITECTURES:
+        raise ValueError(f"train: architecture must be one of {', '.join(ARCHITECTURES)}, got {architecture!r}")
+    if not full_views and (detector != "twostage" or crops_per_sample < 1 or crops_used == 0):
+        raise ValueError("train: full_views=False (crops only) needs detector='twostage' and at least one crop")
+    if imgsz % 32:
+        raise ValueError(f"train: imgsz must be a multiple of 32, got {imgsz}")
+    if val_samples is not None and samples is None:
+        raise ValueError("train: val_samples needs samples (the training data they validate)")
+    if optimizer not in OPTIMIZERS:
+        raise ValueError(f"train: optimizer must be one of {', '.join(OPTIMIZERS)}, got {optimizer!r}")
+
+
+def _split(samples: Sequence[Sample] | None, val_samples: Sequence[Sample] | None, n_train: int, n_val: int,
+           seed: int, n_airports: int, generate_options: dict | None) -> tuple[list[Sample], list[Sample]]:
+    """The training and validation samples of :func:`train`: generated (``samples`` None), given both, or
+    ``samples`` split (a seeded fifth, at most ``n_val``, for validation)."""
+    if samples is None:
+        from ..scenes import generate
+
+        gen = dict(generate_options or {})
+        return (generate(n_train, seed=seed, n_airports=n_airports, **gen),
+                generate(n_val, seed=seed + VAL_SEED_OFFSET, n_airports=n_airports, **gen))
+    if val_samples is not None:
+        tr, va = list(samples), list(val_samples)
+        if not tr or not va:
+            raise ValueError(f"train: need training and validation samples, got {len(tr)} and {len(va)}")
+        return tr, va
+    samples = list(samples)
+    if len(samples) < 2:
+        raise ValueError(f"train: need at least 2 samples, got {len(samples)}")
+    order = np.random.default_rng(seed).permutation(len(samples))
+    nv = max(1, min(n_val, len(samples) // 5))
+    return [samples[i] for i in order[nv:]], [samples[i] for i in order[:nv]]
 
 
 def ship(weights: str | Path, *, detector: str, imgsz: int, models_dir: str | Path | None = None,
