@@ -19,12 +19,13 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Any
 
 import numpy as np
 
 __all__ = [
     "ALPHA", "LEVEL", "ClaimVerdict", "Interval", "Paired", "Rate", "RiskVerdict", "SequentialTest", "Stratum",
-    "breach_fraction_bound", "claim_verdict", "clopper_pearson", "holm", "paired", "rate", "risk_verdict",
+    "binomial_bounds", "breach_fraction_bound", "claim_verdict", "clopper_pearson", "holm", "paired", "rate", "risk_verdict",
     "stratified_interval",
 ]
 
@@ -295,21 +296,21 @@ class Stratum:
     n: int
 
 
-def binomial_bounds(k: int, n: int, alpha_low: float, alpha_high: float) -> tuple[float, float]:
+def binomial_bounds(k: Any, n: Any, alpha_low: float, alpha_high: float) -> tuple[Any, Any]:
     """One-sided exact (Clopper–Pearson) bounds of a binomial proportion: a lower bound that exceeds p with
     probability ≤ ``alpha_low`` and an upper bound below p with probability ≤ ``alpha_high`` (beta quantiles; 0 for
-    k = 0 and 1 for k = n). ``clopper_pearson`` at level 1 − α is the pair with α/2 on each side."""
+    k = 0 and 1 for k = n). ``clopper_pearson`` at level 1 − α is the pair with α/2 on each side. ``k`` and ``n``
+    may be arrays (broadcast; then the bounds are arrays), e.g. every allocation of a budget at once."""
     from scipy.stats import beta
 
-    if n < 0 or not 0 <= k <= max(n, 0):
+    k_, n_ = np.asarray(k), np.asarray(n)
+    if np.any(n_ < 0) or np.any(k_ < 0) or np.any(k_ > np.maximum(n_, 0)):
         raise ValueError(f"need 0 <= k <= n, got k={k}, n={n}")
     if not (0.0 < alpha_low < 1.0 and 0.0 < alpha_high < 1.0):
         raise ValueError(f"alphas must be in (0, 1), got {alpha_low!r}, {alpha_high!r}")
-    if n == 0:
-        return 0.0, 1.0
-    low = 0.0 if k == 0 else float(beta.ppf(alpha_low, k, n - k + 1))
-    high = 1.0 if k == n else float(beta.ppf(1.0 - alpha_high, k + 1, n - k))
-    return low, high
+    low = np.where(k_ > 0, beta.ppf(alpha_low, np.maximum(k_, 1), n_ - k_ + 1), 0.0)
+    high = np.where(k_ < n_, beta.ppf(1.0 - alpha_high, k_ + 1, np.maximum(n_ - k_, 1)), 1.0)
+    return (float(low), float(high)) if low.ndim == 0 else (low, high)
 
 
 def stratified_interval(strata: Sequence[Stratum], level: float = LEVEL,

@@ -233,12 +233,12 @@ def test_a_worker_computes_on_one_core():
     import cv2
     import torch
 
-    from vbl_robust.campaigns.runner import _one_core
+    from vbl_robust.campaigns.work import one_core
 
     before = torch.get_num_threads(), cv2.getNumThreads()
     try:
         cv2.setNumThreads(2)
-        _one_core()
+        one_core()
         assert (torch.get_num_threads(), cv2.getNumThreads()) == (1, 1)
     finally:
         torch.set_num_threads(before[0])

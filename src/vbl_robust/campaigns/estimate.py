@@ -100,9 +100,10 @@ def _one_thread() -> Iterator[None]:
     import cv2
     import torch
 
+    from .work import one_core
+
     threads, cv_threads = torch.get_num_threads(), cv2.getNumThreads()
-    torch.set_num_threads(1)
-    cv2.setNumThreads(1)
+    one_core()
     try:
         yield
     finally:

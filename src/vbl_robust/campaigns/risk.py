@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from ..space import ParameterBox
-from ..stats import SequentialTest, Stratum, risk_verdict, stratified_interval
+from ..stats import SequentialTest, Stratum, binomial_bounds, risk_verdict, stratified_interval
 
 __all__ = ["RISK_METHODS", "Marginal", "PooledRisk", "RiskResult", "ThetaDistribution", "estimate_risk", "parse_dist",
            "pooled_risk"]
@@ -281,8 +281,7 @@ def _guided(f: Callable, dist: ThetaDistribution, eps: float, tau: float, delta:
     tries = 0
     while len(x0) < n0 and tries < 200:
         cand = dist.sample(max(2 * (n0 - len(x0)), 8), rng)
-        inside = np.any(np.all((cand[:, None, :] >= lo[None]) & (cand[:, None, :] <= hi[None]), axis=2), axis=1)
-        x0 = np.concatenate([x0, cand[~inside]])[:n0]
+        x0 = np.concatenate([x0, cand[~_in_cells(cand, lo, hi)]])[:n0]
         tries += 1
     n1 = left - len(x0) if m1 > 0.0 else 0
     # stratum 1: a cell with probability ∝ its mass, then a draw from the distribution restricted to it
@@ -308,10 +307,15 @@ def _guided(f: Callable, dist: ThetaDistribution, eps: float, tau: float, delta:
                       np.concatenate(fs), tuple(reasons), eps, tuple(strata), tuple(split))
 
 
+def _in_cells(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Which rows of ``x`` lie in one of the cells ``[lo[c], hi[c]]``."""
+    return np.any(np.all((x[:, None, :] >= lo[None]) & (x[:, None, :] <= hi[None]), axis=2), axis=1)
+
+
 def _hot_rate(x: np.ndarray, f: np.ndarray, lo: np.ndarray, hi: np.ndarray, eps: float) -> float:
     """The guide's failure rate inside the hot cells (Laplace-smoothed, kept in [0.05, 0.95]): an estimate used only
     to split the draws, never in the interval (the guide's points are not a sample of the distribution)."""
-    inside = np.any(np.all((x[:, None, :] >= lo[None]) & (x[:, None, :] <= hi[None]), axis=2), axis=1)
+    inside = _in_cells(x, lo, hi)
     k, n = int(_failed(f[inside], eps).sum()), int(inside.sum())
     return float(np.clip((k + 1) / (n + 2), 0.05, 0.95))
 
@@ -320,15 +324,11 @@ def _allocate(m1: float, p1: float, left: int, delta: float) -> int:
     """The draws for stratum 1 (of ``left``) that minimise the expected width of the stratified interval:
     m1·(upper − lower of k1 = p1·n1 failures in n1) + m0·(upper of no failure in n0), with the bounds of
     :data:`SPLIT`. Allocation chosen before the draws (from the guide's data only) keeps the interval valid."""
-    from scipy.stats import beta
-
     n1 = np.arange(1, left)
-    n0 = left - n1
     k1 = np.clip(np.round(p1 * n1), 0, n1)
-    (a1, b1), (_, b0) = (s * delta for s in SPLIT[0]), (s * delta for s in SPLIT[1])
-    low1 = np.where(k1 > 0, beta.ppf(a1, np.maximum(k1, 1), n1 - k1 + 1), 0.0)
-    high1 = np.where(k1 < n1, beta.ppf(1 - b1, k1 + 1, np.maximum(n1 - k1, 1)), 1.0)
-    high0 = beta.ppf(1 - b0, 1, n0)
+    (a1, b1), (a0, b0) = (s * delta for s in SPLIT[0]), (s * delta for s in SPLIT[1])
+    low1, high1 = binomial_bounds(k1, n1, a1, b1)
+    high0 = binomial_bounds(0, left - n1, a0, b0)[1]
     return int(n1[np.argmin(m1 * (high1 - low1) + (1 - m1) * high0)])
 
 

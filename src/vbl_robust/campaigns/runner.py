@@ -34,7 +34,7 @@ from .provenance import (
 )
 from .spec import CampaignSpec, Job
 from .store import JobRow, JobStatus, ResultStore, RunProvenance, RunStatus, WriterLock
-from .work import SampleTask, Settings, detector_for, run_sample_task
+from .work import SampleTask, Settings, detector_for, one_core, run_sample_task
 
 logger = logging.getLogger(__name__)
 
@@ -299,7 +299,7 @@ def _pool_worker(tasks: Any, results: Any, detector: DetectorSpec, settings: Set
     from ..constants import TORCH_JIT_WARNING
 
     warnings.filterwarnings("ignore", message=TORCH_JIT_WARNING, category=FutureWarning)
-    _one_core()
+    one_core()
     try:
         det = detector_for(detector)
     except Exception as exc:  # noqa: BLE001 - reported to the parent as one line, not a traceback
@@ -358,21 +358,11 @@ def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Se
             q.close()
 
 
-def _one_core() -> None:
-    """A worker computes on one core: torch's threads and OpenCV's (the black-box views' warps) — a worker per core,
-    never several threads fighting over one."""
-    import cv2
-    import torch
-
-    torch.set_num_threads(1)
-    cv2.setNumThreads(1)
-
-
 # -- Ray -------------------------------------------------------------------------------------------------------
 def _ray_sample_task(task: SampleTask, detector: DetectorSpec, settings: Settings, run_id: int) -> Iterator[list[JobRow]]:
     """Body of a Ray task: the same code as the local executor, in a worker (one core, as its task asks of Ray;
     detector cached per worker)."""
-    _one_core()
+    one_core()
     yield from run_sample_task(task, detector_for(detector), settings, run_id)
 
 

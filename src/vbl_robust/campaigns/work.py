@@ -49,6 +49,16 @@ _DETECTORS: dict[str, Detector] = {}
 CPU_BREACH_CHUNK = 4
 
 
+def one_core() -> None:
+    """A worker computes on one core: torch's threads and OpenCV's (the black-box views' warps) — a worker per core,
+    never several threads fighting over one."""
+    import cv2
+    import torch
+
+    torch.set_num_threads(1)
+    cv2.setNumThreads(1)
+
+
 def detector_for(spec: DetectorSpec) -> Detector:
     """The detector of ``spec``, built once per process (a model is loaded once, not per job)."""
     key = json.dumps(spec.to_dict(), sort_keys=True)

@@ -157,8 +157,7 @@ def section_gallery(ctx: Context, ev: Evidence) -> Section | None:
                     plt.close("all")
                     note = f"its picture cannot be made here ({type(exc).__name__}: {exc})"
                 finally:
-                    if hasattr(sample, "drop_pixels"):
-                        sample.drop_pixels()
+                    sample.drop_pixels()
         elif samples:
             note = "not in the rebuilt dataset"
         s.html.append(f'<div class="case">{figure}{_facts(ctx, rank, case, note and f"not drawn: {note}")}</div>')
