@@ -191,6 +191,13 @@ def table(results: dict) -> str:
     reached = [s for s in savings if s]
     lines += ["", f"Saving ≥ 10×: {sum(s >= 10 for s in reached)} of {len(small)} cases; reached MC-1024's "
               f"half-width within {max(GUIDED_BUDGETS)} evaluations: {len(reached)} of {len(small)}."]
+    top = str(max(GUIDED_BUDGETS))
+    hot = [r["guided"][top]["strata"][0][0] for r in small if len(r["guided"][top]["strata"]) == 2]
+    if hot:
+        lines += ["", f"Why: at {top} evaluations on those cases the guide's hot cells (stratum 1) hold "
+                  f"{100 * min(hot):.0f}–{100 * max(hot):.0f} % of the box on {len(hot)} of {len(small)} cases (the "
+                  f"others ran as one stratum), where the failures are runs a few tenths of a degree wide: the "
+                  "strata are far from pure."]
     misses = [(m, n, r) for (m, n), ok in cover.items() for r, hit in zip(rs, ok, strict=True) if not hit]
     above = [(m, n, r) for m, n, r in misses if r[m][n]["low"] > r["p_true"]]
     if misses:
