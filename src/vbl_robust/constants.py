@@ -51,7 +51,8 @@ FAILURE_REASONS: dict[str, str] = {
     "pnp_failed": "the PnP solver found no pose",
     "non_finite_position": "the PnP position is not finite",
     "out_of_view": "the perturbation turned the runway out of the camera's view (a corner behind the camera)",
-    "monitor_rejected": "a runtime monitor rejected the pose (its PnP reprojection residual above the monitor's limit)",
+    "monitor_rejected": "a runtime monitor rejected the pose (its PnP reprojection residual, or its corners' σ propagated "
+                        "to the position, above the monitor's limit)",
 }
 
 

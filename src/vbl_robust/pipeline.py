@@ -41,7 +41,7 @@ from vbl_robust.constants import FAILURE_REASONS as _REASONS
 from vbl_robust.data.sample import Sample
 from vbl_robust.detect.base import DetectContext, Detector, Selection, select
 from vbl_robust.perturb import Perturbation, PixelScale, ViewSampler, resize_image
-from vbl_robust.pnp import SOLVERS, pnp_position_torch, solve
+from vbl_robust.pnp import SOLVERS, pnp_position_torch, position_sigma, solve
 from vbl_robust.search.evaluations import Evaluations
 from vbl_robust.space import ParameterBox
 
@@ -71,6 +71,10 @@ class EvalRecord:
         detail: ``N`` free-text details (PnP's reason, the image error), ``""`` when none.
         penalty_m: the penalty used.
         loss_t: the differentiable path only: ``loss`` as a ``(N,)`` float64 tensor attached to θ (else None).
+        keypoint_sigma: ``(N, 4, 2)`` the selected corners' σ in the sample's pixels, from a detector with an
+            uncertainty head (NaN elsewhere); None when the detector gives none.
+        position_sigma_m: ``(N,)`` those σ propagated through PnP to the position, metres
+            (:func:`~vbl_robust.pnp.position_sigma`; NaN where no pose); None when the detector gives no σ.
     """
 
     sample_id: str
@@ -86,6 +90,8 @@ class EvalRecord:
     detail: tuple[str, ...]
     penalty_m: float = PENALTY_M
     loss_t: torch.Tensor | None = None
+    keypoint_sigma: np.ndarray | None = None
+    position_sigma_m: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.loss.shape[0])
@@ -109,6 +115,8 @@ class EvalRecord:
                        reproj_error_px=float(self.reproj_error_px[i]), reason=self.reason[i],
                        detail=self.detail[i])
             row.update({f"position_{a}": float(v) for a, v in zip("xyz", self.position[i], strict=True)})
+            if self.position_sigma_m is not None:
+                row["position_sigma_m"] = float(self.position_sigma_m[i])
             rows.append(row)
         return rows
 
@@ -125,10 +133,18 @@ class EvalRecord:
         grad = [r.loss_t for r in records if r.loss_t is not None]
         if grad and len(grad) != len(records):
             raise ValueError("EvalRecord.concat: records of both modes (some differentiable, some not)")
+
+        def cat_sigma(attr, shape):
+            if all(getattr(r, attr) is None for r in records):
+                return None
+            return np.concatenate([np.full((len(r), *shape), np.nan) if getattr(r, attr) is None else getattr(r, attr)
+                                   for r in records])
+
         return EvalRecord(
             r0.sample_id, r0.names, cat("theta"), cat("loss"), cat("error_m"), cat("position"), cat("conf"),
             cat("keypoints"), cat("reproj_error_px"), sum((r.reason for r in records), ()),
             sum((r.detail for r in records), ()), r0.penalty_m, torch.cat(grad) if grad else None,
+            cat_sigma("keypoint_sigma", (4, 2)), cat_sigma("position_sigma_m", ()),
         )
 
 
@@ -173,6 +189,9 @@ class Objective:
             θ, the losses and the black-box PnP stay on the CPU.
         max_reproj_px: a runtime monitor: a pose whose PnP reprojection residual (RMS, the sample's pixels) is above
             it is a flagged failure (``"monitor_rejected"``) instead of a pose; None: no monitor.
+        max_sigma_m: a runtime monitor of a detector that says how sure it is (corner σ, a YOLO26-pose network): a
+            pose whose corners' σ propagated through PnP (:attr:`EvalRecord.position_sigma_m`, metres) is above it
+            is a flagged failure (``"monitor_rejected"``); None: no monitor. Black-box path only.
 
     Raises:
         ValueError: a user mistake (unknown parameter name, unknown PnP solver, bad threshold/penalty/batch size,
@@ -199,6 +218,7 @@ class Objective:
         pnp_grad: str = "exact",
         device: str | None = None,
         max_reproj_px: float | None = None,
+        max_sigma_m: float | None = None,
     ):
         if not isinstance(box, ParameterBox):
             raise ValueError(f"Objective: box must be a vbl_robust.ParameterBox, got {type(box).__name__}")
@@ -214,6 +234,8 @@ class Objective:
             raise ValueError(f"Objective: penalty_m must be finite and >= 0, got {penalty_m}")
         if max_reproj_px is not None and not (np.isfinite(max_reproj_px) and max_reproj_px > 0):
             raise ValueError(f"Objective: max_reproj_px must be a finite number > 0, got {max_reproj_px}")
+        if max_sigma_m is not None and not (np.isfinite(max_sigma_m) and max_sigma_m > 0):
+            raise ValueError(f"Objective: max_sigma_m must be a finite number > 0, got {max_sigma_m}")
         if isinstance(batch_size, bool) or not isinstance(batch_size, int | np.integer) or batch_size < 1:
             raise ValueError(f"Objective: batch_size must be an int >= 1, got {batch_size!r}")
         if resolution not in ("auto", "full") and not (isinstance(resolution, int | np.integer) and resolution >= 8):
@@ -226,6 +248,7 @@ class Objective:
         self.conf_threshold = float(conf_threshold)
         self.penalty_m = float(penalty_m)
         self.max_reproj_px = None if max_reproj_px is None else float(max_reproj_px)
+        self.max_sigma_m = None if max_sigma_m is None else float(max_sigma_m)
         self.batch_size = int(batch_size)
         self.resolution = resolution
         self.pnp_grad = pnp_grad
@@ -340,6 +363,9 @@ class Objective:
                                                                                       None)):
             raise ValueError(f"Objective: detector {self.detector!r} is not differentiable (no detect_top); it "
                              "supports only the black-box path (a NumPy theta)")
+        if self.max_sigma_m is not None:
+            raise ValueError("Objective: the σ monitor (max_sigma_m) reads the black-box path; a gradient search "
+                             "(a torch theta) cannot run under it")
 
     # -- the two steps of a chunk ----------------------------------------------------------------------------------
     def select_at(self, theta) -> Selection:
@@ -365,7 +391,8 @@ class Objective:
         if len(dets) != n:
             raise ValueError(f"Objective: detector {self.detector!r} returned {len(dets)} results for {n} images")
         sel = select(dets, self.conf_threshold)
-        return dataclasses.replace(sel, keypoints=self._scale.to_original(sel.keypoints))
+        sigma = sel.sigma / np.array([self._scale.sx, self._scale.sy]) if sel.sigma is not None else None
+        return dataclasses.replace(sel, keypoints=self._scale.to_original(sel.keypoints), sigma=sigma)
 
     def locate(self, theta, sel: Selection) -> EvalRecord:
         """Step 2: PnP on the selected keypoints and the position error of θ rows ``(B, d)`` → :class:`EvalRecord`
@@ -393,6 +420,15 @@ class Objective:
         err = np.linalg.norm(position[rows] - y, axis=1)
         if self.max_reproj_px is not None and rows.size and grad:  # the monitor reads the residual of the forward
             reproj[rows] = solve(kp[rows], self.sample.corners_3d, self.sample.K, method=self.pnp).reproj_error_px
+        kp_sigma = pos_sigma = None
+        if sel.sigma is not None and np.isfinite(sel.sigma).any():  # the detector says how sure it is
+            kp_sigma, pos_sigma = sel.sigma, np.full(n, np.nan)
+            if rows.size:
+                pos_sigma[rows] = position_sigma(kp[rows], kp_sigma[rows], self.sample.corners_3d, self.sample.K,
+                                                 method=self.pnp)
+        elif self.max_sigma_m is not None and rows.size:
+            raise ValueError(f"Objective: the σ monitor (max_sigma_m) needs a detector that gives its corners' σ "
+                             f"(a YOLO26-pose network); {self.detector!r} gives none")
         for j, i in enumerate(rows):
             if not success[j]:
                 reason[i] = "pnp_failed"
@@ -400,6 +436,8 @@ class Objective:
                 reason[i] = "non_finite_position"
             elif self.max_reproj_px is not None and not reproj[i] <= self.max_reproj_px:
                 reason[i] = "monitor_rejected"  # the monitor flags the pose: the system knows it has no fix
+            elif self.max_sigma_m is not None and not pos_sigma[i] <= self.max_sigma_m:
+                reason[i] = "monitor_rejected"
             else:
                 error[i] = err[j]
         failed = np.array([r != "" for r in reason])
@@ -414,7 +452,8 @@ class Objective:
                 err_t = torch.linalg.vector_norm(pos_t[good].to(theta.device) - yt, dim=1)
                 loss_t = loss_t.index_put((torch.as_tensor(rows[good], device=theta.device),), err_t)
         return EvalRecord(str(self.sample.id), self.names, theta_np, np.where(failed, self.penalty_m, error), error,
-                          position, conf, kp, reproj, tuple(reason), tuple(detail), self.penalty_m, loss_t)
+                          position, conf, kp, reproj, tuple(reason), tuple(detail), self.penalty_m, loss_t,
+                          kp_sigma, pos_sigma)
 
     def _all_failed(self, t, reason: str, detail: str) -> EvalRecord:
         n = t.shape[0]

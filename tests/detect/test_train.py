@@ -302,7 +302,9 @@ def test_a_first_stage_can_be_yolo26_pose_and_runs_in_the_pipeline(tmp_path):
     r = train(tmp_path / "run", samples=samples, n_val=2, imgsz=64, epochs=1, batch=4, workers=0, seed=0,
               architecture="yolo26n-pose")
     det = UltralyticsDetector(r.best, trust=True, imgsz=64)
-    head = det.model.model[-1]
-    assert type(head).__name__ == "Pose26" and list(head.kpt_shape) == [4, 3]
+    head = det.model.head  # the σ head is kept (detect.ultralytics.PoseWithSigma)
+    assert type(head).__name__ == "Pose26" and list(head.kpt_shape) == [4, 3] and det.sigma
     rec = Objective(samples[0], det, ParameterBox({"roll_deg": (-5.0, 5.0)})).evaluate(np.array([[0.0], [2.0]]))
     assert np.asarray(rec.keypoints).shape == (2, 4, 2) and len(rec.reason) == 2
+    dets = det.detect(Objective(samples[0], det, ParameterBox({"roll_deg": (-5.0, 5.0)})).context(np.zeros((1, 1))))
+    assert dets[0].keypoint_sigma is not None and (dets[0].keypoint_sigma > 0).all()

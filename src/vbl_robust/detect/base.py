@@ -79,6 +79,8 @@ class Detections:
         conf: ``(M,)`` confidences in ``[0, 1]``.
         keypoints: ``(M, 4, 2)`` corners TR, TL, BL, BR, same pixels as ``boxes``.
         keypoint_conf: optional ``(M, 4)`` per-keypoint visibility/confidence.
+        keypoint_sigma: optional ``(M, 4, 2)`` per-corner uncertainty σ_u, σ_v (same pixels as ``keypoints``), from a
+            network with an uncertainty head (YOLO26-pose); None: the detector does not say how sure it is.
         reason: for an image without candidates, why (a code of :data:`vbl_robust.constants.FAILURE_REASONS`,
             e.g. ``"out_of_view"``); ``""`` = :func:`select` reports ``"no_detection"``.
     """
@@ -87,6 +89,7 @@ class Detections:
     conf: np.ndarray
     keypoints: np.ndarray
     keypoint_conf: np.ndarray | None = None
+    keypoint_sigma: np.ndarray | None = None
     reason: str = ""
 
     def __post_init__(self) -> None:
@@ -95,6 +98,8 @@ class Detections:
         fields = [("boxes", (m, 4)), ("keypoints", (m, 4, 2))]
         if self.keypoint_conf is not None:
             fields.append(("keypoint_conf", (m, 4)))
+        if self.keypoint_sigma is not None:
+            fields.append(("keypoint_sigma", (m, 4, 2)))
         for name, shape in fields:
             value = _np(getattr(self, name))
             if value.size != int(np.prod(shape)):
@@ -290,6 +295,8 @@ class Selection:
             ``"low_confidence"``.
         keypoints_t: the differentiable path (``detect_top``): ``keypoints`` as a float64 tensor attached to θ;
             None otherwise.
+        sigma: ``(B, 4, 2)`` the selected candidate's corner σ (:attr:`Detections.keypoint_sigma`); NaN where the
+            detector gave none or nothing was selected; None on the differentiable path.
     """
 
     keypoints: np.ndarray
@@ -297,6 +304,7 @@ class Selection:
     ok: np.ndarray
     reason: tuple[str, ...]
     keypoints_t: Any = None
+    sigma: np.ndarray | None = None
 
 
 def select(detections: Sequence[Detections] | Detections, conf_threshold: float = CONF_THRESHOLD) -> Selection:
@@ -315,6 +323,7 @@ def select(detections: Sequence[Detections] | Detections, conf_threshold: float 
         detections = [detections]
     b = len(detections)
     kp = np.full((b, 4, 2), np.nan)
+    sigma = np.full((b, 4, 2), np.nan)
     conf = np.full(b, np.nan)
     ok = np.zeros(b, dtype=bool)
     reason = []
@@ -330,6 +339,8 @@ def select(detections: Sequence[Detections] | Detections, conf_threshold: float 
             reason.append("low_confidence")
             continue
         kp[i] = _np(d.keypoints)[m]
+        if getattr(d, "keypoint_sigma", None) is not None:
+            sigma[i] = _np(d.keypoint_sigma)[m]
         ok[i] = True
         reason.append("")
-    return Selection(kp, conf, ok, tuple(reason))
+    return Selection(kp, conf, ok, tuple(reason), sigma=sigma)

@@ -2,7 +2,10 @@
 
 The ONNX graph is an ultralytics pose export (``dynamic=True``): input ``images`` (B, 3, S, S) float RGB in
 [0, 1], output (B, 4 + nc + K·3, A), the same layout as the ``.pt`` raw predictions, so all pre- and
-post-processing is shared with :class:`~vbl_robust.detect.pose.PoseDetector`. ONNX Runtime does not give
+post-processing is shared with :class:`~vbl_robust.detect.pose.PoseDetector`. A model with a keypoint-uncertainty
+head (YOLO26-pose) is exported with its σ channels appended (B, 4 + nc + K·3 + K·2, A): ultralytics' exporter
+drops that head, so :func:`export_onnx` traces :class:`~vbl_robust.detect.ultralytics.PoseWithSigma` itself
+(``torch.onnx.export``) and writes the same metadata. ONNX Runtime does not give
 gradients: :meth:`OnnxDetector.top` works as a (non-differentiable) black box.
 """
 
@@ -10,8 +13,10 @@ from __future__ import annotations
 
 import ast
 import logging
+import os
 import shutil
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +24,7 @@ import torch
 
 from .offline import import_ultralytics
 from .pose import PoseDetector
-from .ultralytics import load_pose_model
+from .ultralytics import PoseWithSigma, has_sigma_head, load_pose_model
 
 logger = logging.getLogger(__name__)
 
@@ -29,13 +34,15 @@ def export_onnx(pt_path: str | Path, out_path: str | Path, *, trust: bool = Fals
 
     ``trust`` as for :class:`~vbl_robust.detect.ultralytics.UltralyticsDetector` (the ``.pt`` is unpickled).
     """
-    _, ckpt = load_pose_model(pt_path, trust=trust)  # checks trust, pose head, 4 keypoints
+    model, ckpt = load_pose_model(pt_path, trust=trust)  # checks trust, pose head, 4 keypoints
     import_ultralytics()
     from ultralytics import YOLO
 
     size = imgsz or (ckpt.get("train_args") or {}).get("imgsz", 640)
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
+    if has_sigma_head(model):
+        return _export_with_sigma(model, out_path, int(size))
     # ultralytics writes next to the .pt: export from a copy in a directory of this call's own, so the source
     # directory is untouched and two exports at once never share a file; the result is moved in whole (atomic)
     work = Path(tempfile.mkdtemp(prefix=f".{out_path.stem}_", dir=out_path.parent))
@@ -47,6 +54,33 @@ def export_onnx(pt_path: str | Path, out_path: str | Path, *, trust: bool = Fals
         Path(f).replace(out_path)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+    return out_path
+
+
+def _export_with_sigma(model: torch.nn.Module, out_path: Path, size: int) -> Path:
+    """Trace a YOLO26-pose model with its σ channels (:class:`PoseWithSigma`) to ONNX (dynamic batch, opset 17)
+    with ultralytics' metadata keys; written beside ``out_path`` and moved in whole."""
+    import onnx
+
+    names, kpt_shape = dict(model.names), list(model.model[-1].kpt_shape)
+    net = PoseWithSigma(model).eval()
+    fd, tmp = tempfile.mkstemp(prefix=f".{out_path.stem}_", suffix=".onnx", dir=out_path.parent)
+    try:
+        os.close(fd)
+        with torch.no_grad(), warnings.catch_warnings():  # the anchors of the fixed input size are constants: fine
+            warnings.simplefilter("ignore", torch.jit.TracerWarning)
+            torch.onnx.export(net, (torch.zeros(1, 3, size, size),), tmp, input_names=["images"],
+                              output_names=["output0"], dynamic_axes={"images": {0: "batch"}, "output0": {0: "batch"}},
+                              opset_version=17, dynamo=False)
+        graph = onnx.load(tmp)
+        meta = {"task": "pose", "imgsz": str([size, size]), "names": str(names), "kpt_shape": str(kpt_shape),
+                "stride": str(int(max(net.stride))), "batch": "1", "keypoint_sigma": "xy view pixels, after the keypoints"}
+        for key, value in meta.items():
+            graph.metadata_props.add(key=key, value=value)
+        onnx.save(graph, tmp)
+        Path(tmp).replace(out_path)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
     return out_path
 
 

@@ -2,7 +2,9 @@
 
 A :class:`PoseDetector` wraps a network that maps views ``(B, 3, S, S)`` in [0, 1] to raw predictions
 ``y (B, 4 + nc + K·3, A)`` (ultralytics' layout, before NMS; subclasses implement :meth:`PoseDetector.raw`:
-``.pt`` in :mod:`.ultralytics`, ONNX in :mod:`.onnx`). As a detector it is the paper's single pass: it asks the
+``.pt`` in :mod:`.ultralytics`, ONNX in :mod:`.onnx`). A network with a keypoint-uncertainty head (YOLO26-pose)
+appends ``K·2`` channels: each corner's σ_x, σ_y in view pixels (:func:`split_sigma`); the layout tells, so every
+engine of such a network carries them. As a detector it is the paper's single pass: it asks the
 context for the letterboxed view of each perturbed image and reads the candidates back in source pixels
 (OpenCV convention), keypoints TR, TL, BL, BR.
 
@@ -23,16 +25,18 @@ from vbl_robust.perturb.views import view_to_image
 from .base import DetectContext, Detections, as_context
 from .windows import letterbox_window
 
-__all__ = ["PoseDetector", "Top", "split_raw"]
+__all__ = ["PoseDetector", "Top", "split_raw", "split_sigma"]
 
 
 @dataclass
 class Top:
-    """Max-confidence candidate per image (differentiable): conf (B,), keypoints (B, 4, 2), boxes (B, 4)."""
+    """Max-confidence candidate per image (differentiable): conf (B,), keypoints (B, 4, 2), boxes (B, 4), and the
+    keypoints' σ (B, 4, 2) in the same pixels when the network has an uncertainty head (else None)."""
 
     conf: torch.Tensor
     keypoints: torch.Tensor
     boxes: torch.Tensor
+    sigma: torch.Tensor | None = None
 
 
 def split_raw(y: torch.Tensor, nc: int, nk: int = 4, kdim: int = 3) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -44,8 +48,30 @@ def split_raw(y: torch.Tensor, nc: int, nk: int = 4, kdim: int = 3) -> tuple[tor
     xy, wh = y[..., :2], y[..., 2:4]
     boxes = torch.cat([xy - wh / 2, xy + wh / 2], -1)
     conf = y[..., 4:4 + nc].amax(-1) if nc > 1 else y[..., 4]
-    k = y[..., 4 + nc:].reshape(*y.shape[:2], nk, kdim)[..., :2]
+    k = y[..., 4 + nc:4 + nc + nk * kdim].reshape(*y.shape[:2], nk, kdim)[..., :2]
     return boxes, conf, k
+
+
+def split_sigma(y: torch.Tensor, nc: int, nk: int = 4, kdim: int = 3) -> torch.Tensor | None:
+    """Raw predictions → the keypoints' σ ``(B, A, nk, 2)`` in view pixels, or None when the layout has no σ
+    channels (``4 + nc + nk·kdim`` channels: a network without an uncertainty head).
+
+    Raises:
+        ValueError: a channel count that is neither layout.
+    """
+    base = 4 + nc + nk * kdim
+    if y.shape[1] == base:
+        return None
+    if y.shape[1] != base + 2 * nk:
+        raise ValueError(f"raw pose predictions have {y.shape[1]} channels; expected {base} (keypoints) or "
+                         f"{base + 2 * nk} (keypoints and their σ) for {nc} class(es) and {nk} keypoints")
+    return y[:, base:].transpose(1, 2).reshape(y.shape[0], y.shape[2], nk, 2)
+
+
+def sigma_to_image(sigma: torch.Tensor, windows: torch.Tensor, size: int) -> torch.Tensor:
+    """σ in view pixels (B, ..., 2) → image pixels: scaled by the window's side over the view's (no shift)."""
+    side = torch.as_tensor(windows, dtype=sigma.dtype, device=sigma.device)[:, 2]
+    return sigma * (side / size).reshape(-1, *([1] * (sigma.ndim - 1)))
 
 
 class PoseDetector:
@@ -78,12 +104,15 @@ class PoseDetector:
 
     def candidates_in_views(self, views: torch.Tensor, win: torch.Tensor):
         """All anchors of views sampled at windows ``win`` (B, 3): boxes (B, A, 4), conf (B, A), keypoints
-        (B, A, 4, 2), in source pixels (OpenCV)."""
-        boxes, conf, k = split_raw(self.raw_chunked(views), self.nc)
+        (B, A, 4, 2), in source pixels (OpenCV), and the keypoints' σ (B, A, 4, 2) in source pixels (None for a
+        network without an uncertainty head)."""
+        y = self.raw_chunked(views)
+        boxes, conf, k = split_raw(y, self.nc)
         b, a = conf.shape
         kp = view_to_image(k.reshape(b, a * 4, 2), win, self.imgsz).reshape(b, a, 4, 2)
         bx = view_to_image(boxes.reshape(b, a * 2, 2), win, self.imgsz).reshape(b, a, 4)
-        return bx, conf, kp
+        sig = split_sigma(y, self.nc)
+        return bx, conf, kp, (None if sig is None else sigma_to_image(sig, win, self.imgsz))
 
     def letterbox(self, context: DetectContext) -> tuple[torch.Tensor, torch.Tensor]:
         """``(views, windows)`` of the letterboxed perturbed images at ``imgsz``."""
@@ -92,8 +121,8 @@ class PoseDetector:
         win = win.expand(len(context), 3)
         return context.views(win, self.imgsz), win
 
-    def candidates(self, context) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """All anchors on the letterboxed images of a context (or of plain images)."""
+    def candidates(self, context) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """All anchors on the letterboxed images of a context (or of plain images): :meth:`candidates_in_views`."""
         return self.candidates_in_views(*self.letterbox(as_context(context)))
 
     def top(self, context) -> Top:
@@ -101,13 +130,14 @@ class PoseDetector:
         return self.top_of(*self.candidates(context))
 
     @staticmethod
-    def top_of(boxes: torch.Tensor, conf: torch.Tensor, kp: torch.Tensor) -> Top:
+    def top_of(boxes: torch.Tensor, conf: torch.Tensor, kp: torch.Tensor, sigma: torch.Tensor | None = None) -> Top:
         """The max-confidence anchor of candidates (``gather``, differentiable)."""
         i = conf.argmax(dim=1)
         c = conf.gather(1, i[:, None])[:, 0]
         k = kp.gather(1, i[:, None, None, None].expand(-1, 1, 4, 2))[:, 0]
         bx = boxes.gather(1, i[:, None, None].expand(-1, 1, 4))[:, 0]
-        return Top(c, k, bx)
+        sig = None if sigma is None else sigma.gather(1, i[:, None, None, None].expand(-1, 1, 4, 2))[:, 0]
+        return Top(c, k, bx, sig)
 
     def detect_top(self, context) -> tuple[torch.Tensor, torch.Tensor]:
         """Protocol form of :meth:`top`: ``(conf (B,), keypoints (B, 4, 2))``, differentiable."""
@@ -119,12 +149,13 @@ class PoseDetector:
         """Black-box path: candidates after NMS per image, highest confidence first."""
         import torchvision
 
-        boxes, conf, kp = self.candidates(context)
+        boxes, conf, kp, sig = self.candidates(context)
         out = []
         for b in range(conf.shape[0]):
             keep = torch.nonzero(conf[b] >= self.conf_min)[:, 0]
             if keep.numel() == 0:  # the global maximum is always a candidate (selection applies the threshold)
                 keep = conf[b].argmax()[None]
             sel = keep[torchvision.ops.nms(boxes[b, keep], conf[b, keep], self.iou)][:self.max_det]
-            out.append(Detections(boxes[b, sel], conf[b, sel], kp[b, sel]))
+            out.append(Detections(boxes[b, sel], conf[b, sel], kp[b, sel],
+                                  keypoint_sigma=None if sig is None else sig[b, sel]))
         return out

@@ -20,7 +20,7 @@ import torch
 from vbl_robust.perturb.views import view_to_image
 
 from .base import Detections, as_context
-from .pose import PoseDetector, Top, split_raw
+from .pose import PoseDetector, Top, sigma_to_image, split_raw, split_sigma
 from .windows import box_window, corner_box
 
 __all__ = ["TwoStageDetector"]
@@ -71,17 +71,20 @@ class TwoStageDetector:
                           max_side=2.0 * max(height, width))
 
     def top(self, context) -> Top:
-        """Differentiable: pass-1 max-confidence conf and box, pass-2 keypoints (source px, OpenCV)."""
+        """Differentiable: pass-1 max-confidence conf and box, pass-2 keypoints (source px, OpenCV) and, when the
+        pass-2 network has an uncertainty head, their σ (source px)."""
         ctx = as_context(context)
         t1 = self.first.top(ctx)
-        kp, s2 = t1.keypoints, self.second
+        kp, s2, sigma = t1.keypoints, self.second, None
         for _ in range(self.refine):
             win = self.crop_windows(kp, ctx.height, ctx.width)
-            _, conf2, k2 = split_raw(s2.raw_chunked(ctx.views(win, s2.imgsz)), s2.nc)
-            i = conf2.argmax(1)
-            k = k2.gather(1, i[:, None, None, None].expand(-1, 1, 4, 2))[:, 0]
-            kp = view_to_image(k, win, s2.imgsz)
-        return Top(t1.conf, kp, t1.boxes)
+            y = s2.raw_chunked(ctx.views(win, s2.imgsz))
+            _, conf2, k2 = split_raw(y, s2.nc)
+            i = conf2.argmax(1)[:, None, None, None].expand(-1, 1, 4, 2)
+            kp = view_to_image(k2.gather(1, i)[:, 0], win, s2.imgsz)
+            sig = split_sigma(y, s2.nc)
+            sigma = None if sig is None else sigma_to_image(sig.gather(1, i)[:, 0], win, s2.imgsz)
+        return Top(t1.conf, kp, t1.boxes, sigma)
 
     def detect_top(self, context) -> tuple[torch.Tensor, torch.Tensor]:
         """Protocol form of :meth:`top`: ``(conf (B,), keypoints (B, 4, 2))``, differentiable."""
@@ -92,5 +95,7 @@ class TwoStageDetector:
     def detect(self, context) -> list[Detections]:
         """Black box: one candidate per image (the refined max-confidence one)."""
         t = self.top(context)
-        return [Detections(t.boxes[b:b + 1], t.conf[b:b + 1], t.keypoints[b:b + 1]) for b in range(t.conf.shape[0])]
+        return [Detections(t.boxes[b:b + 1], t.conf[b:b + 1], t.keypoints[b:b + 1],
+                           keypoint_sigma=None if t.sigma is None else t.sigma[b:b + 1])
+                for b in range(t.conf.shape[0])]
 

@@ -1,4 +1,5 @@
-"""YOLOv8/YOLO11-pose runway-corner detectors from ultralytics ``.pt`` checkpoints.
+"""YOLOv8/YOLO11/YOLO26-pose runway-corner detectors from ultralytics ``.pt`` checkpoints (a YOLO26-pose model's
+keypoint σ is carried: :class:`PoseWithSigma`).
 
 :func:`load_pose_model` loads and checks a checkpoint (a pickle: only trusted files, see *trust*);
 :class:`UltralyticsDetector` runs it as a :class:`~vbl_robust.detect.pose.PoseDetector` (letterboxed views,
@@ -76,6 +77,48 @@ def load_pose_model(path: str | Path, *, trust: bool = False) -> tuple[torch.nn.
     return model, ckpt if isinstance(ckpt, dict) else {}
 
 
+def has_sigma_head(model: torch.nn.Module) -> bool:
+    """Whether an (unfused) ultralytics pose model has a keypoint-uncertainty head (YOLO26-pose's ``cv4_sigma``)."""
+    return getattr(model.model[-1], "cv4_sigma", None) is not None
+
+
+class PoseWithSigma(torch.nn.Module):
+    """A YOLO26-pose model whose raw output also carries each anchor's keypoint σ: ``(B, 4 + nc + 12 + 8, A)``,
+    the 8 channels σ_x, σ_y per corner in view pixels (:func:`~vbl_robust.detect.pose.split_sigma`).
+
+    Ultralytics computes the σ head only in training (its ``fuse`` drops it): this module keeps the head's 1×1 σ
+    convolutions, reads the keypoint branch's features with forward hooks on ``cv4`` and applies them, as the
+    training loss does: ``σ = sigmoid(raw) · stride`` (the loss works in grid units, ``σ`` in pixels here). The
+    keypoints themselves are ultralytics' unchanged. Written by hand: ultralytics exposes no σ at inference.
+    """
+
+    def __init__(self, model: torch.nn.Module) -> None:
+        super().__init__()
+        head = model.model[-1]
+        if not has_sigma_head(model):
+            raise ValueError(f"{type(head).__name__}: the model has no keypoint-uncertainty head (cv4_sigma)")
+        self.sigma_convs = head.cv4_sigma  # kept before fuse() drops it from the head
+        self.model = model.fuse() if hasattr(model, "fuse") else model
+        self.head = self.model.model[-1]
+        self._features: list[torch.Tensor] = []
+        for branch in self.head.cv4:
+            branch.register_forward_hook(lambda _m, _i, out: self._features.append(out))
+
+    @property
+    def stride(self) -> torch.Tensor:
+        return self.model.stride
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        self._features.clear()
+        out = self.model(x)
+        y = out[0] if isinstance(out, (tuple, list)) else out
+        feats, n = self._features[-self.head.nl:], x.shape[0]
+        raw = torch.cat([conv(f).view(n, conv.out_channels, -1) for conv, f in zip(self.sigma_convs, feats,
+                                                                                   strict=True)], 2)
+        self._features.clear()
+        return torch.cat([y, raw.sigmoid() * self.head.strides.to(raw.dtype)], 1)
+
+
 class UltralyticsDetector(PoseDetector):
     """A YOLO-pose ``.pt`` checkpoint as a runway-corner detector (single pass).
 
@@ -94,9 +137,14 @@ class UltralyticsDetector(PoseDetector):
         device = resolve_device(device)
         self.path = Path(path)
         model, ckpt = load_pose_model(self.path, trust=trust)
-        self.model = model.fuse().to(device) if hasattr(model, "fuse") else model.to(device)
+        #: whether the raw output carries the corners' σ (a YOLO26-pose uncertainty head)
+        self.sigma = has_sigma_head(model)
+        if self.sigma:
+            self.model = PoseWithSigma(model).to(device)
+        else:
+            self.model = model.fuse().to(device) if hasattr(model, "fuse") else model.to(device)
         self.nc = len(getattr(model, "names", {0: "runway"})) or 1
-        stride = int(max(getattr(model, "stride", torch.tensor([32.0]))))
+        stride = int(max(getattr(self.model, "stride", torch.tensor([32.0]))))
         train_imgsz = (ckpt.get("train_args") or {}).get("imgsz", 640)
         self.imgsz = int(imgsz or (train_imgsz if isinstance(train_imgsz, int) else max(train_imgsz)))
         if self.imgsz % stride:
@@ -115,4 +163,4 @@ class UltralyticsDetector(PoseDetector):
         return f"UltralyticsDetector({str(self.path)!r}, imgsz={self.imgsz})"
 
 
-__all__ = ["UltralyticsDetector", "load_pose_model"]
+__all__ = ["PoseWithSigma", "UltralyticsDetector", "has_sigma_head", "load_pose_model"]

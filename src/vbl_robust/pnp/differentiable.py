@@ -239,6 +239,33 @@ def position_jacobian_fd(
     return out
 
 
+def position_sigma(points_2d: np.ndarray, sigma_2d: np.ndarray, corners_3d: Any, K: Any,
+                   method: str = "ippe_lm") -> np.ndarray:
+    """The corners' uncertainty propagated through PnP to the camera position, metres: ``(B,)``.
+
+    First order: with ``J`` the exact implicit Jacobian d(position)/d(corners) (3, 8) of the converged solve (the
+    layer's backward, :func:`pnp_position_torch`) and independent corner coordinates of standard deviations ``σ``,
+    the position's covariance is ``J diag(σ²) Jᵀ`` and the value returned is the square root of its trace (the
+    RMS position error it predicts). ``points_2d`` (B, 4, 2) and ``sigma_2d`` (B, 4, 2) are in the pixels of
+    ``K``; NaN where the solve failed or a σ is not finite.
+    """
+    x = torch.as_tensor(np.asarray(points_2d, dtype=np.float64).reshape(-1, 4, 2)).requires_grad_(True)
+    sig = np.asarray(sigma_2d, dtype=np.float64).reshape(-1, 4, 2)
+    out = np.full(x.shape[0], np.nan)
+    if x.shape[0] == 0:
+        return out
+    pos, ok = pnp_position_torch(x, corners_3d, K, method=method)
+    jac = []
+    for c in range(3):  # rows are independent: the gradient of a column's sum is each row's Jacobian row
+        (g,) = torch.autograd.grad(pos[:, c].nan_to_num().sum(), x, retain_graph=c < 2)
+        jac.append(g.numpy().reshape(-1, 8))
+    J = np.stack(jac, 1)  # (B, 3, 8)
+    var = np.einsum("bck,bk->b", J ** 2, sig.reshape(-1, 8) ** 2)
+    good = ok.numpy() & np.isfinite(sig).all(axis=(1, 2))
+    out[good] = np.sqrt(var[good])
+    return out
+
+
 class PnPPosition(torch.nn.Module):
     """Module form of :func:`pnp_position_torch` with fixed corners, intrinsics, solver and gradient mode."""
 
