@@ -1,6 +1,7 @@
-"""Runtime monitors: how many hazardously misleading poses a reprojection-residual monitor flags, and how many
-nominal poses it rejects (``audit --monitor-residual PX``).
+"""Runtime monitors: how many hazardously misleading poses a monitor flags, and how many nominal poses it rejects
+(``audit --monitor-residual PX``, ``audit --monitor-sigma M``).
 
+**Reprojection residual** (any detector; here the shipped v9):
 Misleading poses: every job of the paper run's spatial-2d experiment (roll × contrast, six boxes, 100 images, four
 methods; shipped detector v9) whose search found a confident pose off by more than ε_safe — its worst such θ,
 evaluated again (one per image and θ). Nominal poses: the unperturbed view of 300 synthetic approaches of seed 0
@@ -9,7 +10,18 @@ pixels) and the selected candidate's confidence. Measured: per residual limit, t
 monitor flags and of nominal poses it rejects (exact 95 % intervals), and the AUROC of the residual (and of the
 confidence) for "this pose is off by more than ε_safe".
 
-Usage: ``python benchmarks/run_all.py --only monitors`` (≈ 2 min on one core).
+**Corner σ** (a detector that says how sure it is: the YOLO26-pose pass-2 network of issue 49, behind v9's pass 1;
+``SIGMA_MODEL``): each confident pose's corners' σ propagated through PnP to the position (metres,
+:func:`vbl_robust.pnp.position_sigma`). The limit is chosen on validation only — the 98th percentile of the σ of
+the nominal poses (unperturbed, within ε_safe) of protocol seed 20261202 (510 approaches; aimed at rejecting ≤ 2 %)
+— and then applied to the test views: the audit's images (``generate(100, seed=0)``, the paper run's) on a grid of
+roll ±15° × contrast [0.5, 2] (7 × 5 views each, the unperturbed view among them). Measured there: the share of
+misleading poses (confident, off by more than ε_safe) flagged and of nominal poses rejected (exact intervals), and
+the AUROC for "this pose is off by more than ε_safe" of σ, of the residual and of the confidence over every
+confident pose of the grid (bootstrap 95 % intervals over images). The same grid through v9 alone gives its
+misleading count, paired per view (exact McNemar) against the candidate's with and without the monitor.
+
+Usage: ``python benchmarks/run_all.py --only monitors`` (≈ 2 min on one core for the residual, ≈ 15 min for σ).
 """
 
 from __future__ import annotations
@@ -26,6 +38,11 @@ PAPER = ROOT / "results" / "paper" / "spatial-2d" / "results.sqlite.xz"
 WORK = ROOT / "runs" / "bench_monitors"
 LIMITS_PX = (0.5, 1.0, 2.0, 3.0, 5.0, 10.0)
 NOMINAL = 300
+#: the σ monitor's network (issue 49: step u's checkpoint chosen on validation; see results/detector_candidates)
+SIGMA_MODEL = ROOT / "results" / "detector_candidates" / "yolo26n_pass2_u.pt"
+SIGMA_VALIDATION_SEED = 20261202
+GRID = (np.linspace(-15.0, 15.0, 7), np.array([0.5, 0.7, 1.0, 1.4, 2.0]))
+NOMINAL_QUANTILE = 0.98
 
 
 def misleading_points(limit: int | None) -> list[tuple[str, object, np.ndarray]]:
@@ -112,8 +129,117 @@ def table(m: dict) -> str:
     return "\n".join(lines)
 
 
+def grid_records(det, samples, settings) -> list:
+    """Every view of ``GRID`` (roll × contrast) of each sample through ``det``: one EvalRecord per sample."""
+    from vbl_robust.campaigns.work import build_objective
+    from vbl_robust.space import ParameterBox
+
+    box = ParameterBox({"roll_deg": (-15.0, 15.0), "contrast": (0.5, 2.0)})
+    theta = np.array([(r, c) for r in GRID[0] for c in GRID[1]])
+    out = []
+    for s in samples:
+        out.append(build_objective(s, det, box, settings).evaluate(theta))
+        s.drop_pixels()
+    return out
+
+
+def sigma_measure(quick: bool, model: Path = SIGMA_MODEL) -> dict:
+    import torch
+
+    torch.set_num_threads(1)
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_detector import held_out
+    from vbl_robust.campaigns.work import Settings, build_objective
+    from vbl_robust.detect.shipped import default_detector
+    from vbl_robust.detect.twostage import TwoStageDetector
+    from vbl_robust.detect.ultralytics import UltralyticsDetector
+    from vbl_robust.scenes import generate
+    from vbl_robust.space import ParameterBox
+
+    settings = Settings(1000.0, 5000.0, 0.25, "ippe_lm")
+    v9 = default_detector()
+    cand = TwoStageDetector(v9.first, UltralyticsDetector(model, trust=True, imgsz=320))
+    ident = ParameterBox({"roll_deg": (-1.0, 1.0)})
+    val = []  # σ of the nominal poses of the validation seed: the limit
+    for s in held_out(12 if quick else 510, SIGMA_VALIDATION_SEED):
+        rec = build_objective(s, cand, ident, settings).evaluate(np.zeros((1, 1)))
+        if rec.reason[0] == "" and rec.error_m[0] <= settings.eps_safe_m:
+            val.append(float(rec.position_sigma_m[0]))
+        s.drop_pixels()
+    limit = float(np.quantile(val, NOMINAL_QUANTILE))
+    samples = generate(4 if quick else 100, seed=0)
+    recs = {"cand": grid_records(cand, samples, settings), "v9": grid_records(v9, samples, settings)}
+    return {"limit_m": limit, "n_validation": len(val), "records": recs, "eps": settings.eps_safe_m}
+
+
+def _auroc(score: np.ndarray, bad: np.ndarray, groups: np.ndarray, seed: int = 0) -> tuple[float, float, float]:
+    """AUROC of ``score`` for ``bad`` and a 95 % bootstrap interval over groups (images)."""
+    from scipy.stats import mannwhitneyu
+
+    def auc(idx):
+        s, b = score[idx], bad[idx]
+        if b.all() or not b.any():
+            return np.nan
+        return mannwhitneyu(s[b], s[~b]).statistic / (b.sum() * (~b).sum())
+
+    ids = np.unique(groups)
+    rows = {g: np.flatnonzero(groups == g) for g in ids}
+    rng = np.random.default_rng(seed)
+    boot = [auc(np.concatenate([rows[g] for g in rng.choice(ids, len(ids))])) for _ in range(1000)]
+    lo, hi = np.nanpercentile(boot, [2.5, 97.5])
+    return float(auc(np.arange(len(score)))), float(lo), float(hi)
+
+
+def sigma_table(m: dict) -> str:
+    from vbl_robust.stats import Rate, paired
+
+    eps, limit = m["eps"], m["limit_m"]
+    rows = []
+    for k, (rc, rv) in enumerate(zip(m["records"]["cand"], m["records"]["v9"], strict=True)):
+        for i in range(len(rc)):
+            rows.append((k, rc.reason[i] == "", rc.error_m[i], rc.position_sigma_m[i], rc.reproj_error_px[i],
+                         rc.conf[i], rc.theta[i, 0] == 0 and rc.theta[i, 1] == 1.0,
+                         rv.reason[i] == "" and rv.error_m[i] > eps))
+    img, ok, err, sig, res, conf, nominal, v9_mis = (np.array(c) for c in zip(*rows, strict=True))
+    mis = ok & (err > eps)
+    good = ok & (err <= eps)
+    flagged = sig > limit
+    nom = good & nominal
+    cand_mis_after = mis & ~flagged
+    conf_rows = ok
+    auc_s = _auroc(sig[conf_rows], mis[conf_rows], img[conf_rows])
+    auc_r = _auroc(res[conf_rows], mis[conf_rows], img[conf_rows])
+    auc_c = _auroc(-conf[conf_rows], mis[conf_rows], img[conf_rows])
+    n_img = len(np.unique(img))
+    t_raw = paired(mis, v9_mis)
+    t_mon = paired(cand_mis_after, v9_mis)
+    lines = [
+        f"Limit {limit:.0f} m: the {NOMINAL_QUANTILE:.0%} quantile of the σ of {m['n_validation']} nominal poses "
+        f"of validation seed {SIGMA_VALIDATION_SEED}. Test: {n_img} images × {len(GRID[0])} rolls × {len(GRID[1])} "
+        f"contrasts = {len(ok)} views; {int(ok.sum())} confident poses, {int(mis.sum())} misleading (off by "
+        f"more than ε_safe), {int(nom.sum())} nominal.", "",
+        "| monitor | misleading flagged % [95 % CI] | nominal rejected % [95 % CI] | good perturbed poses rejected % |",
+        "|---|---|---|---|",
+        f"| σ ≤ {limit:.0f} m | {Rate(int((mis & flagged).sum()), int(mis.sum())).text(1, percent=False)} | "
+        f"{Rate(int((nom & flagged).sum()), int(nom.sum())).text(1, percent=False)} | "
+        f"{Rate(int((good & flagged).sum()), int(good.sum())).text(1, percent=False)} |", "",
+        f"AUROC for 'off by more than ε_safe' over the confident poses [95 % bootstrap over images]: σ "
+        f"{auc_s[0]:.3f} [{auc_s[1]:.3f}, {auc_s[2]:.3f}], reprojection residual {auc_r[0]:.3f} [{auc_r[1]:.3f}, "
+        f"{auc_r[2]:.3f}], low confidence {auc_c[0]:.3f} [{auc_c[1]:.3f}, {auc_c[2]:.3f}] (0.5 = chance).", "",
+        f"Misleading views, paired on the same {len(ok)} views against v9 (which has {int(v9_mis.sum())}): the "
+        f"candidate without the monitor {int(mis.sum())} (only it {t_raw.only_a}, only v9 {t_raw.only_b}, exact "
+        f"McNemar p = {t_raw.p_value:.3g}); with it {int(cand_mis_after.sum())} (only it {t_mon.only_a}, only v9 "
+        f"{t_mon.only_b}, p = {t_mon.p_value:.3g}).",
+        "", "Goal (issue 49's monitor): flag ≥ 80 % of misleading poses while rejecting ≤ 2 % of nominal ones."]
+    return "\n".join(lines)
+
+
 def main(quick: bool = False) -> str:
-    return "## Runtime monitors: reprojection residual\n\n" + table(measure(quick)) + "\n"
+    out = "## Runtime monitors: reprojection residual\n\n" + table(measure(quick)) + "\n"
+    if SIGMA_MODEL.is_file():
+        out += ("\n## Runtime monitors: corner σ (YOLO26-pose pass 2 behind v9's pass 1)\n\n"
+                + sigma_table(sigma_measure(quick)) + "\n")
+    return out
 
 
 if __name__ == "__main__":

@@ -187,6 +187,9 @@ def test_the_summary_table_never_cuts_a_method_name(tmp_path):
     (["--sustain", "5"], "--sustain 5 applies to --sequences only"),
     (["--frames", "5"], "--frames 5 applies to --sequences only"),
     (["--rate", "2.5"], "--rate 2.5 applies to --sequences only"),
+    (["--monitor-sigma", "0"], "--monitor-sigma must be a finite number of metres > 0, got 0.0"),
+    (["--monitor-sigma", "300", "--methods", "random,apgd"], "--monitor-sigma: a gradient search (apgd) cannot run"),
+    (["--monitor-sigma", "300", "--methods", "random"], "--monitor-sigma 300: the detector (oracle"),
 ])
 def test_a_configuration_error_is_refused_before_any_work(tmp_path, args, message):
     """Not "every image unsafe" with exit 0: one line naming the setting and value, exit 2, nothing stored."""

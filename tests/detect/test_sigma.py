@@ -44,7 +44,7 @@ def test_the_raw_output_carries_each_anchors_sigma_and_the_same_keypoints(yolo26
     from vbl_robust.detect.ultralytics import UltralyticsDetector, load_pose_model
 
     det = UltralyticsDetector(yolo26_pt, trust=True)
-    assert det.sigma and det.imgsz == IMGSZ
+    assert det.gives_sigma and det.imgsz == IMGSZ
     x = torch.rand(3, 3, IMGSZ, IMGSZ)
     y = det.raw(x)
     assert y.shape[1] == 4 + 1 + 12 + 8
@@ -169,3 +169,24 @@ def test_the_sigma_monitor_turns_an_unsure_pose_into_a_flagged_failure():
         Objective(sample, _SureOracle(0.5), box, max_sigma_m=limit).evaluate(torch.zeros(1, 1))
     with pytest.raises(ValueError, match="max_sigma_m"):
         Objective(sample, _SureOracle(0.5), box, max_sigma_m=float("nan"))
+
+
+def test_a_campaign_runs_the_sigma_monitor_and_stores_the_worst_candidates_sigma():
+    from vbl_robust.campaigns.spec import CampaignSpec
+    from vbl_robust.campaigns.work import Settings, build_objective, worst_details
+
+    sample = generate(1, seed=7)[0]
+    box = ParameterBox({"roll_deg": (-5.0, 5.0)})
+    spec = CampaignSpec(name="s", blocks=(), monitor_sigma_m=1e-6)
+    assert CampaignSpec.from_dict(spec.to_dict()).monitor_sigma_m == 1e-6  # kept in the stored spec (job context)
+    assert spec.settings()["monitor_sigma_m"] == 1e-6
+    objective = build_objective(sample, _SureOracle(0.5), box, Settings.from_spec(spec))
+    assert objective.evaluate(np.zeros((1, 1))).reason == ("monitor_rejected",)
+    details, corners = worst_details(build_objective(sample, _SureOracle(0.5), box, Settings(1000.0, 5000.0, 0.25,
+                                                                                              "ippe_lm")),
+                                     np.array([2.0]))
+    assert corners is not None and details["corner_sigma_px"] == [[0.5, 0.5]] * 4
+    assert details["position_sigma_m"] > 0
+    plain, _ = worst_details(build_objective(sample, OracleDetector(), box, Settings(1000.0, 5000.0, 0.25, "ippe_lm")),
+                             np.array([2.0]))
+    assert "corner_sigma_px" not in plain and "position_sigma_m" not in plain

@@ -303,7 +303,7 @@ def test_a_first_stage_can_be_yolo26_pose_and_runs_in_the_pipeline(tmp_path):
               architecture="yolo26n-pose")
     det = UltralyticsDetector(r.best, trust=True, imgsz=64)
     head = det.model.head  # the σ head is kept (detect.ultralytics.PoseWithSigma)
-    assert type(head).__name__ == "Pose26" and list(head.kpt_shape) == [4, 3] and det.sigma
+    assert type(head).__name__ == "Pose26" and list(head.kpt_shape) == [4, 3] and det.gives_sigma
     rec = Objective(samples[0], det, ParameterBox({"roll_deg": (-5.0, 5.0)})).evaluate(np.array([[0.0], [2.0]]))
     assert np.asarray(rec.keypoints).shape == (2, 4, 2) and len(rec.reason) == 2
     dets = det.detect(Objective(samples[0], det, ParameterBox({"roll_deg": (-5.0, 5.0)})).context(np.zeros((1, 1))))

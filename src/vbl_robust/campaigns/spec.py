@@ -242,6 +242,9 @@ class CampaignSpec:
         monitor_px: a runtime monitor of the pipeline: poses whose PnP reprojection residual is above this many
             pixels become flagged failures (:class:`~vbl_robust.pipeline.Objective` ``max_reproj_px``). Part of the
             job context when set.
+        monitor_sigma_m: a runtime monitor for a detector that says how sure it is: poses whose corners' σ,
+            propagated through PnP, is above this many metres become flagged failures (``Objective``
+            ``max_sigma_m``). Part of the job context when set.
     """
 
     name: str
@@ -257,6 +260,7 @@ class CampaignSpec:
     clock: str = "wall"
     sustain: int | None = None
     monitor_px: float | None = None
+    monitor_sigma_m: float | None = None
 
     def __post_init__(self) -> None:
         from ..search import CLOCKS
@@ -275,6 +279,10 @@ class CampaignSpec:
             raise ValueError(f"--monitor-residual must be a finite number of pixels > 0, got {self.monitor_px}")
         if self.monitor_px is not None and self.sustain is not None:
             raise ValueError("--monitor-residual applies to image campaigns, not to sequences (--sequences)")
+        if self.monitor_sigma_m is not None and not (math.isfinite(self.monitor_sigma_m) and self.monitor_sigma_m > 0):
+            raise ValueError(f"--monitor-sigma must be a finite number of metres > 0, got {self.monitor_sigma_m}")
+        if self.monitor_sigma_m is not None and self.sustain is not None:
+            raise ValueError("--monitor-sigma applies to image campaigns, not to sequences (--sequences)")
         object.__setattr__(self, "figures", tuple(self.figures))
 
     def check(self) -> None:
@@ -301,6 +309,10 @@ class CampaignSpec:
             twice = sorted({m for m in blk.methods if blk.methods.count(m) > 1})
             if twice:
                 raise ValueError(f"methods: {', '.join(twice)} given more than once")
+            graded = [m for m in blk.methods if blk.kind != "risk" and METHODS[m].needs_gradient]
+            if self.monitor_sigma_m is not None and graded:  # the σ monitor reads the black-box path only
+                raise ValueError(f"--monitor-sigma: a gradient search ({', '.join(graded)}) cannot run under the σ "
+                                 "monitor; leave it out of --methods")
             for box in blk.boxes:
                 try:
                     Perturbation(box.box)
@@ -356,6 +368,8 @@ class CampaignSpec:
             out["sustain"] = self.sustain
         if self.monitor_px is not None:
             out["monitor_px"] = self.monitor_px
+        if self.monitor_sigma_m is not None:
+            out["monitor_sigma_m"] = self.monitor_sigma_m
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -382,7 +396,7 @@ class CampaignSpec:
                    penalty_m=float(d["penalty_m"]), conf_threshold=float(d["conf_threshold"]), pnp=d["pnp"],
                    lipschitz=tuple(lip) if isinstance(lip, list) else lip, notes=d.get("notes", ""),
                    figures=tuple(d.get("figures", ())), clock=d.get("clock", "wall"), sustain=d.get("sustain"),
-                   monitor_px=d.get("monitor_px"))
+                   monitor_px=d.get("monitor_px"), monitor_sigma_m=d.get("monitor_sigma_m"))
 
     def context(self, detector_id: str) -> str:
         """Digest of what every job of this campaign shares: the settings and the detector identity."""

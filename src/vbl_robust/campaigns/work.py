@@ -79,11 +79,12 @@ class Settings:
     clock: str = "wall"
     sustain: int | None = None
     monitor_px: float | None = None
+    monitor_sigma_m: float | None = None
 
     @classmethod
     def from_spec(cls, spec: Any) -> Settings:
         return cls(spec.eps_safe_m, spec.penalty_m, spec.conf_threshold, spec.pnp, spec.lipschitz, spec.clock,
-                   spec.sustain, spec.monitor_px)
+                   spec.sustain, spec.monitor_px, spec.monitor_sigma_m)
 
 
 def build_objective(sample: Sample | ApproachSequence, detector: Detector, box: ParameterBox,
@@ -100,7 +101,8 @@ def build_objective(sample: Sample | ApproachSequence, detector: Detector, box: 
     from ..pipeline import Objective
 
     return Objective(sample, detector, box, pnp=settings.pnp, conf_threshold=settings.conf_threshold,
-                     penalty_m=settings.penalty_m, max_reproj_px=settings.monitor_px)
+                     penalty_m=settings.penalty_m, max_reproj_px=settings.monitor_px,
+                     max_sigma_m=settings.monitor_sigma_m)
 
 
 @dataclass
@@ -167,14 +169,18 @@ def worst_details(objective: SearchObjective, x: np.ndarray) -> tuple[dict[str, 
     """What the pipeline gives at the worst point (one more evaluation): the payload's top confidence, position
     error and estimated position (the failure reason is the one the search recorded, ``JobRow.worst_reason``), and
     the four corners of the selected candidate in the sample's pixels (``JobRow.worst_corners``; None when the
-    detector gave none)."""
+    detector gave none). A detector that says how sure it is adds the corners' σ (``corner_sigma_px``, 4 × 2, the
+    sample's pixels) and their propagation to the position (``position_sigma_m``)."""
     rec = objective.evaluate(np.asarray(x, dtype=np.float64)[None])
     conf = float(rec.conf[0])
     err = float(rec.error_m[0])
     kp = np.asarray(rec.keypoints[0], dtype=np.float64)
     corners = tuple((float(u), float(v)) for u, v in kp) if kp.shape == (4, 2) and np.isfinite(kp).all() else None
-    return {"conf": conf if math.isfinite(conf) else None, "error_m": err if math.isfinite(err) else None,
-            "position": [float(v) if math.isfinite(v) else None for v in rec.position[0]]}, corners
+    out = {"conf": _finite(conf), "error_m": _finite(err), "position": [_finite(float(v)) for v in rec.position[0]]}
+    if rec.keypoint_sigma is not None:
+        out["corner_sigma_px"] = [[_finite(float(v)) for v in c] for c in rec.keypoint_sigma[0]]
+        out["position_sigma_m"] = _finite(float(rec.position_sigma_m[0]))
+    return out, corners
 
 
 def sequence_details(objective: SearchObjective, x: np.ndarray, eps_safe_m: float) -> dict[str, Any]:

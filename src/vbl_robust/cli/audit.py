@@ -60,6 +60,10 @@ Sequences = Annotated[str | None, typer.Option(
 MonitorResidual = Annotated[float | None, typer.Option(
     "--monitor-residual", help="A runtime monitor: a pose whose PnP reprojection residual (RMS, image pixels) is "
     "above this is a flagged failure, not a pose (measure what it flags and rejects: BENCHMARKS, monitors).")]
+MonitorSigma = Annotated[float | None, typer.Option(
+    "--monitor-sigma", help="A runtime monitor for a detector that says how sure it is (a YOLO26-pose network: "
+    "per-corner σ): a pose whose corners' σ propagated through PnP is above this many metres is a flagged failure, "
+    "not a pose (measure what it flags and rejects: BENCHMARKS, monitors). Not with gradient searches (apgd).")]
 Target = Annotated[str, typer.Option(
     "--target", help="What the searches look for: any (every breach; a flagged failure — no detection, low "
     "confidence, PnP failed — counts 5000 m, as in the paper) or misleading (a flagged failure counts 0 m, as safe: "
@@ -89,7 +93,8 @@ def audit(
     retry_failed: o.RetryFailed = False, address: o.Address = None,
     csv: o.Csv = None, parquet: o.Parquet = None, report: o.Report = True,
     quiet: o.Quiet = False, verbose: o.Verbose = False, config: o.Config = None,
-    sequences: Sequences = None, monitor_residual: MonitorResidual = None, target: Target = "any",
+    sequences: Sequences = None, monitor_residual: MonitorResidual = None, monitor_sigma: MonitorSigma = None,
+    target: Target = "any",
     sustain: Sustain = 1, frames: Frames = None, rate: Rate = None, refine_zones: RefineZones = 0,
 ) -> None:
     """Find each image's worst case over a perturbation box: worst θ, worst error, verdict, survival, report."""
@@ -117,9 +122,16 @@ def audit(
     if monitor_residual is not None:
         with one_line(ValueError):
             spec = replace(spec, monitor_px=float(monitor_residual))
+    if monitor_sigma is not None:
+        with one_line(ValueError):
+            spec = replace(spec, monitor_sigma_m=float(monitor_sigma))
+            spec.check()
     spec, workers = run_settings(spec, clock, device, workers)
     check_exports(csv, parquet, out)
     det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
+    if monitor_sigma is not None and not getattr(det.build(), "gives_sigma", False):
+        fail(f"--monitor-sigma {monitor_sigma:g}: the detector ({det.name}) gives no per-corner σ; the σ monitor "
+             "needs a network with an uncertainty head (YOLO26-pose, see train --arch)")
     samples, source = _samples(sequences, lard, n, seed, width, height, frames, rate)
     config = {"command": "audit", "n": len(samples) if sequences is None else n, "seed": seed,
               "lard": str(lard) if lard else None, "roll": roll, "contrast": contrast, "methods": list(method_list),

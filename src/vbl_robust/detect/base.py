@@ -2,12 +2,13 @@
 
 What a detector is (for adapter writers)
 ----------------------------------------
-A class with three declared capabilities and one required method::
+A class with three declared capabilities and one required method (a fourth capability is optional)::
 
     class MyDetector:
         input_size: int | None = 640      # long side of the source it wants (None: full resolution)
         uses_pixels: bool = True          # False: reads only the context (the oracle)
         differentiable: bool = False      # True: also has detect_top (white-box searches)
+        gives_sigma: bool = False         # True: its Detections carry keypoint_sigma (the σ monitor can run)
 
         def detect(self, context: DetectContext) -> list[Detections]: ...
         def detect_top(self, context: DetectContext) -> tuple[Tensor, Tensor]: ...   # if differentiable

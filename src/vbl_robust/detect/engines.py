@@ -91,6 +91,7 @@ class EnginePose(PoseDetector):
             raise ValueError(f"EnginePose: input sizes differ ({engine_model.imgsz} vs {torch_model.imgsz})")
         self.torch_model, self.engine_model, self.engine = torch_model, engine_model, engine
         self.imgsz, self.nc, self.chunk = torch_model.imgsz, torch_model.nc, torch_model.chunk
+        self.gives_sigma = torch_model.gives_sigma
         self.input_size = torch_model.input_size
         self.precision = str(getattr(engine_model, "precision", "fp32"))
         self.device = getattr(torch_model, "device", torch.device("cpu"))

@@ -143,6 +143,7 @@ class OnnxDetector(PoseDetector):
         out_shape = self.session.get_outputs()[0].shape
         if len(out_shape) == 3 and isinstance(out_shape[2], int) and out_shape[2] == 6 + 12:
             raise ValueError(f"{p}: end-to-end (NMS-free) output layout is not supported")
+        self.gives_sigma = len(out_shape) == 3 and out_shape[1] == 4 + self.nc + 12 + 8
         self.imgsz = int(imgsz or size or 640)
         if not isinstance(inp.shape[0], str) and not isinstance(inp.shape[2], str):
             if imgsz is not None and int(inp.shape[2]) != self.imgsz:

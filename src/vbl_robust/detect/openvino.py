@@ -63,6 +63,8 @@ class OpenVinoDetector(PoseDetector):
         if "32" not in self.precision:
             raise ValueError(f"{p}: OpenVINO compiled at {self.precision}, not fp32; refusing (outputs would change)")
         self.request = self.compiled.create_infer_request()
+        channels = self.compiled.outputs[0].get_partial_shape()[1]
+        self.gives_sigma = channels.is_static and channels.get_length() == 4 + self.nc + 12 + 8
         self.input_size = self.imgsz
         self.chunk = int(chunk)
         self.path = p

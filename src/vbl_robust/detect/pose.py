@@ -88,6 +88,8 @@ class PoseDetector:
     chunk: int = 16
     uses_pixels: bool = True
     differentiable: bool = True
+    #: the raw output carries each corner's σ (a network with an uncertainty head; set by the subclass on loading)
+    gives_sigma: bool = False
     conf_min: float = 0.01
     iou: float = 0.7
     max_det: int = 10

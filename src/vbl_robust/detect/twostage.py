@@ -51,6 +51,8 @@ class TwoStageDetector:
         self.second = second or first
         self.margin, self.min_side = float(margin), float(min_side)
         self.differentiable = bool(self.first.differentiable and self.second.differentiable)
+        #: the corners' σ comes from pass 2 (the network that places them)
+        self.gives_sigma = bool(self.second.gives_sigma)
 
     def __repr__(self) -> str:
         second = "" if self.second is self.first else f", second={self.second!r}"

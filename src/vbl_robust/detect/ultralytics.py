@@ -137,9 +137,8 @@ class UltralyticsDetector(PoseDetector):
         device = resolve_device(device)
         self.path = Path(path)
         model, ckpt = load_pose_model(self.path, trust=trust)
-        #: whether the raw output carries the corners' σ (a YOLO26-pose uncertainty head)
-        self.sigma = has_sigma_head(model)
-        if self.sigma:
+        self.gives_sigma = has_sigma_head(model)
+        if self.gives_sigma:
             self.model = PoseWithSigma(model).to(device)
         else:
             self.model = model.fuse().to(device) if hasattr(model, "fuse") else model.to(device)
