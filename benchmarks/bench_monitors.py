@@ -129,18 +129,38 @@ def table(m: dict) -> str:
     return "\n".join(lines)
 
 
-def grid_records(det, samples, settings) -> list:
-    """Every view of ``GRID`` (roll × contrast) of each sample through ``det``: one EvalRecord per sample."""
+def grid_records(det, samples, settings) -> tuple[list, list, float]:
+    """Every view of ``GRID`` (roll × contrast) of each sample through ``det``: one EvalRecord per sample, the
+    positions PnP gives from the pass-1 corners of the same views (the two passes' disagreement is a monitor signal
+    of its own), and the process-clock seconds of the objective's evaluations (pass 1 again not counted)."""
+    import time
+
     from vbl_robust.campaigns.work import build_objective
+    from vbl_robust.pnp import solve
     from vbl_robust.space import ParameterBox
 
     box = ParameterBox({"roll_deg": (-15.0, 15.0), "contrast": (0.5, 2.0)})
     theta = np.array([(r, c) for r in GRID[0] for c in GRID[1]])
-    out = []
+    recs, first, seconds = [], [], 0.0
     for s in samples:
-        out.append(build_objective(s, det, box, settings).evaluate(theta))
+        obj = build_objective(s, det, box, settings)
+        obj.evaluate(theta[:1])  # pixels loaded outside the clock
+        t0 = time.process_time()
+        recs.append(obj.evaluate(theta))
+        seconds += time.process_time() - t0
+        import torch
+
+        with torch.no_grad():
+            top = det.first.top(obj.context(theta))
+        kp = obj.scale.to_original(top.keypoints.double().numpy())
+        pos = np.full((len(theta), 3), np.nan)
+        good = top.conf.numpy() >= settings.conf_threshold
+        if good.any():
+            res = solve(kp[good], s.corners_3d, s.K, method=settings.pnp)
+            pos[good] = np.where(res.success[:, None], res.position, np.nan)
+        first.append(pos)
         s.drop_pixels()
-    return out
+    return recs, first, seconds
 
 
 def sigma_measure(quick: bool, model: Path = SIGMA_MODEL) -> dict:
@@ -168,8 +188,10 @@ def sigma_measure(quick: bool, model: Path = SIGMA_MODEL) -> dict:
         s.drop_pixels()
     limit = float(np.quantile(val, NOMINAL_QUANTILE))
     samples = generate(4 if quick else 100, seed=0)
-    recs = {"cand": grid_records(cand, samples, settings), "v9": grid_records(v9, samples, settings)}
-    return {"limit_m": limit, "n_validation": len(val), "records": recs, "eps": settings.eps_safe_m}
+    out = {"limit_m": limit, "n_validation": len(val), "eps": settings.eps_safe_m}
+    for name, det in (("cand", cand), ("v9", v9)):
+        out[name], out[f"{name}_first"], out[f"{name}_s"] = grid_records(det, samples, settings)
+    return out
 
 
 def _auroc(score: np.ndarray, bad: np.ndarray, groups: np.ndarray, seed: int = 0) -> tuple[float, float, float]:
@@ -195,12 +217,14 @@ def sigma_table(m: dict) -> str:
 
     eps, limit = m["eps"], m["limit_m"]
     rows = []
-    for k, (rc, rv) in enumerate(zip(m["records"]["cand"], m["records"]["v9"], strict=True)):
+    for k, (rc, rv, p1, q1) in enumerate(zip(m["cand"], m["v9"], m["cand_first"], m["v9_first"], strict=True)):
         for i in range(len(rc)):
             rows.append((k, rc.reason[i] == "", rc.error_m[i], rc.position_sigma_m[i], rc.reproj_error_px[i],
                          rc.conf[i], rc.theta[i, 0] == 0 and rc.theta[i, 1] == 1.0,
-                         rv.reason[i] == "" and rv.error_m[i] > eps))
-    img, ok, err, sig, res, conf, nominal, v9_mis = (np.array(c) for c in zip(*rows, strict=True))
+                         rv.reason[i] == "" and rv.error_m[i] > eps, rv.reason[i] == "", rv.error_m[i],
+                         np.linalg.norm(rc.position[i] - p1[i]), np.linalg.norm(rv.position[i] - q1[i])))
+    (img, ok, err, sig, res, conf, nominal, v9_mis, v9_ok, v9_err, gap,
+     v9_gap) = (np.array(c) for c in zip(*rows, strict=True))
     mis = ok & (err > eps)
     good = ok & (err <= eps)
     flagged = sig > limit
@@ -210,6 +234,12 @@ def sigma_table(m: dict) -> str:
     auc_s = _auroc(sig[conf_rows], mis[conf_rows], img[conf_rows])
     auc_r = _auroc(res[conf_rows], mis[conf_rows], img[conf_rows])
     auc_c = _auroc(-conf[conf_rows], mis[conf_rows], img[conf_rows])
+    gap_rows = conf_rows & np.isfinite(gap)
+    auc_g = _auroc(gap[gap_rows], mis[gap_rows], img[gap_rows])
+    v9_rows = v9_ok & np.isfinite(v9_gap)
+    auc_g9 = _auroc(v9_gap[v9_rows], (v9_err > eps)[v9_rows], img[v9_rows])
+    n_views = len(ok)
+    rate_c, rate_v = n_views / m["cand_s"], n_views / m["v9_s"]
     n_img = len(np.unique(img))
     t_raw = paired(mis, v9_mis)
     t_mon = paired(cand_mis_after, v9_mis)
@@ -225,7 +255,12 @@ def sigma_table(m: dict) -> str:
         f"{Rate(int((good & flagged).sum()), int(good.sum())).text(1, percent=False)} |", "",
         f"AUROC for 'off by more than ε_safe' over the confident poses [95 % bootstrap over images]: σ "
         f"{auc_s[0]:.3f} [{auc_s[1]:.3f}, {auc_s[2]:.3f}], reprojection residual {auc_r[0]:.3f} [{auc_r[1]:.3f}, "
-        f"{auc_r[2]:.3f}], low confidence {auc_c[0]:.3f} [{auc_c[1]:.3f}, {auc_c[2]:.3f}] (0.5 = chance).", "",
+        f"{auc_r[2]:.3f}], low confidence {auc_c[0]:.3f} [{auc_c[1]:.3f}, {auc_c[2]:.3f}], the two passes' "
+        f"disagreement (metres between the positions of pass 1's and pass 2's corners) {auc_g[0]:.3f} "
+        f"[{auc_g[1]:.3f}, {auc_g[2]:.3f}] (0.5 = chance). The same disagreement for v9 on its own confident poses: "
+        f"{auc_g9[0]:.3f} [{auc_g9[1]:.3f}, {auc_g9[2]:.3f}].", "",
+        f"Throughput on these views (process clock, one thread, the objective's evaluations only): candidate "
+        f"{rate_c:.1f} evaluations/s, v9 {rate_v:.1f} (v9 / candidate {rate_v / rate_c:.2f}; goal ≤ 1.2).", "",
         f"Misleading views, paired on the same {len(ok)} views against v9 (which has {int(v9_mis.sum())}): the "
         f"candidate without the monitor {int(mis.sum())} (only it {t_raw.only_a}, only v9 {t_raw.only_b}, exact "
         f"McNemar p = {t_raw.p_value:.3g}); with it {int(cand_mis_after.sum())} (only it {t_mon.only_a}, only v9 "
