@@ -190,3 +190,35 @@ def test_a_campaign_runs_the_sigma_monitor_and_stores_the_worst_candidates_sigma
     plain, _ = worst_details(build_objective(sample, OracleDetector(), box, Settings(1000.0, 5000.0, 0.25, "ippe_lm")),
                              np.array([2.0]))
     assert "corner_sigma_px" not in plain and "position_sigma_m" not in plain
+
+
+@pytest.mark.parametrize("which", ["v9", "yolo26"])
+def test_detect_and_top_map_only_what_they_keep_with_the_same_numbers(which, yolo26_pt):
+    """The black-box path maps only the anchors NMS can keep, and ``top`` only the chosen one (issue 50): bit for
+    bit what mapping every anchor (``candidates``) and then choosing gives."""
+    import torchvision
+
+    from vbl_robust.detect.shipped import default_detector
+    from vbl_robust.detect.ultralytics import UltralyticsDetector
+
+    det = default_detector().first if which == "v9" else UltralyticsDetector(yolo26_pt, trust=True)
+    sample = generate(1, seed=11)[0]
+    ctx = Objective(sample, det, ParameterBox({"roll_deg": (-15.0, 15.0)})).context(np.array([[0.0], [9.0], [-14.0]]))
+    boxes, conf, kp, sig = det.candidates(ctx)
+    with torch.no_grad():
+        ref = det.top_of(boxes, conf, kp, sig)
+        top = det.top(ctx)
+    for a, b in ((ref.conf, top.conf), (ref.keypoints, top.keypoints), (ref.boxes, top.boxes), (ref.sigma, top.sigma)):
+        assert (a is None and b is None) or torch.equal(a, b)
+    got = det.detect(ctx)
+    for b, d in enumerate(got):
+        keep = torch.nonzero(conf[b] >= det.conf_min)[:, 0]
+        if keep.numel() == 0:
+            keep = conf[b].argmax()[None]
+        sel = keep[torchvision.ops.nms(boxes[b, keep], conf[b, keep], det.iou)][:det.max_det]
+        assert len(d) == len(sel) >= 1
+        np.testing.assert_array_equal(d.boxes, boxes[b, sel].double().numpy())
+        np.testing.assert_array_equal(d.keypoints, kp[b, sel].double().numpy())
+        np.testing.assert_array_equal(d.conf, conf[b, sel].double().numpy())
+        if sig is not None:
+            np.testing.assert_array_equal(d.keypoint_sigma, sig[b, sel].double().numpy())

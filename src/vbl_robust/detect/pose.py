@@ -128,8 +128,18 @@ class PoseDetector:
         return self.candidates_in_views(*self.letterbox(as_context(context)))
 
     def top(self, context) -> Top:
-        """Differentiable max-confidence candidate per image of a context (or of plain images)."""
-        return self.top_of(*self.candidates(context))
+        """Differentiable max-confidence candidate per image of a context (or of plain images): the anchor is
+        chosen in view coordinates and only it is mapped to the source (the same numbers as mapping every anchor,
+        :meth:`candidates`, then choosing: the map is elementwise)."""
+        views, win = self.letterbox(as_context(context))
+        y = self.raw_chunked(views)
+        boxes, conf, k = split_raw(y, self.nc)
+        sig = split_sigma(y, self.nc)
+        t = self.top_of(boxes, conf, k, sig)
+        n = conf.shape[0]
+        return Top(t.conf, view_to_image(t.keypoints, win, self.imgsz),
+                   view_to_image(t.boxes.reshape(n, 2, 2), win, self.imgsz).reshape(n, 4),
+                   None if sig is None else sigma_to_image(t.sigma, win, self.imgsz))
 
     @staticmethod
     def top_of(boxes: torch.Tensor, conf: torch.Tensor, kp: torch.Tensor, sigma: torch.Tensor | None = None) -> Top:
@@ -151,13 +161,23 @@ class PoseDetector:
         """Black-box path: candidates after NMS per image, highest confidence first."""
         import torchvision
 
-        boxes, conf, kp, sig = self.candidates(context)
-        out = []
-        for b in range(conf.shape[0]):
-            keep = torch.nonzero(conf[b] >= self.conf_min)[:, 0]
-            if keep.numel() == 0:  # the global maximum is always a candidate (selection applies the threshold)
-                keep = conf[b].argmax()[None]
-            sel = keep[torchvision.ops.nms(boxes[b, keep], conf[b, keep], self.iou)][:self.max_det]
-            out.append(Detections(boxes[b, sel], conf[b, sel], kp[b, sel],
-                                  keypoint_sigma=None if sig is None else sig[b, sel]))
+        views, win = self.letterbox(as_context(context))
+        y = self.raw_chunked(views)
+        boxes, conf, k = split_raw(y, self.nc)
+        sig = split_sigma(y, self.nc)
+        # only the anchors NMS can keep are mapped to the source (the map is elementwise: the same numbers)
+        keep = conf >= self.conf_min
+        keep[torch.arange(conf.shape[0]), conf.argmax(1)] |= ~keep.any(1)  # the maximum is always a candidate
+        rows, anchors = torch.nonzero(keep, as_tuple=True)
+        w = win[rows]
+        bx = view_to_image(boxes[rows, anchors].reshape(-1, 2, 2), w, self.imgsz).reshape(-1, 4)
+        kp = view_to_image(k[rows, anchors], w, self.imgsz)
+        sg = None if sig is None else sigma_to_image(sig[rows, anchors], w, self.imgsz)
+        cf = conf[rows, anchors]
+        out, start = [], 0
+        for count in torch.bincount(rows, minlength=conf.shape[0]).tolist():
+            part = slice(start, start + count)
+            start += count
+            sel = torchvision.ops.nms(bx[part], cf[part], self.iou)[:self.max_det] + part.start
+            out.append(Detections(bx[sel], cf[sel], kp[sel], keypoint_sigma=None if sg is None else sg[sel]))
         return out
