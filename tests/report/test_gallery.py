@@ -118,6 +118,23 @@ def test_an_old_store_without_corners_still_reports(run, tmp_path):
     assert "drawn (red)" not in page and page.count('<div class="case">') == 3
 
 
+def test_a_detector_that_says_how_sure_it_is_has_its_position_sigma_in_the_gallery(run, tmp_path):
+    """Issue 49: a job's worst payload keeps the corners' σ propagated to the position; the gallery says it."""
+    import json
+
+    sure = tmp_path / "sure"
+    con = copy_store(run, sure)
+    assert "position σ" not in build_report(run).read_text()  # the oracle gives no σ
+    for rowid, payload in con.execute("SELECT rowid, payload_json FROM jobs WHERE payload_json LIKE '%worst%'").fetchall():
+        data = json.loads(payload)
+        data["worst"]["position_sigma_m"] = 1234.5
+        con.execute("UPDATE jobs SET payload_json = ? WHERE rowid = ?", (json.dumps(data), rowid))
+    con.commit()
+    con.close()
+    page = build_report(sure).read_text()
+    assert page.count("position σ") == 3 and "1234 m (the corners' σ through PnP)" in page
+
+
 def test_a_run_whose_images_cannot_be_rebuilt_shows_the_cases_without_pictures(run, tmp_path):
     moved = tmp_path / "elsewhere"
     con = copy_store(run, moved)

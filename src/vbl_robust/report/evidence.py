@@ -84,7 +84,8 @@ class WorstCase:
     pose; None: unknown); ``conf`` = the top candidate's confidence at θ*; ``corners`` = the corners the detector
     predicted at θ* (sample's pixels of the perturbed view, TR TL BL BR; None: none, or not stored);
     ``confident_m`` = the largest error of a confident pose the search found (None without its points): where θ*
-    itself is a flagged failure, the misleading pose lies elsewhere in Θ."""
+    itself is a flagged failure, the misleading pose lies elsewhere in Θ; ``position_sigma_m`` = how sure a detector
+    with per-corner σ said it was at θ* (the corners' σ propagated to the position; None: it gives no σ)."""
 
     sample_id: str
     box_label: str
@@ -97,6 +98,7 @@ class WorstCase:
     conf: float | None = None
     corners: tuple[tuple[float, float], ...] | None = None
     confident_m: float | None = None
+    position_sigma_m: float | None = None
 
 
 @dataclass(frozen=True)
@@ -192,7 +194,8 @@ def worst_cases(rows: Sequence[JobRow], eps: float, penalty_m: float, cap: int =
         cases.append(WorstCase(r.sample_id, r.box_label or "", r.method, r.budget_label,
                                float(r.worst_m if r.worst_m is not None else penalty_m),
                                None if r.worst_x is None else dict(r.worst_x), None if kind is None else kind.value,
-                               r.worst_reason, worst.get("conf"), src.worst_corners, conf_m))
+                               r.worst_reason, worst.get("conf"), src.worst_corners, conf_m,
+                               worst.get("position_sigma_m")))
     return cases, len(best)
 
 

@@ -117,6 +117,11 @@ def _facts(ctx: Context, rank: int, case: WorstCase, picture: str) -> str:
              ("found by", esc(F.style(case.method)["label"]) + (f", {esc(case.budget_label)}" if case.budget_label
                                                                else "")),
              ("predicted corners", corners)]
+    if case.position_sigma_m is not None:  # a detector that says how sure it is
+        monitor = ctx.spec.monitor_sigma_m
+        verdict = "" if monitor is None else (f" — above the σ monitor's {monitor:g} m" if case.position_sigma_m >
+                                              monitor else f" — within the σ monitor's {monitor:g} m")
+        items.insert(5, ("position σ", f"{fmt_num(case.position_sigma_m)} m (the corners' σ through PnP){verdict}"))
     if case.kind == BreachKind.MISLEADING.value and case.reason and case.confident_m is not None:
         items.insert(2, ("misleading pose", f"elsewhere in Θ: the search's largest confident-pose error is "
                                             f"{fmt_num(case.confident_m)} m"))
