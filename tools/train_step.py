@@ -56,6 +56,10 @@
   sits on one plateau; YOLO26's keypoint loss is built for precise coordinates, and its σ is the runtime
   monitor's signal. The pass-2 network first, because it decides the corners (pass 1 detects 99.6 %) and its
   crops are an easier task to learn from scratch in the epochs one session's cores allow.
+- ``u2`` (session 14): ``u`` continued — from its last epoch (``train_runs/step_u/stage00/weights/epoch11.pt``: run
+  ``u`` first), on the same rendered crops (linked), AdamW lr 3e-4 → 3e-5 cosine over 10 epochs. Why: ``u``'s
+  validation keypoint mAP was still rising at its last epoch (from scratch, 12 epochs of 3000 crops: a fraction of
+  the ~50 epochs the v8 chain took).
 
 Rerun the same command after an interruption (``resume=True`` continues ``last.pt``); one torch thread by default
 so that other work can run beside it (``--threads 2`` when nothing else runs). Every epoch is saved (``save_period=1``) for the validation protocol.
@@ -106,19 +110,21 @@ STEPS = {
                   generate_options=GEN)),
     "u": (12, dict(seed=13, n_train=3000, lr0=1e-3, lrf=0.1, cos_lr=True, appearance={}, full_views=False,
                    warmup_epochs=1.0, architecture="yolo26n-pose", generate_options=GEN)),
+    "u2": (10, dict(seed=13, n_train=3000, lr0=3e-4, lrf=0.1, cos_lr=True, appearance={}, full_views=False,
+                    warmup_epochs=0.0, generate_options=GEN)),
     "m": (2, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, degrees=30.0, pose=72.0,
                   generate_options=GEN)),
 }
 
 #: step → (step, epoch index) whose saved checkpoint it starts from, instead of the shipped model.
-INIT = {"r": ("q", 0)}
+INIT = {"r": ("q", 0), "u2": ("u", 11)}
 
 #: steps trained from their architecture's model file (random initial weights), not from the shipped model.
 SCRATCH = {"u"}
 
 
 #: step → the step whose rendered dataset it trains on (linked into its working directory, never re-rendered).
-DATA = {"t": "s"}
+DATA = {"t": "s", "u2": "u"}
 
 
 def share_dataset(step: str, out: Path) -> None:
