@@ -56,6 +56,11 @@
   sits on one plateau; YOLO26's keypoint loss is built for precise coordinates, and its σ is the runtime
   monitor's signal. The pass-2 network first, because it decides the corners (pass 1 detects 99.6 %) and its
   crops are an easier task to learn from scratch in the epochs one session's cores allow.
+- ``w`` (session 14): ``u`` with the threshold-width loss term (gain 0.5, as steps P–S), now on YOLO26's criterion
+  too; from scratch on ``u``'s rendered crops (linked: run ``u`` first). Why: ``u``'s corners are closer than v9's
+  and its threshold edges follow the roll, but it predicts the thresholds 3–6 % too narrow and its width errors
+  are larger than v9's, which had this term — the width decides the far position (model card, *YOLO26-pose as
+  pass 2*).
 - ``u2`` (session 14): ``u`` continued — from its last epoch (``train_runs/step_u/stage00/weights/epoch11.pt``: run
   ``u`` first), on the same rendered crops (linked), AdamW lr 3e-4 → 3e-5 cosine over 10 epochs. Why: ``u``'s
   validation keypoint mAP was still rising at its last epoch (from scratch, 12 epochs of 3000 crops: a fraction of
@@ -110,6 +115,8 @@ STEPS = {
                   generate_options=GEN)),
     "u": (12, dict(seed=13, n_train=3000, lr0=1e-3, lrf=0.1, cos_lr=True, appearance={}, full_views=False,
                    warmup_epochs=1.0, architecture="yolo26n-pose", generate_options=GEN)),
+    "w": (12, dict(seed=13, n_train=3000, lr0=1e-3, lrf=0.1, cos_lr=True, appearance={}, full_views=False,
+                   warmup_epochs=1.0, architecture="yolo26n-pose", width_loss=0.5, generate_options=GEN)),
     "u2": (10, dict(seed=13, n_train=3000, lr0=3e-4, lrf=0.1, cos_lr=True, appearance={}, full_views=False,
                     warmup_epochs=0.0, generate_options=GEN)),
     "m": (2, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, degrees=30.0, pose=72.0,
@@ -120,11 +127,11 @@ STEPS = {
 INIT = {"r": ("q", 0), "u2": ("u", 11)}
 
 #: steps trained from their architecture's model file (random initial weights), not from the shipped model.
-SCRATCH = {"u"}
+SCRATCH = {"u", "w"}
 
 
 #: step → the step whose rendered dataset it trains on (linked into its working directory, never re-rendered).
-DATA = {"t": "s", "u2": "u"}
+DATA = {"t": "s", "u2": "u", "w": "u"}
 
 
 def share_dataset(step: str, out: Path) -> None:

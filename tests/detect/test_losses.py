@@ -46,15 +46,16 @@ def test_edge_mask_leaves_out_narrow_and_hidden_edges():
     assert ok[0].tolist() == [True, False]
 
 
-def _criteria(gain: float, min_px: float):
+def _criteria(gain: float, min_px: float, base: str = "v8PoseLoss"):
     import_ultralytics()
-    from ultralytics.utils.loss import KeypointLoss, v8PoseLoss
+    from ultralytics.utils import loss as ul
 
     out = []
-    for cls in (v8PoseLoss, losses._pose_loss_class(gain, min_px)):
+    for cls in (getattr(ul, base), losses._pose_loss_class(gain, min_px, getattr(ul, base))):
         c = cls.__new__(cls)  # no model: only what calculate_keypoints_loss reads
-        c.keypoint_loss = KeypointLoss(sigmas=torch.ones(4) / 4)
+        c.keypoint_loss = ul.KeypointLoss(sigmas=torch.ones(4) / 4)
         c.bce_pose = torch.nn.BCEWithLogitsLoss()
+        c.rle_loss = None  # YOLO26's criterion: its residual log-likelihood term is its own, untouched here
         out.append(c)
     return out
 
@@ -70,8 +71,9 @@ def _keypoint_inputs(pred_px: torch.Tensor, stride: float = 8.0):
     return masks, target_gt_idx, keypoints, stride_tensor, bboxes, pred.requires_grad_(True)
 
 
-def test_criterion_adds_gain_times_the_mean_log_width_error():
-    base, withw = _criteria(gain=0.5, min_px=8.0)
+@pytest.mark.parametrize("criterion", ["v8PoseLoss", "PoseLoss26"])
+def test_criterion_adds_gain_times_the_mean_log_width_error(criterion):
+    base, withw = _criteria(gain=0.5, min_px=8.0, base=criterion)
     pred_px = _scaled_edges(TRUE, 1.1, 0.8)
     base_inputs, inputs = _keypoint_inputs(pred_px), _keypoint_inputs(pred_px)
     a = base.calculate_keypoints_loss(*base_inputs)[0]
@@ -86,7 +88,7 @@ def test_criterion_adds_gain_times_the_mean_log_width_error():
     assert float(g[0, 0]) > 0 > float(g[1, 0])  # TR (right) moves left, TL (left) moves right
     assert float(g[2, 0]) > 0 > float(g[3, 0])  # BL moves left, BR moves right
     # edges narrower than min_px leave ultralytics' loss unchanged
-    _, strict = _criteria(gain=0.5, min_px=100.0)
+    _, strict = _criteria(gain=0.5, min_px=100.0, base=criterion)
     c = strict.calculate_keypoints_loss(*_keypoint_inputs(pred_px))[0]
     assert float(c.detach()) == pytest.approx(float(a.detach()), rel=1e-7)
 
@@ -95,14 +97,16 @@ def test_context_swaps_the_pose_criterion_and_restores_it():
     import_ultralytics()
     from ultralytics.nn import tasks
 
-    before = tasks.v8PoseLoss
+    before, before26 = tasks.v8PoseLoss, tasks.PoseLoss26
     with threshold_width_loss(0.0):
-        assert tasks.v8PoseLoss is before
+        assert tasks.v8PoseLoss is before and tasks.PoseLoss26 is before26
     with pytest.raises(RuntimeError, match="boom"), threshold_width_loss(0.3, 4.0):
         assert issubclass(tasks.v8PoseLoss, before) and tasks.v8PoseLoss is not before
+        assert issubclass(tasks.PoseLoss26, before26) and tasks.PoseLoss26 is not before26
         assert tasks.v8PoseLoss.width_gain == 0.3 and tasks.v8PoseLoss.width_min_px == 4.0
+        assert tasks.PoseLoss26.width_gain == 0.3
         raise RuntimeError("boom")
-    assert tasks.v8PoseLoss is before
+    assert tasks.v8PoseLoss is before and tasks.PoseLoss26 is before26
     with pytest.raises(ValueError, match="gain"), threshold_width_loss(-1.0):
         pass
 

@@ -1,4 +1,5 @@
-"""A training loss term on the runway's threshold widths, added to ultralytics' YOLOv8-Pose keypoint loss.
+"""A training loss term on the runway's threshold widths, added to ultralytics' YOLOv8-Pose (and YOLO26-pose)
+keypoint loss.
 
 Why: at far range the camera position from PnP is decided by the two threshold edges' widths in the image (the
 slant distance scales with 1 / width); with the true near-threshold width, far survival on the validation set
@@ -45,10 +46,13 @@ def edge_log_ratio(pred: torch.Tensor, true: torch.Tensor, visible: torch.Tensor
     return torch.stack(vals, 1), torch.stack(masks, 1)
 
 
-def _pose_loss_class(gain: float, min_px: float):
-    from ultralytics.utils.loss import v8PoseLoss
+def _pose_loss_class(gain: float, min_px: float, base: type | None = None):
+    """``base`` (ultralytics' v8 pose criterion by default; YOLO26's ``PoseLoss26`` too) with the threshold-width
+    term added to its keypoint loss (the first value its ``calculate_keypoints_loss`` returns)."""
+    if base is None:
+        from ultralytics.utils.loss import v8PoseLoss as base
 
-    class ThresholdWidthPoseLoss(v8PoseLoss):
+    class ThresholdWidthPoseLoss(base):
         """Ultralytics' pose criterion plus the threshold-width term of this module (``gain``, ``min_px``)."""
 
         width_gain = float(gain)
@@ -56,7 +60,7 @@ def _pose_loss_class(gain: float, min_px: float):
 
         def calculate_keypoints_loss(self, masks, target_gt_idx, keypoints, stride_tensor, target_bboxes,
                                      pred_kpts):
-            kpts_loss, kobj_loss = super().calculate_keypoints_loss(
+            kpts_loss, *rest = super().calculate_keypoints_loss(
                 masks, target_gt_idx, keypoints, stride_tensor, target_bboxes, pred_kpts)
             if self.width_gain and masks.any():
                 gt = keypoints[masks.nonzero(as_tuple=True)[0], target_gt_idx[masks]]  # (n, 4, 3) pixels
@@ -65,24 +69,27 @@ def _pose_loss_class(gain: float, min_px: float):
                 vals, ok = edge_log_ratio(pred, gt[..., :2], gt[..., 2] != 0, min_px=self.width_min_px)
                 if ok.any():
                     kpts_loss = kpts_loss + self.width_gain * vals[ok].mean()
-            return kpts_loss, kobj_loss
+            return (kpts_loss, *rest)
 
+    ThresholdWidthPoseLoss.__name__ = f"ThresholdWidth{base.__name__}"
     return ThresholdWidthPoseLoss
 
 
 @contextlib.contextmanager
 def threshold_width_loss(gain: float, min_px: float = 8.0) -> Iterator[None]:
-    """Within this context, YOLOv8-Pose models built by ultralytics train with the threshold-width term.
+    """Within this context, YOLOv8-Pose and YOLO26-pose models built by ultralytics train with the threshold-width
+    term (on YOLO26 it joins the keypoint loss beside the residual log-likelihood term).
 
     ``gain`` 0 leaves ultralytics' loss as it is. The swap is undone on exit (also on an exception)."""
     if gain < 0 or min_px < 0:
         raise ValueError(f"threshold_width_loss: gain and min_px must be ≥ 0, got {gain!r}, {min_px!r}")
     from ultralytics.nn import tasks
 
-    before = tasks.v8PoseLoss
+    before = tasks.v8PoseLoss, tasks.PoseLoss26
     if gain:
-        tasks.v8PoseLoss = _pose_loss_class(gain, min_px)
+        tasks.v8PoseLoss = _pose_loss_class(gain, min_px, before[0])
+        tasks.PoseLoss26 = _pose_loss_class(gain, min_px, before[1])
     try:
         yield
     finally:
-        tasks.v8PoseLoss = before
+        tasks.v8PoseLoss, tasks.PoseLoss26 = before
