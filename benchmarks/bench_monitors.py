@@ -139,6 +139,8 @@ def grid_records(det, samples, settings) -> tuple[list, list, float]:
     of its own), and the process-clock seconds of the objective's evaluations (pass 1 again not counted)."""
     import time
 
+    import torch
+
     from vbl_robust.campaigns.work import build_objective
     from vbl_robust.pnp import solve
     from vbl_robust.space import ParameterBox
@@ -152,8 +154,6 @@ def grid_records(det, samples, settings) -> tuple[list, list, float]:
         t0 = time.process_time()
         recs.append(obj.evaluate(theta))
         seconds += time.process_time() - t0
-        import torch
-
         with torch.no_grad():
             top = det.first.top(obj.context(theta))
         kp = obj.scale.to_original(top.keypoints.double().numpy())
