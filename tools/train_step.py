@@ -65,6 +65,12 @@
   ``u`` first), on the same rendered crops (linked), AdamW lr 3e-4 → 3e-5 cosine over 10 epochs. Why: ``u``'s
   validation keypoint mAP was still rising at its last epoch (from scratch, 12 epochs of 3000 crops: a fraction of
   the ~50 epochs the v8 chain took).
+- ``x`` (session 15, issue 49): **one YOLO26n-pose network for both passes** (the shipped design's layout: full
+  views and crops), usable as a single pass too — from ``u``'s last epoch (its crop network: it already reads
+  runway corners; run ``u`` first), on the full views *and* crops of ``u``'s rendered samples (linked; seed 13),
+  AdamW lr 5e-4 → 5e-5 cosine over 5 epochs, a short warm-up. Why: the issue asks for YOLO26 in the single-pass
+  design as well, and a full-view network from scratch needs more epochs than a session's cores give; starting
+  from the crop network moves only the detection of small far runways in the full view to learn.
 
 Rerun the same command after an interruption (``resume=True`` continues ``last.pt``); one torch thread by default
 so that other work can run beside it (``--threads 2`` when nothing else runs). Every epoch is saved (``save_period=1``) for the validation protocol.
@@ -119,19 +125,21 @@ STEPS = {
                    warmup_epochs=1.0, architecture="yolo26n-pose", width_loss=0.5, generate_options=GEN)),
     "u2": (10, dict(seed=13, n_train=3000, lr0=3e-4, lrf=0.1, cos_lr=True, appearance={}, full_views=False,
                     warmup_epochs=0.0, generate_options=GEN)),
+    "x": (5, dict(seed=13, n_train=3000, lr0=5e-4, lrf=0.1, cos_lr=True, appearance={}, warmup_epochs=0.3,
+                  generate_options=GEN)),
     "m": (2, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, degrees=30.0, pose=72.0,
                   generate_options=GEN)),
 }
 
 #: step → (step, epoch index) whose saved checkpoint it starts from, instead of the shipped model.
-INIT = {"r": ("q", 0), "u2": ("u", 11)}
+INIT = {"r": ("q", 0), "u2": ("u", 11), "x": ("u", 11)}
 
 #: steps trained from their architecture's model file (random initial weights), not from the shipped model.
 SCRATCH = {"u", "w"}
 
 
 #: step → the step whose rendered dataset it trains on (linked into its working directory, never re-rendered).
-DATA = {"t": "s", "u2": "u", "w": "u"}
+DATA = {"t": "s", "u2": "u", "w": "u", "x": "u"}
 
 
 def share_dataset(step: str, out: Path) -> None:
