@@ -12,7 +12,8 @@ validation set for every choice, test seeds for the figures.
   own pool of 10 airports): the figures of the model card and BENCHMARKS.md, reported per seed and per envelope
   with the spread over seeds. No choice is ever made on them.
 
-Each set: the shipped design (two-stage 320 + 320, ``ippe_lm`` and ``iterative`` PnP), no perturbation;
+Each set: the shipped design (two-stage 320 + 320, ``ippe_lm`` and ``iterative`` PnP; ``--design single``: the
+network alone on the 320-px view), no perturbation;
 detection at τ_conf = 0.25, nominal survival (position error ≤ 1000 m), median position error in % of the slant
 distance, the edge-tilt slope (predicted on true threshold-edge angle; 1 = reads the roll,
 :func:`vbl_robust.detect.evaluate.edge_tilt_slope`), per envelope. Gates (every test seed): detection ≥ 97 %, survival ≥ 90 %; goals: detection ≥ 98 %,
@@ -20,7 +21,7 @@ survival ≥ 95 % (far ≥ 90 %), median error ≤ 5 % of slant.
 
     python benchmarks/detector_protocol.py [--model PATH.pt] [--split validation|test|all] [--n 510]
                                            [--seeds S ...] [--json OUT.json] [--min-side PX] [--margin M]
-                                           [--second PASS2.pt] [--compare OTHER.json]
+                                           [--second PASS2.pt] [--design twostage|single] [--compare OTHER.json]
 
 Rendered pixels are cached in ``.cache/bench_detector/seed<S>`` (shared with ``bench_detector.py``).
 """
@@ -39,14 +40,20 @@ from vbl_robust.detect.protocol import GATES, GOALS, TEST_SEEDS, VALIDATION_SEED
 VALIDATION_SEED = VALIDATION_SEEDS[0]  # the first validation seed (older tools' default)
 
 
-def detector(model: str | None, second: str | None = None, **window):
+def detector(model: str | None, second: str | None = None, design: str = "twostage", **window):
     """The shipped two-stage detector, or ``model`` (a trusted .pt) as one with crop ``window`` (``min_side``,
     ``margin``: what its training crops used); ``second``: a trusted .pt for pass 2 (a crop network of its own,
-    ``train(full_views=False)``), pass 1 staying ``model`` (or the shipped weights)."""
+    ``train(full_views=False)``), pass 1 staying ``model`` (or the shipped weights). ``design="single"``: the
+    network (``model`` or the shipped one) as a single pass on the 320-px view instead — no crop, so neither
+    ``second`` nor a window."""
     from vbl_robust.detect.shipped import DEFAULT_MODEL, default_detector, with_design
     from vbl_robust.detect.twostage import TwoStageDetector
     from vbl_robust.detect.ultralytics import UltralyticsDetector
 
+    if design == "single":
+        if second is not None or window:
+            raise SystemExit("detector_protocol: --design single has no pass 2: drop --second/--min-side/--margin")
+        return with_design(UltralyticsDetector(model or DEFAULT_MODEL, trust=True, imgsz=320), "single")
     if model is None and second is None:
         if window:
             raise ValueError("detector_protocol: --min-side/--margin apply to --model, not to the shipped model")
@@ -143,13 +150,15 @@ def main() -> None:
                     help="a previous --json of another model: paired comparison (approaches only one survives, "
                          "exact McNemar p) on the seeds both evaluated")
     ap.add_argument("--second", default=None, help="a trusted .pt for pass 2 (crop network; pass 1: --model)")
+    ap.add_argument("--design", choices=("twostage", "single"), default="twostage",
+                    help="the shipped two-stage design (default) or the network alone as a single pass")
     args = ap.parse_args()
     from vbl_robust.detect.offline import setup_offline
 
     setup_offline()
     torch.set_num_threads(int(os.environ.get("VBL_BENCH_THREADS", "1")))
     window = {k: v for k, v in (("min_side", args.min_side), ("margin", args.margin)) if v is not None}
-    det = detector(args.model, args.second, **window)
+    det = detector(args.model, args.second, design=args.design, **window)
     seeds = {"validation": VALIDATION_SEEDS, "test": TEST_SEEDS,
              "all": (*VALIDATION_SEEDS, *TEST_SEEDS)}[args.split]
     if args.seeds:
@@ -174,7 +183,8 @@ def main() -> None:
         if split == "test":
             print(spread(res) + "\n")
     print(f"({time.perf_counter() - t0:.0f} s, {torch.get_num_threads()} torch thread(s))")
-    result = {"model": args.model or "shipped", "second": args.second, "n": args.n, **out, "survived": survived}
+    result = {"model": args.model or "shipped", "second": args.second, "design": args.design, "n": args.n, **out,
+              "survived": survived}
     if args.json:
         with open(args.json, "w") as f:
             json.dump(result, f, indent=1)

@@ -60,3 +60,19 @@ def test_compare_pairs_the_approaches_of_the_seeds_both_files_hold(script):
         p.compare(new, {"validation": {"1": []}})
     with pytest.raises(SystemExit, match="no validation seed in both"):
         p.compare(new, {"validation": {"9": []}, "survived": {"9": [True]}})
+
+
+def test_design_single_is_the_network_alone_and_refuses_a_pass_2(script):
+    """``--design single``: the network (``--model`` or the shipped one) on the 320-px view, no crop; a pass-2
+    network or a crop window makes no sense there and is refused."""
+    from vbl_robust.detect.shipped import DEFAULT_MODEL
+    from vbl_robust.detect.twostage import TwoStageDetector
+
+    p = script("benchmarks/detector_protocol.py")
+    one = p.detector(str(DEFAULT_MODEL), design="single")
+    assert not isinstance(one, TwoStageDetector) and one.path == DEFAULT_MODEL
+    assert not isinstance(p.detector(None, design="single"), TwoStageDetector)
+    with pytest.raises(SystemExit, match="no pass 2"):
+        p.detector(None, str(DEFAULT_MODEL), design="single")
+    with pytest.raises(SystemExit, match="no pass 2"):
+        p.detector(str(DEFAULT_MODEL), design="single", min_side=40.0)
