@@ -65,6 +65,11 @@
   ``u`` first), on the same rendered crops (linked), AdamW lr 3e-4 → 3e-5 cosine over 10 epochs. Why: ``u``'s
   validation keypoint mAP was still rising at its last epoch (from scratch, 12 epochs of 3000 crops: a fraction of
   the ~50 epochs the v8 chain took).
+- ``u3`` (session 15, issue 49): ``u2`` continued on **fresh data** — from ``u2``'s last epoch (run ``u2`` first),
+  crops only of new samples (seed 14: 2000 new airports in the shipped mix, rendered), AdamW lr 2e-4 → 2e-5 cosine
+  over 4 epochs. Why: ``u2`` (u + 10 epochs) was the first candidate ahead of v9 on validation (+20 of 2040,
+  p = 0.098) and on every test seed, with its training loss still falling fast on seed 13's 3000 crops (RLE loss
+  1.19 → 0.48); fresh airports raised validation survival at every step of the v8 chain (steps P → Q → R).
 - ``x`` (session 15, issue 49): **one YOLO26n-pose network for both passes** (the shipped design's layout: full
   views and crops), usable as a single pass too — from ``u``'s last epoch (its crop network: it already reads
   runway corners; run ``u`` first), on the full views *and* crops of ``u``'s rendered samples (linked; seed 13),
@@ -125,6 +130,8 @@ STEPS = {
                    warmup_epochs=1.0, architecture="yolo26n-pose", width_loss=0.5, generate_options=GEN)),
     "u2": (10, dict(seed=13, n_train=3000, lr0=3e-4, lrf=0.1, cos_lr=True, appearance={}, full_views=False,
                     warmup_epochs=0.0, generate_options=GEN)),
+    "u3": (4, dict(seed=14, n_train=3000, lr0=2e-4, lrf=0.1, cos_lr=True, appearance={}, full_views=False,
+                    warmup_epochs=0.0, generate_options=GEN)),
     "x": (5, dict(seed=13, n_train=3000, lr0=5e-4, lrf=0.1, cos_lr=True, appearance={}, warmup_epochs=0.3,
                   generate_options=GEN)),
     "m": (2, dict(seed=9, n_train=3000, lr0=1.5e-4, lrf=0.1, cos_lr=True, appearance={}, degrees=30.0, pose=72.0,
@@ -132,7 +139,7 @@ STEPS = {
 }
 
 #: step → (step, epoch index) whose saved checkpoint it starts from, instead of the shipped model.
-INIT = {"r": ("q", 0), "u2": ("u", 11), "x": ("u", 11)}
+INIT = {"r": ("q", 0), "u2": ("u", 11), "u3": ("u2", 9), "x": ("u", 11)}
 
 #: steps trained from their architecture's model file (random initial weights), not from the shipped model.
 SCRATCH = {"u", "w"}
