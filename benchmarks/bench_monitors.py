@@ -39,11 +39,12 @@ PAPER = ROOT / "results" / "paper" / "spatial-2d" / "results.sqlite.xz"
 WORK = ROOT / "runs" / "bench_monitors"
 LIMITS_PX = (0.5, 1.0, 2.0, 3.0, 5.0, 10.0)
 NOMINAL = 300
-#: the σ monitor's network (issue 49: step u's last epoch). Unshipped weights are not kept in the tree: restore
-#: them from git history (results/detector_candidates/README.md) or pass another with ``$VBL_SIGMA_MODEL``.
-SIGMA_MODEL = Path(os.environ.get("VBL_SIGMA_MODEL", ROOT / "results" / "detector_candidates" / "yolo26n_pass2_u.pt"))
-SIGMA_RESTORE = ("git show 61c56d0:results/detector_candidates/yolo26n_pass2_u.pt > "
-                 "results/detector_candidates/yolo26n_pass2_u.pt")
+#: the σ monitor's network (issue 49: step u2's last epoch, the best candidate; step u's in git history too).
+#: Unshipped weights are not kept in the tree: restore them from git history (results/detector_candidates/README.md)
+#: or pass another with ``$VBL_SIGMA_MODEL``.
+SIGMA_MODEL = Path(os.environ.get("VBL_SIGMA_MODEL", ROOT / "results" / "detector_candidates" / "yolo26n_pass2_u2.pt"))
+SIGMA_RESTORE = ("git show 306b97a:results/detector_candidates/yolo26n_pass2_u2.pt > "
+                 "results/detector_candidates/yolo26n_pass2_u2.pt")
 SIGMA_VALIDATION_SEED = 20261202
 GRID = (np.linspace(-15.0, 15.0, 7), np.array([0.5, 0.7, 1.0, 1.4, 2.0]))
 NOMINAL_QUANTILE = 0.98
@@ -280,12 +281,23 @@ def sigma_table(m: dict) -> str:
 
 
 def main(quick: bool = False) -> str:
+    from vbl_robust.digest import file_sha256
+
     if not SIGMA_MODEL.is_file():  # never drop the measured σ section silently
         raise SystemExit(f"bench_monitors: {SIGMA_MODEL} not found; restore it ({SIGMA_RESTORE}) or set "
                          "$VBL_SIGMA_MODEL")
     return ("## Runtime monitors: reprojection residual\n\n" + table(measure(quick)) + "\n"
             "\n## Runtime monitors: corner σ (YOLO26-pose pass 2 behind v9's pass 1)\n\n"
+            f"Pass-2 network: `{_shown(SIGMA_MODEL)}` (SHA-256 {file_sha256(SIGMA_MODEL)[:12]}).\n\n"
             + sigma_table(sigma_measure(quick)) + "\n")
+
+
+def _shown(path: Path) -> str:
+    """``path`` relative to the repository when inside it (the section names the network it measured)."""
+    try:
+        return str(path.resolve().relative_to(ROOT))
+    except ValueError:
+        return str(path)
 
 
 if __name__ == "__main__":
