@@ -79,6 +79,10 @@ def compare(new: dict, old: dict, split: str = "validation") -> str:
     (:func:`vbl_robust.stats.paired`)."""
     from vbl_robust.detect.evaluate import paired_seeds
 
+    designs = [d.get("design", "twostage") for d in (new, old)]  # files written before --design: two-stage
+    if designs[0] != designs[1]:
+        raise SystemExit(f"detector_protocol: --compare pairs one design with itself, not {designs[0]} with "
+                         f"{designs[1]}")
     try:
         rows, pooled = paired_seeds(new, old, split)
     except ValueError as exc:

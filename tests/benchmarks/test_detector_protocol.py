@@ -60,6 +60,9 @@ def test_compare_pairs_the_approaches_of_the_seeds_both_files_hold(script):
         p.compare(new, {"validation": {"1": []}})
     with pytest.raises(SystemExit, match="no validation seed in both"):
         p.compare(new, {"validation": {"9": []}, "survived": {"9": [True]}})
+    with pytest.raises(SystemExit, match="not single with twostage"):  # a file without "design" is two-stage
+        p.compare({**new, "design": "single"}, old)
+    assert "| pooled | 3 |" in p.compare({**new, "design": "single"}, {**old, "design": "single"})
 
 
 def test_design_single_is_the_network_alone_and_refuses_a_pass_2(script):
