@@ -1,5 +1,6 @@
 """Samples and datasets (LARD V2 reader and writer)."""
 
+from .check import ImageCheck, LabelCheck, check_images, check_labels, first_problem, image_digests
 from .lard import LARD_COLUMNS, SEQUENCE_COLUMNS, approach_metrics, load_runway_db, normalize_runway
 from .lard_read import read_lard
 from .lard_write import write_lard
@@ -12,9 +13,15 @@ __all__ = [
     "LARD_COLUMNS",
     "SEQUENCE_COLUMNS",
     "ApproachSequence",
+    "ImageCheck",
+    "LabelCheck",
     "Sample",
     "approach_metrics",
+    "check_images",
+    "check_labels",
+    "first_problem",
     "group_sequences",
+    "image_digests",
     "load_rgb",
     "load_runway_db",
     "normalize_runway",

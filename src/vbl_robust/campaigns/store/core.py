@@ -200,12 +200,14 @@ class ResultStore:
         names = [c[0] for c in cur.description]
         return {r[0]: dict(zip(names, r, strict=True)) for r in cur.fetchall()}
 
-    def check_contents(self, samples: Iterable[Any]) -> None:
+    def check_contents(self, samples: Iterable[Any], digests: Mapping[str, str] | None = None) -> None:
         """Record the image-file digest of each sample (each frame of a sequence) read from a file (``image_path``), and refuse
         (``ValueError`` naming them) samples whose file's bytes differ from those their stored jobs were computed
         on. Every file is hashed on every run: a size and mtime that did not change prove nothing (``cp -p``,
         ``tar x`` and ``rsync -a`` keep them for other bytes); samples rendered in memory have no file (their pixels
-        follow from their geometry and the generator, both in the job keys and the provenance)."""
+        follow from their geometry and the generator, both in the job keys and the provenance). ``digests``
+        (sample id → hex SHA-256) are this run's digests already computed from the files' bytes (the pre-run image
+        check, :func:`vbl_robust.data.check.image_digests`): those files are not read again."""
         from ...digest import file_sha256
 
         stored = {r[0]: r[1:] for r in self.contents()}
@@ -218,7 +220,7 @@ class ResultStore:
                     continue  # rendered in memory, or missing (the job records that failure)
                 st = Path(path).stat()
                 old = stored.get(s.id)
-                digest = file_sha256(path)
+                digest = (digests or {}).get(s.id) or file_sha256(path)
                 if old is not None and old[3] != digest and owner.id in with_jobs:
                     changed.append(f"{s.id} ({path})")
                     continue
