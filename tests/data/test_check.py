@@ -40,7 +40,8 @@ def png_header(width: int, height: int) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
 
     ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
-    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0" * 64)) + chunk(b"IEND", b"")
+    body = chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0" * 64)) + chunk(b"IEND", b"")
+    return b"\x89PNG\r\n\x1a\n" + body
 
 
 def test_a_clean_dataset_passes_with_sizes_and_labels(rows):
@@ -67,7 +68,7 @@ def test_a_missing_image_is_named_relative_to_the_root(rows):
     samples[2].image_path.unlink()
     checks = check_images(samples, root=root)
     bad = [c for c in checks if not c.ok]
-    assert [(c.path, c.problem) for c in bad] == [(samples[2].id, "image file not found")]
+    assert [(c.path, c.problem, c.kind) for c in bad] == [(samples[2].id, "image file not found", "missing")]
     line = first_problem(samples)
     assert line == f"1 of 4 image(s) cannot be used: {samples[2].id}: image file not found"
     assert str(root) not in line and "\n" not in line
@@ -78,7 +79,8 @@ def test_a_truncated_jpeg_is_refused(rows):
     data = samples[1].image_path.read_bytes()
     samples[1].image_path.write_bytes(data[: len(data) // 3])
     check = check_images(samples, root=root)[1]
-    assert not check.ok and check.size == (W, H)  # the header is intact: only decoding finds it
+    # the header is whole: decoding finds it
+    assert not check.ok and check.size == (W, H) and check.kind == "undecodable"
     assert check.problem.startswith("cannot be decoded") and "truncated" in check.problem
 
 
@@ -96,7 +98,7 @@ def test_a_wrong_size_image_is_refused_with_both_sizes(rows):
     root, samples = rows
     Image.fromarray(np.zeros((H + 10, W, 3), np.uint8)).save(samples[3].image_path, format="JPEG")
     check = check_images(samples, root=root)[3]
-    assert not check.ok and check.size == (W, H + 10)
+    assert not check.ok and check.size == (W, H + 10) and check.kind == "size"
     assert check.problem == f"the image is {W}x{H + 10} px, the CSV says {W}x{H}"
 
 
@@ -110,7 +112,7 @@ def test_an_over_large_header_is_refused_without_decoding(rows, monkeypatch):
     monkeypatch.setattr(ImageFile.ImageFile, "load", no_decode)
     monkeypatch.setattr(Image.Image, "load", no_decode)
     check = check_images(samples[:1], root=root)[0]
-    assert not check.ok and check.size == (30000, 30000)
+    assert not check.ok and check.size == (30000, 30000) and check.kind == "too_large"
     assert check.problem == f"the header says 30000x30000 px, more than {MAX_IMAGE_SIDE} px a side (not decoded)"
 
 
@@ -201,10 +203,12 @@ def test_a_file_shared_by_samples_is_checked_once_per_stated_size(rows):
 
 def test_sequences_count_as_their_frames(rows):
     _, samples = rows
-    seqs = [ApproachSequence("A", samples[:2], [0.0, 0.1], [0, 1]), ApproachSequence("B", samples[2:], [0.0, 0.1], [0, 1])]
+    seqs = [ApproachSequence("A", samples[:2], [0.0, 0.1], [0, 1]),
+            ApproachSequence("B", samples[2:], [0.0, 0.1], [0, 1])]
     samples[3].image_path.unlink()
     checks = check_images(seqs)
-    assert [c.sample_id for c in checks] == [s.id for s in samples] and [c.ok for c in checks] == [True, True, True, False]
+    assert [c.sample_id for c in checks] == [s.id for s in samples]
+    assert [c.ok for c in checks] == [True, True, True, False]
 
 
 def test_labels_off_the_camera_are_measured_and_flagged_by_the_reader(tmp_path):

@@ -14,12 +14,14 @@ from .provenance import file_sha256
 logger = logging.getLogger(__name__)
 
 
-def find_lard_files(directory: str | Path) -> tuple[Path, Path]:
+def find_lard_files(directory: str | Path, *, option: str = "--lard") -> tuple[Path, Path]:
     """The metadata CSV and runway-DB JSON of a LARD V2 dataset directory (searched at the top, then one level
-    down); ``ValueError`` naming the candidates when there is not exactly one of each."""
+    down); ``ValueError`` naming the candidates when there is not exactly one of each. Messages start with
+    ``option`` (the command-line option or argument that named the directory) and the directory."""
     d = Path(directory)
+    name = f"{option} {d}".strip()
     if not d.is_dir():
-        raise FileNotFoundError(f"--lard {d}: not a directory")
+        raise FileNotFoundError(f"{name}: not a directory")
     found: dict[str, list[Path]] = {}
     for pattern, kind in (("*.csv", "csv"), ("*.json", "json")):
         hits = sorted(d.glob(pattern)) or sorted(d.glob(f"*/{pattern}"))
@@ -27,10 +29,11 @@ def find_lard_files(directory: str | Path) -> tuple[Path, Path]:
     for kind, what in (("csv", "metadata CSV"), ("json", "runway database JSON")):
         hits = found[kind]
         if not hits:
-            raise FileNotFoundError(f"--lard {d}: no {what} (*.{kind}) found")
+            raise FileNotFoundError(f"{name}: no {what} (*.{kind}) found")
         if len(hits) > 1:
             names = ", ".join(str(h.relative_to(d)) for h in hits[:6])
-            raise ValueError(f"--lard {d}: several {what} files ({names}); point --lard at a directory with exactly one")
+            raise ValueError(f"{name}: several {what} files ({names}); point {option or 'it'} at a directory with "
+                             "exactly one")
     return found["csv"][0], found["json"][0]
 
 

@@ -45,7 +45,7 @@ from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -55,12 +55,23 @@ from ..constants import MAX_IMAGE_SIDE
 from ..geometry.camera import project
 from .lard import CORNER_COLUMNS, EXACT_CORNER_COLUMNS
 
-__all__ = ["MAX_IMAGE_FILE_BYTES", "ImageCheck", "LabelCheck", "check_image", "check_images", "check_labels",
-           "describe_problems", "first_problem", "image_digests"]
+__all__ = ["IMAGE_PROBLEMS", "MAX_IMAGE_FILE_BYTES", "ImageCheck", "LabelCheck", "check_image", "check_images",
+           "check_labels", "describe_problems", "first_problem", "image_digests"]
 
 #: Largest image file accepted, bytes: an uncompressed 16-bit RGBA image of ``MAX_IMAGE_SIDE`` px a side, plus
 #: 1 MiB of headers. A larger file holds more than any accepted image (it is refused before it is read).
 MAX_IMAGE_FILE_BYTES = MAX_IMAGE_SIDE**2 * 8 + (1 << 20)
+#: The kinds of image problem (:attr:`ImageCheck.kind`), each with the words a summary counts it in.
+IMAGE_PROBLEMS: dict[str, str] = {
+    "missing": "image missing",
+    "outside": "outside the dataset root",
+    "unreadable": "unreadable file",
+    "too_large": "too large",
+    "size": "another size than stated",
+    "orientation": "EXIF-rotated",
+    "undecodable": "undecodable",
+    "format": "a format OpenCV cannot read",
+}
 #: EXIF tag of the orientation.
 _ORIENTATION = 0x0112
 #: Threads decoding images at once (decoders release the GIL).
@@ -79,6 +90,7 @@ class ImageCheck:
         problem: why not, one short sentence ("" when ``ok``).
         size: ``(width, height)`` of the file's header, or None when no header was read.
         sha256: hex SHA-256 of the file's bytes, when asked for and the file was read; else None.
+        kind: what kind of problem, a key of :data:`IMAGE_PROBLEMS` ("" when ``ok``).
     """
 
     sample_id: str
@@ -87,6 +99,7 @@ class ImageCheck:
     problem: str = ""
     size: tuple[int, int] | None = None
     sha256: str | None = None
+    kind: str = ""
 
 
 @dataclass(frozen=True)
@@ -183,7 +196,7 @@ def check_images(samples: Iterable[Any], *, root: str | Path | None = None, sha2
     out = []
     for s, key in zip(frames, keys, strict=True):
         c = results[key]
-        out.append(c if c.sample_id == s.id else ImageCheck(s.id, c.path, c.ok, c.problem, c.size, c.sha256))
+        out.append(c if c.sample_id == s.id else replace(c, sample_id=s.id))
     return out
 
 
@@ -265,58 +278,58 @@ def _check_one(s: Any, root: Path | None, sha256: bool) -> ImageCheck:
     path = Path(path)
     shown = _shown(s, root)
 
-    def refuse(problem: str, size: tuple[int, int] | None = None) -> ImageCheck:
-        return ImageCheck(s.id, shown, False, problem, size)
+    def refuse(kind: str, problem: str) -> ImageCheck:
+        return ImageCheck(s.id, shown, False, problem, kind=kind)
 
     try:
         if root is not None:
             resolved = path.resolve()
             if resolved == root or not resolved.is_relative_to(root):
-                return refuse(f"the image file lies outside the dataset root (it resolves to {resolved})")
+                return refuse("outside", f"the image file lies outside the dataset root (it resolves to {resolved})")
         if not path.exists():
-            return refuse("image file not found")
+            return refuse("missing", "image file not found")
         if not path.is_file():
-            return refuse("not a regular file (a directory?)")
+            return refuse("missing", "not a regular file (a directory?)")
         n_bytes = path.stat().st_size
         if n_bytes > MAX_IMAGE_FILE_BYTES:
-            return refuse(f"the file is {n_bytes / 2**20:.0f} MiB, more than any image of at most {MAX_IMAGE_SIDE} "
-                          f"px a side needs ({MAX_IMAGE_FILE_BYTES / 2**20:.0f} MiB)")
+            return refuse("too_large", f"the file is {n_bytes / 2**20:.0f} MiB, more than any image of at most "
+                          f"{MAX_IMAGE_SIDE} px a side needs ({MAX_IMAGE_FILE_BYTES / 2**20:.0f} MiB)")
         if n_bytes == 0:
-            return refuse("the image file is empty")
+            return refuse("undecodable", "the image file is empty")
         with open(path, "rb") as fh:
             return _check_file(s, fh, shown, sha256)
     except OSError as exc:
-        return refuse(f"cannot be read ({exc.strerror or _one_line(exc)})")
+        return refuse("unreadable", f"cannot be read ({exc.strerror or _one_line(exc)})")
 
 
 def _check_file(s: Any, fh: Any, shown: str, sha256: bool) -> ImageCheck:
     from PIL import Image, UnidentifiedImageError
 
     stated = (int(s.width), int(s.height))
-
-    def refuse(problem: str, size: tuple[int, int] | None = None) -> ImageCheck:
-        return ImageCheck(s.id, shown, False, problem, size)
-
     try:
         im = Image.open(fh)
     except UnidentifiedImageError:
         return _check_with_opencv(s, shown, sha256)
     except Exception as exc:  # noqa: BLE001 - a malformed header can raise anything inside PIL's parsers
-        return refuse(f"unreadable image header ({_one_line(exc)})")
+        return ImageCheck(s.id, shown, False, f"unreadable image header ({_one_line(exc)})", kind="undecodable")
     with im:
         size = (int(im.size[0]), int(im.size[1]))
+
+        def refuse(kind: str, problem: str, digest: str | None = None) -> ImageCheck:
+            return ImageCheck(s.id, shown, False, problem, size, digest, kind)
+
         if max(size) > MAX_IMAGE_SIDE:
-            return refuse(f"the header says {size[0]}x{size[1]} px, more than {MAX_IMAGE_SIDE} px a side (not decoded)",
-                          size)
+            return refuse("too_large", f"the header says {size[0]}x{size[1]} px, more than {MAX_IMAGE_SIDE} px a side "
+                          "(not decoded)")
         if size != stated:
-            return refuse(f"the image is {size[0]}x{size[1]} px, {_stated(s)} {stated[0]}x{stated[1]}", size)
+            return refuse("size", f"the image is {size[0]}x{size[1]} px, {_stated(s)} {stated[0]}x{stated[1]}")
         try:
             orientation = im.getexif().get(_ORIENTATION)
         except Exception:  # noqa: BLE001 - a malformed EXIF block: OpenCV ignores what it cannot parse too
             orientation = None
         if orientation not in (None, 1):
-            return refuse(f"EXIF orientation {orientation}: OpenCV would rotate the image when a run reads it, away "
-                          "from its labels (save it without the orientation tag)", size)
+            return refuse("orientation", f"EXIF orientation {orientation}: OpenCV would rotate the image when a run "
+                          "reads it, away from its labels (save it without the orientation tag)")
         digest = None
         if sha256:
             fh.seek(0)
@@ -326,13 +339,12 @@ def _check_file(s: Any, fh: Any, shown: str, sha256: bool) -> ImageCheck:
                 problem = _decode(copy)
         else:
             problem = _decode(im)
-    if problem:
-        return ImageCheck(s.id, shown, False, f"cannot be decoded: {problem}", size, digest)
+        if problem:
+            return refuse("undecodable", f"cannot be decoded: {problem}", digest)
     import cv2
 
     if not cv2.haveImageReader(str(s.image_path)):
-        return ImageCheck(s.id, shown, False, "OpenCV, which reads the images during a run, has no decoder for this "
-                          "format", size, digest)
+        return refuse("format", "OpenCV, which reads the images during a run, has no decoder for this format", digest)
     return ImageCheck(s.id, shown, True, "", size, digest)
 
 
@@ -351,19 +363,20 @@ def _check_with_opencv(s: Any, shown: str, sha256: bool) -> ImageCheck:
 
     path = str(s.image_path)
     if not cv2.haveImageReader(path):
-        return ImageCheck(s.id, shown, False, "not an image file (neither PIL nor OpenCV knows its format)")
+        return ImageCheck(s.id, shown, False, "not an image file (neither PIL nor OpenCV knows its format)",
+                          kind="undecodable")
     data = Path(path).read_bytes()
     img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_COLOR)
     if img is None:
-        return ImageCheck(s.id, shown, False, "cannot be decoded (OpenCV cannot read it)")
+        return ImageCheck(s.id, shown, False, "cannot be decoded (OpenCV cannot read it)", kind="undecodable")
     size = (int(img.shape[1]), int(img.shape[0]))
     digest = hashlib.sha256(data).hexdigest() if sha256 else None
     if max(size) > MAX_IMAGE_SIDE:
         return ImageCheck(s.id, shown, False, f"the image is {size[0]}x{size[1]} px, more than {MAX_IMAGE_SIDE} px a "
-                          "side", size, digest)
+                          "side", size, digest, "too_large")
     if size != (int(s.width), int(s.height)):
         return ImageCheck(s.id, shown, False, f"the image is {size[0]}x{size[1]} px, {_stated(s)} "
-                          f"{int(s.width)}x{int(s.height)}", size, digest)
+                          f"{int(s.width)}x{int(s.height)}", size, digest, "size")
     return ImageCheck(s.id, shown, True, "", size, digest)
 
 
