@@ -41,7 +41,7 @@ def code_version() -> str:
 
 #: The libraries whose versions can move a result (the network, the warps, the PnP solvers, the inference engines).
 NUMERIC_LIBRARIES = ("torch", "torchvision", "opencv-python", "opencv-python-headless", "numpy", "scipy", "kornia",
-                     "ultralytics", "onnxruntime", "openvino")
+                     "ultralytics", "onnxruntime", "openvino", "onnx2pytorch")
 
 
 @cache

@@ -4,6 +4,7 @@
   :class:`DetectContext` a detector asks for its views, :class:`Detections`, :func:`select`;
 - :mod:`.windows` — detector-side geometry (letterbox, crop windows from corners);
 - :mod:`.pose` — the pose-model base (single pass); :mod:`.ultralytics` (``.pt``) and :mod:`.onnx` models;
+  :mod:`.onnx_twin` — a checked torch twin of an ONNX model, for gradient searches;
 - :mod:`.twostage` — two pose models composed: whole image, then a crop; :mod:`.oracle` — ground truth;
 - :mod:`.shipped` — the shipped model (path, design, validation, caveats) and :class:`DetectorSpec`.
 """

@@ -6,7 +6,9 @@ post-processing is shared with :class:`~vbl_robust.detect.pose.PoseDetector`. A 
 head (YOLO26-pose) is exported with its σ channels appended (B, 4 + nc + K·3 + K·2, A): ultralytics' exporter
 drops that head, so :func:`export_onnx` traces :class:`~vbl_robust.detect.ultralytics.PoseWithSigma` itself
 (``torch.onnx.export``) and writes the same metadata. ONNX Runtime does not give
-gradients: :meth:`OnnxDetector.top` works as a (non-differentiable) black box.
+gradients: :meth:`OnnxDetector.top` works as a (non-differentiable) black box. The detector a run builds from an
+``.onnx`` (:class:`~vbl_robust.detect.DetectorSpec`) adds a torch twin of the graph for gradient searches, checked
+against ONNX Runtime before it is used (:mod:`.onnx_twin`).
 """
 
 from __future__ import annotations
@@ -111,6 +113,7 @@ class OnnxDetector(PoseDetector):
     """
 
     differentiable = False
+    gradient_unavailable = "ONNX Runtime gives no gradients (with_twin adds a checked torch twin)"
 
     def __init__(self, path: str | Path, *, imgsz: int | None = None, chunk: int = 16,
                  threads: int | None = None, device: str = "cpu") -> None:
@@ -153,6 +156,9 @@ class OnnxDetector(PoseDetector):
             self.chunk = int(chunk)
         self.input_size = self.imgsz
         self.path = p
+
+    def __repr__(self) -> str:
+        return f"OnnxDetector({str(self.path)!r}, imgsz={self.imgsz})"
 
     def raw(self, views: torch.Tensor) -> torch.Tensor:
         x = views.detach().cpu().numpy().astype(np.float32, copy=False)

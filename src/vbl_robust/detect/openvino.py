@@ -32,6 +32,7 @@ class OpenVinoDetector(PoseDetector):
     """
 
     differentiable = False
+    gradient_unavailable = "OpenVINO gives no gradients (with_twin adds a checked torch twin)"
 
     def __init__(self, path: str | Path, *, imgsz: int | None = None, chunk: int = 16,
                  threads: int | None = None, device: str = "cpu") -> None:

@@ -88,6 +88,9 @@ class PoseDetector:
     chunk: int = 16
     uses_pixels: bool = True
     differentiable: bool = True
+    #: why the differentiable path is unavailable (``""`` when ``differentiable``; one line, read when a gradient
+    #: search is refused: :func:`vbl_robust.detect.onnx_twin.gradient_refusal`)
+    gradient_unavailable: str = ""
     #: the raw output carries each corner's σ (a network with an uncertainty head; set by the subclass on loading)
     gives_sigma: bool = False
     conf_min: float = 0.01

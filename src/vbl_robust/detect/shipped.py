@@ -177,7 +177,8 @@ class DetectorSpec:
     """How to build a detector.
 
     Kinds: ``"oracle"`` (projects the ground truth: a perfect detector), ``"default"`` (the shipped model),
-    ``"ultralytics"`` (a user's ``.pt``; ``trust=True`` required for files outside the package), ``"onnx"``,
+    ``"ultralytics"`` (a user's ``.pt``; ``trust=True`` required for files outside the package), ``"onnx"`` (its
+    engine for the black box, and a torch twin checked against it for gradient searches: :mod:`.onnx_twin`),
     ``"factory"`` (``path`` = ``"module:callable"`` returning a detector; for tests and plug-ins).
     ``options["design"]`` (model kinds): ``"single"`` or ``"twostage"`` (:func:`with_design`); the shipped model
     defaults to its ``default.json``, a user's model to a single pass; ``options["min_side"]``,
@@ -363,16 +364,18 @@ class DetectorSpec:
             engine = opts.pop("engine", "onnxruntime" if self.kind == "onnx" else "torch")
             if self.kind == "onnx":
                 from .engines import resolve_engine
+                from .onnx_twin import with_twin
 
-                if resolve_engine(engine) == "openvino":
+                resolved = resolve_engine(engine)
+                if resolved == "openvino":
                     from .openvino import OpenVinoDetector
 
-                    return with_design(OpenVinoDetector(self.path, **opts), design, **window)
-                if resolve_engine(engine) == "torch":
+                    return with_design(with_twin(OpenVinoDetector(self.path, **opts), resolved), design, **window)
+                if resolved == "torch":
                     raise ValueError(f"{self.path}: an ONNX model runs on onnxruntime or openvino, not torch")
                 from .onnx import OnnxDetector
 
-                return with_design(OnnxDetector(self.path, **opts), design, **window)
+                return with_design(with_twin(OnnxDetector(self.path, **opts), resolved), design, **window)
             from .engines import with_engine
             from .ultralytics import UltralyticsDetector
 

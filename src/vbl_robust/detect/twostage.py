@@ -50,13 +50,26 @@ class TwoStageDetector:
         self.first = first
         self.second = second or first
         self.margin, self.min_side = float(margin), float(min_side)
-        self.differentiable = bool(self.first.differentiable and self.second.differentiable)
         #: the corners' σ comes from pass 2 (the network that places them)
         self.gives_sigma = bool(self.second.gives_sigma)
 
     def __repr__(self) -> str:
         second = "" if self.second is self.first else f", second={self.second!r}"
         return f"TwoStageDetector({self.first!r}{second}, margin={self.margin}, min_side={self.min_side})"
+
+    @property
+    def differentiable(self) -> bool:
+        """Both passes have the differentiable path (read each time: an ONNX twin can lose it on its first check)."""
+        return bool(self.first.differentiable and self.second.differentiable)
+
+    @property
+    def gradient_unavailable(self) -> str:
+        """Why the differentiable path is unavailable (``""`` when it is): the first pass's reason, else the
+        second's."""
+        if self.differentiable:
+            return ""
+        return (getattr(self.first, "gradient_unavailable", "") or getattr(self.second, "gradient_unavailable", "")
+                or "a pass of the two-stage detector is not differentiable")
 
     @property
     def device(self):
