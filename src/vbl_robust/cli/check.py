@@ -227,8 +227,8 @@ def _print_table(rows: list[RowCheck], shown: list[RowCheck], sequences: bool) -
     Console().print(table)
     if len(shown) < len(rows):
         typer.echo(f"… {len(rows) - len(shown)} more row(s) not shown: --all prints them, --json PATH writes them")
-    typer.echo("labels Δ: the largest distance between a corner label and the runway corner reprojected with the "
-               "row's camera (exact x_TR_exact… labels when the CSV has them, else the truncated x_TR…)")
+    typer.echo("labels Δ: the largest distance between a corner label (x_TR_exact… when the CSV has them, else "
+               "x_TR…)\nand that corner reprojected with the row's camera; 'off': beyond the reader's tolerance")
 
 
 def _summary(rows: list[RowCheck], seqs: list) -> dict[str, Any]:
