@@ -61,6 +61,9 @@ def test_an_address_that_accepts_tcp_but_is_not_ray_is_refused_within_the_timeou
     server.start()
     try:
         assert grpc_answers("127.0.0.1", port, 5.0)
-        check_executor("ray", f"ray://127.0.0.1:{port}", timeout_s=5.0)
+        check_executor("ray", f"127.0.0.1:{port}", timeout_s=5.0)
+        # a Ray Client address is refused before any connection: runs stream rows back, which Ray Client cannot carry
+        with pytest.raises(ValueError, match=f"--address ray://127.0.0.1:{port}: Ray Client addresses are not"):
+            check_executor("ray", f"ray://127.0.0.1:{port}", timeout_s=5.0)
     finally:
         server.stop(None)

@@ -85,10 +85,12 @@ RAY_CONNECT_TIMEOUT_S = 10.0
 
 def check_executor(executor: str, address: str | None, *, timeout_s: float = RAY_CONNECT_TIMEOUT_S) -> None:
     """``ValueError`` (one line naming the option) before any work: an unknown executor, ``address`` without Ray,
-    or a Ray address (``host:port``, ``ray://host:port``, or ``auto``: Ray's own lookup of a cluster started on
-    this machine) where no gRPC server completes a handshake within ``timeout_s``. Ray's services (the GCS and the
-    Ray client server) speak gRPC over HTTP/2: a port that merely accepts TCP (another service, a silent socket) never
-    completes the HTTP/2 handshake and is refused here, where Ray itself would retry for minutes."""
+    or a Ray address (``host:port`` of the head's GCS, or ``auto``: Ray's own lookup of a cluster started on this
+    machine) where no gRPC server completes a handshake within ``timeout_s``. Ray's services speak gRPC over HTTP/2:
+    a port that merely accepts TCP (another service, a silent socket) never completes the HTTP/2 handshake and is
+    refused here, where Ray itself would retry for minutes. A cluster with token authentication is then joined as
+    :func:`join_ray_auth` says (it may set ``RAY_AUTH_MODE=token`` here). A Ray Client address (``ray://``) is
+    refused: the runner streams each sample's rows back with Ray generators, which Ray Client does not carry."""
     import socket
     from urllib.parse import urlsplit
 
@@ -108,7 +110,11 @@ def check_executor(executor: str, address: str | None, *, timeout_s: float = RAY
     except ValueError:
         host, port = None, None
     if not host or port is None:
-        raise ValueError(f"--address {address}: expected host:port or ray://host:port (or auto)")
+        raise ValueError(f"--address {address}: expected host:port (or auto)")
+    if "://" in target:
+        raise ValueError(f"--address {address}: Ray Client addresses are not supported (runs stream their rows back "
+                         f"with Ray generators, which Ray Client does not carry): run on a machine of the cluster "
+                         f"with --address auto or the head's host:port")
     try:  # a closed port is refused at once; an open one must then speak gRPC
         socket.create_connection((host, port), timeout=timeout_s).close()
     except OSError as exc:
@@ -117,6 +123,93 @@ def check_executor(executor: str, address: str | None, *, timeout_s: float = RAY
     if not grpc_answers(host, port, timeout_s):
         raise ValueError(f"--address {address}: no Ray cluster answers at {host}:{port} within {timeout_s:g} s "
                          f"(the port is open but completes no gRPC handshake: not a Ray service)")
+    join_ray_auth(address, host, port, timeout_s)
+
+
+#: Ray's token authentication (on by default since Ray 2.5x): the mode, and where Ray reads the token from, in
+#: Ray's order — the variable's value, else the file the path variable names, else ``~/.ray/auth_token``.
+RAY_AUTH_MODE_ENV = "RAY_AUTH_MODE"
+RAY_AUTH_TOKEN_ENV = "RAY_AUTH_TOKEN"
+RAY_AUTH_TOKEN_PATH_ENV = "RAY_AUTH_TOKEN_PATH"
+
+
+def ray_auth_token() -> tuple[str | None, str]:
+    """``(token, where it comes from)`` as Ray itself looks for it: ``$RAY_AUTH_TOKEN`` if set (a blank value is no
+    token), else the file ``$RAY_AUTH_TOKEN_PATH`` names (unreadable or empty: no token, and no fall-back), else
+    ``~/.ray/auth_token``; surrounding white space stripped. ``(None, why)`` when there is none."""
+    from pathlib import Path
+
+    value = os.environ.get(RAY_AUTH_TOKEN_ENV, "")
+    if value:
+        return value.strip() or None, RAY_AUTH_TOKEN_ENV
+    named = os.environ.get(RAY_AUTH_TOKEN_PATH_ENV, "")
+    path = Path(named) if named else Path(os.environ.get("HOME") or Path.home()) / ".ray" / "auth_token"
+    try:
+        token = path.read_text().strip()
+    except (OSError, UnicodeDecodeError):
+        token = ""
+    if named:
+        return (token, f"{RAY_AUTH_TOKEN_PATH_ENV}={named}") if token else (
+            None, f"{RAY_AUTH_TOKEN_PATH_ENV}={named} cannot be read or is empty")
+    return (token, str(path)) if token else (None, f"{RAY_AUTH_TOKEN_ENV} is not set and there is no {path}")
+
+
+#: A harmless call on a Ray cluster's GCS (the address ``ray start`` prints): it reads the cluster's id, and a
+#: cluster with token authentication refuses it UNAUTHENTICATED when the token is missing or wrong.
+_RAY_AUTH_PROBE = "/ray.rpc.NodeInfoGcsService/GetClusterId"
+
+
+def ray_rejects(host: str, port: int, token: str | None, timeout_s: float) -> bool:
+    """Whether the Ray GCS at ``host:port`` refuses a call carrying ``token`` (None: no token) as unauthenticated;
+    any other answer (success, an unknown method, a time-out) is no refusal."""
+    import grpc
+
+    metadata = (("authorization", f"Bearer {token}"),) if token else None
+    with grpc.insecure_channel(f"{host}:{port}") as channel:
+        try:
+            channel.unary_unary(_RAY_AUTH_PROBE)(b"", timeout=timeout_s, metadata=metadata)
+        except grpc.RpcError as exc:
+            return exc.code() == grpc.StatusCode.UNAUTHENTICATED
+    return False
+
+
+def join_ray_auth(address: str, host: str, port: int, timeout_s: float = RAY_CONNECT_TIMEOUT_S) -> None:
+    """Make this process able to join the Ray cluster at ``host:port`` or say in one line (``ValueError``) why it
+    cannot, before Ray's own connection retries (a screen of warnings, then "Failed to connect"). A cluster without
+    token authentication needs nothing. One with it (``ray start --head`` turns it on when a token exists) needs
+    the head's token here, found as Ray finds it (:func:`ray_auth_token`), and ``RAY_AUTH_MODE=token``: set here for
+    this process when the user left it unset; its workers are started by the cluster's nodes, whose own
+    ``RAY_AUTH_MODE`` counts. Refused: ``RAY_AUTH_MODE`` set to another mode, no token, a token the cluster rejects;
+    and ``RAY_AUTH_MODE=token`` without a token (Ray refuses to connect then, even to a cluster without tokens)."""
+    mode = os.environ.get(RAY_AUTH_MODE_ENV, "").strip()
+    if not ray_rejects(host, port, None, timeout_s):
+        token, source = ray_auth_token() if mode.lower() == "token" else ("", "")
+        if token is None:
+            raise ValueError(f"--address {address}: {RAY_AUTH_MODE_ENV}=token and no token was found ({source}); "
+                             f"the cluster uses no token authentication: unset {RAY_AUTH_MODE_ENV}")
+        return
+    if mode and mode.lower() != "token":
+        raise ValueError(f"--address {address}: the cluster uses token authentication but {RAY_AUTH_MODE_ENV}={mode}: "
+                         f"unset it or set {RAY_AUTH_MODE_ENV}=token")
+    token, source = ray_auth_token()
+    if token is None:
+        raise ValueError(f"--address {address}: the cluster uses token authentication and no token was found "
+                         f"({source}): set {RAY_AUTH_TOKEN_ENV} to the head's token (`ray get-auth-token` on the "
+                         f"head prints it) or copy the head's ~/.ray/auth_token here")
+    if ray_rejects(host, port, token, timeout_s):
+        raise ValueError(f"--address {address}: the cluster rejects the token from {source}: use the head's token "
+                         f"(`ray get-auth-token` on the head prints it)")
+    logger.info("Ray cluster at %s:%d: token authentication, token from %s accepted", host, port, source)
+    if mode.lower() != "token":
+        logger.info("%s=token set for this process (it was unset)", RAY_AUTH_MODE_ENV)
+        os.environ[RAY_AUTH_MODE_ENV] = "token"
+        try:  # Ray caches the mode it read at start-up: read it again, as Ray's own `ray start` does
+            from ray._raylet import AuthenticationTokenLoader, Config
+
+            Config.initialize("")
+            AuthenticationTokenLoader.instance().reset_cache()
+        except (ImportError, AttributeError):  # pragma: no cover - another Ray layout reads the variable anyway
+            pass
 
 
 def _running_cluster() -> str | None:
@@ -379,6 +472,7 @@ def _ray_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Set
     if not ray.is_initialized():
         kw: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
         if address:
+            check_executor("ray", address)  # answers, and token authentication joined, before Ray's own retries
             try:
                 ray.init(address=address, **kw)
             except ConnectionError as exc:  # e.g. --address auto with no cluster running: one line, not a trace
