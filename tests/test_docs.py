@@ -145,3 +145,46 @@ def test_shown_make_targets_exist() -> None:
         code = re.findall(r"```.*?```", text, flags=re.S) + re.findall(r"`([^`\n]+)`", re.sub(r"```.*?```", "", text, flags=re.S))
         for target in re.findall(r"(?:^|\s|&&\s*)make ([a-z][\w-]*)", "\n".join(code), flags=re.M):
             assert target in targets, f"{path.relative_to(ROOT)}: `make {target}` is no Makefile target"
+
+
+#: A command on the committed paper bundle, as the docs print it in inline code: `vbl-robust report|zones
+#: results/paper/EXPERIMENT …`.
+BUNDLE_COMMAND = re.compile(r"`(vbl-robust (?:report|zones) results/paper/[^`]+)`")
+
+
+def _bundle_commands() -> list[str]:
+    found = set()
+    for page in [README, ROOT / "REPRODUCTION.md", *DOCS.rglob("*.md")]:
+        found.update(BUNDLE_COMMAND.findall(page.read_text()))
+    return sorted(found)
+
+
+def test_the_docs_name_commands_on_the_committed_bundle() -> None:
+    """Guard for the test below: the docs do print such commands (and none on a run directory a fresh clone lacks)."""
+    assert len(_bundle_commands()) >= 3
+    for page in DOCS.rglob("*.md"):
+        assert not re.search(r"`vbl-robust (?:report|zones) runs/paper/", page.read_text()), page
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("line", _bundle_commands())
+def test_every_command_the_docs_print_on_the_bundle_runs(line: str, full: bool) -> None:
+    """Each `vbl-robust report|zones results/paper/…` line of the docs runs on the committed bundle — its packed
+    store read through a temporary copy — and exits 0 (nothing in the bundle is unmeasured), writing nothing into
+    the bundle. Without --full, the smallest stores only."""
+    import shlex
+
+    from typer.testing import CliRunner
+
+    from vbl_robust.cli import app
+
+    args = shlex.split(line)[1:]
+    store = ROOT / args[1] / "results.sqlite.xz"
+    assert store.is_file(), store
+    if not full and store.stat().st_size > 4_000_000:
+        pytest.skip(f"{args[1]}: a {store.stat().st_size / 1e6:.1f} MB packed store runs under --full")
+    before = {p: p.stat().st_mtime_ns for p in (ROOT / args[1]).rglob("*")}
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output[-2000:]
+    assert result.stdout.strip()
+    assert {p: p.stat().st_mtime_ns for p in (ROOT / args[1]).rglob("*")} == before

@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from vbl_robust.constants import NotMeasured, NotMeasuredError
 from vbl_robust.data import Sample
 from vbl_robust.detect import OracleDetector
 from vbl_robust.pipeline import Objective
@@ -77,13 +78,15 @@ def test_the_loss_is_the_penalty_exactly_when_a_reason_is_recorded(samples, k, t
 
 @settings(PROPS, max_examples=10)
 @given(thetas_in_box())
-def test_a_sample_without_pixels_is_penalised_on_every_row_not_raised(samples, theta):
+def test_a_sample_without_pixels_is_not_measured_on_any_theta(samples, theta):
+    """No θ of a sample without pixels gives a value: not the penalty (a finding), an error the campaign records
+    as not measured."""
     s = samples[2]
     bare = Sample(s.id, s.K, s.corners_3d, s.corners_2d, s.position, s.width, s.height, R=s.R,
                   image_path="/nonexistent/vbl_robust/x.png")
-    rec = Objective(bare, OracleDetector(), BOX).evaluate(theta)
-    assert all(r != "" for r in rec.reason) and rec.failed.all()
-    np.testing.assert_array_equal(rec.loss, PENALTY_M)
+    with pytest.raises(NotMeasuredError) as e:
+        Objective(bare, OracleDetector(), BOX).evaluate(theta)
+    assert e.value.reason is NotMeasured.INPUT_UNAVAILABLE
 
 
 def test_the_noisy_oracle_does_produce_failures(samples):

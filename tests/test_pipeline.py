@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 import torch
 
+from vbl_robust.constants import NotMeasured, NotMeasuredError
 from vbl_robust.data.sample import Sample
 from vbl_robust.detect import Detections, OracleDetector
 from vbl_robust.geometry.camera import intrinsics, lard_rotation, project, runway_corners
@@ -141,18 +142,21 @@ def test_oracle_fail_outside_penalises_only_the_rows_that_lose_a_corner():
     assert r.reason == ("", "no_detection") and r.loss[1] == 5000.0 and r.loss[0] < 1e-6
 
 
-def test_unloadable_pixels_penalise_every_row_without_raising(tmp_path):
+def test_unloadable_pixels_are_not_measured_never_a_penalty(tmp_path):
+    """Pixels that cannot be loaded are the tool's failure, not the pipeline's: no value is scored (not the 5000 m
+    penalty), both paths raise NotMeasuredError (INPUT_UNAVAILABLE), and the message names the sample, not the
+    absolute path."""
     s = make_sample(*POSES[0][1:], size=(128, 128))
-    broken = Sample("missing", s.K, s.corners_3d, s.corners_2d, s.position, 128, 128, R=s.R,
-                    image_path=tmp_path / "nope.png")
+    broken = Sample("runway/nope.png", s.K, s.corners_3d, s.corners_2d, s.position, 128, 128, R=s.R,
+                    image_path=tmp_path / "runway" / "nope.png")
     obj = Objective(broken, OracleDetector(), BOX)
-    rec = obj.evaluate(np.array([[0.0, 1.0], [3.0, 0.5]]))
-    assert rec.reason == ("image_unavailable",) * 2 and rec.loss.tolist() == [5000.0, 5000.0]
-    assert "nope.png" in rec.detail[0] and "nope.png" in obj.image_error
+    with pytest.raises(NotMeasuredError, match=r"^runway/nope.png: image file not found$") as e:
+        obj.evaluate(np.array([[0.0, 1.0], [3.0, 0.5]]))
+    assert e.value.reason is NotMeasured.INPUT_UNAVAILABLE and str(tmp_path) not in obj.image_error
     theta = torch.tensor([[0.0, 1.0]], dtype=torch.float64, requires_grad=True)
-    loss = obj(theta).values
-    loss.sum().backward()
-    assert loss.tolist() == [5000.0] and theta.grad.abs().max() == 0
+    with pytest.raises(NotMeasuredError):
+        obj(theta)
+    assert "image_unavailable" not in FAILURE_REASONS  # no evaluation of the pipeline carries it
 
 
 def test_user_errors_are_value_errors_at_construction(samples):

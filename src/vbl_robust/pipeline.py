@@ -17,9 +17,11 @@ gradient, never NaN). Each chunk of θ is two steps: :meth:`Objective.select_at`
 a :class:`~vbl_robust.detect.Selection`) and :meth:`Objective.locate` (PnP and the error → an
 :class:`EvalRecord`); an objective over several frames batches the first step across frames and scores each
 frame with the second. Both modes record per row why an evaluation failed
-(:data:`vbl_robust.constants.FAILURE_REASONS`): ``image_unavailable`` (the pixels cannot be loaded — every row,
-never an exception), ``no_detection``, ``low_confidence``, ``non_finite_keypoints``, ``pnp_failed``,
+(:data:`vbl_robust.constants.FAILURE_REASONS`): ``no_detection``, ``low_confidence``, ``non_finite_keypoints``, ``pnp_failed``,
 ``non_finite_position``. A successful row is never capped: a wild but "successful" PnP can exceed the penalty.
+What the tool cannot do is no failure of the pipeline and is never scored: pixels that cannot be loaded, or a torch
+θ on a detector without gradients, raise :class:`~vbl_robust.constants.NotMeasuredError` (a campaign records the
+job as not measured).
 
 Resolution: the image is resized once to the detector's ``input_size`` (long side) when that is smaller —
 rotation about the principal point commutes with isotropic scaling, so this is the same perturbation on fewer
@@ -36,7 +38,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 import torch
 
-from vbl_robust.constants import CONF_THRESHOLD, PENALTY_M
+from vbl_robust.constants import CONF_THRESHOLD, PENALTY_M, NotMeasured, NotMeasuredError
 from vbl_robust.constants import FAILURE_REASONS as _REASONS
 from vbl_robust.data.sample import Sample
 from vbl_robust.detect.base import DetectContext, Detector, Selection, select
@@ -195,8 +197,8 @@ class Objective:
 
     Raises:
         ValueError: a user mistake (unknown parameter name, unknown PnP solver, bad threshold/penalty/batch size,
-            a detector without ``detect``). An image that cannot be loaded is NOT an error: every row is
-            penalised with reason ``image_unavailable``.
+            a detector without ``detect``). An image that cannot be loaded is not the pipeline's failure: an
+            evaluation then raises :class:`~vbl_robust.constants.NotMeasuredError` (``INPUT_UNAVAILABLE``).
 
     >>> import vbl_robust as vr                                     # doctest: +SKIP
     >>> objective = vr.Objective(sample, vr.OracleDetector(), box)  # doctest: +SKIP
@@ -285,7 +287,8 @@ class Objective:
         return int(self.resolution)
 
     def _load(self) -> None:
-        """Load and resize the pixels once; a failure is recorded (``image_unavailable``), never raised."""
+        """Load and resize the pixels once; a failure is recorded (:attr:`image_error`; an evaluation then raises
+        :class:`~vbl_robust.constants.NotMeasuredError`)."""
         if self._loaded:
             return
         self._loaded = True
@@ -295,8 +298,9 @@ class Objective:
             if img.ndim != 3 or img.shape[2] != 3:
                 raise ValueError(f"sample {s.id}: image must be (H, W, 3) RGB, got shape {img.shape}")
         except (OSError, ValueError) as e:  # FileNotFoundError is an OSError
-            self._image_error = str(e)
-            logger.warning("sample %s: pixels unavailable, every evaluation is penalised: %s", s.id, e)
+            # the file by the sample's name (a LARD sample's id is its path inside the dataset), never the absolute path
+            self._image_error = str(e).replace(str(s.image_path), str(s.id)) if s.image_path else str(e)
+            logger.warning("sample %s: pixels unavailable, the sample cannot be measured: %s", s.id, self._image_error)
             return
         self._scale, size = PixelScale.for_long_side(s.width, s.height, self._long_side())
         base = img.astype(np.float32) / 255.0 if img.dtype == np.uint8 else img.astype(np.float32)
@@ -347,8 +351,11 @@ class Objective:
             t = self.perturbation.check_theta(t)
         self._load()
         self.nfev += t.shape[0]
-        if self._image_error or t.shape[0] == 0:
-            rec = self._all_failed(t, "image_unavailable" if self._image_error else "", self._image_error)
+        if self._image_error:  # the tool's failure, not the pipeline's: no value at all
+            err, sid = self._image_error, str(self.sample.id)
+            raise NotMeasuredError(NotMeasured.INPUT_UNAVAILABLE, err if sid in err else f"sample {sid}: {err}")
+        if t.shape[0] == 0:
+            rec = self._all_failed(t, "", "")
         else:
             parts = [self.locate(c, self.select_at(c)) for c in (t[i : i + self.batch_size]
                                                                   for i in range(0, t.shape[0], self.batch_size))]
@@ -361,11 +368,13 @@ class Objective:
         """``ValueError`` unless the detector has the differentiable path (``detect_top``) a torch θ needs."""
         if not getattr(self.detector, "differentiable", False) or not callable(getattr(self.detector, "detect_top",
                                                                                       None)):
-            raise ValueError(f"Objective: detector {self.detector!r} is not differentiable (no detect_top); it "
-                             "supports only the black-box path (a NumPy theta)")
+            why = getattr(self.detector, "gradient_unavailable", "") or "no detect_top"
+            raise NotMeasuredError(NotMeasured.METHOD_UNFIT,
+                                   f"a gradient search cannot run: the detector {detector_name(self.detector)} is not "
+                                   f"differentiable ({why}); it supports only the black-box path (a NumPy theta)")
         if self.max_sigma_m is not None:
-            raise ValueError("Objective: the σ monitor (max_sigma_m) reads the black-box path; a gradient search "
-                             "(a torch theta) cannot run under it")
+            raise NotMeasuredError(NotMeasured.METHOD_UNFIT, "the σ monitor (max_sigma_m) reads the black-box path; "
+                                   "a gradient search (a torch theta) cannot run under it")
 
     # -- the two steps of a chunk ----------------------------------------------------------------------------------
     def select_at(self, theta) -> Selection:
@@ -455,7 +464,7 @@ class Objective:
                           position, conf, kp, reproj, tuple(reason), tuple(detail), self.penalty_m, loss_t,
                           kp_sigma, pos_sigma)
 
-    def _all_failed(self, t, reason: str, detail: str) -> EvalRecord:
+    def _all_failed(self, t, reason: str, detail: str) -> EvalRecord:  # an empty θ batch
         n = t.shape[0]
         nan = np.full(n, np.nan)
         grad = isinstance(t, torch.Tensor)
@@ -465,3 +474,11 @@ class Objective:
             nan.copy(), (reason,) * n, (detail,) * n, self.penalty_m,
             torch.full((n,), self.penalty_m, dtype=torch.float64) if grad else None,
         )
+
+
+def detector_name(detector: Any) -> str:
+    """A detector as a user names it in one line: its file name, else its class name (never a Python repr)."""
+    path = getattr(detector, "path", None)
+    name = getattr(path, "name", None) or (str(path).rsplit("/", 1)[-1] if path else "")
+    kind = type(detector).__name__
+    return f"{name} ({kind})" if name else kind

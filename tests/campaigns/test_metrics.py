@@ -1,3 +1,4 @@
+import dataclasses
 import math
 
 import numpy as np
@@ -32,7 +33,9 @@ def test_survived_is_the_one_survival_rule():
     eps = 1000.0
     assert mx.survived(row(worst_m=1000.0, nfev=4), eps) and not mx.survived(row(worst_m=1000.5, nfev=4), eps)
     assert not mx.survived(row(worst_m=math.nan, nfev=4), eps)
-    assert not mx.survived(row(worst_m=5000.0, status="failed", nfev=0), eps)  # a failed job never survives
+    # a job the tool could not complete has no survival at all: asking for it is an error, never True or False
+    with pytest.raises(ValueError, match="not measured"):
+        mx.survived(row(status="not measured", reason="tool error: boom", nfev=0), eps)
     assert mx.survived(row(worst_m=None, nfev=0), eps)  # no evaluation within its time budget: nothing found
     rows = [row(key=f"k{i}", worst_m=w, nfev=0 if w is None else 4) for i, w in enumerate((10.0, math.inf, None, 2e3))]
     assert mx.summarize(rows, eps)[0].survival == 50.0
@@ -56,17 +59,25 @@ def test_breach_kinds_split_flagged_failures_from_misleading_poses():
     kinds = [mx.breach_kind(r, eps) for r in rows]
     assert kinds == [BreachKind.SAFE, BreachKind.FLAGGED, BreachKind.MISLEADING, BreachKind.MISLEADING,
                      BreachKind.SAFE]
-    failed = row(key="k5", worst_m=5000.0, status="failed", nfev=0)
-    assert mx.breach_kind(failed, eps) is BreachKind.FLAGGED
+    failed = row(key="k5", worst_m=5000.0, status="failed", nfev=0)  # "failed": a store from before the name
+    with pytest.raises(ValueError, match="not measured"):
+        mx.breach_kind(failed, eps)
     # without the points only a silent worst is known; a flagged worst may hide a misleading pose
     assert mx.breach_kind(rows[3].replace(points=None), eps) is BreachKind.MISLEADING
     assert mx.breach_kind(rows[2].replace(points=None), eps) is None
+    # the job not measured is in no denominator: the group's numbers are those of the four measured rows
     s = mx.summarize(rows[:4] + [failed], eps)[0]
-    assert (s.n, s.survivors, s.flagged, s.misleading) == (5, 1, 2, 2)
-    assert s.survival_rate.ci.low == pytest.approx(100 * binomtest(1, 5).proportion_ci(method="exact").low)
+    assert (s.n, s.survivors, s.flagged, s.misleading, s.not_measured) == (4, 1, 1, 2, 1)
+    assert s == dataclasses.replace(mx.summarize(rows[:4], eps)[0], not_measured=1)
+    assert s.survival_rate.ci.low == pytest.approx(100 * binomtest(1, 4).proportion_ci(method="exact").low)
     line = s.as_row()
     assert (line["survival_ci_low"], line["survival_ci_high"]) == (s.survival_rate.ci.low, s.survival_rate.ci.high)
-    assert (line["misleading_pct"], line["flagged_pct"]) == (40.0, 40.0)
+    assert (line["misleading_pct"], line["flagged_pct"]) == (50.0, 25.0)
+    # a group with no row measured has no survival: NaN and no interval, never 0 % or 100 %
+    alone = mx.summarize([failed], eps)[0]
+    assert (alone.n, alone.not_measured, alone.measured) == (0, 1, False) and math.isnan(alone.survival)
+    assert math.isnan(alone.as_row()["survival_ci_low"]) and alone.kind_rate(BreachKind.FLAGGED) is None
+    assert mx.breached_images([failed, rows[0]], eps) == (set(), set(), False)
     unknown = mx.summarize([rows[2].replace(points=None), rows[0]], eps)[0]
     assert unknown.misleading is None and unknown.flagged is None and math.isnan(unknown.as_row()["misleading_pct"])
 

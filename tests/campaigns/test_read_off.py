@@ -121,11 +121,14 @@ def test_a_time_budget_before_the_first_evaluation_finds_nothing(tmp_path, monke
     assert line.survival == 100.0 and line.n_empty == 1 and math.isnan(line.median_worst_m)
 
 
-def test_a_failed_run_reads_as_failed_at_every_budget(tmp_path, monkeypatch):
+def test_a_run_not_measured_reads_as_not_measured_at_every_budget(tmp_path, monkeypatch):
     _, stored, spec = _stored_run(tmp_path, monkeypatch)
-    failed = stored.replace(status=JobStatus.FAILED, points=None, worst_m=5000.0, verdict=Verdict.FAILED)
+    failed = stored.replace(status=JobStatus.NOT_MEASURED, points=None, worst_m=None, verdict=Verdict.NOT_MEASURED,
+                            reason="tool error: boom")
     rows = mx.read_off_rows([failed], spec.eps_safe_m, spec.penalty_m)
-    assert len(rows) == 5 and all(x.status is JobStatus.FAILED and x.read_from for x in rows)
+    assert len(rows) == 5 and all(x.status is JobStatus.NOT_MEASURED and x.read_from for x in rows)
+    lines = mx.summarize(rows, spec.eps_safe_m)
+    assert all(ln.n == 0 and ln.not_measured == 1 and math.isnan(ln.survival) for ln in lines)
 
 
 def test_rows_without_reads_pass_through(tmp_path, monkeypatch):

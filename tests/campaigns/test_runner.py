@@ -14,7 +14,7 @@ from vbl_robust.campaigns import (
     run_campaign,
 )
 from vbl_robust.campaigns.store import JobStatus, RunStatus
-from vbl_robust.constants import FAILURE_REASONS, Verdict
+from vbl_robust.constants import FAILURE_REASONS, NotMeasured, Verdict
 from vbl_robust.data.sample import Sample
 
 
@@ -67,17 +67,27 @@ def test_same_seed_same_results(tmp_path, small_samples, oracle):
     assert out[0] == out[1]
 
 
-def test_unreadable_image_is_a_recorded_failure_and_the_campaign_goes_on(tmp_path, small_samples, oracle):
+def test_unreadable_image_is_not_measured_and_the_campaign_goes_on(tmp_path, small_samples, oracle):
     good = small_samples[0]
     bad = dataclasses.replace(small_samples[1], id="missing", image_path=tmp_path / "nope.png", _image=None, _loader=None)
     assert isinstance(bad, Sample)
     with ResultStore(tmp_path / "r.sqlite") as st:
-        s = run_campaign(small_spec(), [bad, good], st, detector=oracle)
+        # checked before the first job: refused in one line, nothing stored
+        with pytest.raises(ValueError, match=r"^input unavailable: 1 of 2 image\(s\) cannot be used: .*nope.png: "
+                                             r"image file not found"):
+            run_campaign(small_spec(), [bad, good], st, detector=oracle)
+        assert st.campaign() is None and st.count() == 0
+        # an image lost during the run (here: the check skipped) is not measured, the campaign goes on
+        s = run_campaign(small_spec(), [bad, good], st, detector=oracle, precheck=False)
         rows = st.jobs()
-    assert s.failed == 2 and s.status == "finished"
+    assert s.not_measured == 2 and s.status == "finished"
     failed = [r for r in rows if r.sample_id == "missing"]
-    assert {r.status for r in failed} == {JobStatus.FAILED} and {r.verdict for r in failed} == {Verdict.FAILED}
-    assert all(r.worst_m == 5000.0 and "nope.png" in r.reason for r in failed)
+    assert {r.status for r in failed} == {JobStatus.NOT_MEASURED}
+    assert {r.verdict for r in failed} == {Verdict.NOT_MEASURED}
+    # no worst error (never the 5000 m penalty), the typed reason, and no absolute path in what a user reads
+    assert all(r.worst_m is None and r.not_measured is NotMeasured.INPUT_UNAVAILABLE for r in failed)
+    assert all(r.reason.startswith("input unavailable: missing: image file not found") and str(tmp_path) not in r.reason
+               for r in failed)
     assert {r.status for r in rows if r.sample_id != "missing"} == {"done"}
 
     # the image comes back: a plain rerun skips the failed jobs, --retry-failed runs them (and only them) again
@@ -87,12 +97,13 @@ def test_unreadable_image_is_a_recorded_failure_and_the_campaign_goes_on(tmp_pat
     with ResultStore(tmp_path / "r.sqlite") as st:
         # a retry with other settings is refused before anything is forgotten (issue 48 item 7)
         with pytest.raises(ValueError, match="other settings"):
-            run_campaign(small_spec(methods=("random",)), [bad, good], st, detector=oracle, retry_failed=True)
-        assert sum(r.status is JobStatus.FAILED for r in st.jobs()) == 2
+            run_campaign(small_spec(methods=("random",)), [bad, good], st, detector=oracle, retry_failed=True,
+                         precheck=False)
+        assert sum(r.status is JobStatus.NOT_MEASURED for r in st.jobs()) == 2
         assert run_campaign(small_spec(), [bad, good], st, detector=oracle).done == 0
         again = run_campaign(small_spec(), [bad, good], st, detector=oracle, retry_failed=True)
         rows = st.jobs()
-    assert again.done == 2 and again.failed == 0 and again.skipped == 2
+    assert again.done == 2 and again.not_measured == 0 and again.skipped == 2
     assert {r.status for r in rows} == {"done"} and len(rows) == 4
 
 
@@ -101,8 +112,9 @@ def test_pipeline_exception_is_recorded_with_its_reason(tmp_path, small_samples)
     with ResultStore(tmp_path / "r.sqlite") as st:
         s = run_campaign(small_spec(methods=("random",)), small_samples[:2], st, detector=det)
         rows = st.jobs()
-    assert s.failed == 2 and len(rows) == 2
-    assert all(r.status == "failed" and "RuntimeError: detector exploded" in r.reason for r in rows)
+    assert s.not_measured == 2 and len(rows) == 2
+    assert all(r.status is JobStatus.NOT_MEASURED and r.reason == "detector error: RuntimeError: detector exploded"
+               for r in rows)
 
 
 def test_chain_stops_at_the_first_breach_and_records_implied_rows(tmp_path, small_samples):

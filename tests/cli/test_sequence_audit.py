@@ -90,7 +90,7 @@ def test_zones_report_and_refinement_on_a_sequence_campaign(tmp_path):
     assert section.count('<tr class="breach"><td class="l">synth_q3_000') == 2  # both sequences breach
     assert section.count("data:image/png;base64,") == 1
     res = runner.invoke(app, ["report", str(out), "--format", "md"])
-    assert res.exit_code == 0 and "2 sequences completed by every method" in res.output, res.output
+    assert res.exit_code == 0 and "2 sequences measured by every method" in res.output, res.output
 
     from vbl_robust.campaigns.refine import refine_run
 

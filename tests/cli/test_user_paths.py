@@ -113,9 +113,10 @@ def test_audit_of_a_lard_directory_on_ray(lard_dir, tmp_path):
     assert [r.provenance.executor for r in runs] == ["ray"]
 
 
-def test_a_run_where_every_job_failed_exits_non_zero(lard_dir, tmp_path):
-    """Issue 48 item 10: images that cannot be read are recorded failures, and a run that measured nothing says so
-    and exits 1 (a rerun after the images are restored, with --retry-failed, measures them)."""
+def test_a_run_whose_images_cannot_be_read_is_refused_or_measures_nothing(lard_dir, tmp_path):
+    """Images that cannot be read are refused before the run (exit 2, nothing stored); accepted with
+    --allow-unmeasured, every job is not measured and no rate exists — a dash, never 0 % survival."""
+    import json
     import shutil
 
     broken = tmp_path / "lard"
@@ -123,8 +124,15 @@ def test_a_run_where_every_job_failed_exits_non_zero(lard_dir, tmp_path):
     for png in (broken / "images").glob("*.png"):
         png.write_bytes(b"not a png")
     out = tmp_path / "run"
-    res = runner.invoke(app, ["audit", "--lard", str(broken), "--out", str(out), "--max-evals", "2", "--methods",
-                              "random", "--no-landscape", "--quiet"])
-    assert res.exit_code == 1 and "every job failed (3)" in res.output, res.output
+    args = ["audit", "--lard", str(broken), "--out", str(out), "--max-evals", "2", "--methods", "random",
+            "--no-landscape", "--quiet"]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 2 and "input unavailable: 3 of 3 image(s) cannot be used" in res.output, res.output
+    assert not (out / "results.sqlite").exists()
+    res = runner.invoke(app, [*args, "--allow-unmeasured"])
+    assert res.exit_code == 0 and "3 of 3 jobs not measured" in res.output, res.output
     rows, _ = _stored(out)
-    assert len(rows) == 3 and all(r.status.value == "failed" for r in rows)
+    assert len(rows) == 3 and all(not r.measured and r.worst_m is None for r in rows)
+    res = runner.invoke(app, ["report", str(out), "--format", "json", "--allow-unmeasured"])
+    (line,) = json.loads(res.stdout)
+    assert (line["images"], line["not_measured"], line["survival_pct"], line["survival_ci_low"]) == (0, 3, None, None)

@@ -217,7 +217,7 @@ def test_report_markdown_survival_table_from_the_store(gated_run, tmp_path):
     out, _ = gated_run
     res = runner.invoke(app, ["report", str(out), "--format", "md"])
     assert res.exit_code == 0, res.output
-    assert "2 images completed by every method (of 2 started)" in res.output
+    assert "2 images measured by every method (of 2 started)" in res.output
     with ResultStore.open_existing(out) as store:
         spec = CampaignSpec.from_dict(store.campaign()["spec"])
         from vbl_robust.campaigns.metrics import main_rows, summarize

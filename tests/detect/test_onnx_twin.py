@@ -10,6 +10,8 @@ import pytest
 import torch
 
 import vbl_robust.detect.onnx_twin as twin_mod
+from vbl_robust.campaigns.precheck import check_methods
+from vbl_robust.constants import NotMeasuredError
 from vbl_robust.detect.base import DetectContext
 from vbl_robust.detect.onnx import OnnxDetector
 from vbl_robust.detect.onnx_twin import (
@@ -18,7 +20,6 @@ from vbl_robust.detect.onnx_twin import (
     TorchTwin,
     TwinPose,
     compare_raw,
-    gradient_refusal,
     with_twin,
 )
 from vbl_robust.detect.shipped import DEFAULT_MODEL, DetectorSpec
@@ -28,7 +29,7 @@ from vbl_robust.space import ParameterBox
 
 IMGSZ = 320
 BOX = ParameterBox({"roll_deg": (-15, 15), "contrast": (0.7, 1.4)})
-BLACK_BOX = "georobust, georobust-av, random or grid"
+BLACK_BOX = "georobust, georobust-a, georobust-av, direct, direct-l, random, sobol or grid"
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +64,7 @@ def test_the_default_onnx_detector_has_a_checked_twin(onnx_det, user_onnx):
     assert isinstance(onnx_det.engine_model, OnnxDetector) and onnx_det.engine == "onnxruntime"
     assert onnx_det.torch_model.batch == 1  # ultralytics' default export: a static batch of one
     assert onnx_det.checks[0].ok and onnx_det.checks[0].keypoints_px <= KEYPOINT_TOL_PX
-    assert gradient_refusal(onnx_det, ["apgd"]) == ""
+    check_methods(["apgd"], onnx_det, "my_model.onnx")  # no refusal: the twin gives the gradient
     # the identity a run records is the file's, as before: kind, SHA-256, engine
     ident = DetectorSpec("onnx", str(user_onnx)).identity()
     assert ident["kind"] == "onnx" and ident["engine"] == "onnxruntime" and len(ident["sha256"]) == 64
@@ -108,9 +109,12 @@ def test_apgd_on_the_onnx_retraces_apgd_on_the_pt(onnx_det, sample):
 def _refused(det, sample, match):
     assert not det.differentiable
     assert match in det.gradient_unavailable
-    line = gradient_refusal(det, ["apgd"])
-    assert "\n" not in line and line.startswith("--methods apgd: the detector my_model.onnx") and BLACK_BOX in line
-    with pytest.raises(ValueError, match="gradient|differentiable"):
+    with pytest.raises(ValueError) as refused:  # before the run: one line that names the alternatives
+        check_methods(["apgd"], det, "my_model.onnx")
+    line = str(refused.value)
+    assert "\n" not in line and line.startswith("--methods apgd: method unfit — the detector my_model.onnx gives no "
+                                                "gradient (") and BLACK_BOX in line
+    with pytest.raises(NotMeasuredError, match="gradient|differentiable"):
         maximize(Objective(sample, det, BOX), BOX, "apgd", max_evals=4, seed=0)
 
 

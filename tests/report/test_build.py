@@ -42,16 +42,27 @@ def test_audit_report_is_self_contained_with_figures_tables_and_provenance(tmp_p
     assert other.parent == tmp_path / "copy" and (tmp_path / "copy" / "figures" / "landscape_2d.png").exists()
 
 
-def test_report_warns_about_incomplete_runs_and_failures(tmp_path, samples):
+def test_report_warns_about_incomplete_runs_and_jobs_not_measured(tmp_path, samples):
+    """An image lost during the run is not measured: a banner on the first screen names it, the table lists it,
+    and no number counts it (the box's survival is the other image's alone; evidence.json lists it apart)."""
+    import json
+
     spec = CampaignSpec("audit", (Block(boxes=(roll_box(5),), methods=("random",), budgets=(Budget(max_evals=4),)),))
     missing = dataclasses.replace(samples[0], id="gone", image_path=tmp_path / "gone.png", _image=None, _loader=None)
     with ResultStore(tmp_path / "results.sqlite") as st:
-        run_campaign(spec, [missing], st, detector=DetectorSpec("oracle"))
+        run_campaign(spec, [missing, samples[1]], st, detector=DetectorSpec("oracle"), precheck=False)
         rid = st.begin_run(RunProvenance(jobs_total=9, jobs_skipped=1))
         st.end_run(rid, "interrupted", 0, 1.0)
     html = build_report(tmp_path).read_text()
-    assert "job(s) failed" in html and "gone.png" in html
-    assert "campaign is incomplete (1 of 9 jobs)" in html
+    first = html[: html.index('<section id="summary">')]  # the first screen, before the run's settings
+    assert "1 of 2 jobs not measured" in first and "input unavailable: gone: image file not found" in first
+    assert "could not be measured by the tool" in html and str(tmp_path) not in html
+    assert "campaign is incomplete (2 of 9 jobs)" in html
+    ev = json.loads((tmp_path / "evidence.json").read_text())
+    (box,) = ev["boxes"]
+    assert box["images"] == 1 and box["survivors"] == 1  # the measured image alone
+    assert ev["not_measured"] == [{"sample_id": "gone", "method": "random", "box": box["label"],
+                                   "kind": "input unavailable", "reason": "gone: image file not found"}]
 
 
 def test_report_errors_name_the_run(tmp_path):
@@ -121,7 +132,7 @@ def test_searches_with_no_evaluation_in_time_are_counted_apart_in_the_report_and
                           nfev=n) for i, (m, w, n, v) in enumerate(rows)])
     html = build_report(tmp_path).read_text()
     assert "no evaluation in time" in html
-    done = SimpleNamespace(done=2, skipped=0, failed=0, seconds=1.0, status="finished")
+    done = SimpleNamespace(done=2, skipped=0, not_measured=0, seconds=1.0, status="finished")
     assert finish(tmp_path, done, csv=None, parquet=None, report=False)
     out = capsys.readouterr().out
     assert "no eval in time" in out and "count as survivors" in out

@@ -17,7 +17,7 @@ def summary_rows():
                 method=m, box_level=lv, box_label=f"±{lv:g}°", budget_label=None, survival=20.0 * round(base / lv / 10),
                 survivors=round(base / lv / 10), n=5, flagged=0, misleading=5 - round(base / lv / 10), residual=None,
                 max_seconds=lv / 10, max_evals=float(lv * 10), max_iters=math.nan, median_worst_m=100.0 * lv,
-                n_empty=0, mean_worst_m=100.0 * lv, breaches=0, certified=0, failed=0, nfev=50, mean_nfev=10.0,
+                n_empty=0, mean_worst_m=100.0 * lv, breaches=0, certified=0, not_measured=0, nfev=50, mean_nfev=10.0,
                 failed_evals=None, failures={}, median_search_s=0.1, read_from=""))
     return out
 

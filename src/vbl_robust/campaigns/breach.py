@@ -2,8 +2,9 @@
 the kind of a breach (flagged failure or hazardously misleading pose), what "no breach found" is worth for a
 search of uniform points, a row's numeric budget and its failed evaluations per reason.
 
-An image *survives* a box when its worst error is ≤ ε_safe; a failed sample counts with the failure penalty, so it
-is never a survivor. Re-exported by :mod:`vbl_robust.campaigns.metrics`.
+An image *survives* a box when its worst error is ≤ ε_safe. A job the tool could not complete (not measured:
+:attr:`~vbl_robust.campaigns.store.JobRow.measured` is False) has no survival at all: asking for it raises, and
+every group of rows leaves it out of its denominator (:func:`measured_rows`). Re-exported by :mod:`vbl_robust.campaigns.metrics`.
 """
 
 from __future__ import annotations
@@ -27,6 +28,21 @@ def survival_rate(worst: Sequence[float], eps_safe_m: float) -> float:
     return float(100.0 * np.mean(np.isfinite(w) & (w <= eps_safe_m)))
 
 
+def measured_rows(rows: Iterable[JobRow]) -> tuple[list[JobRow], list[JobRow]]:
+    """``rows`` split into those the tool measured and those it could not (status NOT_MEASURED): only the first
+    enter a rate; the second are counted and listed apart."""
+    done, not_done = [], []
+    for r in rows:
+        (done if r.measured else not_done).append(r)
+    return done, not_done
+
+
+def _require_measured(row: JobRow) -> None:
+    if not row.measured:
+        raise ValueError(f"job {row.method} on {row.sample_id} ({row.box_label}) was not measured "
+                         f"({row.reason}): it has no survival and enters no rate")
+
+
 def empty_row(row: JobRow) -> bool:
     """A search that completed no evaluation within its time budget: it found nothing (:func:`survived`) and has no
     worst error to count in the statistics."""
@@ -35,13 +51,12 @@ def empty_row(row: JobRow) -> bool:
 
 def survived(row: JobRow, eps_safe_m: float) -> bool:
     """Whether the image survived this job: its worst error is finite and ≤ ``eps_safe_m``, or the job completed
-    no evaluation (:func:`empty_row`); a failed job (worst = the penalty) never survives. The one definition behind
-    every survival rate (:func:`summarize`) and paired comparison (claims, ``report --compare``; the test is
-    :func:`vbl_robust.stats.paired`)."""
+    no evaluation (:func:`empty_row`). The one definition behind every survival rate (:func:`summarize`) and paired
+    comparison (claims, ``report --compare``; the test is :func:`vbl_robust.stats.paired`). ``ValueError`` for a
+    job not measured: it has no survival (leave it out first, :func:`measured_rows`)."""
+    _require_measured(row)
     if empty_row(row):
         return True
-    if row.status is JobStatus.FAILED:
-        return False
     return row.worst_m is not None and math.isfinite(row.worst_m) and row.worst_m <= eps_safe_m
 
 
@@ -49,7 +64,7 @@ def breach_kind(row: JobRow, eps_safe_m: float) -> BreachKind | None:
     """Integrity apart from availability (:class:`~vbl_robust.constants.BreachKind`): ``SAFE`` for a survivor
     (:func:`survived`); ``MISLEADING`` when some evaluation of the job succeeded (no failure reason: a selected
     candidate with confidence ≥ τ_conf and a PnP pose) with a finite error above ``eps_safe_m``; else ``FLAGGED``
-    (every breach was a flagged failure; a job that could not run at all is flagged too).
+    (every breach was a flagged failure). ``ValueError`` for a job not measured.
 
     Exact from the job's points (``store.jobs(with_points=True)``, as :func:`main_rows` loads them). Without
     them, a job whose worst point is itself a silent breach is ``MISLEADING``; any other breached job is ``None``
@@ -69,11 +84,12 @@ def breach_kind(row: JobRow, eps_safe_m: float) -> BreachKind | None:
 
 
 def breached_images(rows: Iterable[JobRow], eps_safe_m: float) -> tuple[set[str], set[str], bool]:
-    """Over every method together (an image is breached when any row of it is): the breached images, those of them
-    with a misleading pose (:func:`breach_kind`), and whether some breached row's kind is unknown (no points)."""
+    """Over every method together (an image is breached when any measured row of it is; rows not measured are left
+    out): the breached images, those of them with a misleading pose (:func:`breach_kind`), and whether some breached
+    row's kind is unknown (no points)."""
     breached, misleading, unknown = set(), set(), False
     for r in rows:
-        if survived(r, eps_safe_m):
+        if not r.measured or survived(r, eps_safe_m):
             continue
         breached.add(r.sample_id)
         kind = breach_kind(r, eps_safe_m)
@@ -108,3 +124,27 @@ def failure_counts(rows: Iterable[JobRow]) -> dict[str, int]:
     for r in rows:
         total.update(r.failures)
     return dict(sorted(total.items()))
+
+
+def not_measured_lines(rows: Iterable[JobRow], total: int | None = None, unit: str = "image",
+                       limit: int = 8) -> list[str]:
+    """What the tool could not measure, for a user to act on: a headline (``"2 of 31 jobs not measured"``) and one
+    line per kind and reason with the methods and the number of ``unit`` s it hit (at most ``limit`` lines, then
+    how many more); ``[]`` when every job was measured."""
+    missing = [r for r in rows if not r.measured]
+    if not missing:
+        return []
+    groups: dict[tuple[str, str], tuple[set[str], set[str]]] = {}
+    for r in missing:
+        methods, samples = groups.setdefault((r.not_measured.value, r.not_measured_detail), (set(), set()))
+        methods.add(r.method)
+        samples.add(r.sample_id)
+    head = (f"{len(missing)} of {total} jobs" if total else f"{len(missing)} job{'s' * (len(missing) != 1)}") \
+        + " not measured"
+    lines = [head + " (they enter no rate):"]
+    for (kind, detail), (methods, samples) in sorted(groups.items(), key=lambda kv: -len(kv[1][1]))[:limit]:
+        lines.append(f"{kind}: {detail} — {', '.join(sorted(methods))} on {len(samples)} {unit}"
+                     f"{'s' * (len(samples) != 1)}")
+    if len(groups) > limit:
+        lines.append(f"… and {len(groups) - limit} more reasons (report.html lists every job)")
+    return lines

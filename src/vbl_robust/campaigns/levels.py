@@ -18,12 +18,14 @@ from .summary import summarize
 
 def smallest_breach_levels(rows: Iterable[JobRow]) -> dict[tuple[str, str], float]:
     """Per (sample id, method): the smallest box level (roll half-width) at which a breach was found (a failed
-    sample counts as breached at its smallest level), ``inf`` when none up to the largest level."""
+    sample's rows not measured are left out), ``inf`` when none up to the largest level."""
     out: dict[tuple[str, str], float] = {}
     for r in rows:
+        if not r.measured:
+            continue
         key = (r.sample_id, r.method)
         cur = out.setdefault(key, math.inf)
-        if r.verdict in (Verdict.BREACH, Verdict.FAILED):
+        if r.verdict is Verdict.BREACH:
             out[key] = min(cur, float(r.box_level))
     return out
 

@@ -2,9 +2,10 @@
 error, φ_crit, |PO_k| and RA(k), failed evaluations per reason, PnP errors, the perturbation families' survival
 per budget level and their ranking.
 
-Conventions: a row's ``worst_m`` is the worst error the search found for that image (metres); a failed sample
-counts with the failure penalty (5000 m by default), so it is never a survivor. An image *survives* a box when
-its worst error is ≤ ε_safe: S_rate = 100 · #survivors / N (%).
+Conventions: a row's ``worst_m`` is the worst error the search found for that image (metres); a flagged failure
+of the pipeline counts with the failure penalty (5000 m by default). An image *survives* a box when its worst error
+is ≤ ε_safe: S_rate = 100 · #survivors / N (%), N the images measured: a job the tool could not complete (not
+measured) is in no rate, counted apart.
 
 Budgets read off a trace: a stored run whose budget reads smaller budgets (``Budget.reads``, the runtime
 experiments' anytime methods) stands for one result per read budget; :func:`read_off_rows` derives those rows
@@ -31,6 +32,8 @@ from .breach import (
     budget_value,
     empty_row,
     failure_counts,
+    measured_rows,
+    not_measured_lines,
     residual_bound,
     survival_rate,
     survived,
@@ -65,6 +68,7 @@ __all__ = [
     "ANY_METHOD", "GROUP_BY", "RANK_THRESHOLDS", "REFERENCE_METHOD", "Summary", "against_reference", "breach_kind",
     "breached_images", "budget_value", "columns", "convergence", "distance_profile", "empty_row", "failure_counts",
     "family_of", "family_profile", "first_level_below", "grid_complete", "lattice_covered", "main_rows",
+    "measured_rows", "not_measured_lines",
     "phi_crit", "pnp_summary", "quartile_edges", "quartile_of", "rank_families", "read_off", "read_off_rows",
     "reads_trace", "reference_rows", "residual_bound", "row_result", "smallest_breach_levels", "summarize",
     "survival_curve", "survival_rate", "survived", "worst_within",

@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from ..constants import NotMeasured, NotMeasuredError
+
 #: Keypoint source of the PnP comparison: the ground-truth corners truncated to integers as LARD labels them.
 TRUNCATED = "truncated ground truth"
 
@@ -70,7 +72,7 @@ def pnp_comparison(sample: Any, detector: Any, settings: Any) -> dict[str, Any]:
     objective = Objective(sample, detector, ParameterBox({"roll_deg": (-1.0, 1.0)}), pnp=settings.pnp,
                           conf_threshold=settings.conf_threshold, penalty_m=settings.penalty_m)
     if objective.image_error:
-        raise ValueError(f"sample {sample.id}: image unavailable: {objective.image_error}")
+        raise NotMeasuredError(NotMeasured.INPUT_UNAVAILABLE, f"sample {sample.id}: {objective.image_error}")
     rec = objective.evaluate(np.zeros((1, 1)))
     kp = np.asarray(rec.keypoints[0], dtype=np.float64)
     truth = np.asarray(sample.corners_2d, dtype=np.float64)

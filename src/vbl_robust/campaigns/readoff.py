@@ -42,7 +42,7 @@ def row_result(row: JobRow) -> Any:
 def read_off(row: JobRow, budget: Budget, eps_safe_m: float, penalty_m: float) -> JobRow:
     """The row of ``budget`` (a time or an evaluation budget) read off the stored run ``row`` (with points): the
     best value and point, counts and trace of the evaluations within the budget; ``read_from`` = the run's
-    budget label. A failed run gives a failed row for the budget."""
+    budget label. A run not measured gives a row not measured for the budget."""
     from ..search import at_budget
     from .work import result_fields
 
@@ -73,10 +73,13 @@ def reads_trace(spec: Any) -> bool:
     return any(b.reads for blk in spec.blocks for b in blk.budgets)
 
 
-def main_rows(store: Any, spec: Any, *, with_trace: bool = True) -> list[JobRow]:
+def main_rows(store: Any, spec: Any, *, with_trace: bool = True, measured_only: bool = True) -> list[JobRow]:
     """The main search rows of a campaign as its tables and figures show them: stored rows with their points (the
     kind of each breach, :func:`breach_kind`), with every run that reads smaller budgets off its trace replaced by
-    its read-off rows (:func:`read_off_rows`)."""
+    its read-off rows (:func:`read_off_rows`). Rows not measured (the tool could not complete them) are left out
+    unless ``measured_only`` is False (a summary table that counts them apart, :func:`summarize`)."""
     reads = reads_trace(spec)
     rows = store.jobs(kind="search", role="main", with_points=True, with_trace=with_trace or reads)
+    if measured_only:
+        rows = [r for r in rows if r.measured]
     return read_off_rows(rows, spec.eps_safe_m, spec.penalty_m) if reads else rows

@@ -8,7 +8,7 @@ Executors:
   :func:`default_workers` = the machine's cores (``VBL_ROBUST_WORKERS`` overrides it).
 - ``"ray"``: one Ray task per sample (a streaming generator: each finished job's rows come back as soon as they
   are ready); workers build the detector once each; this process writes every row into the same store.
-  ``address`` = an existing cluster (``"auto"``, ``"ray://host:10001"``), else a local Ray instance is started.
+  ``address`` = an existing cluster (``"auto"``, ``"host:6379"``; Ray Client ``ray://`` is refused), else a local Ray instance is started.
 
 Progress goes through a callback receiving :class:`Progress` after every committed job; the CLI renders it.
 """
@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..constants import Verdict
+from .precheck import check_run
 from .provenance import (
     DetectorSpec,
     code_version,
@@ -33,7 +34,7 @@ from .provenance import (
     sample_fingerprint,
 )
 from .spec import CampaignSpec, Job
-from .store import JobRow, JobStatus, ResultStore, RunProvenance, RunStatus, WriterLock
+from .store import JobRow, ResultStore, RunProvenance, RunStatus, WriterLock
 from .work import SampleTask, Settings, detector_for, one_core, run_sample_task
 
 logger = logging.getLogger(__name__)
@@ -62,7 +63,7 @@ class Progress:
     total: int
     skipped: int
     breaches: int
-    failed: int
+    not_measured: int
     elapsed: float
     last: JobRow | None = None
 
@@ -73,7 +74,7 @@ class RunSummary:
     total: int
     skipped: int
     done: int
-    failed: int
+    not_measured: int
     breaches: int
     seconds: float
     status: RunStatus
@@ -267,6 +268,7 @@ def run_campaign(
     config: dict[str, Any] | None = None,
     wait: bool = False,
     retry_failed: bool = False,
+    precheck: bool = True,
 ) -> RunSummary:
     """Run every job of ``spec`` on ``samples`` that ``store`` does not hold yet.
 
@@ -282,8 +284,11 @@ def run_campaign(
         progress: called after every committed job.
         dataset_source: where the samples came from (provenance), e.g. ``{"kind": "synthetic", "n": 10, "seed": 0}``.
         config: the full user configuration (provenance; e.g. the CLI options).
-        retry_failed: run the jobs stored as failed again (e.g. after a missing image was restored); by default
+        retry_failed: run the jobs stored as not measured again (e.g. after a missing image was restored); by default
             a rerun skips them like every stored job.
+        precheck: check before anything is stored that every image can be read at its stated size and every method
+            can run on the detector (:func:`~vbl_robust.campaigns.precheck.check_run`; ``ValueError``, one line);
+            False only for a caller that has just checked.
         wait: when another process is writing ``store`` (:class:`~vbl_robust.campaigns.store.WriterLock`), wait
             for it instead of refusing (``ValueError`` naming its PID).
     """
@@ -293,6 +298,8 @@ def run_campaign(
         raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
     spec.check()
     spec.check_samples(samples)
+    if precheck:
+        check_run(spec, samples, detector)  # every image readable, every method fit for the detector
     lock = WriterLock(store.path).acquire(wait=wait)
     try:
         return _run(spec, samples, store, detector, executor, workers, address, ray_num_cpus, progress,
@@ -335,15 +342,15 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
     tasks = [SampleTask(sample_of[sid], js) for sid, js in by_sample.items()]
     settings = Settings.from_spec(spec)
 
-    state = {"new": 0, "failed": 0, "breaches": _stored_breaches(store)}
+    state = {"new": 0, "not_measured": 0, "breaches": _stored_breaches(store)}
 
     def on_rows(rows: list[JobRow]) -> None:
         store.commit(rows)
         state["new"] += len(rows)
-        state["failed"] += sum(r.status is JobStatus.FAILED for r in rows)
+        state["not_measured"] += sum(not r.measured for r in rows)
         state["breaches"] += sum(r.verdict is Verdict.BREACH and r.role == "main" for r in rows)
         if progress is not None:
-            progress(Progress(skipped + state["new"], len(jobs), skipped, state["breaches"], state["failed"],
+            progress(Progress(skipped + state["new"], len(jobs), skipped, state["breaches"], state["not_measured"],
                               time.perf_counter() - t0, rows[0]))
 
     if progress is not None:
@@ -369,7 +376,8 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
         if status is RunStatus.FINISHED and skipped + state["new"] < len(jobs):
             status = RunStatus.INCOMPLETE
         store.end_run(run_id, status, state["new"], seconds)
-    return RunSummary(run_id, len(jobs), skipped, state["new"], state["failed"], state["breaches"], seconds, status)
+    return RunSummary(run_id, len(jobs), skipped, state["new"], state["not_measured"], state["breaches"], seconds,
+                      status)
 
 
 def _stored_breaches(store: ResultStore) -> int:

@@ -13,8 +13,16 @@ import numpy as np
 
 from ..constants import BreachKind, Verdict
 from ..stats import Rate
-from .breach import breach_kind, budget_value, empty_row, failure_counts, residual_bound, survived
-from .store import JobRow, JobStatus
+from .breach import (
+    breach_kind,
+    budget_value,
+    empty_row,
+    failure_counts,
+    measured_rows,
+    residual_bound,
+    survived,
+)
+from .store import JobRow
 
 
 def _stats(values: Sequence[float]) -> dict[str, float]:
@@ -35,8 +43,9 @@ class Summary:
         method, box_label, budget_label, box_level: the group's value of each attribute it is grouped by (None for
             one it is not grouped by; ``box_level`` is the first row's when not grouped by it).
         max_evals, max_seconds, max_iters: the group's numeric budget (NaN when the budget has no such bound).
-        n: rows (images, or sequences); survivors: rows that survived (:func:`survived`); survival: S_rate =
-            100 · survivors / n (%), with its exact 95 % interval ``survival_ci`` (:mod:`vbl_robust.stats`);
+        n: rows measured (images, or sequences); survivors: rows that survived (:func:`survived`); survival: S_rate
+            = 100 · survivors / n (%; NaN when no row was measured), with its exact 95 % interval ``survival_ci``
+            (:mod:`vbl_robust.stats`); not_measured: rows the tool could not complete (never in ``n`` or any rate);
             n_empty: rows with no evaluation completed within their time budget (survivors, left out of the
             worst-error statistics).
         flagged, misleading: breached rows whose every breach was a flagged failure / that hold a hazardously
@@ -45,7 +54,7 @@ class Summary:
             without a breach — on each of them the breached fraction of the box is below it at 95 %; None
             otherwise (or when every row breached).
         median_worst_m, mean_worst_m: over the rows with a worst error (NaN for none).
-        breaches, certified, failed: verdict and status counts.
+        breaches, certified: verdict counts.
         nfev, mean_nfev: evaluations in all and per row; failed_evals: failed evaluations (None when no row
             recorded them), failures: per reason.
         median_search_s: median search seconds; read_from: the budget label of the runs the group was read off
@@ -62,6 +71,7 @@ class Summary:
     n: int
     survivors: int
     survival: float
+    not_measured: int
     n_empty: int
     flagged: int | None
     misleading: int | None
@@ -70,7 +80,6 @@ class Summary:
     mean_worst_m: float
     breaches: int
     certified: int
-    failed: int
     nfev: int
     mean_nfev: float
     failed_evals: int | None
@@ -83,18 +92,23 @@ class Summary:
         """Survivors of n with the exact interval (:class:`vbl_robust.stats.Rate`)."""
         return Rate(self.survivors, self.n)
 
+    @property
+    def measured(self) -> bool:
+        """Whether some row of the group was measured (else it has no survival: a dash, never 0 % or 100 %)."""
+        return self.n > 0
+
     def kind_rate(self, kind: BreachKind) -> Rate | None:
-        """Rows of ``kind`` of n (None when the kinds are unknown)."""
+        """Rows of ``kind`` of n (None when the kinds are unknown or no row was measured)."""
         count = {BreachKind.SAFE: self.survivors, BreachKind.FLAGGED: self.flagged,
                  BreachKind.MISLEADING: self.misleading}[kind]
-        return None if count is None else Rate(count, self.n)
+        return None if count is None or not self.n else Rate(count, self.n)
 
     def as_row(self) -> dict[str, Any]:
         """The fields by name, plus ``survival_ci_low`` / ``survival_ci_high`` (%, exact 95 %) and
         ``misleading_pct`` / ``flagged_pct`` (for the report's, the command line's and the exported tables)."""
         row = {f.name: getattr(self, f.name) for f in fields(self)}
-        ci = self.survival_rate.ci
-        row.update(survival_ci_low=ci.low, survival_ci_high=ci.high)
+        ci = self.survival_rate.ci if self.n else None
+        row.update(survival_ci_low=math.nan if ci is None else ci.low, survival_ci_high=math.nan if ci is None else ci.high)
         for kind in (BreachKind.FLAGGED, BreachKind.MISLEADING):
             r = self.kind_rate(kind)
             row[f"{kind.value}_pct"] = math.nan if r is None else r.pct
@@ -124,7 +138,9 @@ def summarize(rows: Iterable[JobRow], eps_safe_m: float,
               by: Sequence[str] = ("method", "box_label", "budget_label")) -> list[Summary]:
     """One :class:`Summary` per group of ``rows`` with equal ``by`` attributes (names from :data:`GROUP_BY`), in
     first-seen order. A row with no evaluation completed within its time budget (``nfev == 0``, no worst error)
-    counts as a survivor (nothing found) and is left out of the worst-error statistics (``n_empty`` counts them)."""
+    counts as a survivor (nothing found) and is left out of the worst-error statistics (``n_empty`` counts them). A
+    row not measured enters no statistic of its group: ``not_measured`` counts it (a group of such rows only has
+    ``n == 0`` and no survival)."""
     bad = [k for k in by if k not in GROUP_BY]
     if bad:
         raise ValueError(f"summarize: cannot group by {bad}; groups are {GROUP_BY}")
@@ -132,7 +148,8 @@ def summarize(rows: Iterable[JobRow], eps_safe_m: float,
     for r in rows:
         groups.setdefault(tuple(getattr(r, k) for k in by), []).append(r)
     out = []
-    for key, rs in groups.items():
+    for key, every in groups.items():
+        rs, unmeasured = measured_rows(every)
         # a search that completed no evaluation within its time budget found nothing: a survivor, and not part
         # of the worst-error statistics
         empty = [empty_row(r) for r in rs]
@@ -146,20 +163,20 @@ def summarize(rows: Iterable[JobRow], eps_safe_m: float,
         bounds = [b for b in (residual_bound(r, eps_safe_m) for r in rs) if b is not None]
         out.append(Summary(
             method=group.get("method"), box_label=group.get("box_label"), budget_label=group.get("budget_label"),
-            box_level=group.get("box_level", rs[0].box_level),
-            max_evals=budget_value(rs[0], "max_evals"), max_seconds=budget_value(rs[0], "max_seconds"),
-            max_iters=budget_value(rs[0], "max_iters"),
-            n=len(rs), survivors=sum(alive), survival=100.0 * float(np.mean(alive)), n_empty=sum(empty),
+            box_level=group.get("box_level", every[0].box_level),
+            max_evals=budget_value(every[0], "max_evals"), max_seconds=budget_value(every[0], "max_seconds"),
+            max_iters=budget_value(every[0], "max_iters"),
+            n=len(rs), survivors=sum(alive), survival=100.0 * float(np.mean(alive)) if rs else math.nan,
+            not_measured=len(unmeasured), n_empty=sum(empty),
             flagged=kinds.count(BreachKind.FLAGGED) if kinds_known else None,
             misleading=kinds.count(BreachKind.MISLEADING) if kinds_known else None,
             residual=max(bounds) if bounds else None,
             median_worst_m=s["median"], mean_worst_m=s["mean"],
             breaches=sum(r.verdict is Verdict.BREACH for r in rs),
             certified=sum(r.verdict is Verdict.CERTIFIED for r in rs),
-            failed=sum(r.status is JobStatus.FAILED for r in rs),
-            nfev=sum(r.nfev for r in rs), mean_nfev=float(np.mean([r.nfev for r in rs])),
+            nfev=sum(r.nfev for r in rs), mean_nfev=float(np.mean([r.nfev for r in rs])) if rs else math.nan,
             failed_evals=sum(known) if known else None, failures=failure_counts(rs),
-            median_search_s=float(np.median([r.search_s or 0.0 for r in rs])),
+            median_search_s=float(np.median([r.search_s or 0.0 for r in rs])) if rs else math.nan,
             read_from=next((r.read_from for r in rs if r.read_from), ""),
         ))
     return out

@@ -1,7 +1,8 @@
 """Flat exports of a store: its job rows (CSV, standard library; Parquet, pyarrow) and its summary table.
 
 :func:`export` writes one line per job with the identifying columns, the worst error and point (one column per
-parameter, real units), verdict, the kind of breach (``breach_kind``: safe / flagged / misleading) and what "no
+parameter, real units), verdict, the detector that was audited (name, SHA-256, design: single pass or two-stage,
+input size, engine), the kind of breach (``breach_kind``: safe / flagged / misleading) and what "no
 breach found" is worth for a uniform random search (``residual_bound``), counts and timings (a sequence campaign's main jobs also their breach facts along the approach,
 :data:`SEQUENCE_COLUMNS`); traces, evaluated points and per-frame errors stay in the store. A run that reads smaller
 budgets off its trace (runtime experiments) is followed by one line per read budget, derived from it
@@ -26,8 +27,11 @@ COLUMNS = (
     "box_level", "budget_label", "max_evals", "max_seconds", "max_iters", "stop_at_breach", "seed", "status",
     "reason", "worst_m", "verdict", "nfev", "nit", "n_failed", "failures", "worst_reason", "search_status",
     "search_s", "job_s", "upper_bound", "bound_estimate", "run_id", "key", "read_from", "breach_kind",
-    "residual_bound",
+    "residual_bound", "detector", "detector_sha256", "design", "input_size", "engine",
 )
+#: The detector columns of every job line (the campaign's detector identity): which pipeline was audited.
+DETECTOR_COLUMNS = {"detector": "name", "detector_sha256": "sha256", "design": "design", "input_size": "input_size",
+                    "engine": "engine"}
 #: Columns of a risk job (``vbl-robust risk``; fractions): the failure probability, its interval, the verdict on
 #: p_fail ≤ τ and the evaluations spent.
 RISK_COLUMNS = ("p_fail", "ci_low", "ci_high", "ci_level", "tau", "risk_verdict", "evaluations")
@@ -36,7 +40,7 @@ RISK_COLUMNS = ("p_fail", "ci_low", "ci_high", "ci_level", "tau", "risk_verdict"
 #: search, the largest bound on the breached fraction of the box over the images without a breach).
 SUMMARY_COLUMNS = (
     "experiment", "method", "box_label", "box_level", "budget_label", "images", "survivors", "survival_pct",
-    "survival_ci_low", "survival_ci_high", "breaches", "misleading", "flagged", "certified", "failed_jobs",
+    "survival_ci_low", "survival_ci_high", "breaches", "misleading", "flagged", "certified", "not_measured",
     "median_worst_m", "mean_evals", "residual_bound",
 )
 
@@ -65,6 +69,8 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
     camp = store.campaign()
     eps, penalty = ((camp["spec"].get("eps_safe_m"), camp["spec"].get("penalty_m")) if camp else (None, None))
     eps_kind = EPS_SAFE_M if eps is None else eps
+    ident = (camp or {}).get("detector") or {}
+    detector = {col: ident.get(key) for col, key in DETECTOR_COLUMNS.items()}
     stored = store.jobs(with_trace=False, with_points=True)
     if any(r.budget is not None and r.budget.reads for r in stored):
         full = {r.key: r for r in store.jobs(role="main", with_points=True) if r.budget is not None and r.budget.reads}
@@ -76,13 +82,14 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
         s = samples.get(r.sample_id, {})
         b = {} if r.budget is None else r.budget.to_dict()
         d = {c: _plain(getattr(r, c, None)) for c in COLUMNS}
+        d.update(detector)
         d.update(slant_distance_m=s.get("slant_distance_m"), envelope=s.get("envelope"), max_evals=b.get("max_evals"),
                  max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"), stop_at_breach=b.get("stop_at_breach"))
         risk = (r.payload or {}).get("risk") if r.kind == "risk" else None
         if risk is not None:
             has_risk = True
             d.update({c: risk.get(c) for c in RISK_COLUMNS if c in risk}, risk_verdict=risk.get("verdict"))
-        if r.kind == "search":
+        if r.kind == "search" and r.measured:
             kind = breach_kind(r, eps_kind)
             d.update(breach_kind=None if kind is None else kind.value, residual_bound=residual_bound(r, eps_kind))
         for name, v in (r.worst_x or {}).items():
@@ -113,20 +120,20 @@ def summary_records(store: ResultStore) -> list[dict[str, Any]]:
     if camp is None:
         raise ValueError(f"{store.path}: no campaign stored")
     spec = CampaignSpec.from_dict(camp["spec"])
-    rows = main_rows(store, spec, with_trace=False)
+    rows = main_rows(store, spec, with_trace=False, measured_only=False)  # counted apart (not_measured)
     boxes = list({r.box.label: r.box for r in rows if r.box is not None}.values())
     ref = store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
     rows += reference_rows(ref, boxes, spec.eps_safe_m, spec.penalty_m)
     out = []
     for s in summarize(rows, spec.eps_safe_m):
-        ci = s.survival_rate.ci
+        ci = s.survival_rate.ci if s.measured else None
         out.append({
             "experiment": spec.name, "method": s.method, "box_label": s.box_label, "box_level": s.box_level,
-            "budget_label": s.budget_label, "images": s.n, "survivors": s.survivors, "survival_pct": s.survival,
-            "survival_ci_low": ci.low, "survival_ci_high": ci.high, "breaches": s.breaches,
-            "misleading": s.misleading, "flagged": s.flagged, "certified": s.certified, "failed_jobs": s.failed,
+            "budget_label": s.budget_label, "images": s.n, "survivors": s.survivors,
+            "survival_pct": s.survival if s.measured else None, "survival_ci_low": ci and ci.low, "survival_ci_high": ci and ci.high, "breaches": s.breaches,
+            "misleading": s.misleading, "flagged": s.flagged, "certified": s.certified, "not_measured": s.not_measured,
             "median_worst_m": None if math.isnan(s.median_worst_m) else s.median_worst_m,
-            "mean_evals": s.mean_nfev, "residual_bound": s.residual,
+            "mean_evals": s.mean_nfev if s.measured else None, "residual_bound": s.residual,
         })
     return out
 

@@ -9,9 +9,10 @@ Rows are :class:`~vbl_robust.campaigns.store.JobRow` s. Every search evaluation 
 detection, PnP failure, …) from the objective into the search result and the row (``n_failed``, ``failures``,
 ``worst_reason``, the reason of every stored point); the search itself sees the penalty value, as before.
 
-A sample the pipeline cannot process (unreadable image, an exception while building or evaluating the
-objective) gives a row with status "failed", its reason, worst error = the failure penalty and verdict
-"failed"; the campaign goes on.
+A job the tool cannot complete (an image that cannot be loaded, a method that cannot run on the detector, an
+exception in our code or in the detector) gives a row with status and verdict "not measured", its reason as
+``"<kind>: <detail>"`` (:class:`~vbl_robust.constants.NotMeasured`, :func:`not_measured_reason` draws the line) and
+no worst error; it enters no rate, and the campaign goes on.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..constants import Verdict
+from ..constants import NotMeasured, NotMeasuredError, Verdict
 from ..search.result import verdict_for
 from .provenance import DetectorSpec
 from .spec import Job
@@ -43,6 +44,10 @@ if TYPE_CHECKING:  # typing only: the pipeline (torch) is imported where an obje
     from ..space import ParameterBox
 
 logger = logging.getLogger(__name__)
+#: Where vbl-robust's own code lives (:func:`not_measured_reason` tells its frames from a user's).
+_PACKAGE_DIR = "/vbl_robust/"
+#: The objective's methods that call a detector (an exception below them is the detector's).
+_DETECTOR_CALLS = frozenset({"select_at", "_detect_all"})
 
 _DETECTORS: dict[str, Detector] = {}
 #: Points per objective call of a breach-stopped search on a CPU (:func:`breach_chunk`).
@@ -122,10 +127,27 @@ def _row(job: Job, run_id: int | None, status: JobStatus, **outcome: Any) -> Job
     )
 
 
-def failed_row(job: Job, reason: str, settings: Settings, run_id: int | None = None, job_s: float = 0.0) -> JobRow:
-    """A job that could not run: worst error = the penalty, verdict FAILED."""
-    return _row(job, run_id, JobStatus.FAILED, reason=reason, worst_m=settings.penalty_m, verdict=Verdict.FAILED,
-                n_failed=0, job_s=job_s)
+def unmeasured_row(job: Job, kind: NotMeasured, detail: str, run_id: int | None = None, job_s: float = 0.0,
+                   ) -> JobRow:
+    """A job the tool could not complete: status and verdict NOT_MEASURED, reason ``"<kind>: <detail>"``, no worst
+    error (it enters no rate)."""
+    return _row(job, run_id, JobStatus.NOT_MEASURED, reason=f"{NotMeasured(kind).value}: {detail}", worst_m=None,
+                verdict=Verdict.NOT_MEASURED, n_failed=0, job_s=job_s)
+
+
+def not_measured_reason(exc: BaseException) -> tuple[NotMeasured, str]:
+    """Why a job that raised ``exc`` is not measured, and the one line a user reads (no Python repr, no source
+    location: those go to the log). The one place the tool's failures are told apart: a
+    :class:`~vbl_robust.constants.NotMeasuredError` says its kind; an exception raised inside the detector (the
+    innermost frame of vbl-robust's own is in ``detect/``, or is the objective's call of the detector, below which a
+    user's model or plugin raised) is ``DETECTOR_ERROR``; any other is ``TOOL_ERROR``."""
+    if isinstance(exc, NotMeasuredError):
+        return exc.reason, str(exc)
+    ours = [f for f in traceback.extract_tb(exc.__traceback__) if _PACKAGE_DIR in f.filename]
+    in_detector = bool(ours) and ("/detect/" in ours[-1].filename or ours[-1].name in _DETECTOR_CALLS)
+    kind = NotMeasured.DETECTOR_ERROR if in_detector else NotMeasured.TOOL_ERROR
+    text = str(exc).splitlines()[0] if str(exc) else ""
+    return kind, f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def _finite(v: float | None) -> float | None:
@@ -290,12 +312,6 @@ def _warm_up(f: Callable[[Any], Any], box: Any, needs_gradient: bool) -> None:
         f(centre)
 
 
-def _reason(exc: BaseException) -> str:
-    tb = traceback.extract_tb(exc.__traceback__)
-    where = f" (at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno})" if tb else ""
-    return f"{type(exc).__name__}: {exc}{where}"
-
-
 def run_sample_task(task: SampleTask, detector: Detector, settings: Settings, run_id: int | None = None,
                     ) -> Iterator[list[JobRow]]:
     """Run a sample's jobs in order; yield the rows to commit after each job."""
@@ -317,8 +333,9 @@ def run_sample_task(task: SampleTask, detector: Detector, settings: Settings, ru
                 objectives[label] = build_objective(task.sample, detector, job.box.box, settings)
             objective = objectives[label]
             image_error = objective.image_error
-            if image_error:  # the pipeline would penalise every evaluation: a failed sample, not a breach
-                yield [failed_row(job, f"image unavailable: {image_error}", settings, run_id, time.perf_counter() - t0)]
+            if image_error:  # the tool cannot read the input: not measured, never a breach
+                named = image_error if job.sample_id in image_error else f"sample {job.sample_id}: {image_error}"
+                yield [unmeasured_row(job, NotMeasured.INPUT_UNAVAILABLE, named, run_id, time.perf_counter() - t0)]
                 continue
             if job.kind == "risk":
                 yield [risk_row(job, objective, settings, run_id, t0)]
@@ -330,10 +347,12 @@ def run_sample_task(task: SampleTask, detector: Detector, settings: Settings, ru
             elif job.role == "main" and result.x is not None:
                 details, corners = worst_details(objective, result.x)
                 row = row.replace(payload={"worst": details}, worst_corners=corners)
-        except Exception as exc:  # a sample the pipeline cannot handle is a recorded failure
-            logger.warning("sample %s, job %s/%s failed: %s", job.sample_id, job.method, job.box and job.box.label,
-                           _reason(exc))
-            yield [failed_row(job, _reason(exc), settings, run_id, time.perf_counter() - t0)]
+        except Exception as exc:  # the tool could not complete the job: not measured, recorded, the campaign goes on
+            kind, detail = not_measured_reason(exc)
+            logger.warning("sample %s, job %s/%s not measured (%s): %s", job.sample_id, job.method,
+                           job.box and job.box.label, kind.value, detail)
+            logger.debug("traceback of the job not measured", exc_info=exc)
+            yield [unmeasured_row(job, kind, detail, run_id, time.perf_counter() - t0)]
             continue
         rows = [row]
         if job.chain is not None and row.verdict is Verdict.BREACH:

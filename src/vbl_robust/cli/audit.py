@@ -90,7 +90,7 @@ def audit(
     max_evals: MaxEvals = 200, max_seconds: MaxSeconds = None, early_stop: EarlyStop = True,
     lipschitz: Lipschitz = None, pnp: o.Pnp = "ippe_lm", landscape: Landscape = None,
     executor: o.Executor = "local", workers: o.Workers = 0, clock: o.Clock = "auto", wait: o.Wait = False,
-    retry_failed: o.RetryFailed = False, address: o.Address = None,
+    retry_failed: o.RetryFailed = False, address: o.Address = None, allow_unmeasured: o.AllowUnmeasured = False,
     csv: o.Csv = None, parquet: o.Parquet = None, report: o.Report = True,
     quiet: o.Quiet = False, verbose: o.Verbose = False, config: o.Config = None,
     sequences: Sequences = None, monitor_residual: MonitorResidual = None, monitor_sigma: MonitorSigma = None,
@@ -141,8 +141,10 @@ def audit(
                                                "rate": rate}),
               **({"method_options": method_opts} if method_opts else {})}
     summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
-                                config=config, quiet=quiet, workers=workers, wait=wait, retry_failed=retry_failed)
-    complete = finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
+                                config=config, quiet=quiet, workers=workers, wait=wait, retry_failed=retry_failed,
+                                allow_unmeasured=allow_unmeasured)
+    complete = finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet,
+                      allow_unmeasured=allow_unmeasured)
     if refine_zones:
         from .zones import refine_audit
 

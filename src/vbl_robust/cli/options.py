@@ -12,7 +12,7 @@ import typer
 from ..constants import MAX_IMAGE_SIDE, MAX_IMAGES, MAX_SEED
 from .config import Config
 
-__all__ = ["DEFAULT_IMAGES", "Address", "Batch", "Clock", "Config", "Csv", "Design", "Device", "Engine", "Executor",
+__all__ = ["DEFAULT_IMAGES", "Address", "AllowUnmeasured", "Batch", "Clock", "Config", "Csv", "Design", "Device", "Engine", "Executor",
            "Height", "Images", "Imgsz", "Lard", "MethodOption", "Model", "Oracle", "OracleNoise", "Out", "Parquet", "Pnp",
            "Quiet", "Report", "RetryFailed", "Roll", "Seed", "StoredRun", "Threads", "TrustModel", "Verbose", "Wait",
            "Width", "Workers"]
@@ -77,8 +77,13 @@ Clock = Annotated[str, typer.Option("--clock", help="Clock of time budgets: proc
                                     "on a CPU, wall on a GPU). Recorded with the results.")]
 Wait = Annotated[bool, typer.Option("--wait", help="When another run is writing the same --out, wait for it to end "
                                     "instead of refusing.")]
-RetryFailed = Annotated[bool, typer.Option("--retry-failed", help="Run the jobs stored as failed again (e.g. after a "
-                                           "missing image was restored); a plain rerun skips them.")]
+RetryFailed = Annotated[bool, typer.Option("--retry-failed", help="Run the jobs stored as not measured again (e.g. "
+                                           "after a missing image was restored); a plain rerun skips them.")]
+AllowUnmeasured = Annotated[bool, typer.Option(
+    "--allow-unmeasured", help="Accept jobs the tool could not measure (an image missing or unreadable, an exception "
+    "in the tool or the detector): run past images that cannot be read instead of refusing the run, and exit 0. "
+    "Such jobs never enter a rate either way and are listed in the report; without this flag a run with an "
+    "unreadable image is refused before it starts, and any job not measured makes the command exit 1.")]
 
 # -- what a campaign writes ---------------------------------------------------------------------------------------
 Csv = Annotated[Path | None, typer.Option("--csv", help="Also export the job rows to this CSV file.")]

@@ -32,9 +32,32 @@ Compare = Annotated[Path | None, typer.Option(
 
 def report(
     run: o.StoredRun, out: ReportOut = None, csv: Csv = None, parquet: Parquet = None, fmt: Format = "html",
-    others: With = None, compare: Compare = None,
+    others: With = None, compare: Compare = None, allow_unmeasured: o.AllowUnmeasured = False,
 ) -> None:
-    """Regenerate a run's self-contained HTML report (figures, tables, provenance) from its store."""
+    """Regenerate a run's self-contained HTML report (figures, tables, provenance) from its store (a run directory,
+    its results.sqlite, or a bundle's packed results.sqlite.xz, read through a temporary copy). Exit 1 when some job
+    of the run was not measured, unless --allow-unmeasured."""
+    _report(run, out, csv, parquet, fmt, others, compare)
+    _unmeasured_exit(run, allow_unmeasured)
+
+
+def _unmeasured_exit(run: Path, allow_unmeasured: bool) -> None:
+    """The jobs of ``run`` the tool could not measure, on standard error, and exit 1 unless ``allow_unmeasured``."""
+    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.campaigns.spec import CampaignSpec
+
+    from .run import unmeasured_ok
+
+    with one_line(), ResultStore.open_existing(run) as store:
+        camp = store.campaign()
+        unit = CampaignSpec.from_dict(camp["spec"]).unit if camp else "image"
+        rows = store.jobs(with_trace=False)
+    if not unmeasured_ok(rows, unit, allow_unmeasured):
+        raise typer.Exit(1)
+
+
+def _report(run: Path, out: Path | None, csv: Path | None, parquet: Path | None, fmt: str, others: list[Path] | None,
+            compare: Path | None) -> None:
     from vbl_robust.campaigns import ResultStore, export
     from vbl_robust.report import build_report
 

@@ -75,7 +75,7 @@ def reproduce(
     eval_budgets: EvalBudgets = None, iterations: Iterations = None, family_grid: FamilyGrid = None,
     executor: o.Executor = "local", workers: o.Workers = 0, clock: o.Clock = "auto", wait: o.Wait = False,
     retry_failed: o.RetryFailed = False, resume_from: ResumeFrom = None, check_against: CheckAgainst = None,
-    address: o.Address = None, csv: o.Csv = None, parquet: o.Parquet = None, report: o.Report = True,
+    address: o.Address = None, allow_unmeasured: o.AllowUnmeasured = False, csv: o.Csv = None, parquet: o.Parquet = None, report: o.Report = True,
     estimate: Estimate = False, probe_seconds: ProbeSeconds = 5.0,
     quiet: o.Quiet = False, verbose: o.Verbose = False, config: o.Config = None,
 ) -> None:
@@ -120,8 +120,9 @@ def reproduce(
                   **({"method_options": method_opts} if method_opts else {})}
         summary = run_with_progress(spec, samples, out_dir, det, executor=executor, address=address, source=source,
                                     config=config, quiet=quiet, workers=n_workers, wait=wait,
-                                    retry_failed=retry_failed)
-        incomplete |= not finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
+                                    retry_failed=retry_failed, allow_unmeasured=allow_unmeasured)
+        incomplete |= not finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet,
+                                 allow_unmeasured=allow_unmeasured)
         if references:
             differ |= _check(exp.name, out_dir, references[exp.name])
     if group:

@@ -39,7 +39,7 @@ def risk(
     methods: Methods = "mc,guided", max_evals: MaxEvals = 1024, tau: Tau = 0.01, delta: Delta = 0.05,
     guide_evals: GuideEvals = 64, pnp: o.Pnp = "ippe_lm",
     executor: o.Executor = "local", workers: o.Workers = 0, wait: o.Wait = False,
-    retry_failed: o.RetryFailed = False, address: o.Address = None,
+    retry_failed: o.RetryFailed = False, address: o.Address = None, allow_unmeasured: o.AllowUnmeasured = False,
     csv: o.Csv = None, parquet: o.Parquet = None, report: o.Report = True,
     quiet: o.Quiet = False, verbose: o.Verbose = False, config: o.Config = None,
 ) -> None:
@@ -70,8 +70,10 @@ def risk(
               "methods": list(method_list), "max_evals": max_evals, "tau": tau, "delta": delta,
               "guide_evals": guide_evals, "pnp": pnp, "width": width, "height": height}
     summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
-                                config=config, quiet=quiet, workers=workers, wait=wait, retry_failed=retry_failed)
-    complete = finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet)
+                                config=config, quiet=quiet, workers=workers, wait=wait, retry_failed=retry_failed,
+                                allow_unmeasured=allow_unmeasured)
+    complete = finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet,
+                      allow_unmeasured=allow_unmeasured)
     if not quiet:
         _print_pooled(out)
     if not complete:

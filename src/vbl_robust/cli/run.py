@@ -42,10 +42,11 @@ def run_settings(spec: Any, clock: str, device: str, workers: int) -> tuple[Any,
 
 def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, executor: str, address: str | None,
                       source: dict, config: dict, quiet: bool = False, workers: int = 1, wait: bool = False,
-                      retry_failed: bool = False) -> Any:
+                      retry_failed: bool = False, allow_unmeasured: bool = False) -> Any:
     """Run ``spec`` into ``out/results.sqlite`` with a rich progress bar (``workers`` processes for the local
-    executor; ``wait``: wait for another run writing the same store instead of refusing); returns the run
-    summary."""
+    executor; ``wait``: wait for another run writing the same store instead of refusing; ``allow_unmeasured``: run
+    past images that cannot be read, whose jobs are then not measured, instead of refusing the run); returns the
+    run summary."""
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -56,10 +57,20 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
     )
 
     from vbl_robust.campaigns import ResultStore, run_campaign
+    from vbl_robust.campaigns.precheck import check_run
 
     with one_line(ValueError):
         spec.check()  # before anything is created or run
         spec.check_samples(samples)
+        # images readable at their size (or, allowed, left to the run: an unreadable one is not measured), methods
+        # fit for the detector
+        check_run(spec, samples, detector, images=not allow_unmeasured)
+    if allow_unmeasured:
+        from vbl_robust.data.check import first_problem
+
+        if problem := first_problem(samples):
+            typer.secho(f"warning: {problem}; their jobs will be not measured (--allow-unmeasured)",
+                        fg=typer.colors.YELLOW, err=True)
     with one_line(ValueError, OSError, prefix=f"--out {out}: "):
         out.mkdir(parents=True, exist_ok=True)
         ResultStore(out / "results.sqlite").close()  # a store that cannot be opened fails here, in one line
@@ -70,13 +81,14 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
 
         def on_progress(p: Any) -> None:
             bar.update(task, total=p.total, completed=p.done,
-                       status=f"breaches {p.breaches}" + (f", failed {p.failed}" if p.failed else "")
+                       status=f"breaches {p.breaches}"
+                       + (f", not measured {p.not_measured}" if p.not_measured else "")
                        + (f" ({p.skipped} resumed)" if p.skipped else ""))
 
         try:
             summary = run_campaign(spec, samples, store, detector=detector, executor=executor, workers=workers,
                                    address=address, progress=on_progress, dataset_source=source, config=config,
-                                   wait=wait, retry_failed=retry_failed)
+                                   wait=wait, retry_failed=retry_failed, precheck=False)
         except (ValueError, FileNotFoundError) as exc:
             fail(str(exc))
         except KeyboardInterrupt:
@@ -105,16 +117,20 @@ def check_exports(csv: Path | None, parquet: Path | None, out: Path | None = Non
             fail(f"{option} {path}: cannot write there ({parent} is not a writable directory)")
 
 
-def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, report: bool, quiet: bool = False) -> bool:
-    """Print the summary table, export, and write the HTML report; False when the run is incomplete (its caller
-    ends with exit code 1 once it has done what else it can: a run that did not finish never exits 0)."""
+def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, report: bool, quiet: bool = False,
+           allow_unmeasured: bool = False) -> bool:
+    """Print the summary table, export, and write the HTML report; False when the run is incomplete or some job
+    could not be measured (unless ``allow_unmeasured``): its caller ends with exit code 1 once it has done what else
+    it can — a run that did not finish, or did not measure what it was asked to, never exits 0."""
     from vbl_robust.campaigns import ResultStore, export
     from vbl_robust.campaigns.metrics import main_rows
     from vbl_robust.campaigns.spec import CampaignSpec
 
     with ResultStore.open_existing(out) as store:
         spec = CampaignSpec.from_dict(store.campaign()["spec"])
-        rows = main_rows(store, spec, with_trace=False)  # runs that read smaller budgets off their trace: per budget
+        # runs that read smaller budgets off their trace: per budget; jobs not measured counted apart
+        rows = main_rows(store, spec, with_trace=False, measured_only=False)
+        every = store.jobs(with_trace=False)
         for path in (csv, parquet):
             if path is not None:
                 with one_line(ValueError):
@@ -122,7 +138,8 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
                 typer.echo(f"exported {path}")
     if rows and not quiet:
         print_summary(spec, rows)
-    status = f"{summary.done} new jobs, {summary.skipped} already done, {summary.failed} failed, {summary.seconds:.0f} s"
+    status = (f"{summary.done} new jobs, {summary.skipped} already done, {summary.not_measured} not measured, "
+              f"{summary.seconds:.0f} s")
     typer.echo(f"{spec.name}: {status}; results in {out / 'results.sqlite'}")
     if summary.status != "finished":
         typer.secho(f"run {summary.status}: rerun the same command to resume", fg=typer.colors.YELLOW, err=True)
@@ -130,11 +147,21 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
         from vbl_robust.report import build_report
 
         typer.echo(f"report: {build_report(out)}")
-    if summary.done and summary.failed == summary.done and summary.status == "finished":
-        typer.secho(f"every job failed ({summary.failed}): nothing was measured — see the reasons in the report",
-                    fg=typer.colors.RED, err=True)
-        return False
-    return summary.status == "finished"
+    return summary.status == "finished" and unmeasured_ok(every, spec.unit, allow_unmeasured)
+
+
+def unmeasured_ok(rows: list, unit: str, allow_unmeasured: bool) -> bool:
+    """Tell the user what could not be measured (stderr, one line per reason) and whether the command may exit 0:
+    yes when every job was measured, or ``--allow-unmeasured`` was given."""
+    from vbl_robust.campaigns.metrics import not_measured_lines
+
+    lines = not_measured_lines(rows, len(rows), unit)
+    for line in lines:
+        typer.secho(line, fg=typer.colors.RED if not allow_unmeasured else typer.colors.YELLOW, err=True)
+    if lines and not allow_unmeasured:
+        typer.secho("exit 1: fix the input or the method list and rerun with --retry-failed, or accept the rates "
+                    "without these jobs with --allow-unmeasured", fg=typer.colors.RED, err=True)
+    return not lines or allow_unmeasured
 
 
 def print_summary(spec: Any, rows: list) -> None:
@@ -154,23 +181,27 @@ def print_summary(spec: Any, rows: list) -> None:
         table.add_column(heads[c], no_wrap=c == "method", min_width=max(len(str(ln.method)) for ln in lines)
                          if c == "method" else None)
     empty = any(line.n_empty for line in lines)  # survivors never searched (no evaluation in a time budget)
+    unmeasured = any(line.not_measured for line in lines)
     heads = ["n", "survival % [95 % CI]", *(["no eval in time"] if empty else []), "median (m)", "breaches",
-             "failed"]
+             "failed evals", *(["not measured"] if unmeasured else [])]
     cells = []
     for line in lines:
         fe, med = line.failed_evals, line.median_worst_m
         kinds = "?" if line.misleading is None else f"{line.misleading} / {line.flagged}"
-        cells.append([str(line.n), line.survival_rate.text(1, percent=False),
+        cells.append([str(line.n), line.survival_rate.text(1, percent=False) if line.measured else "–",
                       *([str(line.n_empty)] if empty else []), "–" if math.isnan(med) else f"{med:.1f}",
-                      f"{line.breaches} ({kinds})", f"{line.failed} / {'–' if fe is None else fe}"])
+                      f"{line.breaches} ({kinds})", "–" if fe is None else str(fe),
+                      *([str(line.not_measured)] if unmeasured else [])])
     for j, col in enumerate(heads):  # values are never cut: a column is at least as wide as its widest value
         table.add_column(col, justify="right", min_width=max(len(c[j]) for c in cells))
     for line, row in zip(lines, cells, strict=True):
         table.add_row(*(str(getattr(line, c)) for c in cols), *row)
     Console().print(table)
-    typer.echo(f"n: {spec.unit}s; median: of the worst errors found; failed: jobs / evaluations; breaches: all "
-               "(m / f): m misleading — a confident pose off by more than ε_safe; f flagged only — every "
-               "breach a failure the system sees (no detection, low confidence, PnP failed …)")
+    typer.echo(f"n: {spec.unit}s measured; median: of the worst errors found; failed evals: evaluations the pipeline "
+               "failed (counted with the penalty); breaches: all (m / f): m misleading — a confident pose off by more "
+               "than ε_safe; f flagged only — every breach a failure the system sees (no detection, low confidence, "
+               "PnP failed …)" + ("; not measured: jobs the tool could not complete, in no rate (listed below)"
+                                  if unmeasured else ""))
     if empty:
         typer.echo("no eval in time: searches that completed no evaluation within their time budget; they "
                    "found nothing and count as survivors")

@@ -363,7 +363,7 @@ def _parse_row(row, i, csv_file, db_file, db, frames, base, use_exact, fov_deg, 
         R=R,
         image_path=path,
         meta=meta,
-        _loader=_ImageLoader(path, where),
+        _loader=_ImageLoader(path, where, PurePosixPath(image_text.replace("\\", "/")).as_posix()),
     )
 
 
@@ -374,14 +374,18 @@ class _ImageLoader:
 
     path: Path
     where: str
+    #: The image as the CSV names it (relative to the dataset root): what a message about it shows, never the
+    #: absolute path.
+    name: str = ""
 
     def __call__(self) -> np.ndarray:
+        shown = self.name or str(self.path)
         try:
             return load_rgb(self.path)
         except FileNotFoundError:
-            raise FileNotFoundError(f"{self.where}: image file {self.path} not found") from None
+            raise FileNotFoundError(f"{shown}: image file not found") from None
         except ValueError as exc:
-            raise ValueError(f"{self.where}: {exc}") from None
+            raise ValueError(str(exc).replace(str(self.path), shown)) from None
 
 
 def _named_target(s: Sample) -> tuple[str, str] | None:

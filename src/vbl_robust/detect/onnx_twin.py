@@ -31,13 +31,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..constants import NotMeasured, NotMeasuredError
 from .engines import EnginePose
 from .pose import PoseDetector, split_raw, split_sigma
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["CONF_TOL", "KEYPOINT_TOL_PX", "TorchTwin", "TwinCheck", "TwinPose", "check_view", "compare_raw",
-           "convert_onnx", "gradient_refusal", "with_twin"]
+           "convert_onnx", "with_twin"]
 
 #: largest |Δ| keypoint (view pixels) between the twin and the engine for the twin to be trusted
 KEYPOINT_TOL_PX = 1e-3
@@ -189,7 +190,7 @@ class TwinPose(EnginePose):
         if not (torch.is_grad_enabled() and views.requires_grad):
             return self.engine_model.raw(views)
         if self.gradient_unavailable:
-            raise ValueError(f"{self.path}: no gradient: {self.gradient_unavailable}")
+            raise NotMeasuredError(NotMeasured.METHOD_UNFIT, f"{self.path.name}: no gradient: {self.gradient_unavailable}")
         if not self._checked_run:
             self._check_run(views.detach())
         return self.torch_model.raw(views)
@@ -204,7 +205,7 @@ class TwinPose(EnginePose):
         if not check.ok:
             self.differentiable = False
             self.gradient_unavailable = check.reason
-            raise ValueError(f"{self.path}: no gradient: {check.reason}")
+            raise NotMeasuredError(NotMeasured.METHOD_UNFIT, f"{self.path.name}: no gradient: {check.reason}")
         logger.info("%s: torch twin agrees with %s on the run's first views (%.2g px, confidence %.2g)",
                     self.path, self.engine, check.keypoints_px, check.conf)
 
@@ -249,17 +250,3 @@ def with_twin(detector: PoseDetector, engine: str = "onnxruntime") -> PoseDetect
     detector.gradient_unavailable = f"no checked torch twin of {path.name}: {check.reason}"
     logger.info("%s: gradient searches unavailable: %s", path, check.reason)
     return detector
-
-
-def gradient_refusal(detector, methods) -> str:
-    """``""`` when ``detector`` has the differentiable path or no gradient method is asked for, else one line for a
-    command to refuse with before its run: the gradient methods asked for (``methods``: their names, e.g. the
-    ``--methods`` that need a gradient), why the detector has none and the black-box methods to use instead."""
-    methods = list(methods)
-    if not methods or (getattr(detector, "differentiable", False) and callable(getattr(detector, "detect_top", None))):
-        return ""
-    why = getattr(detector, "gradient_unavailable", "") or "it has no differentiable path"
-    path = getattr(detector, "path", None)
-    name = Path(path).name if path else type(detector).__name__
-    return (f"--methods {','.join(methods)}: the detector {name} gives no gradient ({why}); use a black-box "
-            "method instead: georobust, georobust-av, random or grid")

@@ -333,6 +333,7 @@ class DetectorSpec:
             ident["device"] = resolve_device(self.options.get("device", "cpu"))
             ident["engine"] = resolve_engine(self.options.get("engine", default), ident["device"])
             ident["precision"] = "fp32"
+        ident["design"], ident["input_size"] = self.design()
         if self.kind == "default" and f is not None and (f.parent / "default.json").is_file():
             ident["config_sha256"] = file_sha256(f.parent / "default.json")
             info = default_model_info(self.shipped_name)
@@ -342,12 +343,26 @@ class DetectorSpec:
                 ident["open_goals"] = goals
         return ident
 
+    def design(self) -> tuple[str | None, int | None]:
+        """The pipeline this detector runs as a report names it: ``("single pass" | "two-stage" | "oracle", input
+        size in px)``; the input size is None where the model file states it (a user's model at its own size), the
+        design None for a factory's detector (its own)."""
+        if self.kind == "oracle":
+            return "oracle", None
+        if self.kind == "factory":
+            return None, None
+        info = default_model_info(self.shipped_name) if self.kind == "default" else {}
+        design = self.options.get("design") or info.get("detector", "single")
+        size = self.options.get("imgsz") or info.get("imgsz")
+        return {"single": "single pass", "twostage": "two-stage"}.get(design, design), (int(size) if size else None)
+
     def key(self) -> str:
-        """Digest of what determines the detector's outputs (not where the file lives)."""
+        """Digest of what determines the detector's outputs (not where the file lives; the design and input size
+        named in the identity are its options' and the shipped ``default.json``'s, digested there)."""
         ident = self.identity()
         ident["options"] = {k: v for k, v in ident["options"].items() if k not in ("engine", "device")}
-        return digest({k: v for k, v in ident.items() if k not in ("name", "path", "engine", "precision", "device")},
-                      24)
+        skip = ("name", "path", "engine", "precision", "device", "design", "input_size")
+        return digest({k: v for k, v in ident.items() if k not in skip}, 24)
 
     def build(self) -> Any:
         """Construct the detector (call once per process; models are heavy)."""

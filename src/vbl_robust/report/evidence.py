@@ -115,6 +115,8 @@ class Evidence:
     worst: tuple[WorstCase, ...]
     breached: int = 0
     budget: str | None = None
+    #: The jobs the tool could not measure (in no count or rate above): sample, method, box, kind and reason each.
+    not_measured: tuple[dict[str, Any], ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -220,7 +222,10 @@ def evidence_of(ctx: Context) -> Evidence:
     return Evidence(experiment=ctx.spec.name, eps_safe_m=ctx.eps, level=LEVEL, jobs_done=ctx.store.count(),
                     jobs_planned=runs[-1].provenance.jobs_total if runs else None,
                     boxes=tuple(_box_evidence(lab, rs, ctx.eps) for lab, rs in boxes.items()), worst=tuple(cases),
-                    breached=breached, budget=budget)
+                    breached=breached, budget=budget,
+                    not_measured=tuple({"sample_id": r.sample_id, "method": r.method, "box": r.box_label,
+                                        "kind": r.not_measured.value, "reason": r.not_measured_detail}
+                                       for r in ctx.unmeasured))
 
 
 def _pct_ci(ci: tuple[float, float] | None) -> str:
@@ -240,17 +245,34 @@ def _bound_text(b: BoxEvidence) -> str:
     return "–" if b.residual_bound is None else f"< {100 * b.residual_bound:.2g} % of Θ (random search)"
 
 
+def not_measured_banner(rows: Sequence[JobRow], total: int, unit: str) -> str:
+    """The first-screen warning of the jobs the tool could not measure (:func:`~vbl_robust.campaigns.metrics.
+    not_measured_lines`), or ``""`` when it measured every job."""
+    lines = mx.not_measured_lines(rows, total, unit)
+    if not lines:
+        return ""
+    items = "".join(f"<li>{esc(line)}</li>" for line in lines[1:])
+    return (f'<div class="warn banner" role="alert"><p><b>{esc(lines[0].rstrip(":"))}.</b> No number in this '
+            f"report counts them: not as breaches, not as survivors. The {unit}s they concern enter the rates only "
+            f"through the methods that ran.</p><ul>{items}</ul></div>")
+
+
 def section_evidence(ctx: Context, ev: Evidence) -> Section | None:
     """The first screen of the report (module docstring): per box, survival with its interval, misleading against
     flagged-only images and the bound, then completeness; also writes ``evidence.json`` into the report's
     directory. None when the run has no box with a result."""
     import json
 
-    if not ev.boxes:
+    if not ev.boxes and not ev.not_measured:
         return None
     atomic_write(ctx.out_dir / "evidence.json", json.dumps(ev.to_dict(), indent=1, default=str))
     unit = ctx.spec.unit
     s = Section("Safe where, and how sure")
+    banner = not_measured_banner(ctx.unmeasured, ev.jobs_done, unit)
+    if banner:
+        s.html.append(banner)
+    if not ev.boxes:
+        return s
     if ev.budget:
         s.html.append(f"<p>At the largest budget per {unit}, <b>{esc(ev.budget)}</b> (the other budgets: the table "
                       "per method, box and budget).</p>")

@@ -41,7 +41,7 @@ __all__ = ["NO_CANDIDATE", "case_figure", "section_gallery"]
 GALLERY_COLORS = 256
 
 #: Failure reasons after which the detector selected no candidate (so no corners were predicted).
-NO_CANDIDATE = frozenset({"image_unavailable", "no_detection", "low_confidence", "non_finite_keypoints",
+NO_CANDIDATE = frozenset({"no_detection", "low_confidence", "non_finite_keypoints",
                           "out_of_view"})
 
 

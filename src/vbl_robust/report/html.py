@@ -36,6 +36,7 @@ tr.breach td { background: #fde8e8; }
 img { max-width: 100%; border: 1px solid #eee; }
 .note { background: #f7f7f7; border-left: 4px solid #1f77b4; padding: .5em 1em; }
 .warn { background: #fff6e0; border-left: 4px solid #e0a000; padding: .5em 1em; }
+.warn.banner { background: #fdecea; border-left-color: #c0392b; }
 details pre { white-space: pre-wrap; font-size: 12px; background: #f7f7f7; padding: .5em; }
 figcaption { font-size: 13px; color: #444; }
 """ + "\n".join(f"tbody.nw-{j} td:nth-child({j}) {{ white-space: nowrap; }}" for j in range(1, NOWRAP_COLUMNS + 1)) + """

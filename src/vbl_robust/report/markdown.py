@@ -35,8 +35,16 @@ from ..stats import Rate
 __all__ = ["compare_markdown", "families_markdown", "survival_markdown", "zones_markdown"]
 
 
+def esc_md(text: object) -> str:
+    """``text`` safe in a Markdown line or table cell: ``|`` escaped, ``<`` and ``>`` as entities (a name from data
+    never becomes markup or a column)."""
+    return str(text).replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace("|", "\\|")
+
+
 def _table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
-    return ["| " + " | ".join(head) + " |", "|" + "---|" * len(head), *("| " + " | ".join(r) + " |" for r in rows)]
+    cells = [[esc_md(c) for c in r] for r in rows]
+    return ["| " + " | ".join(map(esc_md, head)) + " |", "|" + "---|" * len(head),
+            *("| " + " | ".join(r) + " |" for r in cells)]
 
 
 def _labelled(r) -> str:
@@ -60,6 +68,14 @@ def _read(run: str | Path):
         rows = mx.main_rows(store, spec, with_trace=False)
         land = store.jobs(kind="search", role="landscape", with_points=True, with_trace=False)
     return spec, rows, land
+
+
+def _unmeasured(run: str | Path, unit: str) -> list[str]:
+    """The run's jobs not measured, as Markdown lines (none when every job was measured)."""
+    with ResultStore.open_existing(run) as store:
+        every = store.jobs(with_trace=False)
+    lines = mx.not_measured_lines(every, len(every), unit)
+    return [f"**{esc_md(lines[0])}**", *(f"- {esc_md(line)}" for line in lines[1:]), ""] if lines else []
 
 
 def _read_alike(run: str | Path, spec: CampaignSpec, rows: Sequence, other: str | Path):
@@ -103,8 +119,9 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
     methods = list(dict.fromkeys(ln.method for ln in lines))
     cell = {(ln.method, col(ln)): ln for ln in lines}
     where = f"; box {boxes[0]}" if one else ""
-    out = [f"{run}: {len(done)} {spec.unit}s completed by every method (of {len(per_image)} started); "
-           f"ε_safe = {eps:g} m{where}; cell = survival % [exact 95 % interval] (breaches)", ""]
+    out = [f"{run}: {len(done)} {spec.unit}s measured by every method (of {len(per_image)} started); "
+           f"ε_safe = {eps:g} m{where}; cell = survival % [exact 95 % interval] (breaches)", "",
+           *_unmeasured(run, spec.unit)]
     table = [[m, *(f"{cell[(m, c)].survival_rate.text(1, percent=False)} ({cell[(m, c)].breaches})"
                    if (m, c) in cell else "–" for c in cols)] for m in methods]
     kinds = [[m, *(_kinds(cell[(m, c)]) if (m, c) in cell else "–" for c in cols)] for m in methods]

@@ -44,13 +44,20 @@ class Context:
 
     @cached_property
     def risk(self) -> list[JobRow]:
-        """The stored failure-probability jobs (``vbl-robust risk``) with their points (every draw)."""
-        return self.store.jobs(kind="risk", with_points=True, with_trace=False)
+        """The stored failure-probability jobs (``vbl-robust risk``) the tool measured, with their points (every
+        draw)."""
+        return [r for r in self.store.jobs(kind="risk", with_points=True, with_trace=False) if r.measured]
 
     @cached_property
     def runs(self) -> list[JobRow]:
-        """The stored main search jobs with their points (as run: no rows read off a trace)."""
-        return self.store.jobs(kind="search", role="main", with_points=True, with_trace=False)
+        """The stored main search jobs the tool measured, with their points (as run: no rows read off a trace)."""
+        return [r for r in self.store.jobs(kind="search", role="main", with_points=True, with_trace=False)
+                if r.measured]
+
+    @cached_property
+    def unmeasured(self) -> list[JobRow]:
+        """Every stored job the tool could not measure (any kind and role): in no rate, listed apart."""
+        return [r for r in self.store.jobs(with_trace=False) if not r.measured]
 
     def figure(self, fig: Any, name: str, caption: str, *, colors: int | None = None) -> str:
         """``fig`` written to ``figures/<name>.png`` (atomically; ``colors``: a palette of that many colours, see

@@ -40,14 +40,17 @@ def _summary_table(summary: Sequence[mx.Summary], unit: str = "image") -> str:
         ("n", f"{unit}s", None), ("survival_text", "survival % [95 % CI]", esc),
         ("median_worst_m", "median worst (m)", None), ("breaches", "breaches", None),
         ("misleading", "misleading", None), ("flagged", "flagged only", None), ("certified", "certified", None),
-        ("failed", "failed", None), ("mean_nfev", "mean evals", None), ("failed_evals", "failed evals", None),
+        ("mean_nfev", "mean evals", None), ("failed_evals", "failed evals", None),
         ("median_search_s", "median s", None),
     ]
     if any(line.n_empty for line in summary):  # survivors that were never searched: say how many
         cols.insert(5, ("n_empty", "no evaluation in time", None))
+    if any(line.not_measured for line in summary):  # jobs the tool could not complete: in no rate
+        cols.insert(4, ("not_measured", "not measured", None))
     if any(line.read_from for line in summary):
         cols.append(("read_from", "read off the run", None))
-    rows = [{**ln.as_row(), "survival_text": ln.survival_rate.text(1, percent=False)} for ln in summary]
+    rows = [{**ln.as_row(), "survival_text": ln.survival_rate.text(1, percent=False) if ln.measured else "–"}
+            for ln in summary]
     return table(rows, cols, left=("method", "box_label", "budget_label", "read_from"))
 
 
@@ -66,6 +69,16 @@ def _failures_table(summary: Sequence[mx.Summary], penalty_m: float) -> str:
             f"{legend}.</p>" + table(lines, cols, left=("method", "box_label", "budget_label")))
 
 
+def detector_facts(det: dict) -> str:
+    """Which pipeline was audited, from a stored detector identity: design (single pass / two-stage), input size,
+    engine and the model's short SHA-256 (each where known)."""
+    parts = [det.get("design") or "",
+             f"input {det['input_size']} px" if det.get("input_size") else "",
+             f"engine {det['engine']}" if det.get("engine") else "",
+             f"sha256 {str(det['sha256'])[:12]}" if det.get("sha256") else ""]
+    return ", ".join(p for p in parts if p) or "–"
+
+
 # -- sections ------------------------------------------------------------------------------------------------
 def section_overview(ctx: Context, title: str) -> Section:
     s = Section("Summary")
@@ -75,7 +88,8 @@ def section_overview(ctx: Context, title: str) -> Section:
     n_done = ctx.store.count()
     total = last.jobs_total
     s.html.append(
-        f"<p><b>{esc(title)}</b>. Detector: <b>{esc(det.get('name', '?'))}</b>; {len(ctx.samples)} {ctx.spec.unit}s; "
+        f"<p><b>{esc(title)}</b>. Detector: <b>{esc(det.get('name', '?'))}</b> ({esc(detector_facts(det))}); "
+        f"{len(ctx.samples)} {ctx.spec.unit}s; "
         f"ε_safe = {ctx.eps:g} m, τ_conf = {ctx.spec.conf_threshold:g}, failure penalty {ctx.spec.penalty_m:g} m, "
         f"PnP solver <code>{esc(ctx.spec.pnp)}</code>, seed {ctx.spec.seed}. Jobs in the store: {n_done}"
         + (f" of {total}" if total else "") + ".</p>")
@@ -90,15 +104,16 @@ def section_overview(ctx: Context, title: str) -> Section:
     if total and n_done < total:
         s.html.append(f'<p class="warn">The campaign is incomplete ({n_done} of {total} jobs): rerun the same '
                       "command to resume.</p>")
-    failed = [r for r in ctx.store.jobs(with_trace=False) if r.status is JobStatus.FAILED]
-    if failed:
-        s.html.append(f'<p class="warn">{len(failed)} job(s) failed and count with the {ctx.spec.penalty_m:g} m '
-                      "penalty (never as survivors):</p>")
-        lines = [{"sample_id": r.sample_id, "method": r.method, "box_label": r.box_label, "reason": r.reason}
-                 for r in failed[:50]]
+    if ctx.unmeasured:
+        s.html.append(f'<p class="warn">{len(ctx.unmeasured)} job(s) could not be measured by the tool; they are in '
+                      "no rate (not as breaches, not as survivors):</p>")
+        lines = [{"sample_id": r.sample_id, "method": r.method, "box_label": r.box_label,
+                  "kind": r.not_measured.value, "reason": r.not_measured_detail} for r in ctx.unmeasured[:50]]
         s.html.append(table(lines, [("sample_id", "sample", None), ("method", "method", None),
-                                    ("box_label", "box", None), ("reason", "reason", None)],
-                            left=("sample_id", "method", "box_label", "reason"), fold="The failed jobs"))
+                                    ("box_label", "box", None), ("kind", "why", None), ("reason", "reason", None)],
+                            left=("sample_id", "method", "box_label", "kind", "reason"),
+                            fold="The jobs not measured" + (f" (the first 50 of {len(ctx.unmeasured)})"
+                                                            if len(ctx.unmeasured) > 50 else "")))
     return s
 
 
@@ -111,7 +126,8 @@ def section_methods(ctx: Context) -> Section | None:
     if not ctx.main:
         return None
     s = Section(METHODS_TITLE)
-    summary = mx.summarize(ctx.main, ctx.eps)
+    summary = mx.summarize([*ctx.main, *(r for r in ctx.unmeasured if r.kind == "search" and r.role == "main")],
+                           ctx.eps)
     s.html.append(_summary_table(summary, ctx.spec.unit))
     failures = _failures_table(summary, ctx.spec.penalty_m)
     if failures:

@@ -33,6 +33,10 @@ from .schema import (
 
 #: File name of the store in a run directory.
 STORE = "results.sqlite"
+#: File name of a packed store (xz) in a bundle (:func:`~vbl_robust.campaigns.store.pack.pack_store`).
+PACKED = STORE + ".xz"
+#: Bytes read at a time when a packed store is unpacked (bounded memory, whatever the store's size).
+_UNPACK_CHUNK = 1 << 20
 
 
 class ResultStore:
@@ -47,6 +51,7 @@ class ResultStore:
     def __init__(self, path: str | Path, *, readonly: bool = False):
         self.path = Path(path)
         self.readonly = readonly
+        self._unpacked_dir: Path | None = None  # a packed store read through a temporary copy (removed at close)
         try:
             if readonly:
                 self._con = self._open_readonly()
@@ -94,16 +99,49 @@ class ResultStore:
     @classmethod
     def open_existing(cls, path: str | Path, *, readonly: bool = True) -> ResultStore:
         """Open a store that must exist (a run directory or the ``.sqlite`` file itself) — read-only unless told
-        otherwise: reading a run (report, zones, tables, bundles) never writes it, and works where it cannot."""
+        otherwise: reading a run (report, zones, tables, bundles) never writes it, and works where it cannot.
+        Read-only, a packed store (``results.sqlite.xz`` of a bundle, named or found in the run directory instead of
+        ``results.sqlite``) is read through a temporary unpacked copy, removed when the store is closed."""
         p = Path(path)
         if p.is_dir():
             p = p / STORE
-        if not p.is_file():
-            raise FileNotFoundError(f"{p}: no results store (run `vbl-robust audit` or `reproduce` with --out first)")
+        packed = p if p.name.endswith(".xz") else p.with_name(p.name + ".xz")
+        if not p.is_file() or p.name.endswith(".xz"):
+            if packed.is_file() and readonly:
+                return cls._unpacked(packed)
+            hint = (f"; {packed.name} beside it is packed: `vbl-robust merge {packed} --into DIR` unpacks it into a "
+                    "run directory") if packed.is_file() else " (run `vbl-robust audit` or `reproduce` with --out first)"
+            raise FileNotFoundError(f"{p}: no results store{hint}")
         return cls(p, readonly=readonly)
+
+    @classmethod
+    def _unpacked(cls, packed: Path) -> ResultStore:
+        """A packed store opened read-only through a temporary copy (streamed: bounded memory)."""
+        import lzma
+        import shutil
+        import tempfile
+
+        tmp = Path(tempfile.mkdtemp(prefix="vbl-robust-store-"))
+        try:
+            with lzma.open(packed, "rb") as src, open(tmp / STORE, "wb") as dst:
+                shutil.copyfileobj(src, dst, _UNPACK_CHUNK)
+            store = cls(tmp / STORE, readonly=True)
+        except (lzma.LZMAError, EOFError) as exc:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise ValueError(f"{packed}: not a complete packed store ({exc})") from None
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        store._unpacked_dir = tmp
+        return store
 
     def close(self) -> None:
         self._con.close()
+        if self._unpacked_dir is not None:
+            import shutil
+
+            shutil.rmtree(self._unpacked_dir, ignore_errors=True)
+            self._unpacked_dir = None
 
     def __enter__(self) -> ResultStore:
         return self
@@ -258,11 +296,11 @@ class ResultStore:
         return int(self._con.execute("SELECT COUNT(*) FROM jobs").fetchone()[0])
 
     def forget_failed(self) -> int:
-        """Delete the rows of failed jobs (status "failed": the pipeline could not run them), so that a rerun runs
-        them again; returns how many were deleted."""
+        """Delete the rows of jobs not measured (the tool could not complete them: status "not measured", or "failed"
+        in stores written before the name), so that a rerun runs them again; returns how many were deleted."""
         with self.transaction():
             before = self._con.total_changes
-            self._con.execute("DELETE FROM jobs WHERE status = ?", (JobStatus.FAILED.value,))
+            self._con.execute("DELETE FROM jobs WHERE status IN (?, 'failed')", (JobStatus.NOT_MEASURED.value,))
             return self._con.total_changes - before
 
     def commit(self, rows: Sequence[JobRow]) -> int:

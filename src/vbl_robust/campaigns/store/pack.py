@@ -5,10 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .core import STORE, ResultStore
+from .core import PACKED, STORE, ResultStore
 
-#: File name of a packed store in a bundle (:func:`pack_store`).
-PACKED = STORE + ".xz"
+__all__ = ["PACKED", "pack_store", "restore_store"]
 
 
 def pack_store(store: ResultStore, path: Path) -> Path:

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ...constants import MAX_BLOB_BYTES, Verdict
+from ...constants import MAX_BLOB_BYTES, NotMeasured, Verdict
 from ...search.result import TraceRow
 from ..spec import BoxSpec, Budget
 
@@ -28,11 +28,17 @@ def now_iso() -> str:
 
 
 class JobStatus(StrEnum):
-    """How a job ended: searched (``DONE``), could not run (``FAILED``), or implied by a breach in a chain."""
+    """How a job ended: searched (``DONE``), not measured (``NOT_MEASURED``: the tool could not complete it, the
+    row's ``reason`` says why, :class:`~vbl_robust.constants.NotMeasured`), or implied by a breach in a chain.
+    Stores written before the name read their ``"failed"`` as ``NOT_MEASURED``."""
 
     DONE = "done"
-    FAILED = "failed"
+    NOT_MEASURED = "not measured"
     IMPLIED = "implied"
+
+    @classmethod
+    def _missing_(cls, value: object) -> JobStatus | None:
+        return cls.NOT_MEASURED if value == "failed" else None
 
 
 class RunStatus(StrEnum):
@@ -149,8 +155,8 @@ class JobRow:
     "pnp"), ``role`` ("main" | "reference" | "landscape"), ``method``, ``sample_id``, ``sample_index``, ``box``,
     ``budget``, ``seed``, ``options``, ``chain``; ``run_id`` = the run that computed it.
 
-    Outcome: ``status``; ``reason`` (why a job failed / what implied it); ``worst_m`` = worst error found,
-    metres (the penalty for a failed job); ``worst_x`` = ``{name: value}`` of the worst point, real units;
+    Outcome: ``status``; ``reason`` (why a job was not measured, ``"<NotMeasured kind>: <detail>"`` / what
+    implied it); ``worst_m`` = worst error found, metres (None for a job not measured); ``worst_x`` = ``{name: value}`` of the worst point, real units;
     ``verdict`` (None for a PnP job); ``nfev``/``nit`` = evaluations / iterations; ``n_failed`` = failed
     evaluations and ``failures`` = their counts per reason (None / ``{}`` in rows stored before failures were
     recorded); ``worst_reason`` = failure reason at the worst point (``""`` = a successful evaluation, None
@@ -221,6 +227,24 @@ class JobRow:
     @property
     def budget_label(self) -> str | None:
         return None if self.budget is None else self.budget.label
+
+    @property
+    def measured(self) -> bool:
+        """Whether the tool completed this job (any status but ``NOT_MEASURED``): only measured rows enter a rate."""
+        return self.status is not JobStatus.NOT_MEASURED
+
+    @property
+    def not_measured(self) -> NotMeasured | None:
+        """Why the job was not measured (:class:`~vbl_robust.constants.NotMeasured`), None for a measured row."""
+        return None if self.measured else NotMeasured.of(self.reason)
+
+    @property
+    def not_measured_detail(self) -> str:
+        """The reason of a job not measured without its kind (``""`` for a measured row)."""
+        if self.measured:
+            return ""
+        head, sep, rest = (self.reason or "").partition(":")
+        return rest.strip() if sep and NotMeasured.of(self.reason).value == head.strip() else (self.reason or "")
 
     def replace(self, **changes: Any) -> JobRow:
         """A copy with ``changes`` (``dataclasses.replace``)."""
