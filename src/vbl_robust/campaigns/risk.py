@@ -157,16 +157,26 @@ class ThetaDistribution:
         return ", ".join(f"{n} {m.text()}" for n, m in zip(self.box.names, self.marginals, strict=True))
 
 
-def parse_dist(items: Sequence[str] | None) -> dict[str, tuple[str, float, float]]:
+def parse_dist(items: Sequence[str] | None, names: Sequence[str] | None = None,
+               ) -> dict[str, tuple[str, float, float]]:
     """``["roll_deg=normal:0,5", "contrast=uniform"]`` → ``{"roll_deg": ("normal", 0.0, 5.0)}`` (uniform entries
-    are the default and dropped); ``ValueError`` naming the item for anything else."""
+    are the default and dropped); ``ValueError`` naming the item for anything else: a parameter given twice (two
+    distributions for one parameter contradict each other, even the same one twice), or — when ``names`` (the box's
+    parameters) is given — one not in the box."""
     out: dict[str, tuple[str, float, float]] = {}
+    seen: dict[str, str] = {}
     for item in items or ():
         name, _, rest = item.partition("=")
         kind, _, args = rest.partition(":")
         name, kind = name.strip(), kind.strip().lower()
         if not name or kind not in ("uniform", "normal"):
             raise ValueError(f"--dist {item}: expected NAME=uniform or NAME=normal:MEAN,SD")
+        if name in seen:
+            raise ValueError(f"--dist {item}: {name} is given twice (also --dist {seen[name]}); give one "
+                             "distribution per parameter")
+        seen[name] = item
+        if names is not None and name not in names:
+            raise ValueError(f"--dist {item}: {name} is not a parameter of the box ({', '.join(names)})")
         if kind == "uniform":
             if args.strip():
                 raise ValueError(f"--dist {item}: uniform takes no arguments (its range is the box's)")
@@ -177,8 +187,6 @@ def parse_dist(items: Sequence[str] | None) -> dict[str, tuple[str, float, float
             raise ValueError(f"--dist {item}: expected NAME=normal:MEAN,SD") from None
         if not (math.isfinite(mu) and math.isfinite(sigma) and sigma > 0):
             raise ValueError(f"--dist {item}: the mean must be finite and SD > 0")
-        if name in out:
-            raise ValueError(f"--dist {name}: given twice")
         out[name] = ("normal", mu, sigma)
     return out
 

@@ -63,7 +63,9 @@ def one_line(*errors: type[Exception], prefix: str = "") -> Iterator[None]:
 
 def parse_range(text: str, *, name: str, symmetric: bool = False) -> tuple[float, float]:
     """Parse ``"15"`` (→ ±15 when ``symmetric``) or ``"0.7,1.4"`` into ``(lower, upper)``."""
-    parts = [p.strip() for p in text.split(",") if p.strip()]
+    parts = [p.strip() for p in text.split(",")]
+    if not all(parts):  # "5," or ",5" is a typo, not ±5
+        raise typer.BadParameter(f"{name}: expected a number or 'lower,upper', got {text!r} (an empty value)")
     try:
         vals = [float(p) for p in parts]
     except ValueError:

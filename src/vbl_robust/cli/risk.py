@@ -59,7 +59,8 @@ def risk(
             fail(f"{name} {v}: must be finite")
     check_executor(executor, address)
     with one_line(ValueError):
-        spec = risk_spec(box, methods=method_list, max_evals=max_evals, seed=seed, dist=parse_dist(dist),
+        spec = risk_spec(box, methods=method_list, max_evals=max_evals, seed=seed,
+                         dist=parse_dist(dist, box.box.names),
                          tau=tau, delta=delta, guide_evals=guide_evals, pnp=pnp)
     spec, workers = run_settings(spec, "auto", device, workers)
     check_exports(csv, parquet, out)

@@ -59,27 +59,37 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
     from vbl_robust.campaigns import ResultStore, run_campaign
     from vbl_robust.campaigns.precheck import check_run
 
+    from .config import record_configuration
+
     with one_line(ValueError):
         spec.check()  # before anything is created or run
         spec.check_samples(samples)
         # images readable at their size (or, allowed, left to the run: an unreadable one is not measured), methods
         # fit for the detector
         check_run(spec, samples, detector, images=not allow_unmeasured)
+    build_detector(detector)
+    with one_line(ValueError):
+        check_store(out, spec, samples, detector, wait=wait)  # the store there accepts this run, read only
     if allow_unmeasured:
         from vbl_robust.data.check import first_problem
 
         if problem := first_problem(samples):
             typer.secho(f"warning: {problem}; their jobs will be not measured (--allow-unmeasured)",
                         fg=typer.colors.YELLOW, err=True)
+    made = _missing(out) + ([] if (out / "results.sqlite").exists() else [out / "results.sqlite"])
     with one_line(ValueError, OSError, prefix=f"--out {out}: "):
         out.mkdir(parents=True, exist_ok=True)
         ResultStore(out / "results.sqlite").close()  # a store that cannot be opened fails here, in one line
     columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("jobs"),
                TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), TextColumn("{task.fields[status]}"))
+    started = []  # the run began (its store accepted it): its configuration is recorded, nothing is undone
     with ResultStore(out / "results.sqlite") as store, Progress(*columns, disable=quiet, transient=False) as bar:
         task = bar.add_task(spec.name, total=None, status="")
 
         def on_progress(p: Any) -> None:
+            if not started:
+                started.append(True)
+                record_configuration()
             bar.update(task, total=p.total, completed=p.done,
                        status=f"breaches {p.breaches}"
                        + (f", not measured {p.not_measured}" if p.not_measured else "")
@@ -90,12 +100,98 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
                                    address=address, progress=on_progress, dataset_source=source, config=config,
                                    wait=wait, retry_failed=retry_failed, precheck=False)
         except (ValueError, FileNotFoundError) as exc:
+            if not started:  # refused before it began (e.g. another run took the store meanwhile)
+                store.close()
+                _remove(made)
             fail(str(exc))
         except KeyboardInterrupt:
             bar.stop()
             fail(f"interrupted; finished jobs are saved in {out / 'results.sqlite'}: rerun the same command to resume",
                  code=130)
     return summary
+
+
+def build_detector(detector: Any) -> None:
+    """Build the run's detector once in this process before anything is stored (a worker process builds its own;
+    built detectors are cached), so that a model which cannot be loaded is refused in one line, not found by the
+    run after its store was made."""
+    from vbl_robust.campaigns.work import detector_for
+
+    try:
+        detector_for(detector)
+    except (ValueError, FileNotFoundError) as exc:
+        fail(str(exc))
+    except Exception as exc:  # noqa: BLE001 - a user's model or plugin failing to load: one line, exit 2
+        fail(f"the detector {detector.name} cannot be built: {type(exc).__name__}: {one_line_text(exc)}")
+
+
+def one_line_text(exc: BaseException) -> str:
+    """The first line of ``exc``'s message (a library's multi-line error, shown as one line)."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def check_store(out: Path, spec: Any, samples: list, detector: Any, *, wait: bool = False) -> None:
+    """``ValueError`` when the store in ``out`` (if any) would refuse this run: another run is writing it (unless
+    ``wait``), it holds results of another campaign or detector, or of other pixels of the same images — all read
+    without writing, so a refusal leaves the run directory as it was."""
+    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.campaigns.store.identity import check_same
+
+    path = out / "results.sqlite"
+    if not path.is_file():
+        return
+    if not wait:
+        _refuse_in_use(path)
+    with ResultStore(path, readonly=True) as store:
+        have = store.campaign()
+        if have is None or store.count() == 0:
+            return
+        check_same(path, have, spec.to_dict(), detector.identity())
+        store.changed_contents(samples)
+
+
+def _refuse_in_use(path: Path) -> None:
+    """``ValueError`` naming the PID when another process holds the store's writer lock
+    (:class:`~vbl_robust.campaigns.store.WriterLock`), probed without writing the lock file."""
+    import fcntl
+    import os
+
+    lock = Path(f"{path}.lock")
+    try:
+        fd = os.open(lock, os.O_RDONLY)
+    except OSError:
+        return  # no lock file: nobody has written this store with a lock yet; the run's own lock decides
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        try:
+            holder = lock.read_text().strip() or "another process"
+        except OSError:
+            holder = "another process"
+        raise ValueError(f"{path.parent}: in use by PID {holder} (another run is writing this store); wait for it "
+                         "to end (--wait) or write to another --out") from None
+    finally:
+        os.close(fd)  # releases the probe's lock
+
+
+def _missing(out: Path) -> list[Path]:
+    """``out`` and those of its parents that do not exist yet, innermost first."""
+    return [p for p in (out, *out.parents) if not p.exists()]
+
+
+def _remove(made: list[Path]) -> None:
+    """Undo what a refused run created: its store file (with SQLite's companions and the writer lock), then the
+    directories, innermost first, each only if empty."""
+    for path in made:
+        if path.name == "results.sqlite":
+            for p in (path, *(path.with_name(path.name + x) for x in ("-wal", "-shm", ".lock"))):
+                p.unlink(missing_ok=True)
+    for path in sorted((p for p in made if p.name != "results.sqlite"), key=lambda p: len(p.parts), reverse=True):
+        try:
+            path.rmdir()
+        except OSError:
+            pass
 
 
 def check_exports(csv: Path | None, parquet: Path | None, out: Path | None = None) -> None:

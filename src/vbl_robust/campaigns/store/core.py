@@ -246,6 +246,14 @@ class ResultStore:
         follow from their geometry and the generator, both in the job keys and the provenance). ``digests``
         (sample id → hex SHA-256) are this run's digests already computed from the files' bytes (the pre-run image
         check, :func:`vbl_robust.data.check.image_digests`): those files are not read again."""
+        rows = self.changed_contents(samples, digests)
+        with self.transaction():
+            self.insert_contents(rows, replace=True)
+
+    def changed_contents(self, samples: Iterable[Any], digests: Mapping[str, str] | None = None,
+                         ) -> list[tuple[Any, ...]]:
+        """What :meth:`check_contents` checks, without writing: ``ValueError`` for samples whose file's bytes
+        differ from those their stored jobs were computed on, else the ``contents`` rows of this run's files."""
         from ...digest import file_sha256
 
         stored = {r[0]: r[1:] for r in self.contents()}
@@ -267,8 +275,7 @@ class ResultStore:
             raise ValueError(f"{self.path}: the pixels of {len(changed)} sample(s) changed since their results were "
                              f"stored: {', '.join(changed[:5])}{' …' if len(changed) > 5 else ''}; run them into "
                              "another --out (the stored results describe the old images)")
-        with self.transaction():
-            self.insert_contents(rows, replace=True)
+        return rows
 
     def contents(self) -> list[tuple[Any, ...]]:
         """The ``contents`` rows: ``(sample_id, path, size, mtime_ns, sha256)`` of each sample read from a file."""
