@@ -279,7 +279,7 @@ def print_summary(spec: Any, rows: list) -> None:
     empty = any(line.n_empty for line in lines)  # survivors never searched (no evaluation in a time budget)
     unmeasured = any(line.not_measured for line in lines)
     heads = ["n", "survival % [95 % CI]", *(["no eval in time"] if empty else []), "median (m)", "breaches",
-             "failed evals", *(["not measured"] if unmeasured else [])]
+             "failed evals", *(["unmeasured"] if unmeasured else [])]
     cells = []
     for line in lines:
         fe, med = line.failed_evals, line.median_worst_m
@@ -296,7 +296,7 @@ def print_summary(spec: Any, rows: list) -> None:
     typer.echo(f"n: {spec.unit}s measured; median: of the worst errors found; failed evals: evaluations the pipeline "
                "failed (counted with the penalty); breaches: all (m / f): m misleading — a confident pose off by more "
                "than ε_safe; f flagged only — every breach a failure the system sees (no detection, low confidence, "
-               "PnP failed …)" + ("; not measured: jobs the tool could not complete, in no rate (listed below)"
+               "PnP failed …)" + ("; unmeasured: jobs the tool could not complete, in no rate (listed below)"
                                   if unmeasured else ""))
     if empty:
         typer.echo("no eval in time: searches that completed no evaluation within their time budget; they "
