@@ -21,7 +21,7 @@ from vbl_robust.data import (
     read_lard,
     write_lard,
 )
-from vbl_robust.data.check import MAX_IMAGE_FILE_BYTES, check_image, describe_problems
+from vbl_robust.data.check import CAMERA_CONVENTION, MAX_IMAGE_FILE_BYTES, check_image, describe_problems
 from vbl_robust.digest import file_sha256
 
 
@@ -99,7 +99,9 @@ def test_a_wrong_size_image_is_refused_with_both_sizes(rows):
     Image.fromarray(np.zeros((H + 10, W, 3), np.uint8)).save(samples[3].image_path, format="JPEG")
     check = check_images(samples, root=root)[3]
     assert not check.ok and check.size == (W, H + 10) and check.kind == "size"
-    assert check.problem == f"the image is {W}x{H + 10} px, the CSV says {W}x{H}"
+    # the line says what the camera model assumes of that size (horizontal FOV, square pixels, centred)
+    assert check.problem == f"the image is {W}x{H + 10} px, the CSV says {W}x{H} {CAMERA_CONVENTION}"
+    assert "horizontal field of view" in CAMERA_CONVENTION and "square pixels" in CAMERA_CONVENTION
 
 
 def test_an_over_large_header_is_refused_without_decoding(rows, monkeypatch):
@@ -156,7 +158,7 @@ def test_a_format_only_opencv_reads_is_checked_by_opencv(rows):
     cv2.imwrite(str(s.image_path), np.ones((H, W, 3), np.float32))
     assert check_image(s).ok
     cv2.imwrite(str(s.image_path), np.ones((H, W + 1, 3), np.float32))
-    assert check_image(s).problem == f"the image is {W + 1}x{H} px, the CSV says {W}x{H}"
+    assert check_image(s).problem == f"the image is {W + 1}x{H} px, the CSV says {W}x{H} {CAMERA_CONVENTION}"
 
 
 def test_an_image_outside_the_root_is_refused(rows, tmp_path):

@@ -251,6 +251,12 @@ def _shown(s: Any, root: Path | None) -> str:
     return text.replace("\\", "/") if text else path.as_posix()
 
 
+#: The camera the intrinsics assume, said where an image of another size is refused (the labels and K hold for the
+#: stated size only).
+CAMERA_CONVENTION = ("(the camera model assumes that size: focal length from the horizontal field of view over the "
+                     "width, square pixels, principal point at the image centre)")
+
+
 def _stated(s: Any) -> str:
     return "the CSV says" if "csv" in (getattr(s, "meta", None) or {}) else "the sample says"
 
@@ -322,7 +328,8 @@ def _check_file(s: Any, fh: Any, shown: str, sha256: bool) -> ImageCheck:
             return refuse("too_large", f"the header says {size[0]}x{size[1]} px, more than {MAX_IMAGE_SIDE} px a side "
                           "(not decoded)")
         if size != stated:
-            return refuse("size", f"the image is {size[0]}x{size[1]} px, {_stated(s)} {stated[0]}x{stated[1]}")
+            return refuse("size", f"the image is {size[0]}x{size[1]} px, {_stated(s)} {stated[0]}x{stated[1]} "
+                          f"{CAMERA_CONVENTION}")
         try:
             orientation = im.getexif().get(_ORIENTATION)
         except Exception:  # noqa: BLE001 - a malformed EXIF block: OpenCV ignores what it cannot parse too
@@ -376,7 +383,7 @@ def _check_with_opencv(s: Any, shown: str, sha256: bool) -> ImageCheck:
                           "side", size, digest, "too_large")
     if size != (int(s.width), int(s.height)):
         return ImageCheck(s.id, shown, False, f"the image is {size[0]}x{size[1]} px, {_stated(s)} "
-                          f"{int(s.width)}x{int(s.height)}", size, digest, "size")
+                          f"{int(s.width)}x{int(s.height)} {CAMERA_CONVENTION}", size, digest, "size")
     return ImageCheck(s.id, shown, True, "", size, digest)
 
 
