@@ -126,10 +126,15 @@ Into = Annotated[Path, typer.Option("--into", help="The run directory (or .sqlit
                                     "missing.")]
 
 
-def merge(sources: Sources, into: Into) -> None:
+MergeTrust = Annotated[bool, typer.Option("--trust-model", help="Allow joining a campaign whose detector names code "
+                                          "(a factory's module:callable, a .pt outside the package): the joined "
+                                          "run would build it.")]
+
+
+def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None:
     """Copy into one run the jobs that other runs of the same campaign and detector computed (another machine,
     a GPU, a cluster without a shared disk): rows it lacks, their samples and runs; rows it holds stay. Refused
-    while a run writes it."""
+    while a run writes it, and for a detector that names code unless --trust-model."""
     from vbl_robust.campaigns.store import MergeReport, merge_runs
 
     def merged(report: MergeReport) -> None:
@@ -137,7 +142,7 @@ def merge(sources: Sources, into: Into) -> None:
         typer.echo(f"{part.source}: {part.copied} job rows merged, {part.already} already in {report.into}")
 
     with one_line(ValueError, OSError):
-        merge_runs(sources, into, progress=merged)
+        merge_runs(sources, into, trust=trust_model, progress=merged)
 
 
 def _summary(run: Path, fmt: str) -> None:

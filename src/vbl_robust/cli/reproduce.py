@@ -106,6 +106,8 @@ def reproduce(
         return
     if resume_from is not None and not resume_from.is_dir():
         fail(f"--resume-from {resume_from}: not a directory")
+    if resume_from is not None:
+        _refuse_code(resume_from, [exp.name for exp in exps], trust_model)
     references = {exp.name: _reference(check_against, exp.name) for exp in exps} if check_against else {}
     differ = incomplete = False  # an incomplete experiment does not stop the next ones; the exit code says it
     for exp in exps:
@@ -150,6 +152,21 @@ def _check_method_options(options: dict, specs: list) -> None:
     missing = sorted(set(options) - ran)
     if missing:
         fail(f"--method-option: no experiment here runs method(s) {missing} (they run {sorted(ran)}; see --methods)")
+
+
+def _refuse_code(bundle: Path, names: list[str], trust: bool) -> None:
+    """``--resume-from``: one line, before anything runs or is restored, when a packed store of the bundle names a
+    detector that is code (a factory, a .pt outside the package) and ``trust`` (--trust-model) is not given."""
+    from vbl_robust.campaigns.store import PACKED, ResultStore
+    from vbl_robust.detect.shipped import refuse_without_consent
+
+    for name in names:
+        packed = bundle / name / PACKED
+        if packed.is_file():
+            with one_line(ValueError, prefix=f"--resume-from {bundle}: "):
+                with ResultStore.open_existing(packed) as stored:
+                    camp = stored.campaign()
+                refuse_without_consent((camp or {}).get("detector") or {}, trust, where=f"{name}: ")
 
 
 def _restore(bundle: Path, name: str, out_dir: Path) -> None:

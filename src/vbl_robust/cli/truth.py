@@ -19,9 +19,9 @@ Out = Annotated[Path | None, typer.Option("--out", help="The truth run's directo
 
 
 def truth(
-    run: Run, counts: Counts, out: Out = None, trust_model: o.TrustModel = False, workers: o.Workers = 0,
-    wait: o.Wait = False, report: o.Report = True, quiet: o.Quiet = False, verbose: o.Verbose = False,
-    config: o.Config = None,
+    ctx: typer.Context, run: Run, counts: Counts, out: Out = None, trust_model: o.TrustModel = False,
+    workers: o.Workers = 0, wait: o.Wait = False, report: o.Report = True, quiet: o.Quiet = False,
+    verbose: o.Verbose = False, config: o.Config = None,
 ) -> None:
     """Dense grid on the images every method of RUN left surviving at its largest box: is "no breach found"
     true? Prints the true survival there and the true breaches each method missed."""
@@ -33,9 +33,11 @@ def truth(
         true_survival,
         truth_spec,
     )
-    from vbl_robust.detect.shipped import DetectorSpec, refuse_untrusted
+    from vbl_robust.detect.shipped import DetectorSpec
 
     quiet = set_verbosity(quiet=quiet, verbose=verbose)
+    if trust_model and _from_file(ctx, "trust_model"):  # consent to run the store's code is the user's, not a file's
+        fail("--trust-model: give it on the command line; a --config file cannot consent to run a store's code")
     try:
         grid = tuple(int(c) for c in counts.split(","))
     except ValueError:
@@ -43,14 +45,15 @@ def truth(
     out = out if out is not None else run.with_name(run.name + TRUTH_SUFFIX)
     with one_line():
         with ResultStore.open_existing(run) as store:
+            camp = store.campaign()
+            # the run's detector is data from its store: one that names code (a factory, a .pt) is refused first,
+            # before anything else is read, unless --trust-model
+            det = None if camp is None else DetectorSpec.from_identity(camp.get("detector") or {},
+                                                                      trust=trust_model, where=f"{run}: ")
             run_spec, box, methods, keep = survivors_of_every_method(store)
-            ident = store.campaign()["detector"]
             samples = load_run_samples(store, keep)
         spec = truth_spec(run_spec, box, grid)
         spec.check()
-        det = DetectorSpec.from_identity(ident, trust=trust_model)
-        if det.kind == "ultralytics":
-            refuse_untrusted(f"the run's model {det.path}", trust_model)
     if not samples:
         typer.echo(f"{run}: every image is breached by some method at {box.label}; nothing to grid")
         return
@@ -69,3 +72,9 @@ def truth(
                + "; true breaches missed: " + ", ".join(f"{m} {k}" for m, k in t.missed.items()))
     if not complete:
         raise typer.Exit(1)
+
+
+def _from_file(ctx: typer.Context, name: str) -> bool:
+    """Whether the option ``name`` took its value from a ``--config`` file (the context's default map; compared by
+    name: typer carries its own copy of click's ``ParameterSource``)."""
+    return getattr(ctx.get_parameter_source(name), "name", None) == "DEFAULT_MAP"

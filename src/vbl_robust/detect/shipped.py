@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib
 import json
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -29,8 +30,9 @@ from .pose import PoseDetector
 logger = logging.getLogger(__name__)
 
 __all__ = ["DEFAULT_MODEL", "DESIGNS", "DETECTOR_KINDS", "MODELS_DIR", "SHIPPED_MODELS", "DetectorSpec",
-           "default_detector", "default_model_caveats", "default_model_info", "default_model_path",
-           "default_model_status", "refuse_untrusted", "shipped_model_dir", "with_design"]
+           "CODE_KINDS", "consent_needed", "default_detector", "default_model_caveats", "default_model_info",
+           "default_model_path", "default_model_status", "refuse_untrusted", "refuse_without_consent",
+           "shipped_model_dir", "with_design"]
 
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 DEFAULT_MODEL = MODELS_DIR / "runway_yolov8n_pose.pt"
@@ -42,6 +44,13 @@ SHIPPED_MODELS = {"default": "", "hardened": "hardened"}  # name -> its director
 #: Designs of a pose-model detector: one pass on the letterboxed image, or a pass on it and one on a crop.
 DESIGNS = ("single", "twostage")
 DETECTOR_KINDS = ("oracle", "default", "ultralytics", "onnx", "factory")
+#: Kinds whose spec names code, ``"module:callable"``: building the detector imports the module and calls the
+#: callable with the spec's options (a factory: tests and the Python API; a plug-in: ``--detector-plugin``). Only
+#: with the user's consent when the spec comes from data (:func:`consent_needed`).
+CODE_KINDS = ("factory", "plugin")
+#: What a ``.pt`` outside the package is (the reason every refusal of one gives).
+_PICKLE = "a .pt file is a pickle that runs code when loaded"
+_PACKAGE_DIR = Path(__file__).resolve().parent.parent
 #: options of a two-stage detector's crop window (``TwoStageDetector(margin=..., min_side=...)``)
 CROP_WINDOW_KEYS = ("margin", "min_side")
 
@@ -132,8 +141,49 @@ def refuse_untrusted(what: str | Path, trust: bool) -> None:
     """Unless ``trust``, ``ValueError`` naming ``what``: a ``.pt`` file is a pickle, and loading it runs code (the
     one refusal every command gives; ``--trust-model``)."""
     if not trust:
-        raise ValueError(f"{what}: a .pt file is a pickle that runs code when loaded; pass --trust-model if you "
-                         "trust it")
+        raise ValueError(f"{what}: {_PICKLE}; pass --trust-model if you trust it")
+
+
+def _packaged(path: str | Path) -> bool:
+    """``path`` lies inside the installed package (the shipped models: trusted as its code is)."""
+    try:
+        return Path(path).resolve().is_relative_to(_PACKAGE_DIR)
+    except (OSError, RuntimeError, TypeError, ValueError):  # a path that cannot be resolved is not the package's
+        return False
+
+
+def consent_needed(detector: DetectorSpec | Mapping[str, Any]) -> str | None:
+    """Why building ``detector`` would run code that is not this package's, in one line; None when it would not.
+
+    The one place that decides it, for a :class:`DetectorSpec` or an identity as a store records it
+    (:meth:`DetectorSpec.identity`: a campaign, a bundle's packed store, a file). Code is run by a kind of
+    :data:`CODE_KINDS` (its ``"module:callable"`` is imported and called with the stored options) and by a ``.pt``
+    outside the package (a pickle: loading it runs code). The shipped models, the oracle and an ONNX file (a graph
+    of operators, no code) need no consent. What gives consent is the caller's: ``--trust-model`` on the command
+    line (:func:`refuse_without_consent`), never a value read from the data itself.
+    """
+    if isinstance(detector, DetectorSpec):
+        kind, path = detector.kind, detector.path
+    elif isinstance(detector, Mapping):
+        kind = detector.get("kind")
+        path = detector.get("factory") if kind in CODE_KINDS else detector.get("path")
+    else:
+        raise TypeError(f"a DetectorSpec or a detector identity (a mapping), not {type(detector).__name__}")
+    if kind in CODE_KINDS:
+        module, _, attr = str(path).partition(":")
+        return (f"detector {kind} {path!r} is code: building it imports module {module!r} and calls {attr!r} "
+                "with the stored options")
+    if kind == "ultralytics" and (not path or not _packaged(path)):
+        return f"{path}: {_PICKLE}"
+    return None
+
+
+def refuse_without_consent(detector: DetectorSpec | Mapping[str, Any], trust: bool, *, where: str = "") -> None:
+    """Unless ``trust`` (``--trust-model``), ``ValueError`` when :func:`consent_needed` says building ``detector``
+    runs code: one line, ``where`` first (e.g. ``"RUN: "``), the reason, and the flag that gives consent."""
+    reason = None if trust else consent_needed(detector)
+    if reason:
+        raise ValueError(f"{where}{reason}; pass --trust-model if you trust it")
 
 
 def _model_options(oracle: bool, oracle_noise: float, design: str, engine: str, device: str,
@@ -275,18 +325,25 @@ class DetectorSpec:
         if model is None:
             return cls.choose(oracle_noise_px=oracle_noise, options=opts)[0]
         spec = cls.from_path(model, trust=trust, option=option)
-        if spec.kind == "ultralytics":
-            refuse_untrusted(f"{option} {model}", trust)
+        refuse_without_consent(spec, trust, where=f"{option} ")
         return replace(spec, options=opts) if opts else spec
 
     @classmethod
-    def from_identity(cls, ident: dict[str, Any], *, trust: bool = False) -> DetectorSpec:
+    def from_identity(cls, ident: Mapping[str, Any], *, trust: bool = False, where: str = "") -> DetectorSpec:
         """The spec a run recorded (:meth:`identity`, as stored with its campaign): to run more jobs with the same
-        detector. A ``.pt`` file loads only with ``trust`` (it is a pickle)."""
+        detector. A stored identity is data: one that names code (:func:`consent_needed`: a factory or plug-in's
+        ``module:callable``, a ``.pt`` outside the package) is refused unless ``trust`` (``--trust-model``) —
+        ``ValueError``, one line beginning with ``where``, before anything is imported or loaded."""
+        if not isinstance(ident, Mapping):
+            raise ValueError(f"{where}the stored detector is not a detector identity ({type(ident).__name__})")
+        refuse_without_consent(ident, trust, where=where)
         kind = ident.get("kind")
-        path = ident.get("factory") if kind == "factory" else ident.get("path")
-        return cls(kind, path if kind in ("ultralytics", "onnx", "factory") else None, trust=trust,
-                   options=dict(ident.get("options") or {}))
+        path = ident.get("factory") if kind in CODE_KINDS else ident.get("path")
+        options = ident.get("options") or {}
+        if not isinstance(options, Mapping):
+            raise ValueError(f"{where}the stored detector's options are not a mapping ({type(options).__name__})")
+        return cls(kind, path if kind in ("ultralytics", "onnx", *CODE_KINDS) else None, trust=trust,
+                   options=dict(options))
 
     @classmethod
     def shipped(cls, name: str = "default", options: dict[str, Any] | None = None) -> DetectorSpec:
@@ -323,7 +380,7 @@ class DetectorSpec:
         f = self.model_file
         ident = {"kind": self.kind, "name": self.name, "path": None if f is None else str(f),
                  "sha256": None if f is None else file_sha256(f), "options": dict(self.options)}
-        if self.kind == "factory":
+        if self.kind in CODE_KINDS:
             ident["factory"] = self.path
         if self.kind in ("default", "ultralytics", "onnx"):
             from .device import resolve_device

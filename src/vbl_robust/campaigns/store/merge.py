@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import dataclasses
 import tempfile
+import zlib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ...detect.shipped import refuse_without_consent
 from .core import STORE, ResultStore
 from .identity import check_same
 from .lock import WriterLock
@@ -43,14 +45,17 @@ class MergeReport:
         return sum(s.already for s in self.sources)
 
 
-def check_mergeable(store: ResultStore, other: ResultStore,
-                    campaign: Mapping[str, Any] | None = None) -> dict[str, Any]:
+def check_mergeable(store: ResultStore, other: ResultStore, campaign: Mapping[str, Any] | None = None, *,
+                    trust: bool = False) -> dict[str, Any]:
     """``ValueError`` unless ``other`` holds job rows of ``store``'s campaign and detector (or of ``campaign``, when
     given: several sources checked against the first before anything is written) on samples that agree with
-    ``store``'s; returns ``other``'s campaign."""
+    ``store``'s; returns ``other``'s campaign. A campaign whose detector names code (a factory's
+    ``module:callable``, a ``.pt`` outside the package: :func:`~vbl_robust.detect.shipped.consent_needed`) is
+    refused unless ``trust`` (``--trust-model``): the merged store would build it, wherever it is read next."""
     theirs = other.campaign()
     if theirs is None or other.count() == 0:
         raise ValueError(f"{other.path}: holds no job rows to merge")
+    refuse_without_consent(theirs.get("detector") or {}, trust, where=f"{other.path}: ")
     mine = campaign if campaign is not None else (store.campaign() if store.count() else None)
     if mine is not None:
         check_same(store.path, mine, theirs["spec"], theirs["detector"],
@@ -67,7 +72,7 @@ def check_mergeable(store: ResultStore, other: ResultStore,
     return theirs
 
 
-def merge_store(store: ResultStore, other: ResultStore, *, source: str = "") -> MergedSource:
+def merge_store(store: ResultStore, other: ResultStore, *, source: str = "", trust: bool = False) -> MergedSource:
     """Copy into ``store`` the job rows of ``other`` that it lacks, with their samples, image digests and runs.
 
     ``other`` must hold the same campaign and detector (checked as a resuming run is: ``ValueError``); a sample
@@ -75,24 +80,32 @@ def merge_store(store: ResultStore, other: ResultStore, *, source: str = "") -> 
     ``other``'s campaign. Each run of ``other`` that brought rows is recorded anew (its provenance kept,
     ``config["merged_from"]`` = ``source``, default ``other``'s path), and the copied rows point to it. Rows already
     there (the same key: the same job, context and sample) are kept as they are. One transaction: all of it or
-    nothing. The caller holds ``store``'s writer lock."""
-    theirs = check_mergeable(store, other)
+    nothing. A detector that needs consent is refused unless ``trust`` (:func:`check_mergeable`); a source whose
+    stored evaluations cannot be decoded is refused (``ValueError``) before anything is written. The caller holds
+    ``store``'s writer lock."""
+    theirs = check_mergeable(store, other, trust=trust)
+    label = source or str(other.path)
+    try:
+        stored = other.jobs(with_points=True)
+    except (zlib.error, ValueError, KeyError, TypeError) as exc:  # a damaged or crafted blob: what, not where
+        raise ValueError(f"{label}: a job row's stored evaluations cannot be decoded ({type(exc).__name__}: "
+                         f"{exc}); nothing merged") from None
     if store.campaign() is None or store.count() == 0:
         store.bind_campaign(theirs["name"], theirs["spec"], theirs["detector"])
     have = store.done_keys()
-    rows = [r for r in other.jobs(with_points=True) if r.key not in have]
+    rows = [r for r in stored if r.key not in have]
     runs = {r.run_id: r for r in other.runs()}
     new_id: dict[int | None, int | None] = {None: None}
     with store.transaction():
         for rid in sorted({r.run_id for r in rows if r.run_id is not None}):
             run = runs.get(rid) or RunRecord(rid, now_iso(), RunStatus.UNKNOWN)
-            config = {**(run.provenance.config or {}), "merged_from": source or str(other.path)}
+            config = {**(run.provenance.config or {}), "merged_from": label}
             new_id[rid] = store.insert_run(dataclasses.replace(
                 run, provenance=dataclasses.replace(run.provenance, config=config)))
         store.insert_jobs(r.replace(run_id=new_id.get(r.run_id)) for r in rows)
         store.insert_contents(other.contents())
         store.insert_samples(other.samples().values())
-    return MergedSource(source or str(other.path), len(rows), other.count() - len(rows))
+    return MergedSource(label, len(rows), len(stored) - len(rows))
 
 
 def _store_path(into: Path) -> Path:
@@ -110,29 +123,37 @@ def _unpacked(source: Path, scratch: Path) -> Path:
     return scratch
 
 
-def merge_runs(sources: Sequence[str | Path], into: str | Path, *,
+def merge_runs(sources: Sequence[str | Path], into: str | Path, *, trust: bool = False,
                progress: Callable[[MergeReport], None] | None = None) -> MergeReport:
     """Merge the job rows of ``sources`` (run directories, ``.sqlite`` files or packed stores ``.sqlite.xz`` as
     ``bundle --stores`` writes them) into the run ``into`` (a directory or ``.sqlite`` file; created when missing)
     with :func:`merge_store`, each source recorded under the name given.
 
-    Every source is checked against the first and against ``into`` before anything is written (``ValueError``);
-    ``into`` is refused while a run writes it (:class:`~vbl_robust.campaigns.store.lock.WriterLock`:
-    ``ValueError``); a missing packed store is a ``FileNotFoundError``, a damaged one a ``ValueError``.
-    ``progress`` is called with the report so far after each source is merged (its last entry: that source)."""
+    A source whose detector names code (:func:`~vbl_robust.detect.shipped.consent_needed`) is refused unless
+    ``trust`` (``--trust-model``), before ``into`` is created or touched. Every source is checked against the
+    first and against ``into`` before anything is written (``ValueError``); ``into`` is refused while a run writes
+    it (:class:`~vbl_robust.campaigns.store.lock.WriterLock`: ``ValueError``); a missing packed store is a
+    ``FileNotFoundError``, a damaged one a ``ValueError``. ``progress`` is called with the report so far after each
+    source is merged (its last entry: that source)."""
     dst = _store_path(Path(into))
-    dst.parent.mkdir(parents=True, exist_ok=True)
     report = MergeReport(dst)
-    with WriterLock(dst), ResultStore(dst) as store, tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp:
         paths = [_unpacked(Path(src), Path(tmp) / str(i)) for i, src in enumerate(sources)]
-        first = None
-        for path in paths:  # every source checked (against the first) before anything is written
+        for src, path in zip(sources, paths, strict=True):  # consent first: nothing of into exists yet
             with ResultStore.open_existing(path) as other:
-                first = check_mergeable(store, other, first)
-        for src, path in zip(sources, paths, strict=True):
-            with ResultStore.open_existing(path) as other:
-                part = merge_store(store, other, source=str(src))
-            report = dataclasses.replace(report, sources=(*report.sources, part))
-            if progress is not None:
-                progress(report)
+                camp = other.campaign()
+                if camp is not None:
+                    refuse_without_consent(camp.get("detector") or {}, trust, where=f"{src}: ")
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        with WriterLock(dst), ResultStore(dst) as store:
+            first = None
+            for path in paths:  # every source checked (against the first) before anything is written
+                with ResultStore.open_existing(path) as other:
+                    first = check_mergeable(store, other, first, trust=trust)
+            for src, path in zip(sources, paths, strict=True):
+                with ResultStore.open_existing(path) as other:
+                    part = merge_store(store, other, source=str(src), trust=trust)
+                report = dataclasses.replace(report, sources=(*report.sources, part))
+                if progress is not None:
+                    progress(report)
     return report
