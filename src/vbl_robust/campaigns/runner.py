@@ -387,14 +387,9 @@ def _stored_breaches(store: ResultStore) -> int:
 # -- worker processes ---------------------------------------------------------------------------------------------
 def _pool_worker(tasks: Any, results: Any, detector: DetectorSpec, settings: Settings, run_id: int) -> None:
     """A worker process: one torch thread; runs sample tasks from ``tasks`` until ``None`` and sends each job's
-    rows (``("rows", rows)``), then ``("done", None)`` per task; dies with its parent (Linux)."""
-    try:  # PR_SET_PDEATHSIG: a campaign killed with -9 takes its workers with it
-        import ctypes
-        import signal
-
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)
-    except (OSError, AttributeError):  # pragma: no cover - not Linux
-        pass
+    rows (``("rows", rows)``), then ``("done", None)`` per task. Started by
+    :func:`~vbl_robust.campaigns.pool_start.start_worker`, which has tied its life to its parent's before this
+    module (torch, the detector) was imported."""
     import warnings
 
     from ..constants import TORCH_JIT_WARNING
@@ -417,7 +412,10 @@ def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Se
     """Run the sample tasks in ``workers`` processes (spawned: a fresh interpreter each) and yield their rows in
     completion order. A worker that dies leaves its sample's unfinished jobs pending (a rerun resumes them)."""
     import multiprocessing as mp
+    import pickle
     import queue
+
+    from .pool_start import start_worker
 
     ctx = mp.get_context("spawn")
     task_q, result_q = ctx.Queue(), ctx.Queue()
@@ -427,7 +425,9 @@ def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Se
         task_q.put(t)
     for _ in range(workers):
         task_q.put(None)
-    procs = [ctx.Process(target=_pool_worker, args=(task_q, result_q, detector, settings, run_id), daemon=True)
+    # the worker's own arguments travel as bytes, unpickled only once it is tied to this process (pool_start)
+    payload = pickle.dumps((detector, settings, run_id))
+    procs = [ctx.Process(target=start_worker, args=(os.getpid(), task_q, result_q, payload), daemon=True)
              for _ in range(workers)]
     for p in procs:
         p.start()
