@@ -227,7 +227,7 @@ class Objective:
         if not isinstance(sample, Sample):
             raise ValueError(f"Objective: sample must be a vbl_robust.Sample, got {type(sample).__name__}")
         if not callable(getattr(detector, "detect", None)):
-            raise ValueError(f"Objective: detector {detector!r} has no detect(context) method")
+            raise ValueError(f"Objective: detector {detector_name(detector)} has no detect(context) method")
         if pnp not in SOLVERS:
             raise ValueError(f"Objective: unknown PnP solver pnp={pnp!r}; choose from {SOLVERS}")
         if not (0.0 <= float(conf_threshold) <= 1.0):
@@ -398,7 +398,8 @@ class Objective:
                              tuple("" if good else "low_confidence" for good in ok), kp_t)
         dets = list(raw)
         if len(dets) != n:
-            raise ValueError(f"Objective: detector {self.detector!r} returned {len(dets)} results for {n} images")
+            raise ValueError(f"Objective: detector {detector_name(self.detector)} returned {len(dets)} results for {n} "
+                             "images")
         sel = select(dets, self.conf_threshold)
         sigma = sel.sigma / np.array([self._scale.sx, self._scale.sy]) if sel.sigma is not None else None
         return dataclasses.replace(sel, keypoints=self._scale.to_original(sel.keypoints), sigma=sigma)
@@ -437,7 +438,7 @@ class Objective:
                                                  method=self.pnp)
         elif self.max_sigma_m is not None and rows.size:
             raise ValueError(f"Objective: the σ monitor (max_sigma_m) needs a detector that gives its corners' σ "
-                             f"(a YOLO26-pose network); {self.detector!r} gives none")
+                             f"(a YOLO26-pose network); {detector_name(self.detector)} gives none")
         for j, i in enumerate(rows):
             if not success[j]:
                 reason[i] = "pnp_failed"

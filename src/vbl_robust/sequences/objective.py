@@ -36,7 +36,7 @@ from vbl_robust.constants import CONF_THRESHOLD, EPS_SAFE_M, PENALTY_M
 from vbl_robust.data.sample import Sample
 from vbl_robust.data.sequence import ApproachSequence
 from vbl_robust.perturb import PERTURBATIONS
-from vbl_robust.pipeline import EvalRecord, Objective
+from vbl_robust.pipeline import EvalRecord, Objective, detector_name
 from vbl_robust.search.evaluations import Evaluations
 from vbl_robust.space import ParameterBox
 
@@ -301,8 +301,8 @@ class SequenceObjective:
                 with torch.no_grad():
                     out = list(self.detector.detect(ctx))
                 if len(out) != b - a:
-                    raise ValueError(f"SequenceObjective: detector {self.detector!r} returned {len(out)} results for "
-                                     f"{b - a} images")
+                    raise ValueError(f"SequenceObjective: detector {detector_name(self.detector)} returned "
+                                     f"{len(out)} results for {b - a} images")
                 pos = 0
                 for f, m in zip((f for f, _, _ in pieces), sizes, strict=True):
                     parts[f].extend(out[pos:pos + m])
