@@ -219,7 +219,7 @@ def test_worst_corners_are_stored_and_a_schema_3_store_reads_them_as_none(tmp_pa
         st.commit([row("new", worst_corners=corners)])
         assert [r.worst_corners for r in st.jobs()] == [None, corners]
     con = sqlite3.connect(tmp_path / "old.sqlite")
-    assert con.execute("PRAGMA user_version").fetchone()[0] == store_module.SCHEMA_VERSION == 4
+    assert con.execute("PRAGMA user_version").fetchone()[0] == store_module.SCHEMA_VERSION == 5
 
 
 def test_run_status_strings_are_the_stored_values_and_a_run_reads_back_flat(tmp_path):
@@ -243,7 +243,7 @@ def test_run_status_strings_are_the_stored_values_and_a_run_reads_back_flat(tmp_
 def test_the_schema_declares_each_table_once_and_its_ddl_is_what_stores_hold(tmp_path):
     """The DDL is generated from the column tables; the text SQLite keeps for each table is the one earlier versions
     wrote (a store's bytes do not depend on which version created it)."""
-    assert [t.name for t in schema.TABLES] == ["campaign", "runs", "samples", "contents", "jobs"]
+    assert [t.name for t in schema.TABLES] == ["campaign", "runs", "samples", "contents", "jobs", "digests"]
     ResultStore(tmp_path / "r.sqlite").close()
     con = sqlite3.connect(tmp_path / "r.sqlite")
     for t in schema.TABLES:

@@ -16,6 +16,7 @@ import vbl_robust.search.api as search_api
 from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, ResultStore, run_campaign
 from vbl_robust.campaigns.replay import replay, zones_of_run
 from vbl_robust.campaigns.spec import roll_contrast_box
+from vbl_robust.campaigns.store.digest import reseal
 from vbl_robust.cli import app
 from vbl_robust.stats import Rate
 
@@ -169,7 +170,8 @@ def test_zones_command_fails_loudly_on_a_store_that_does_not_replay(gated_run, t
                   if len((d := json.loads(zlib.decompress(b)))["xs"]) > 3)
     d["xs"][3][0] += 0.01
     con.execute("UPDATE jobs SET points = ? WHERE key = ?", (zlib.compress(json.dumps(d).encode()), key))
-    con.commit()
+    with con:  # re-digested: a store that does not replay (other code), not a row changed since its commit
+        reseal(con)
     con.close()
     res = runner.invoke(app, ["zones", str(out)])
     assert res.exit_code == 2 and "replay failed" in res.output and "evaluation 3" in res.output

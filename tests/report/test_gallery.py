@@ -15,6 +15,7 @@ from vbl_robust.campaigns import store as store_module
 from vbl_robust.campaigns.experiments import audit_spec
 from vbl_robust.campaigns.spec import CampaignSpec, roll_contrast_box
 from vbl_robust.campaigns.store import JobRow, Points
+from vbl_robust.campaigns.store.digest import reseal
 from vbl_robust.perturb import Perturbation
 from vbl_robust.report import build_report
 from vbl_robust.report.evidence import WORST_CASES, worst_cases
@@ -109,7 +110,7 @@ def test_an_old_store_without_corners_still_reports(run, tmp_path):
     con = copy_store(run, old)
     kept = ", ".join(c for c in store_module.JOB_COLUMNS if c != "worst_corners_json")
     con.executescript(f"CREATE TABLE old_jobs AS SELECT {kept} FROM jobs; DROP TABLE jobs; "
-                      "ALTER TABLE old_jobs RENAME TO jobs;")
+                      "ALTER TABLE old_jobs RENAME TO jobs; DROP TABLE digests;")  # a store of schema 4 has none
     con.execute(f"PRAGMA user_version = {store_module.SCHEMA_VERSION - 1}")
     con.commit()
     con.close()
@@ -129,7 +130,8 @@ def test_a_detector_that_says_how_sure_it_is_has_its_position_sigma_in_the_galle
         data = json.loads(payload)
         data["worst"]["position_sigma_m"] = 1234.5
         con.execute("UPDATE jobs SET payload_json = ? WHERE rowid = ?", (json.dumps(data), rowid))
-    con.commit()
+    with con:  # as that detector's run would have committed them (else: rows changed since committed, not used)
+        reseal(con)
     con.close()
     page = build_report(sure).read_text()
     assert page.count("position σ") == 3 and "1234 m (the corners' σ through PnP)" in page

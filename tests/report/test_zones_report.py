@@ -18,6 +18,7 @@ from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, Resu
 from vbl_robust.campaigns import metrics as mx
 from vbl_robust.campaigns.replay import zones_of_run
 from vbl_robust.campaigns.spec import roll_box, roll_contrast_box
+from vbl_robust.campaigns.store.digest import reseal
 from vbl_robust.report import build_report
 from vbl_robust.report import zone_section as B
 from vbl_robust.report.html import fmt_num
@@ -128,7 +129,8 @@ def test_a_job_that_does_not_replay_is_listed_as_skipped(gated_2d, tmp_path):
     d = json.loads(zlib.decompress(blob))
     d["xs"][3][0] += 0.01
     con.execute("UPDATE jobs SET points = ? WHERE key = ?", (zlib.compress(json.dumps(d).encode()), key))
-    con.commit()
+    with con:  # re-digested: a store that does not replay (other code), not a row changed since its commit
+        reseal(con)
     con.close()
     sec = _section(build_report(out).read_text())
     assert "1 job(s) skipped" in sec and "replay failed" in sec and "evaluation 3" in sec

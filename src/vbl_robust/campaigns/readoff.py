@@ -77,7 +77,12 @@ def main_rows(store: Any, spec: Any, *, with_trace: bool = True, measured_only: 
     """The main search rows of a campaign as its tables and figures show them: stored rows with their points (the
     kind of each breach, :func:`breach_kind`), with every run that reads smaller budgets off its trace replaced by
     its read-off rows (:func:`read_off_rows`). Rows not measured (the tool could not complete them) are left out
-    unless ``measured_only`` is False (a summary table that counts them apart, :func:`summarize`)."""
+    unless ``measured_only`` is False (a summary table that counts them apart, :func:`summarize`). Rows inconsistent
+    with their own evaluations or their digests are never used (:func:`vbl_robust.campaigns.verify.screen`: the store
+    leaves them out from then on, the report counts them apart)."""
+    from .verify import screen
+
+    screen(store, spec)
     reads = reads_trace(spec)
     rows = store.jobs(kind="search", role="main", with_points=True, with_trace=with_trace or reads)
     if measured_only:

@@ -12,6 +12,7 @@ The zone maths is :mod:`vbl_robust.search.zones`.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +30,8 @@ if TYPE_CHECKING:
     from .store import JobRow
 
 __all__ = ["JobZones", "ReplayError", "job_zones", "replay", "zones_of_run"]
+
+logger = logging.getLogger(__name__)
 
 #: Tolerance of the replay's check that an asked point is the stored one (relative to max(1, |x|)).
 REPLAY_TOL = 1e-12
@@ -179,13 +182,19 @@ def zones_of_run(run: str | Path, *, roles: Sequence[str] | None = None, thresho
                  lipschitz: float | Sequence[float] | None = None, norm: str = "2", estimate: bool | float = False,
                  ) -> list[JobZones]:
     """:func:`job_zones` of every search job of a run directory (or its ``results.sqlite``), in store order;
-    ``roles`` keeps only those roles ("main", "reference", "landscape")."""
+    ``roles`` keeps only those roles ("main", "reference", "landscape"). Rows inconsistent with their own
+    evaluations or their digests are left out (:func:`vbl_robust.campaigns.verify.screen`; logged as a warning)."""
     from .spec import CampaignSpec
     from .store import ResultStore
+    from .verify import screen
 
     with ResultStore.open_existing(run) as store:
         campaign = store.campaign()
         spec = None if campaign is None else CampaignSpec.from_dict(campaign["spec"])
+        left_out = screen(store, spec).inconsistent
+        if left_out:
+            logger.warning("%s: %d job row(s) inconsistent — not used (vbl-robust verify %s names them)", run,
+                           len(left_out), run)
         rows = store.jobs(kind="search", with_points=True, with_trace=False)
     return [job_zones(r, spec, threshold=threshold, lipschitz=lipschitz, norm=norm, estimate=estimate)
             for r in rows if roles is None or r.role in roles]

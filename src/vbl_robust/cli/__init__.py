@@ -13,7 +13,7 @@ from typing import Annotated
 import typer
 from typer.core import TyperGroup
 
-from . import audit, check, report, reproduce, risk, scenes, train, truth, zones
+from . import audit, check, report, reproduce, risk, scenes, train, truth, verify, zones
 from .common import set_verbosity, stop_on_sigterm
 from .config import RecordingCommand
 
@@ -95,7 +95,8 @@ def _main(
 
 #: The commands, in the order ``vbl-robust --help`` lists them.
 COMMANDS = (scenes.scenes, check.check, audit.audit, audit.demo, risk.risk, reproduce.reproduce, truth.truth,
-            report.report, report.bundle, report.merge, train.train, train.ship, train.harden, zones.zones)
+            report.report, report.bundle, report.merge, train.train, train.ship, train.harden, zones.zones,
+            verify.verify)
 for _command in COMMANDS:  # a campaign's run directory keeps its configuration (config.yaml)
     app.command(cls=RecordingCommand if _command.__name__ in _CAMPAIGNS else None)(_command)
 

@@ -139,10 +139,14 @@ def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None
 
     def merged(report: MergeReport) -> None:
         part = report.sources[-1]
-        typer.echo(f"{part.source}: {part.copied} job rows merged, {part.already} already in {report.into}")
+        typer.echo(f"{part.source}: {part.copied} job rows merged, {part.already} already in {report.into}"
+                   + (f"; {part.inconsistent} inconsistent — not merged (vbl-robust verify {part.source} names them)"
+                      if part.inconsistent else ""))
 
     with one_line(ValueError, OSError):
-        merge_runs(sources, into, trust=trust_model, progress=merged)
+        done = merge_runs(sources, into, trust=trust_model, progress=merged)
+    if len(done.code_versions) > 1:  # runs of other code versions joined: say which
+        typer.echo(f"code versions joined in {done.into}: {', '.join(done.code_versions)}")
 
 
 def _summary(run: Path, fmt: str) -> None:

@@ -34,6 +34,7 @@ from ..constants import BreachKind
 from ..search import direct_family
 from ..stats import LEVEL, Rate
 from .html import esc, fmt_num, table
+from .integrity import banner_html
 from .rows import Context, Section
 
 #: Worst cases shown per report (the gallery, :mod:`.gallery`): the most severe breached images.
@@ -263,7 +264,7 @@ def section_evidence(ctx: Context, ev: Evidence) -> Section | None:
     directory. None when the run has no box with a result."""
     import json
 
-    if not ev.boxes and not ev.not_measured:
+    if not ev.boxes and not ev.not_measured and not ctx.store.left_out:
         return None
     atomic_write(ctx.out_dir / "evidence.json", json.dumps(ev.to_dict(), indent=1, default=str))
     unit = ctx.spec.unit
@@ -271,6 +272,7 @@ def section_evidence(ctx: Context, ev: Evidence) -> Section | None:
     banner = not_measured_banner(ctx.unmeasured, ev.jobs_done, unit)
     if banner:
         s.html.append(banner)
+    s.html.extend(banner_html(ctx))  # the rows inconsistent with their own evaluations (not used)
     if not ev.boxes:
         return s
     if ev.budget:

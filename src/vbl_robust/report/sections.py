@@ -18,6 +18,7 @@ from ..constants import FAILURE_REASONS, Verdict
 from ..search import NON_FINITE
 from . import figures as F
 from .html import esc, fmt_num, folded, table
+from .integrity import provenance_html
 from .rows import (
     Context,
     Section,
@@ -480,4 +481,5 @@ def section_provenance(ctx: Context) -> Section:
                       f"<code>{esc(ds.get('sha256'))}</code>.</p>")
         s.html.append("<details><summary>Full configuration of the last run (JSON)</summary><pre>"
                       f"{esc(json.dumps(last.config, indent=1))}</pre></details>")
+    s.html.append(provenance_html(ctx))  # the store's head digest (vbl-robust verify RUN --head …)
     return s

@@ -10,15 +10,17 @@ from __future__ import annotations
 
 import json
 import sqlite3
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from .digest import record_forgotten, record_stored
 from .identity import check_same
 from .rows import JobRow, JobStatus, RunProvenance, RunRecord, RunStatus, now_iso
 from .schema import (
     CAMPAIGN,
     CONTENTS,
+    DIGESTS,
     JOBS,
     RUNS,
     SAMPLES,
@@ -304,25 +306,35 @@ class ResultStore:
 
     def forget_failed(self) -> int:
         """Delete the rows of jobs not measured (the tool could not complete them: status "not measured", or "failed"
-        in stores written before the name), so that a rerun runs them again; returns how many were deleted."""
+        in stores written before the name), so that a rerun runs them again; returns how many were deleted. Each
+        leaves a ``forgotten`` digest entry in its run's chain (:mod:`~vbl_robust.campaigns.store.digest`)."""
+        where = "WHERE status IN (?, 'failed')"
         with self.transaction():
+            gone = self._con.execute(f"SELECT key, run_id FROM jobs {where} ORDER BY rowid",
+                                     (JobStatus.NOT_MEASURED.value,)).fetchall()
+            record_forgotten(self._con, gone)
             before = self._con.total_changes
-            self._con.execute("DELETE FROM jobs WHERE status IN (?, 'failed')", (JobStatus.NOT_MEASURED.value,))
+            self._con.execute(f"DELETE FROM jobs {where}", (JobStatus.NOT_MEASURED.value,))
             return self._con.total_changes - before
 
     def commit(self, rows: Sequence[JobRow]) -> int:
-        """Insert the rows of finished jobs in one transaction; returns how many were new (duplicates ignored)."""
+        """Insert the rows of finished jobs in one transaction; returns how many were new (duplicates ignored). Each
+        new row gets its digest, chained in its run (:mod:`~vbl_robust.campaigns.store.digest`)."""
         if not rows:
             return 0
         with self.transaction():
             return self.insert_jobs(rows)
 
     def insert_jobs(self, rows: Iterable[JobRow]) -> int:
-        """Job rows (a key already stored is kept as it is), inside the caller's transaction; returns how many were
-        new."""
-        before = self._con.total_changes
-        self._con.executemany(JOBS.insert(verb="INSERT OR IGNORE"), [to_columns(JOBS, r) for r in rows])
-        return self._con.total_changes - before
+        """Job rows (a key already stored is kept as it is), each new one with its digest entry, inside the caller's
+        transaction; returns how many were new."""
+        sql, new = JOBS.insert(verb="INSERT OR IGNORE"), 0
+        for r in rows:
+            cur = self._con.execute(sql, to_columns(JOBS, r))
+            if cur.rowcount == 1:
+                record_stored(self._con, int(cur.lastrowid))
+                new += 1
+        return new
 
     def jobs(self, *, kind: str | None = None, role: str | None = None, with_points: bool = False,
              with_trace: bool = True) -> list[JobRow]:
@@ -338,4 +350,40 @@ class ResultStore:
         cols = [c for c in JOBS.names if (with_points or c != "points") and (with_trace or c != "trace_json")]
         sql = f"SELECT {', '.join(cols)} FROM jobs" + (f" WHERE {' AND '.join(where)}" if where else "")
         sql += " ORDER BY sample_index, rowid"
-        return [job_row(dict(zip(cols, r, strict=True))) for r in self._con.execute(sql, args)]
+        rows = (dict(zip(cols, r, strict=True)) for r in self._con.execute(sql, args))
+        return [job_row(d) for d in rows if d["key"] not in self._left_out]
+
+    # -- verification (:mod:`~vbl_robust.campaigns.verify`) --------------------------------------------------------
+    #: Keys of rows found inconsistent (:meth:`leave_out`): :meth:`jobs` leaves them out.
+    _left_out: frozenset[str] = frozenset()
+
+    def leave_out(self, keys: Iterable[str]) -> None:
+        """From now on :meth:`jobs` leaves out the rows ``keys`` (rows found inconsistent with their own evaluations
+        or their digests: :func:`vbl_robust.campaigns.verify.screen`); ``count`` still counts them."""
+        self._left_out = frozenset(keys)
+
+    @property
+    def left_out(self) -> frozenset[str]:
+        return self._left_out
+
+    @property
+    def changes(self) -> int:
+        """Rows this connection has changed since it was opened (a check of the rows read before is stale)."""
+        return self._con.total_changes
+
+    def job_columns(self) -> Iterator[dict[str, Any]]:
+        """Every job row's stored columns as SQLite returns them (``{column: value}``, blobs as bytes), in insertion
+        order, one at a time: what a check reads before anything is decoded."""
+        cur = self._con.execute(f"SELECT {', '.join(JOBS.names)} FROM jobs ORDER BY rowid")
+        for r in cur:
+            yield dict(zip(JOBS.names, r, strict=True))
+
+    def digest_entries(self) -> Iterator[dict[str, Any]]:
+        """The ``digests`` rows in the order written (:mod:`~vbl_robust.campaigns.store.digest`)."""
+        for r in self._con.execute(f"SELECT {', '.join(DIGESTS.names)} FROM digests ORDER BY seq"):
+            yield dict(zip(DIGESTS.names, r, strict=True))
+
+    def digest_heads(self) -> dict[int | None, str]:
+        """Each run's head (its last chain value) as stored."""
+        return dict(self._con.execute("SELECT run_id, chain_sha256 FROM digests WHERE seq IN "
+                                      "(SELECT max(seq) FROM digests GROUP BY run_id) ORDER BY run_id").fetchall())

@@ -8,7 +8,7 @@ import dataclasses
 import tempfile
 import zlib
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -22,11 +22,14 @@ from .rows import RunRecord, RunStatus, now_iso
 
 @dataclass(frozen=True)
 class MergedSource:
-    """What one source brought: ``copied`` job rows, and ``already`` rows the store held (the same keys)."""
+    """What one source brought: ``copied`` job rows, and ``already`` rows the store held (the same keys);
+    ``inconsistent`` rows not copied (they contradict their own evaluations or their digests:
+    :func:`vbl_robust.campaigns.verify.check_store`)."""
 
     source: str
     copied: int
     already: int
+    inconsistent: int = 0
 
 
 @dataclass(frozen=True)
@@ -35,6 +38,9 @@ class MergeReport:
 
     into: Path
     sources: tuple[MergedSource, ...] = ()
+    #: The code versions of the runs ``into`` holds after the merge, in run order (``RunProvenance.code_version``;
+    #: what the merge found, not what it did: left out of comparisons).
+    code_versions: tuple[str, ...] = field(default=(), compare=False)
 
     @property
     def copied(self) -> int:
@@ -93,6 +99,10 @@ def merge_store(store: ResultStore, other: ResultStore, *, source: str = "", tru
     if store.campaign() is None or store.count() == 0:
         store.bind_campaign(theirs["name"], theirs["spec"], theirs["detector"])
     have = store.done_keys()
+    from ..verify import screen  # rows that contradict their evaluations or digests are not merged
+
+    left_out = screen(other).inconsistent
+    stored = [r for r in stored if r.key not in left_out]
     rows = [r for r in stored if r.key not in have]
     runs = {r.run_id: r for r in other.runs()}
     new_id: dict[int | None, int | None] = {None: None}
@@ -102,10 +112,10 @@ def merge_store(store: ResultStore, other: ResultStore, *, source: str = "", tru
             config = {**(run.provenance.config or {}), "merged_from": label}
             new_id[rid] = store.insert_run(dataclasses.replace(
                 run, provenance=dataclasses.replace(run.provenance, config=config)))
-        store.insert_jobs(r.replace(run_id=new_id.get(r.run_id)) for r in rows)
         store.insert_contents(other.contents())
-        store.insert_samples(other.samples().values())
-    return MergedSource(label, len(rows), len(stored) - len(rows))
+        store.insert_samples(other.samples().values())  # before the rows: their digests cover their samples' rows
+        store.insert_jobs(r.replace(run_id=new_id.get(r.run_id)) for r in rows)
+    return MergedSource(label, len(rows), len(stored) - len(rows), len(left_out))
 
 
 def _store_path(into: Path) -> Path:
@@ -156,4 +166,5 @@ def merge_runs(sources: Sequence[str | Path], into: str | Path, *, trust: bool =
                 report = dataclasses.replace(report, sources=(*report.sources, part))
                 if progress is not None:
                     progress(report)
-    return report
+            versions = dict.fromkeys(r.provenance.code_version or "unknown" for r in store.runs())
+    return dataclasses.replace(report, code_versions=tuple(versions))

@@ -20,8 +20,17 @@ columns: they are added on open, old rows read them as unknown); 2 = failures re
 carries its completion time on the search's clock (``ts`` in the points blob, so no column is added; rows written
 before read ``Points.times`` as None, and no time budget can be read off them); 4 = now: a main search job stores
 the corners its detector predicted at the worst point (``worst_corners_json``, added on open; rows written before
-read ``JobRow.worst_corners`` as None). A column's ``since`` says which version added it: :func:`migrate` adds the
-missing ones to an older store. A store written by a newer version is refused with a one-line error.
+read ``JobRow.worst_corners`` as None); 5 = now: every job row committed has a content digest in ``digests``
+(:mod:`~vbl_robust.campaigns.store.digest`), chained per run — no byte of the other tables changes; a store brought
+to 5 records its rows stored before as ``before`` (written before digests, not covered). A column's ``since`` says
+which version added it: :func:`migrate` adds the missing ones to an older store. A store written by a newer version
+is refused with a one-line error.
+
+- ``digests`` — one entry per job row committed (``stored``), per row forgotten to be run again (``forgotten``)
+  and per row found by the migration to schema 5 (``before``): the SHA-256 of the row's stored columns (canonical
+  JSON, blobs by their SHA-256), a short hash per column (which column changed), the SHA-256 of its sample's row,
+  and the run's chain: each entry's ``chain_sha256`` hashes the run's previous one with this entry, so the run's
+  last (its *head*) stands for every row the run committed, in order.
 """
 
 from __future__ import annotations
@@ -38,7 +47,9 @@ from ..spec import BoxSpec, Budget
 from .rows import Corners, JobRow, Points, RunProvenance, RunRecord
 
 #: Version of the layout below (``PRAGMA user_version``).
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
+#: The version from which every committed job row has its digest (``digests``).
+DIGESTS_SINCE = 5
 
 
 def _same(v: Any) -> Any:
@@ -207,8 +218,23 @@ JOBS = Table("jobs", (
            comment="[[u, v] x 4] corners predicted at the worst point, sample's pixels (schema 4)"),
 ), after=("CREATE INDEX IF NOT EXISTS jobs_by_sample ON jobs (sample_id);",))
 
+#: The digests of the job rows as committed (schema 5; :mod:`~vbl_robust.campaigns.store.digest`): a table of its
+#: own, so that no byte of the jobs table changes.
+DIGESTS = Table("digests", (
+    Column("seq", "INTEGER PRIMARY KEY AUTOINCREMENT", comment="order of writing"),
+    Column("event", "TEXT NOT NULL", comment="stored | forgotten | before (a row stored before schema 5)"),
+    Column("key", "TEXT NOT NULL", comment="the job row's key"),
+    Column("run_id", "INTEGER", comment="the chain it belongs to: the row's run"),
+    Column("layout", "INTEGER", comment="the schema version whose job columns the digest covers"),
+    Column("row_sha256", "TEXT", comment="SHA-256 of the row's columns (canonical JSON, blobs by SHA-256)"),
+    Column("columns", "TEXT", comment="a short hash per column, in column order (names the column changed)"),
+    Column("sample_sha256", "TEXT", comment="SHA-256 of its sample's row when committed (None: not stored)"),
+    Column("chain_sha256", "TEXT NOT NULL", comment="SHA-256 of the run's previous chain_sha256 and this entry"),
+), after=("CREATE INDEX IF NOT EXISTS digests_by_key ON digests (key);",
+          "CREATE INDEX IF NOT EXISTS digests_by_run ON digests (run_id, seq);"), comment_at=40)
+
 #: Every table, in the order of the DDL.
-TABLES = (CAMPAIGN, RUNS, SAMPLES, CONTENTS, JOBS)
+TABLES = (CAMPAIGN, RUNS, SAMPLES, CONTENTS, JOBS, DIGESTS)
 
 #: The whole layout of a new store (``CREATE … IF NOT EXISTS``: run on every open).
 DDL = "\n" + "\n".join(t.ddl() for t in TABLES) + "\n"
@@ -273,6 +299,8 @@ def migrate(con: sqlite3.Connection, path: str | Path) -> None:
     con.executescript(DDL)
     if version == SCHEMA_VERSION:
         return
+    from .digest import mark_before
+
     with Transaction(con):
         for table in TABLES:
             added = [c for c in table.columns if c.since]
@@ -280,4 +308,6 @@ def migrate(con: sqlite3.Connection, path: str | Path) -> None:
             for c in added:
                 if c.name not in have:
                     con.execute(f"ALTER TABLE {table.name} ADD COLUMN {c.name} {c.decl}")
+        if version < DIGESTS_SINCE:
+            mark_before(con)
         con.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
