@@ -358,3 +358,27 @@ def test_risk_rows_agree_with_their_draws(tmp_path):
     _sql(tmp_path, "UPDATE jobs SET worst_m = 1.0 WHERE key = ?", (key,))
     res = _verify(tmp_path)
     assert res.exit_code == 1 and f"{key}: summary: worst_m 1 stored" in res.output
+
+
+def test_a_store_being_written_is_checked_as_it_stood(pristine, tmp_path, monkeypatch):
+    """A row committed (with its digest) while a reader checks is not half seen: no 'no digest' finding."""
+    import vbl_robust.campaigns.verify as verify
+
+    run = _copy(pristine, tmp_path / "live")
+    with ResultStore(run / "results.sqlite") as writer:  # open: its write-ahead log lies beside the store
+        row = writer.jobs(kind="search", role="main", with_points=True)[0]
+        read_chains = verify.read_chains
+
+        def then_commit(entries):  # the digests read, then a writer commits a row before the rows are read
+            chains = read_chains(entries)
+            writer.commit([row.replace(key="committed-meanwhile")])
+            return chains
+
+        monkeypatch.setattr(verify, "read_chains", then_commit)
+        with ResultStore.open_existing(run) as reader:
+            check = check_store(reader)
+        assert check.ok and "committed-meanwhile" not in {f.key for f in check.findings}, check.findings
+        monkeypatch.undo()
+        with ResultStore.open_existing(run) as reader:
+            after = check_store(reader)
+        assert after.ok and after.rows == check.rows + 1

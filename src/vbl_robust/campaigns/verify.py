@@ -208,7 +208,13 @@ def _settings(store: ResultStore, spec: Any) -> tuple[float, float] | None:
 def check_store(store: ResultStore, spec: Any = None) -> StoreCheck:
     """Every job row of ``store`` against its own evaluations (the settings of ``spec``, default the store's
     campaign), its box, its sample and its digest; the committed rows missing and the digest entries that break
-    their chain. Reads the rows one at a time (bounded memory); changes nothing."""
+    their chain. Reads the rows one at a time (bounded memory), all as of one moment (a store being written is
+    checked as it stood); changes nothing."""
+    with store.snapshot():
+        return _check(store, spec)
+
+
+def _check(store: ResultStore, spec: Any) -> StoreCheck:
     chains = read_chains(store.digest_entries())
     samples = store.samples()
     settings = _settings(store, spec)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import sqlite3
 from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -370,6 +371,19 @@ class ResultStore:
     def changes(self) -> int:
         """Rows this connection has changed since it was opened (a check of the rows read before is stale)."""
         return self._con.total_changes
+
+    @contextmanager
+    def snapshot(self) -> Iterator[None]:
+        """Inside: every read sees the store as of one moment (a read transaction: rows a writer commits meanwhile,
+        with their digests, are not half seen). Nested in a transaction already open: that one."""
+        if self._con.in_transaction:
+            yield
+            return
+        self._con.execute("BEGIN")
+        try:
+            yield
+        finally:
+            self._con.execute("COMMIT")
 
     def job_columns(self) -> Iterator[dict[str, Any]]:
         """Every job row's stored columns as SQLite returns them (``{column: value}``, blobs as bytes), in insertion
