@@ -1,7 +1,7 @@
 """What is checked before a campaign's first job, so that a job the tool cannot complete is refused up front rather
 than found during the run: each method of the campaign can run on the detector (a gradient search needs a detector
-with a differentiable path), and each image of the run is present, decodes and has the size its camera model
-states. A refusal is one ``ValueError`` line naming the option and the value; nothing is stored before it.
+with a differentiable path), each image of the run is present, decodes and has the size its camera model states,
+and a plug-in detector runs on the run's first image. A refusal is one ``ValueError`` line naming the option and the value; nothing is stored before it.
 
 What still fails during a run (a file deleted meanwhile, an exception in the detector) is recorded as *not measured*
 (:class:`~vbl_robust.constants.NotMeasured`), never as a finding.
@@ -16,7 +16,7 @@ from ..constants import NotMeasured
 from .provenance import DetectorSpec
 from .spec import CampaignSpec
 
-__all__ = ["check_images", "check_methods", "check_run", "gradient_methods"]
+__all__ = ["check_images", "check_methods", "check_plugin", "check_run", "gradient_methods"]
 
 
 def gradient_methods(spec: CampaignSpec) -> list[str]:
@@ -71,3 +71,25 @@ def check_run(spec: CampaignSpec, samples: Sequence[Any], detector: DetectorSpec
     needs = gradient_methods(spec)
     if needs:
         check_methods(needs, detector_for(detector), detector.name, monitor_sigma=spec.monitor_sigma_m is not None)
+    if detector.kind == "plugin" and samples:
+        check_plugin(spec, samples[0], detector)
+
+
+def check_plugin(spec: CampaignSpec, sample: Any, detector: DetectorSpec) -> None:
+    """``ValueError`` (one line) unless the plug-in detector runs on the run's first sample: one evaluation at the
+    centre of the first box, through the whole pipeline (its ``detect`` must return one
+    :class:`~vbl_robust.detect.Detections` per view). A detector that raises here would leave every job not
+    measured; what it finds (no detection, a bad pose) is no refusal — that is the pipeline's outcome."""
+    import numpy as np
+
+    from .work import Settings, build_objective, detector_for
+
+    box = next(b.box for blk in spec.blocks for b in blk.boxes)
+    centre = ((np.asarray(box.lower, dtype=np.float64) + np.asarray(box.upper, dtype=np.float64)) / 2)[None]
+    try:
+        build_objective(sample, detector_for(detector), box, Settings.from_spec(spec)).evaluate(centre)
+    except Exception as exc:  # noqa: BLE001 - whatever the user's code raises is one line here
+        text = str(exc).splitlines()[0] if str(exc) else ""
+        raise ValueError(f"--detector-plugin {detector.path}: {NotMeasured.DETECTOR_ERROR.value} on the run's first "
+                         f"image ({sample.id}): {type(exc).__name__}{': ' + text if text else ''}; nothing was run "
+                         "or stored") from None

@@ -84,6 +84,7 @@ def audit(
     out: o.Out = Path("runs/audit"), n: o.Images = None, seed: o.Seed = 0, lard: o.Lard = None,
     width: o.Width = 1024, height: o.Height = 1024,
     model: o.Model = None, trust_model: o.TrustModel = False, design: o.Design = "auto", engine: o.Engine = "auto",
+    detector_plugin: o.DetectorPlugin = None, plugin_digest: o.PluginDigest = None,
     device: o.Device = "cpu", oracle: o.Oracle = False, oracle_noise: o.OracleNoise = 0.0,
     roll: o.Roll = "15", contrast: Contrast = None, perturb: Perturb = None,
     methods: Methods = ",".join(AUDIT_METHODS), method_option: o.MethodOption = None,
@@ -128,7 +129,8 @@ def audit(
             spec.check()
     spec, workers = run_settings(spec, clock, device, workers)
     check_exports(csv, parquet, out)
-    det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
+    det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device, plugin=detector_plugin,
+                        plugin_digest=plugin_digest)
     if monitor_sigma is not None and not getattr(det.build(), "gives_sigma", False):
         fail(f"--monitor-sigma {monitor_sigma:g}: the detector ({det.name}) gives no per-corner σ; the σ monitor "
              "needs a network with an uncertainty head (YOLO26-pose, see train --arch)")

@@ -199,15 +199,25 @@ def with_method_options(spec: Any, options: dict[str, dict[str, Any]], strict: b
 
 def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_noise: float,
                   design: str = "auto", engine: str = "torch", device: str = "cpu", *,
-                  noise_needs_oracle: bool = True) -> Any:
+                  noise_needs_oracle: bool = True, plugin: str | None = None, plugin_digest: str | None = None) -> Any:
     """:meth:`DetectorSpec.from_choice <vbl_robust.detect.shipped.DetectorSpec.from_choice>` of the detector
     options, or one line; notes on standard error when the oracle stands in for the shipped model (and why) or
     when the shipped model has open accuracy goals."""
     from vbl_robust.detect.shipped import DetectorSpec, default_model_status
 
+    # consent to run code (a .pt pickle, a plug-in) is the user's typing, never a value read from a --config file:
+    # a plug-in named on the command line is consent to import it; one from a file needs --trust-model typed
+    if trust_model and from_config("trust_model"):
+        fail("--trust-model: give it on the command line; a --config file cannot consent to running a model's code")
+    consent = trust_model or (plugin is not None and not from_config("detector_plugin"))
+    if plugin is not None and not consent:
+        fail(f"--detector-plugin {plugin} comes from a --config file: importing it runs its code; pass --trust-model "
+             "on the command line if you trust it")
     with one_line():
         spec = DetectorSpec.from_choice(model, oracle=oracle, oracle_noise=oracle_noise, design=design, engine=engine,
-                                        device=device, trust=trust_model, noise_needs_oracle=noise_needs_oracle)
+                                        device=device, trust=trust_model if plugin is None else consent,
+                                        noise_needs_oracle=noise_needs_oracle, plugin=plugin,
+                                        plugin_digest=plugin_digest)
     if spec.kind == "default":
         _note_open_goals(spec.shipped_name)
     elif spec.kind == "oracle" and not oracle:
@@ -216,6 +226,17 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
                     "Pass --model PATH for your model, or --model default to audit the shipped one anyway.",
                     fg=typer.colors.YELLOW, err=True)
     return spec
+
+
+def from_config(param: str, ctx: Any = None) -> bool:
+    """Whether the running command's option ``param`` took its value from a ``--config`` file (the context's default
+    map) — data, not the user's typing. Compared by name: typer carries its own copy of click (and its
+    ``ParameterSource``); ``ctx`` defaults to the running command's."""
+    if ctx is None:
+        from typer._click.globals import get_current_context  # typer's own click: where its commands run
+
+        ctx = get_current_context(silent=True)
+    return ctx is not None and getattr(ctx.get_parameter_source(param), "name", None) == "DEFAULT_MAP"
 
 
 def _note_open_goals(name: str = "default") -> None:

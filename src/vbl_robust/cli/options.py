@@ -12,7 +12,7 @@ import typer
 from ..constants import MAX_IMAGE_SIDE, MAX_IMAGES, MAX_SEED
 from .config import Config
 
-__all__ = ["DEFAULT_IMAGES", "Address", "AllowUnmeasured", "Batch", "Clock", "Config", "Csv", "Design", "Device", "Engine", "Executor",
+__all__ = ["DEFAULT_IMAGES", "Address", "AllowUnmeasured", "DetectorPlugin", "PluginDigest", "Batch", "Clock", "Config", "Csv", "Design", "Device", "Engine", "Executor",
            "Height", "Images", "Imgsz", "Lard", "MethodOption", "Model", "Oracle", "OracleNoise", "Out", "Parquet", "Pnp",
            "Quiet", "Report", "RetryFailed", "Roll", "Seed", "StoredRun", "Threads", "TrustModel", "Verbose", "Wait",
            "Width", "Workers"]
@@ -46,6 +46,13 @@ Model = Annotated[Path | None, typer.Option("--model", help="Detector: a YOLO-po
                                             "the shipped model, or 'hardened' for the shipped model hardened by "
                                             "vbl-robust harden once installed (default: the shipped model once it is "
                                             "validated, else the oracle).")]
+DetectorPlugin = Annotated[str | None, typer.Option(
+    "--detector-plugin", help="Any detector: MODULE:FACTORY or path/to/file.py:FACTORY, a factory returning an object "
+    "that satisfies the Detector protocol (how-to: a detector plug-in). It is imported and run: naming it here is "
+    "your consent; from a --config file it needs --trust-model. Not with --model or --oracle.")]
+PluginDigest = Annotated[str | None, typer.Option(
+    "--plugin-digest", help="With --detector-plugin: the SHA-256 of the plug-in's weights, recorded in its identity "
+    "(the plug-in's source file is hashed by vbl-robust itself).")]
 TrustModel = Annotated[bool, typer.Option("--trust-model", help="Allow loading a .pt pickle from outside the package.")]
 Design = Annotated[str, typer.Option("--detector", help="Detector design: auto (the shipped model's own; a user's "
                                      "model as one pass), single (one pass: the paper's pipeline) or twostage.")]

@@ -69,6 +69,7 @@ def reproduce(
     experiment: Experiment, out: Out = None, images: Images = None, seed: o.Seed = 0, lard: o.Lard = None,
     width: o.Width = 1024, height: o.Height = 1024,
     model: o.Model = None, trust_model: o.TrustModel = False, design: o.Design = "auto", engine: o.Engine = "auto",
+    detector_plugin: o.DetectorPlugin = None, plugin_digest: o.PluginDigest = None,
     device: o.Device = "cpu", oracle: o.Oracle = False, oracle_noise: o.OracleNoise = 0.0,
     methods: Methods = None, method_option: o.MethodOption = None, landscape: Landscape = True,
     max_evals: MaxEvals = None, grid_step: GridStep = None, time_budgets: TimeBudgets = None,
@@ -94,7 +95,8 @@ def reproduce(
     check_exports(csv, parquet, out)
     method_opts = parse_method_options(method_option)
     _check_method_options(method_opts, [exp.build(seed, opts) for exp in exps])
-    det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
+    det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device, plugin=detector_plugin,
+                        plugin_digest=plugin_digest)
     root = out or Path("runs") / (experiment if group else exps[0].name)
     if estimate:
         from vbl_robust.campaigns.estimate import PROBE_IMAGES

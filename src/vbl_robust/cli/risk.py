@@ -34,6 +34,7 @@ def risk(
     out: o.Out = Path("runs/risk"), n: o.Images = None, seed: o.Seed = 0, lard: o.Lard = None,
     width: o.Width = 1024, height: o.Height = 1024,
     model: o.Model = None, trust_model: o.TrustModel = False, design: o.Design = "auto", engine: o.Engine = "auto",
+    detector_plugin: o.DetectorPlugin = None, plugin_digest: o.PluginDigest = None,
     device: o.Device = "cpu", oracle: o.Oracle = False, oracle_noise: o.OracleNoise = 0.0,
     roll: o.Roll = "15", contrast: Contrast = None, perturb: Perturb = None, dist: Dist = None,
     methods: Methods = "mc,guided", max_evals: MaxEvals = 1024, tau: Tau = 0.01, delta: Delta = 0.05,
@@ -64,7 +65,8 @@ def risk(
                          tau=tau, delta=delta, guide_evals=guide_evals, pnp=pnp)
     spec, workers = run_settings(spec, "auto", device, workers)
     check_exports(csv, parquet, out)
-    det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device)
+    det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device, plugin=detector_plugin,
+                        plugin_digest=plugin_digest)
     samples, source = load(n, seed, lard, width, height)
     config = {"command": "risk", "n": len(samples), "seed": seed, "lard": str(lard) if lard else None,
               "roll": roll, "contrast": contrast, "perturb": list(perturb or []), "dist": list(dist or []),

@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from . import options as o
-from .common import fail, one_line, set_verbosity
+from .common import fail, from_config, one_line, set_verbosity
 from .run import finish, run_settings, run_with_progress
 
 Run = Annotated[Path, typer.Argument(help="A run directory (e.g. runs/paper/spatial-2d).")]
@@ -36,7 +36,7 @@ def truth(
     from vbl_robust.detect.shipped import DetectorSpec
 
     quiet = set_verbosity(quiet=quiet, verbose=verbose)
-    if trust_model and _from_file(ctx, "trust_model"):  # consent to run the store's code is the user's, not a file's
+    if trust_model and from_config("trust_model"):  # consent to run the store's code is the user's, not a file's
         fail("--trust-model: give it on the command line; a --config file cannot consent to run a store's code")
     try:
         grid = tuple(int(c) for c in counts.split(","))
@@ -72,9 +72,3 @@ def truth(
                + "; true breaches missed: " + ", ".join(f"{m} {k}" for m, k in t.missed.items()))
     if not complete:
         raise typer.Exit(1)
-
-
-def _from_file(ctx: typer.Context, name: str) -> bool:
-    """Whether the option ``name`` took its value from a ``--config`` file (the context's default map; compared by
-    name: typer carries its own copy of click's ``ParameterSource``)."""
-    return getattr(ctx.get_parameter_source(name), "name", None) == "DEFAULT_MAP"

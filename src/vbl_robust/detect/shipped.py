@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib
 import json
 import logging
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -43,7 +44,7 @@ DEFAULT_MODEL = MODELS_DIR / "runway_yolov8n_pose.pt"
 SHIPPED_MODELS = {"default": "", "hardened": "hardened"}  # name -> its directory under MODELS_DIR
 #: Designs of a pose-model detector: one pass on the letterboxed image, or a pass on it and one on a crop.
 DESIGNS = ("single", "twostage")
-DETECTOR_KINDS = ("oracle", "default", "ultralytics", "onnx", "factory")
+DETECTOR_KINDS = ("oracle", "default", "ultralytics", "onnx", "factory", "plugin")
 #: Kinds whose spec names code, ``"module:callable"``: building the detector imports the module and calls the
 #: callable with the spec's options (a factory: tests and the Python API; a plug-in: ``--detector-plugin``). Only
 #: with the user's consent when the spec comes from data (:func:`consent_needed`).
@@ -295,7 +296,8 @@ class DetectorSpec:
     def from_choice(cls, model: str | Path | None = None, *, oracle: bool = False, oracle_noise: float = 0.0,
                     design: str = "auto", engine: str = "torch", device: str = "cpu", trust: bool = False,
                     options: dict[str, Any] | None = None, noise_needs_oracle: bool = True,
-                    option: str = "--model") -> DetectorSpec:
+                    option: str = "--model", plugin: str | None = None,
+                    plugin_digest: str | None = None) -> DetectorSpec:
         """The detector a user chose — the one way every command and workflow makes one.
 
         ``oracle``: the oracle, with ``oracle_noise`` px of fixed corner noise; else ``model``: a shipped model's
@@ -314,6 +316,9 @@ class DetectorSpec:
         opts = _model_options(oracle, oracle_noise, design, engine, device, noise_needs_oracle)
         if oracle and model is not None:
             raise ValueError(f"--oracle and {option} are exclusive")
+        if plugin is not None or plugin_digest is not None:
+            return cls.plugin(plugin, plugin_digest, trust=trust, taken=(oracle and "--oracle") or
+                              (model is not None and option) or (design != "auto" and "--detector") or None)
         if oracle:
             return cls.oracle(oracle_noise)
         opts.update(options or {})
@@ -327,6 +332,26 @@ class DetectorSpec:
         spec = cls.from_path(model, trust=trust, option=option)
         refuse_without_consent(spec, trust, where=f"{option} ")
         return replace(spec, options=opts) if opts else spec
+
+    @classmethod
+    def plugin(cls, target: str | None, digest: str | None = None, *, trust: bool = False,
+               taken: str | None = None) -> DetectorSpec:
+        """A plug-in detector (:mod:`.plugin`): ``target`` = ``MODULE:FACTORY`` or ``FILE.py:FACTORY``; ``digest``
+        = the SHA-256 of its weights as the user states it (64 hex digits; part of its identity); ``taken``: an
+        option that chose another detector (refused: one detector per run). Building it imports the user's code:
+        ``trust`` is the consent (the command line's ``--detector-plugin`` gives it; a value from data does not)."""
+        if target is None:
+            raise ValueError("--plugin-digest needs --detector-plugin")
+        if taken:
+            raise ValueError(f"--detector-plugin and {taken} are exclusive (one detector per run)")
+        from .plugin import parse_plugin
+
+        parse_plugin(target)
+        if digest is not None and not re.fullmatch(r"[0-9a-fA-F]{64}", digest):
+            raise ValueError(f"--plugin-digest {digest}: expected the SHA-256 of the weights, 64 hex digits")
+        spec = cls("plugin", target, trust=trust, options={} if digest is None else {"weights_sha256": digest.lower()})
+        refuse_without_consent(spec, trust, where="--detector-plugin ")
+        return spec
 
     @classmethod
     def from_identity(cls, ident: Mapping[str, Any], *, trust: bool = False, where: str = "") -> DetectorSpec:
@@ -359,10 +384,15 @@ class DetectorSpec:
 
     @property
     def model_file(self) -> Path | None:
+        """The file whose SHA-256 identifies the detector: the weights, or a plug-in's source file."""
         if self.kind == "default":
             return default_model_path(self.shipped_name)
         if self.kind in ("ultralytics", "onnx"):
             return Path(self.path)
+        if self.kind == "plugin":
+            from .plugin import plugin_source
+
+            return plugin_source(self.path)
         return None
 
     @property
@@ -406,7 +436,7 @@ class DetectorSpec:
         design None for a factory's detector (its own)."""
         if self.kind == "oracle":
             return "oracle", None
-        if self.kind == "factory":
+        if self.kind in CODE_KINDS:
             return None, None
         info = default_model_info(self.shipped_name) if self.kind == "default" else {}
         design = self.options.get("design") or info.get("detector", "single")
@@ -453,6 +483,10 @@ class DetectorSpec:
 
             model = UltralyticsDetector(self.path, trust=self.trust, **opts)
             return with_design(with_engine(model, engine, trust=self.trust), design, **window)
+        if self.kind == "plugin":
+            from .plugin import build_plugin
+
+            return build_plugin(self.path)
         module, _, attr = self.path.partition(":")
         return getattr(importlib.import_module(module), attr)(**self.options)
 
