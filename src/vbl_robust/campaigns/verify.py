@@ -145,11 +145,12 @@ _FIELDS = {"worst_m": "worst_m", "worst_x": "worst_x_json", "verdict": "verdict"
            "n_failed": "n_failed", "failures": "failures_json", "worst_reason": "worst_reason"}
 
 
-def row_findings(row: JobRow, *, eps_safe_m: float, penalty_m: float) -> list[Finding]:
+def row_findings(row: JobRow, *, eps_safe_m: float, penalty_m: float, committed: bool = False) -> list[Finding]:
     """What is inconsistent in one decoded row (with its points) by itself: θ* outside its box; a job not measured
     holding a result; a search or failure-probability row whose summary is not what its stored evaluations give
-    (``eps_safe_m``, ``penalty_m``: the campaign's); a searched row without its evaluations. Implied rows are
-    checked against their chain by :func:`check_store`."""
+    (``eps_safe_m``, ``penalty_m``: the campaign's); a searched row without its evaluations, unless ``committed``
+    (its digest shows it is the row committed: rows a caller commits without points, as tests do). Implied rows
+    are checked against their chain by :func:`check_store`."""
     found = [f for f in (_outside_box(row),) if f is not None]
     if row.status is JobStatus.NOT_MEASURED:
         if row.worst_m is not None or (row.points is not None and len(row.points)) or row.verdict not in (
@@ -163,6 +164,8 @@ def row_findings(row: JobRow, *, eps_safe_m: float, penalty_m: float) -> list[Fi
                                  f"{_show(row.verdict)} at ε_safe = {eps_safe_m:g} m", ("worst_m", "verdict")))
         return found
     if row.kind not in ("search", "risk"):
+        return found
+    if row.points is None and committed:
         return found
     if row.points is None or row.box is None:
         found.append(Finding(row.key, FindingKind.SUMMARY, "a finished job without its stored evaluations or box",
@@ -246,7 +249,8 @@ def _check(store: ResultStore, spec: Any) -> StoreCheck:
                                  f"{str(exc).splitlines()[0] if str(exc) else ''})"))
             row = None
         if row is not None and settings is not None:
-            row_f += row_findings(row, eps_safe_m=settings[0], penalty_m=settings[1])
+            committed = entry is not None and entry["event"] == STORED and not row_f
+            row_f += row_findings(row, eps_safe_m=settings[0], penalty_m=settings[1], committed=committed)
             if row.status is JobStatus.IMPLIED:
                 implied.append(row.replace(points=None, trace=()))
             elif row.chain is not None and row.verdict is Verdict.BREACH:
