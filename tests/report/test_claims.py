@@ -69,13 +69,18 @@ def test_every_claim_has_a_row_computed_on_every_image(claims):
 def test_pnp_row_is_pnp_summary_of_the_store(root, claims):
     store, _ = _open(root, "pnp-validation")
     with store:
-        med = {(s["source"], s["solver"]): s["median_rel_pct"] for s in mx.pnp_summary(store.jobs(kind="pnp"))}
+        jobs = store.jobs(kind="pnp")
+        med = {(s["source"], s["solver"]): s["median_rel_pct"] for s in mx.pnp_summary(jobs)}
     row = claims[0]
     parts = []
     for src in (TRUNCATED, "detector"):
         a, b = med[(src, "ippe_lm")], med[(src, "iterative")]
         assert f"{src}: ippe_lm {fmt_num(a)} % vs iterative {fmt_num(b)} %" in row.ours
-        parts.append(None if math.isnan(a) or math.isnan(b) else a <= 1.25 * b)
+        errs = [r.payload["errors"][src] for r in jobs if r.payload]
+        rel = {s: [math.nan if e[s]["abs_m"] is None else e[s]["rel_pct"] for e in errs] for s in ("ippe_lm", "iterative")}
+        out, text = C.pnp_part(rel["ippe_lm"], rel["iterative"], src)
+        parts.append(out)
+        assert text in row.reason and "median ratio ippe_lm / iterative" in text
     assert not math.isnan(med[(TRUNCATED, "ippe_lm")])  # the sizes above leave something to compare
     assert row.verdict == C.combine(parts) and row.truth == ""
 
@@ -138,7 +143,16 @@ def test_roughness_row_reads_the_complete_runtime_grid(root, claims):
         f = np.where(np.isfinite(g.points.fs), g.points.fs, spec.penalty_m)[np.argsort(g.points.xs[:, 0])]
         jumps.append(float(np.max(np.abs(np.diff(f)))))
     assert f"median largest jump {fmt_num(float(np.median(jumps)))} m" in claims[8].ours
-    assert claims[8].verdict == C.rough_verdict(jumps, spec.eps_safe_m)
+    verdict, why = C.rough_part(jumps, spec.eps_safe_m)
+    assert claims[8].verdict == verdict and claims[8].reason == why + "." and "exact 95 %" in why
+
+
+def test_every_row_states_a_test_or_an_interval(claims):
+    """Issue 57: 9 of 9 claim rows say in their reason the test or the interval behind the verdict (the committed
+    bundle's: tests/report/test_claims_noise.py)."""
+    said = ("p = ", "[", "exact 95 %", "no method breaches")  # these 2 images: runtime-1d may breach nowhere
+    missing = [c.reason for c in claims if not any(s in c.reason for s in said)]
+    assert not missing, missing
 
 
 def test_missing_experiments_say_not_run_yet(root, tmp_path):
@@ -192,7 +206,7 @@ def test_markdown_has_one_row_per_claim_and_says_how_it_was_made(root, claims):
     rows = [ln for ln in md.splitlines() if ln.startswith("| ")]
     assert len(rows) == 1 + len(claims)  # the header, then one per claim
     assert all(ln.replace("\\|", "").count("|") == 8 for ln in rows)  # 7 cells each, escaped pipes aside
-    assert "\\|PO_k\\|" in md and f"under `{root}`" in md and "write_claims" in md
+    assert "\\|PO_k\\|" in md and f"under `{root}`" in md and "write_claims" in md and "bootstrap" in md
     path = C.write_claims(root)
     assert path == root / "claims.md" and path.read_text() == md
 
@@ -215,14 +229,6 @@ def test_html_escapes_every_text(claims):
 ])
 def test_combine(parts, verdict):
     assert C.combine(parts) == verdict
-
-
-def test_comparisons_skip_unknown_budgets():
-    nan = math.nan
-    assert C.at_most([0, 50], [0, 60]) is True and C.at_most([0, 70], [0, 60]) is False
-    assert C.at_most([nan, 70], [0, nan]) is None and C.at_most([nan, 10], [0, 20]) is True
-    assert C.behind([50, 60], [50, 50]) is True and C.behind([50, 50], [50, 50]) is False
-    assert C.behind([60, 40], [50, 50]) is False and C.behind([nan], [1]) is None
 
 
 def _verdict_row(method, half_width, sid, worst, status=JobStatus.DONE, nfev=4):
@@ -271,45 +277,6 @@ def test_fewer_evaluations_is_judged_by_the_signed_rank_test():
     assert C.fewer_evals([3.0], [3.0])[0] is ClaimVerdict.TIE and C.fewer_evals([], [])[0] is None
 
 
-def test_times_differ():
-    assert C.times_differ({"a": 1.0}) is None
-    assert C.times_differ({"a": 0.1, "b": 0.3}) is True and C.times_differ({"a": 0.1, "b": 0.15}) is False
-    assert C.times_differ({"a": 0.1, "b": math.inf}) is True  # one method never breaches
-    assert C.times_differ({"a": math.inf, "b": math.inf}) is False
-
-
-def test_plateau_and_crossing():
-    assert C.plateaus_near([200, 480, 510]) is True
-    assert C.plateaus_near([480, 900]) is False  # still climbing
-    assert C.plateaus_near([1100, 1150]) is False  # not ≈ 500 m
-    assert C.plateaus_near([math.nan, 500]) is None
-    assert C.crosses_by([0.5, 2.0, 5.0], [400, 1200, 3000], 1000) is True
-    assert C.crosses_by([0.5, 2.0, 5.0], [400, 900, 3000], 1000) is False  # only at 5 s
-    assert C.crosses_by([5.0], [3000], 1000) is None
-
-
-def test_phi_rules():
-    assert C.phi_near([10, 20], 15) is True and C.phi_near([25], 15) is False
-    assert C.phi_near([math.inf], 30) is False and C.phi_near([], 15) is None
-    assert C.at_most([45, 45], [math.inf, 45]) is True and C.at_most([45], [40]) is False  # APGD at the limit
-
-
-def test_convergence_rules():
-    assert C.ra_below({1: 100, 5: 30, 9: 15, 12: 40}) is True
-    assert C.ra_below({k: 30.0 for k in range(1, 11)}) is False
-    assert C.ra_below({1: 100, 2: 50}) is None  # fewer than 10 iterations and not below yet
-    assert C.rises_then_plateaus([1, 3, 6, 9, 9, 10, 9, 10]) is True
-    assert C.rises_then_plateaus([1, 3, 6, 9, 15, 22, 30, 40]) is False  # still rising
-    assert C.rises_then_plateaus([1, 9, 10, 9, 10, 3]) is False  # drops again
-    assert C.rises_then_plateaus([3, 3, 3, 3]) is False and C.rises_then_plateaus([1, 2, 3]) is None
-
-
-def test_rough_verdict():
-    assert C.rough_verdict([2000, 3000, 10], 1000) == C.HOLDS
-    assert C.rough_verdict([2000, 10, 10], 1000) == C.PARTLY
-    assert C.rough_verdict([10, 20], 1000) == C.FAILS and C.rough_verdict([], 1000) == C.NOT_RUN
-
-
 def _row(fs, xs=None, times=None):
     fs = np.asarray(fs, dtype=float)
     xs = np.arange(len(fs), dtype=float)[:, None] if xs is None else np.asarray(xs, dtype=float)[:, None]
@@ -323,25 +290,3 @@ def test_first_breach_and_largest_jump():
     assert math.isnan(C.first_breach_s(_row([10, 2000]), 1000, 5000))  # no stamped times
     jump, slope = C.largest_jump(np.array([[0.1], [0.0], [0.2]]), np.array([300.0, 100.0, 5000.0]), 5000)
     assert jump == pytest.approx(4700) and slope == pytest.approx(47000)
-
-
-def test_the_index_has_one_card_per_experiment_with_its_figure_and_the_verdicts_on_it(tmp_path):
-    (tmp_path / "spatial-1d").mkdir()
-    (tmp_path / "spatial-1d" / "report.html").write_text("x")
-    (tmp_path / "spatial-1d" / "headline.png").write_bytes(b"png")
-    (tmp_path / "x<y>").mkdir()
-    claims = [C.Claim("spatial-1d", "claim A", "", "", C.HOLDS, "", 3),
-              C.Claim("spatial-1d + spatial-2d", "claim B & more", "", "", C.TIE, "", 3),
-              C.Claim("runtime-1d", "claim C", "", "", C.FAILS, "", 3)]
-    page = C.write_index(tmp_path, ["spatial-1d", "x<y>"], C.claims_html(claims), {"spatial-1d": "3 of 3 jobs"},
-                         claims=claims).read_text()
-    cards = page.split('<div class="cards">')[1].split("</div></div>")[0].split('<div class="card">')[1:]
-    assert len(cards) == 2
-    spatial, other = cards
-    assert '<a href="spatial-1d/report.html">spatial-1d</a>' in spatial and "3 of 3 jobs" in spatial
-    assert '<img src="spatial-1d/headline.png"' in spatial and "Spatial" in spatial  # the experiment's title
-    assert 'verdict-holds">holds</span> claim A' in spatial and 'verdict-tie">tie</span> claim B &amp; more' in spatial
-    assert "claim C" not in spatial and "x&lt;y&gt;" in other and "no report yet" in other and "<img" not in other
-    # the claims table below: prose left-aligned, the numbers folded under each claim
-    table = page.split('<section class="claims">')[1]
-    assert table.count('<td class="l">claim A<details>') == 1 and table.count("verdict-does-not-hold") == 1

@@ -17,8 +17,9 @@ and, with ``stores=True``, ``results.sqlite.xz``: a compact copy of the store (`
 
 and ``out/status.md``: one line per experiment (jobs done / planned, images, wall and worker hours),
 ``out/claims.md``: the paper's claims checked on those stores (:mod:`vbl_robust.report.claims`), and
-``out/index.html``: one card per experiment (a link to its report, its jobs done, its headline figure and the
-verdicts of the claims on it) and the claims section. With
+``out/index.html``: the overall verdict and what was measured (data, model), the claims section, then one card
+per experiment in the paper's order (a link to its report, its jobs done, the verdicts of the claims on it and its
+headline figure). Names from the runs are escaped in every file (Markdown: :func:`~.markdown.esc_md`). With
 ``reproduction=PATH`` the part of that Markdown file between :data:`BEGIN` and :data:`END` is replaced by the
 claims and status tables (the rest of it is prose kept as written). Without ``stores``
 the SQLite stores are not copied (tens of MB; a packed store already in ``out`` is kept); rerunning the command that
@@ -27,6 +28,9 @@ made them regenerates them.
 Atomic as a whole: everything is written into a staging directory beside ``out`` first and moved into ``out`` only
 when complete (:func:`_publish`), so a bundle killed midway leaves the previous bundle as it was, never experiments
 without their ``index.html`` or ``claims.md``.
+
+:func:`refresh_bundle` rewrites only the top files (and REPRODUCTION.md's generated part) of a committed bundle
+from its own packed stores and provenance, without the run directories: after a change of the claims' rules.
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ from typing import Any
 
 from ..atomic import atomic_write
 from ..campaigns.store import PACKED, STORE, ResultStore, RunRecord, pack_store
+from .markdown import esc_md
 
 #: Markers of the generated part of a REPRODUCTION.md (:func:`write_bundle`).
 BEGIN, END = "<!-- bundle:begin -->", "<!-- bundle:end -->"
@@ -135,15 +140,16 @@ def _publish(stage: Path, out: Path) -> None:
             os.replace(entry, target)
 
 def status_markdown(totals: dict[str, dict[str, Any]]) -> str:
-    """The per-experiment status table of a bundle (Markdown): wall hours of its runs; worker hours (each job's wall
+    """The per-experiment status table of a bundle (Markdown; names escaped, :func:`esc_md`): wall hours of its runs; worker hours (each job's wall
     time in its worker, waits for a shared core included); search hours on the campaign's clock (on the process
     clock: the CPU hours the searches took, what an idle machine would need)."""
     lines = ["| experiment | jobs done / planned | images | wall (h) | worker (h) | searches (h, on the clock) | clock "
              "| workers |", "|---|---|---|---|---|---|---|---|"]
     for name, t in totals.items():
-        lines.append(f"| {name} | {t['jobs_done']} / {t['jobs_planned']} | {t['images_with_jobs']} of "
+        lines.append(f"| {esc_md(name)} | {t['jobs_done']} / {t['jobs_planned']} | {t['images_with_jobs']} of "
                      f"{t['images']} | {t['wall_s'] / 3600:.2f} | {t['worker_s'] / 3600:.2f} | "
-                     f"{t.get('search_s', 0.0) / 3600:.2f} | {t['clock']} | {', '.join(map(str, t['workers'])) or '–'} |")
+                     f"{t.get('search_s', 0.0) / 3600:.2f} | {esc_md(t['clock'])} | "
+                     f"{esc_md(', '.join(map(str, t['workers'])) or '–')} |")
     hours = {k: sum(t.get(k, 0.0) for t in totals.values()) / 3600 for k in ("wall_s", "worker_s", "search_s")}
     lines.append(f"| **all** | {sum(t['jobs_done'] for t in totals.values())} / "
                  f"{sum(t['jobs_planned'] for t in totals.values())} | | {hours['wall_s']:.2f} | {hours['worker_s']:.2f} "
@@ -160,38 +166,79 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
     if Path(out).resolve() == Path(root).resolve():
         raise ValueError(f"--out {out}: the bundle goes beside the runs, not into their directory (it would replace "
                          "each run's report)")
-    from .claims import claims_html, claims_markdown, claims_of, write_index
-
     runs = run_dirs(root, names)
     if not runs:
         raise FileNotFoundError(f"{root}: no experiment run directory (<experiment>/{STORE}) found")
-    text = None
-    if reproduction is not None:
-        text = Path(reproduction).read_text()
-        if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
-            raise ValueError(f"{reproduction}: needs one {BEGIN} line followed by one {END} line")
+    text = _reproduction_text(reproduction) if reproduction is not None else None
     out = Path(out)
     stage = out.parent / f".{out.name}.staging"  # the whole bundle is written here, then published into out
     shutil.rmtree(stage, ignore_errors=True)
     stage.mkdir(parents=True)
     try:
         totals = {run.name: write_experiment(run, stage / run.name, stores, keep=out / run.name) for run in runs}
-        status = status_markdown(totals)
-        checked = claims_of(root)
-        claims = claims_markdown(checked, str(root))
-        atomic_write(stage / "status.md", status)
-        atomic_write(stage / "claims.md", claims)
-        write_index(stage, list(totals), claims_html(checked, str(root)),
-                    {n: f"{t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} of {t['images']} "
-                        f"images" for n, t in totals.items()}, claims=checked)
+        claims = _write_top(stage, totals, root)
         _publish(stage, out)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
     if text is not None:
-        head, rest = text.split(BEGIN)
-        tail = rest.split(END)[1]
-        atomic_write(Path(reproduction), f"{head}{BEGIN}\n## The paper's claims, checked\n\n{claims}\n"
-                                      f"## Status of the runs\n\n{status}{END}{tail}")
+        _write_reproduction(Path(reproduction), text, claims, status_markdown(_ordered(totals)))
+    return totals
+
+
+def _ordered(totals: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    from .claims_page import paper_order
+
+    return {n: totals[n] for n in paper_order(list(totals))}
+
+
+def _write_top(out: Path, totals: dict[str, dict[str, Any]], root: Path) -> str:
+    """Write ``out/status.md``, ``out/claims.md`` (the claims of the stores under ``root``) and ``out/index.html``
+    (the experiments ``totals`` names, in the paper's order); returns the claims' Markdown."""
+    from .claims import claims_html, claims_markdown, claims_of, write_index
+
+    totals = _ordered(totals)
+    checked = claims_of(root)
+    claims = claims_markdown(checked, str(root))
+    atomic_write(out / "status.md", status_markdown(totals))
+    atomic_write(out / "claims.md", claims)
+    write_index(out, list(totals), claims_html(checked, str(root)),
+                {n: f"{t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} of {t['images']} "
+                    f"images" for n, t in totals.items()}, claims=checked)
+    return claims
+
+
+def _reproduction_text(reproduction: Path) -> str:
+    """The text of a REPRODUCTION.md; ``ValueError`` when it lacks the markers of its generated part."""
+    text = Path(reproduction).read_text()
+    if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
+        raise ValueError(f"{reproduction}: needs one {BEGIN} line followed by one {END} line")
+    return text
+
+
+def _write_reproduction(path: Path, text: str, claims: str, status: str) -> None:
+    """Replace the generated part of ``text`` (a REPRODUCTION.md) by the claims and status tables."""
+    head, rest = text.split(BEGIN)
+    tail = rest.split(END)[1]
+    atomic_write(path, f"{head}{BEGIN}\n## The paper's claims, checked\n\n{claims}\n"
+                       f"## Status of the runs\n\n{status}{END}{tail}")
+
+
+def refresh_bundle(out: Path, reproduction: Path | None = None) -> dict[str, dict[str, Any]]:
+    """Rewrite a bundle's ``status.md``, ``claims.md`` and ``index.html`` (and the generated part of
+    ``reproduction``) from what the bundle itself holds — each experiment's ``provenance.json`` totals and its
+    packed store (:func:`~vbl_robust.report.claims.claims_of` reads ``results.sqlite.xz``) — without rerunning or
+    rebuilding a report: after a change of the claims' rules or of the index. ``FileNotFoundError`` when ``out``
+    holds no bundled experiment; ``ValueError`` when ``reproduction`` lacks the markers (checked first)."""
+    out = Path(out)
+    text = _reproduction_text(reproduction) if reproduction is not None else None
+    totals = {}
+    for prov in sorted(out.glob("*/provenance.json")):
+        totals[prov.parent.name] = json.loads(prov.read_text())["totals"]
+    if not totals:
+        raise FileNotFoundError(f"{out}: no bundled experiment (<experiment>/provenance.json) found")
+    claims = _write_top(out, totals, out)  # each file replaced atomically; the experiments are left as they are
+    if text is not None:
+        _write_reproduction(Path(reproduction), text, claims, status_markdown(_ordered(totals)))
     return totals
 
 
