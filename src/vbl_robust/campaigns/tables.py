@@ -3,7 +3,8 @@
 :func:`export` writes one line per job with the identifying columns, the worst error and point (one column per
 parameter, real units), verdict, the detector that was audited (name, SHA-256, design: single pass or two-stage,
 input size, engine), the kind of breach (``breach_kind``: safe / flagged / misleading) and what "no
-breach found" is worth for a uniform random search (``residual_bound``), counts and timings (a sequence campaign's main jobs also their breach facts along the approach,
+breach found" is worth for a uniform random search (``residual_bound``), the image's unperturbed error L(0)
+(``nominal_m``, from main jobs stored with it; empty in older stores), counts and timings (a sequence campaign's main jobs also their breach facts along the approach,
 :data:`SEQUENCE_COLUMNS`); traces, evaluated points and per-frame errors stay in the store. A run that reads smaller
 budgets off its trace (runtime experiments) is followed by one line per read budget, derived from it
 (:func:`~vbl_robust.campaigns.metrics.read_off_rows`; column ``read_from`` = the run's budget label).
@@ -27,7 +28,7 @@ COLUMNS = (
     "box_level", "budget_label", "max_evals", "max_seconds", "max_iters", "stop_at_breach", "seed", "status",
     "reason", "worst_m", "verdict", "nfev", "nit", "n_failed", "failures", "worst_reason", "search_status",
     "search_s", "job_s", "upper_bound", "bound_estimate", "run_id", "key", "read_from", "breach_kind",
-    "residual_bound", "detector", "detector_sha256", "design", "input_size", "engine",
+    "residual_bound", "detector", "detector_sha256", "design", "input_size", "engine", "nominal_m",
 )
 #: The detector columns of every job line (the campaign's detector identity): which pipeline was audited.
 DETECTOR_COLUMNS = {"detector": "name", "detector_sha256": "sha256", "design": "design", "input_size": "input_size",
@@ -78,11 +79,14 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
                   ([r] + ([read_off(full[r.key], b, eps, penalty) for b in r.budget.read_budgets()]
                           if r.key in full else []))]
     rows, params, sequences, has_risk = [], [], False, False
+    nominal = {r.sample_id: (r.payload or {})["nominal"].get("error_m") for r in stored
+               if "nominal" in (r.payload or {})}  # L(0): the image's, whatever the job
     for r in stored:
         s = samples.get(r.sample_id, {})
         b = {} if r.budget is None else r.budget.to_dict()
         d = {c: _plain(getattr(r, c, None)) for c in COLUMNS}
         d.update(detector)
+        d["nominal_m"] = nominal.get(r.sample_id)
         d.update(slant_distance_m=s.get("slant_distance_m"), envelope=s.get("envelope"), max_evals=b.get("max_evals"),
                  max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"), stop_at_breach=b.get("stop_at_breach"))
         risk = (r.payload or {}).get("risk") if r.kind == "risk" else None

@@ -205,6 +205,18 @@ def worst_details(objective: SearchObjective, x: np.ndarray) -> tuple[dict[str, 
     return out, corners
 
 
+def nominal_details(objective: SearchObjective) -> dict[str, Any]:
+    """The unperturbed image's facts (one evaluation at the identity θ: roll 0, contrast 1, …), stored beside the
+    worst point as the payload's ``nominal``: ``error_m`` = L(0) (the objective: the penalty where it failed),
+    ``reason`` (``""``: a pose), ``conf`` and the predicted ``corners`` (sample's pixels, TR TL BL BR; None: none)."""
+    from ..sequences import nominal_theta
+
+    rec = objective.evaluate(nominal_theta(objective.box))
+    kp = np.asarray(rec.keypoints[0], dtype=np.float64)
+    return {"error_m": _finite(float(rec.loss[0])), "reason": rec.reason[0], "conf": _finite(float(rec.conf[0])),
+            "corners": kp.tolist() if kp.shape == (4, 2) and np.isfinite(kp).all() else None}
+
+
 def sequence_details(objective: SearchObjective, x: np.ndarray, eps_safe_m: float) -> dict[str, Any]:
     """What a sequence job stores about its worst θ (two more evaluations of the sequence): the breach facts of the
     worst θ and of the unperturbed θ (:meth:`~vbl_robust.sequences.SequenceRecord.summary` at ``eps_safe_m``, with
@@ -316,6 +328,7 @@ def run_sample_task(task: SampleTask, detector: Detector, settings: Settings, ru
                     ) -> Iterator[list[JobRow]]:
     """Run a sample's jobs in order; yield the rows to commit after each job."""
     objectives: dict[str, SearchObjective] = {}
+    nominals: dict[str, dict[str, Any]] = {}
     breached: dict[str, JobRow] = {}  # chain -> breaching row
     for job in task.jobs:
         if job.chain is not None and job.chain in breached:
@@ -346,7 +359,9 @@ def run_sample_task(task: SampleTask, detector: Detector, settings: Settings, ru
                 row = row.replace(payload={"sequence": sequence_details(objective, result.x, settings.eps_safe_m)})
             elif job.role == "main" and result.x is not None:
                 details, corners = worst_details(objective, result.x)
-                row = row.replace(payload={"worst": details}, worst_corners=corners)
+                if label not in nominals:  # L(0): one evaluation per image and box, shared by its jobs
+                    nominals[label] = nominal_details(objective)
+                row = row.replace(payload={"worst": details, "nominal": nominals[label]}, worst_corners=corners)
         except Exception as exc:  # the tool could not complete the job: not measured, recorded, the campaign goes on
             kind, detail = not_measured_reason(exc)
             logger.warning("sample %s, job %s/%s not measured (%s): %s", job.sample_id, job.method,
