@@ -68,7 +68,8 @@ def test_wheel_carries_the_models_and_every_package(wheel: Path) -> None:
         names = set(zf.namelist())
     for needed in ("vbl_robust/models/runway_yolov8n_pose.pt", "vbl_robust/models/default.json",
                    "vbl_robust/models/MODEL_CARD.md", "vbl_robust/models/hardened/runway_yolov8n_pose.pt",
-                   "vbl_robust/models/hardened/default.json"):
+                   "vbl_robust/models/hardened/default.json", "vbl_robust/models/yolo26/default.json",
+                   "vbl_robust/models/yolo26/runway_yolo26n_pose_pass2.pt"):
         assert needed in names, needed
     packages = sorted(str(p.parent.relative_to(PACKAGE.parent)) for p in PACKAGE.rglob("__init__.py"))
     assert len(packages) >= 12

@@ -43,9 +43,11 @@ Height = Annotated[int, typer.Option("--height", min=16, max=MAX_IMAGE_SIDE, hel
 
 # -- the detector (vbl_robust.detect.shipped.DetectorSpec.from_choice) --------------------------------------------
 Model = Annotated[Path | None, typer.Option("--model", help="Detector: a YOLO-pose .pt or .onnx file, 'default' for "
-                                            "the shipped model, or 'hardened' for the shipped model hardened by "
-                                            "vbl-robust harden once installed (default: the shipped model once it is "
-                                            "validated, else the oracle).")]
+                                            "the shipped model, 'yolo26' for the shipped model's pass 1 with a "
+                                            "YOLO26-pose crop network that gives each corner's σ (--monitor-sigma), "
+                                            "or 'hardened' for the shipped model hardened by vbl-robust harden once "
+                                            "installed (default: the shipped model once it is validated, else the "
+                                            "oracle).")]
 DetectorPlugin = Annotated[str | None, typer.Option(
     "--detector-plugin", help="Any detector: MODULE:FACTORY or path/to/file.py:FACTORY, a factory returning an object "
     "that satisfies the Detector protocol (how-to: a detector plug-in). It is imported and run: naming it here is "

@@ -39,9 +39,12 @@ MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 DEFAULT_MODEL = MODELS_DIR / "runway_yolov8n_pose.pt"
 #: The models shipped with the package, by the name ``--model NAME`` takes: each a directory holding its weights
 #: (``runway_yolov8n_pose.pt``) and ``default.json`` (how the model runs by default: design, input size; its
-#: version, validation and open goals). ``default`` is what every run uses unless told otherwise; ``hardened``
-#: (``vbl-robust harden``) ships beside it and never replaces it, so every published result keeps its model.
-SHIPPED_MODELS = {"default": "", "hardened": "hardened"}  # name -> its directory under MODELS_DIR
+#: version, validation and open goals; ``"weights"`` names another weights file, ``"first"`` another shipped model
+#: whose network is pass 1 of a two-stage design). ``default`` is what every run uses unless told otherwise;
+#: ``hardened`` (``vbl-robust harden``) ships beside it and never replaces it, so every published result keeps its
+#: model; ``yolo26`` is v9's pass 1 with a YOLO26-pose crop network as pass 2 that says how sure it is of each
+#: corner (per-corner σ: ``--monitor-sigma``).
+SHIPPED_MODELS = {"default": "", "hardened": "hardened", "yolo26": "yolo26"}  # name -> its directory under MODELS_DIR
 #: Designs of a pose-model detector: one pass on the letterboxed image, or a pass on it and one on a crop.
 DESIGNS = ("single", "twostage")
 DETECTOR_KINDS = ("oracle", "default", "ultralytics", "onnx", "factory", "plugin")
@@ -65,8 +68,16 @@ def shipped_model_dir(name: str) -> Path:
 
 
 def default_model_path(name: str = "default") -> Path | None:
-    """The weights file of the shipped model ``name`` (:data:`SHIPPED_MODELS`) if it is installed, else None."""
-    f = DEFAULT_MODEL if name == "default" else shipped_model_dir(name) / DEFAULT_MODEL.name
+    """The weights file of the shipped model ``name`` (:data:`SHIPPED_MODELS`) if it is installed, else None: the
+    file its ``default.json`` names (``"weights"``), else ``runway_yolov8n_pose.pt``."""
+    folder = shipped_model_dir(name)
+    weights = DEFAULT_MODEL.name
+    if name != "default":
+        try:
+            weights = str(json.loads((folder / "default.json").read_text()).get("weights") or weights)
+        except (OSError, ValueError, AttributeError):
+            pass
+    f = folder / Path(weights).name  # a name inside the model's directory, never a path out of it
     return f if f.is_file() else None
 
 
@@ -135,6 +146,18 @@ def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str |
     det = UltralyticsDetector(path, trust=True, imgsz=imgsz or info.get("imgsz"), chunk=chunk, device=device)
     design = design or info.get("detector", "single")
     window = dict(info.get("twostage") or {}) if design == "twostage" else {}
+    first = info.get("first")
+    if first is not None and design == "twostage":  # a crop network behind another shipped model's pass 1
+        from .twostage import TwoStageDetector
+
+        pass1 = default_model_path(str(first))
+        if first not in SHIPPED_MODELS or first == model or pass1 is None:
+            raise FileNotFoundError(f"shipped model {model}: its pass 1, shipped model {first!r}, is not installed")
+        one = UltralyticsDetector(pass1, trust=True, imgsz=imgsz or info.get("imgsz"), chunk=chunk, device=device)
+        return TwoStageDetector(with_engine(one, engine, trust=True), with_engine(det, engine, trust=True),
+                                **{k: float(v) for k, v in window.items()})
+    if first is not None:  # a single pass: the shipped model's pass 1 alone is the other model
+        raise ValueError(f"shipped model {model} is a pass-2 (crop) network behind {first!r}: it runs two-stage only")
     return with_design(with_engine(det, engine, trust=True), design, **window)
 
 
@@ -424,6 +447,8 @@ class DetectorSpec:
         if self.kind == "default" and f is not None and (f.parent / "default.json").is_file():
             ident["config_sha256"] = file_sha256(f.parent / "default.json")
             info = default_model_info(self.shipped_name)
+            if info.get("first") in SHIPPED_MODELS and (one := default_model_path(str(info["first"]))) is not None:
+                ident["first_sha256"] = file_sha256(one)  # pass 1 is another file: part of what decides outputs
             if "version" in info:
                 ident["name"] += f" v{info['version']}"
             if goals := default_model_caveats(info):
