@@ -1,6 +1,7 @@
 import dataclasses
 import math
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 from matplotlib.figure import Figure
@@ -120,7 +121,45 @@ def every_figure():
     yield "risk", F.risk_per_image({"mc": [(i, 0.01, 0.0, 0.05) for i in range(40)]}, 40, 0.01)
     img = np.full((64, 80, 3), 0.5)
     corners = np.array([[50.0, 30.0], [40.0, 30.0], [35.0, 50.0], [55.0, 50.0]])
-    yield "gallery", F.worst_view(img, img, corners, corners + 3, corners + 6, confident=False)
+    yield "gallery", F.worst_view(img, img, corners, corners + 3, corners + 6, predicted_before=corners + 0.5,
+                                  confident=False, titles=("unperturbed: L(0) = 812 m", "perturbed at θ*: L = 5000 m"))
+    # a grid stopped at its first breach: part of the box evaluated, no method's worst point drawn
+    yield "landscape_partial", F.landscape_2d(
+        xs[np.abs(xs[:, 0]) <= 15], fs[np.abs(xs[:, 0]) <= 15], ["roll_deg", "contrast"], {}, eps_safe_m=1000.0,
+        bounds=[(-30.0, 30.0), (0.4, 2.5)], title="L over ±30°, c∈[0.4, 2.5], image synth_s0_000047 (slant distance "
+        "2469 m); the grid stopped at its first breach after 25 of 1681 points (blank: not evaluated)")
+    yield "zones", F.zones_figure(zone_map_2d(), landscape=(xs, fs),
+                                  title="GeoRobust zones on ±30°, c∈[0.4, 2.5], image synth_s0_000047 — estimate K̂: "
+                                        "not sound (the search's own Lipschitz estimate)")
+    yield "safety", F.survival_per_box(boxes_evidence(), eps_safe_m=1000.0)
+
+
+def zone_map_2d():
+    """The zones of a GeoRobust run over a 2-D box with a breach on its right."""
+    from vbl_robust.search import make_optimizer
+    from vbl_robust.search.zones import zones
+    from vbl_robust.space import ParameterBox
+
+    box = ParameterBox({"roll_deg": (-30.0, 30.0), "contrast": (0.4, 2.5)})
+    opt = make_optimizer("georobust", box, max_evals=60)
+    while len(x := opt.ask()):
+        opt.tell(x, np.where(x[:, 0] > 12.0, 5000.0, 20.0 + 30.0 * np.abs(x[:, 0])))
+    return zones(opt.cells(), 1000.0, estimate=True)
+
+
+def boxes_evidence():
+    """Six boxes of a spatial-2d run (labels as long as a report's), survival falling."""
+    from vbl_robust.report.evidence import BoxEvidence
+    from vbl_robust.stats import Rate
+
+    out = []
+    for lab, surv, mis in (("±2°, c∈[0.9, 1.1]", 82, 18), ("±5°, c∈[0.8, 1.25]", 75, 25), ("±10°, c∈[0.7, 1.4]", 66, 34),
+                           ("±15°, c∈[0.6, 1.6]", 64, 36), ("±20°, c∈[0.5, 2]", 56, 43), ("±30°, c∈[0.4, 2.5]", 25, 65)):
+        ci = Rate(surv, 100).ci
+        out.append(BoxEvidence(label=lab, ranges={}, methods=("random",), images=100, evaluations=1, survivors=surv,
+                               misleading=mis, flagged=100 - surv - mis, survival_ci=(ci.low, ci.high),
+                               misleading_ci=None, residual_bound=None, remaining_area_pct=None, search_status={}))
+    return out
 
 
 #: The widest a report shows a figure (CSS px): the page's 1100 px less its padding (a laptop's 1280 px window).
@@ -143,13 +182,105 @@ def drawn():
     return dict(every_figure())
 
 
-@pytest.mark.parametrize("name", ["survival", "runtime", "distance", "progress", "landscape", "convergence", "pnp",
-                                  "risk", "gallery"])
+NAMES = ["survival", "runtime", "distance", "progress", "landscape", "convergence", "pnp", "risk", "gallery",
+         "landscape_partial", "zones", "safety"]
+
+
+@pytest.mark.parametrize("name", NAMES)
 def test_no_title_label_or_legend_is_clipped(name, drawn):
     assert outside(drawn[name]) == (0, 0, 0, 0)
 
 
-@pytest.mark.parametrize("name", ["survival", "runtime", "distance", "progress", "landscape", "convergence", "pnp",
-                                  "risk", "gallery"])
+@pytest.mark.parametrize("name", NAMES)
 def test_every_text_is_readable_at_a_laptops_width(name, drawn):
     assert smallest_text_px(drawn[name]) >= 9.0
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_axes_name_parameters_by_their_display_names(name, drawn):
+    """One table of display names ("roll φ (°)"), never a parameter's code name ("roll_deg (deg)")."""
+    import re
+
+    from vbl_robust.perturb import PERTURBATIONS
+
+    raw = re.compile(r"\b(" + "|".join(n for n in PERTURBATIONS if "_" in n) + r")\b")
+    labels = [t for ax in drawn[name].axes for t in (ax.get_xlabel(), ax.get_ylabel(), ax.get_title())]
+    assert not [t for t in labels if raw.search(t)]
+
+
+def _marker_paths(ax):
+    """The marker paths of what is drawn in ``ax`` with data (scatter collections and marker lines)."""
+    drawn = []
+    for c in ax.collections:
+        if len(c.get_offsets()) and c.get_paths():
+            drawn.append(c.get_paths()[0].vertices.round(6).tobytes())
+    for line in ax.get_lines():
+        if len(line.get_xdata()) and line.get_marker() not in (None, "", "None", "none"):
+            drawn.append(line.get_marker())
+    return drawn
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_a_legend_names_only_markers_that_are_drawn(name, drawn):
+    """An empty proxy in a legend (``scatter([], [])``) stands for something drawn: the same marker with data."""
+    fig = drawn[name]
+    fig.canvas.draw()
+    for ax in fig.axes:
+        present = _marker_paths(ax)
+        for c in ax.collections:
+            if not len(c.get_offsets()) and c.get_label() and not c.get_label().startswith("_"):
+                assert c.get_paths()[0].vertices.round(6).tobytes() in present, c.get_label()
+
+
+def test_a_landscapes_axes_span_the_box_its_title_names(drawn):
+    ax = drawn["landscape_partial"].axes[0]
+    assert ax.get_xlim() == (-30.0, 30.0) and ax.get_ylim() == (0.4, 2.5)
+    assert "stopped at its first breach" in ax.get_title()
+    texts = [t.get_text() for t in drawn["landscape_partial"].legends[0].get_texts()]
+    assert "worst point found" not in texts  # no star drawn, none named
+    assert "worst point found" in [t.get_text() for t in drawn["landscape"].legends[0].get_texts()]
+
+
+def test_the_zones_ruled_out_colour_stands_out_from_its_landscape(drawn):
+    """The "ruled out" green is not a colour of the landscape's colour map (viridis' greens swallowed it)."""
+    from matplotlib.colors import to_rgb
+
+    from vbl_robust.report.zone_figure import LANDSCAPE_CMAP
+    from vbl_robust.search.zones import RULED_OUT
+
+    cmap = plt.get_cmap(LANDSCAPE_CMAP)(np.linspace(0, 1, 256))[:, :3]
+    green = np.array(to_rgb(F.COLOURS[RULED_OUT]))
+    assert np.min(np.linalg.norm(cmap - green, axis=1)) > 0.3
+    ax = drawn["zones"].axes[0]
+    assert ax.get_xlabel() == "roll φ (°)" and ax.get_ylabel() == "contrast factor α"
+
+
+def test_the_gallery_draws_pixels_as_blocks_with_predictions_on_both_sides(drawn):
+    fig = drawn["gallery"]
+    left, right = fig.axes[:2]
+    assert [im.get_interpolation() for ax in (left, right) for im in ax.get_images()] == ["nearest", "nearest"]
+    assert left.get_xlabel().startswith("corner shift: TR 0.7, TL 0.7")  # the unperturbed prediction, 0.5 px off
+    assert right.get_xlabel().startswith("corner shift: TR 4.2")
+    x0, x1 = left.get_xlim()
+    assert x1 - x0 <= 40  # scaled to the runway (a 20 px quadrilateral), not a 128 px crop
+
+
+def test_the_progress_median_never_falls_when_searches_start_late():
+    """A median over the images that happen to have a point at a count fell (late starters joined low); every
+    image counts at every count."""
+    from vbl_robust.campaigns.store import JobRow
+    from vbl_robust.report.sections import progress_curves
+    from vbl_robust.search.result import TraceRow
+
+    def row(sid, nfev, best):
+        trace = tuple(TraceRow(iteration=i, nfev=n, elapsed=0.0, best_value=b, best_x=None, batch_size=1, n_failed=0)
+                      for i, (n, b) in enumerate(zip(nfev, best, strict=True)))
+        return JobRow(key=sid, experiment="t", kind="search", role="main", method="georobust", sample_id=sid,
+                      sample_index=0, status="done", trace=trace)
+
+    rows = [row("a", [1, 5, 9], [1250.0, 1300.0, 1400.0]), row("b", [1, 9], [1200.0, 1200.0]),
+            row("c", [5, 9], [300.0, 700.0]), row("d", [5], [200.0])]  # d stopped early: keeps its value
+    n, med = progress_curves(rows)["georobust"]
+    assert n[0] == 5 and np.all(np.diff(med) >= 0)
+    assert med[0] == pytest.approx(np.median([1300.0, 1200.0, 300.0, 200.0]))
+    assert med[-1] == pytest.approx(np.median([1400.0, 1200.0, 700.0, 200.0]))

@@ -4,6 +4,7 @@ without them still reports; every id escaped."""
 
 import dataclasses
 import html
+import json
 import re
 import sqlite3
 
@@ -19,6 +20,7 @@ from vbl_robust.campaigns.store.digest import reseal
 from vbl_robust.perturb import Perturbation
 from vbl_robust.report import build_report
 from vbl_robust.report.evidence import WORST_CASES, worst_cases
+from vbl_robust.report.html import fmt_num
 from vbl_robust.stats import Rate
 
 EVIL = '<img src=x onerror=alert(1)>&"'
@@ -69,6 +71,23 @@ def test_the_predicted_corners_are_stored_where_the_detector_put_them(run, sampl
         moved = Perturbation(r.box.box).points(s.corners_2d, theta, K=s.K)[0]
         assert np.abs(np.asarray(r.worst_corners) - moved).max() < 3.0
         assert r.payload["worst"]["conf"] == pytest.approx(float(again.conf[0]))
+        # L(0): one evaluation at the identity θ (roll 0, contrast 1), stored with the job
+        nominal = build_objective(s, detector, r.box.box, Settings.from_spec(spec)).evaluate(
+            np.array([[0.0, 1.0]]))
+        stored = r.payload["nominal"]
+        assert stored["error_m"] == pytest.approx(float(nominal.loss[0])) and stored["reason"] == nominal.reason[0]
+        assert np.allclose(stored["corners"], nominal.keypoints[0], atol=1e-6)
+
+
+def test_the_csv_carries_each_images_nominal_error(run, tmp_path):
+    import csv
+
+    from vbl_robust.campaigns.tables import export
+
+    with ResultStore.open_existing(run) as st:
+        stored = {r.sample_id: r.payload["nominal"]["error_m"] for r in st.jobs(role="main")}
+        lines = list(csv.DictReader(export(st, tmp_path / "jobs.csv").open()))
+    assert lines and all(float(ln["nominal_m"]) == pytest.approx(stored[ln["sample_id"]]) for ln in lines)
 
 
 def test_the_first_screen_is_survival_per_box_with_its_interval(run):
@@ -77,8 +96,9 @@ def test_the_first_screen_is_survival_per_box_with_its_interval(run):
     assert headings[:3] == ["Safe where, and how sure", "Summary", "Worst cases: the 3 most severe of 3 breached images"]
     first = page.split("<h2", 2)[1]
     ci = Rate(0, 3).ci
-    assert "survival % [95 % CI]" in first and f"0.0 [{ci.low:.1f}, {ci.high:.1f}]" in first
-    assert "misleading images" in first and "flagged only" in first and "bound (95 %)" in first
+    assert "survival, 95 % CI (%)" in first and f"[{ci.low:.1f}, {ci.high:.1f}]" in first
+    assert "Not safe</b> on <b>±10°, c∈[0.7, 1.4]</b>: 3 of 3 images breached" in first
+    assert "misleading" in first and "flagged only" in first and "breached share of Θ" in first
 
 
 def test_the_gallery_draws_each_rebuilt_image_beside_its_facts(run):
@@ -86,6 +106,17 @@ def test_the_gallery_draws_each_rebuilt_image_beside_its_facts(run):
     gallery = page.split("<h2", 4)[3]
     assert gallery.count('<div class="case">') == 3 and gallery.count("<img") == 3
     assert gallery.count("drawn (red)") == 3 and "misleading" in gallery and "θ*" in gallery
+    # L(0), each corner's shift on both sides and what a pixel is worth
+    with ResultStore.open_existing(run) as st:
+        nominal = {r.sample_id: r.payload["nominal"]["error_m"] for r in st.jobs(role="main")}
+    for sid, l0 in nominal.items():
+        case = gallery[gallery.index(f"image {sid}</h3>"):]
+        case = case[:case.index("</dl>")]
+        assert f"<dt>unperturbed, L(0)</dt><dd>{fmt_num(l0)} m (a pose" in case
+        assert "fails unperturbed" in case  # ε_safe = 1 m: every image is already above ε_safe / 2
+        assert re.search(r"corner shift at θ\*</dt><dd>TR \d+\.\d, TL [\d.]+, BL [\d.]+, BR [\d.]+ px", case)
+        assert re.search(r"corner shift unperturbed</dt><dd>TR \d+\.\d", case)
+        assert "m per pixel (pinhole model)" in case
     pngs = sorted((run / "figures").glob("gallery_*.png"))
     assert [p.name for p in pngs] == ["gallery_01.png", "gallery_02.png", "gallery_03.png"]
     assert all(p.stat().st_size < 200_000 for p in pngs)
@@ -98,12 +129,29 @@ def test_every_id_is_escaped_and_a_sample_missing_from_the_rebuilt_dataset_is_sa
     con = copy_store(run, tmp_path / "evil")
     for table in ("jobs", "samples", "contents"):
         con.execute(f"UPDATE {table} SET sample_id = ? WHERE sample_id = 'synth_s5_000002'", (EVIL,))
-    with con:  # as a run on images of that name would have committed them (else: rows changed, not used)
+    with con:  # as a run on an image of that name would have committed them (else: rows changed, not used)
         reseal(con)
     con.close()
     page = build_report(tmp_path / "evil").read_text()
     assert EVIL not in page and f"image {html.escape(EVIL)}</h3>" in page
     assert "No pictures: the images cannot be rebuilt here" in page and "are not in its rebuilt dataset" in page
+
+
+def test_a_corner_shift_of_a_pixel_moves_the_position_by_what_the_gallery_says(samples):
+    """The gallery's geometry line, D · δ / f · (D / W) per pixel, against PnP: one near corner moved 1 px
+    sideways (the near edge's width changes by 1 px) moves the position by 0.5–1.5 × that, on 1024 px images."""
+    from vbl_robust.pnp import solve
+    from vbl_robust.report.gallery import geometry_text, metres_per_pixel
+    from vbl_robust.scenes import generate
+
+    for s in generate(4, seed=0, width=1024, height=1024):
+        m, D, W, f = metres_per_pixel(s)
+        p0 = solve(s.corners_2d, s.corners_3d, s.K).position[0]
+        moved = s.corners_2d.copy()
+        moved[2, 0] += np.sign(moved[2, 0] - moved[3, 0])  # BL outwards, away from BR
+        shift = np.linalg.norm(solve(moved, s.corners_3d, s.K).position[0] - p0)
+        assert 0.5 * m < shift < 1.5 * m, (s.id, m, shift)
+        assert f"≈ {fmt_num(m)} m per pixel" in geometry_text(s) and f"D = {D / 1000:.1f} km" in geometry_text(s)
 
 
 def test_an_old_store_without_corners_still_reports(run, tmp_path):
@@ -113,10 +161,15 @@ def test_an_old_store_without_corners_still_reports(run, tmp_path):
     con.executescript(f"CREATE TABLE old_jobs AS SELECT {kept} FROM jobs; DROP TABLE jobs; "
                       "ALTER TABLE old_jobs RENAME TO jobs; DROP TABLE digests;")  # a store of schema 4 has none
     con.execute(f"PRAGMA user_version = {store_module.SCHEMA_VERSION - 1}")
+    for rowid, payload in con.execute("SELECT rowid, payload_json FROM jobs WHERE payload_json LIKE '%nominal%'").fetchall():
+        data = json.loads(payload)
+        del data["nominal"]  # a store from before L(0) was stored
+        con.execute("UPDATE jobs SET payload_json = ? WHERE rowid = ?", (json.dumps(data), rowid))
     con.commit()
     con.close()
     page = build_report(old).read_text()
     assert "Safe where, and how sure" in page and "not stored (a row written before schema 4" in page
+    assert page.count("– (not stored: a run from before L(0) was)") == 3 and "unperturbed: L(0) = –" not in page
     assert "drawn (red)" not in page and page.count('<div class="case">') == 3
 
 

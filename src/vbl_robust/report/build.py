@@ -8,8 +8,9 @@ are also written as PNG files next to the report, and the run's headline figure 
 images are rebuilt from the run's dataset source (where that is not possible, the gallery says so and shows the
 stored facts alone).
 
-Order: the first screen answers "safe where, and how sure" (:mod:`.evidence`: per box, survival with its
-interval, misleading against flagged-only images, the bound), then the run's settings (the summary), the
+Order: the first screen answers "safe where, and how sure" (:mod:`.evidence`: per box one sentence — the verdict,
+the images breached, survival with its interval and what it means at this number of images —, the model, data,
+date and version, then the table and the survival figure), then the run's settings (the summary), the
 worst-case gallery (:mod:`.gallery`), the table per method, box and budget, the declared figures, provenance.
 
 Where things are: :mod:`.rows` (the context and which stored rows each section reads), :mod:`.sections` (one
@@ -48,7 +49,7 @@ from ..campaigns import metrics as mx
 from ..campaigns.experiments import EXPERIMENTS
 from ..campaigns.spec import FIGURES, CampaignSpec
 from ..campaigns.store import ResultStore
-from .evidence import Evidence, evidence_of, section_evidence
+from .evidence import SAFETY_FIGURE, Evidence, evidence_of, section_evidence
 from .gallery import section_gallery
 from .html import esc, page
 from .risk_section import section_risk
@@ -84,18 +85,21 @@ SECTIONS: dict[str, Callable[[Context], Section | None]] = {
 }
 
 
-#: The figure that stands for a run on an index card (``headline.png`` beside the report): the first of these
-#: names drawn (a prefix matches, e.g. ``runtime_2d_time``), else the run's first figure.
+#: The figure that stands for a paper experiment's run on an index card (``headline.png`` beside the report): the
+#: first of these names drawn (a prefix matches, e.g. ``runtime_2d_time``), else the run's first figure. Any other
+#: run (an audit, a risk run, a truth run) stands by its safety figure, survival per box with its intervals
+#: (:data:`AUDIT_HEADLINE`), never by a search's convergence.
 HEADLINE = ("survival_", "runtime_", "distance_profile", "families_ranking", "sequence_errors", "convergence",
-            "pnp_solvers", "risk", "landscape_", "best_vs_evals")
+            "pnp_solvers", "risk", SAFETY_FIGURE, "landscape_", "best_vs_evals")
+AUDIT_HEADLINE = (SAFETY_FIGURE, "survival_", "risk", "sequence_errors", "landscape_")
 HEADLINE_FILE = "headline.png"
 
 
-def _headline(figures: list[Path], out_dir: Path) -> None:
-    """Write the run's headline figure (:data:`HEADLINE`) to ``out_dir/headline.png``; none drawn: remove an
-    old one."""
+def _headline(figures: list[Path], out_dir: Path, order: tuple[str, ...] = HEADLINE) -> None:
+    """Write the run's headline figure (the first of ``order`` drawn) to ``out_dir/headline.png``; none drawn:
+    remove an old one."""
     drawn = [p for p in figures if not p.name.startswith("gallery_")] or figures
-    rank = [next((i for i, pre in enumerate(HEADLINE) if p.stem.startswith(pre)), len(HEADLINE)) for p in drawn]
+    rank = [next((i for i, pre in enumerate(order) if p.stem.startswith(pre)), len(order)) for p in drawn]
     if not drawn:
         (out_dir / HEADLINE_FILE).unlink(missing_ok=True)
         return
@@ -151,5 +155,6 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
         body.append("</section>")
     path = out_dir / "report.html"
     atomic_write(path, page(f"vbl-robust {spec.name}", "\n".join(body)))
-    _headline(ctx.figures, out_dir)
+    _headline(ctx.figures, out_dir, HEADLINE if exp is not None and not spec.name.endswith("-truth")
+              else AUDIT_HEADLINE)
     return path

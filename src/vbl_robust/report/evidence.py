@@ -30,10 +30,12 @@ import numpy as np
 from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.store import JobRow
-from ..constants import BreachKind
+from ..constants import BreachKind, Verdict
 from ..search import direct_family
 from ..stats import LEVEL, Rate
-from .html import esc, fmt_num, table
+from . import figures as F
+from .figure_style import param_name
+from .html import esc, fmt_num, folded, table
 from .integrity import banner_html
 from .rows import Context, Section
 
@@ -74,6 +76,8 @@ class BoxEvidence:
     remaining_area_pct: float | None
     search_status: dict[str, int]
     risk: tuple[RiskBound, ...] = ()
+    #: images with a sound bound ≤ ε_safe over the box from some method (:attr:`Verdict.CERTIFIED`)
+    certified: int = 0
 
 
 @dataclass(frozen=True)
@@ -86,7 +90,9 @@ class WorstCase:
     predicted at θ* (sample's pixels of the perturbed view, TR TL BL BR; None: none, or not stored);
     ``confident_m`` = the largest error of a confident pose the search found (None without its points): where θ*
     itself is a flagged failure, the misleading pose lies elsewhere in Θ; ``position_sigma_m`` = how sure a detector
-    with per-corner σ said it was at θ* (the corners' σ propagated to the position; None: it gives no σ)."""
+    with per-corner σ said it was at θ* (the corners' σ propagated to the position; None: it gives no σ);
+    ``nominal_*`` = the same facts unperturbed (θ at its identity: L(0) in metres, the failure reason, confidence
+    and predicted corners; None: stored before jobs held them, :func:`vbl_robust.campaigns.work.nominal_details`)."""
 
     sample_id: str
     box_label: str
@@ -100,6 +106,10 @@ class WorstCase:
     corners: tuple[tuple[float, float], ...] | None = None
     confident_m: float | None = None
     position_sigma_m: float | None = None
+    nominal_m: float | None = None
+    nominal_reason: str | None = None
+    nominal_conf: float | None = None
+    nominal_corners: tuple[tuple[float, float], ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -145,8 +155,9 @@ def _box_evidence(label: str, rows: Sequence[JobRow], eps: float) -> BoxEvidence
     for r in rows:
         key = r.search_status or r.status.value
         status[key] = status.get(key, 0) + 1
+    certified = len({r.sample_id for r in rows if r.verdict is Verdict.CERTIFIED} - breached)
     return BoxEvidence(
-        label=label, ranges={} if box is None else {n: (float(lo), float(hi)) for n, lo, hi in
+        label=label, certified=certified, ranges={} if box is None else {n: (float(lo), float(hi)) for n, lo, hi in
                                                    zip(box.names, box.lower, box.upper, strict=True)},
         methods=tuple(dict.fromkeys(r.method for r in rows)), images=len(ids), evaluations=sum(r.nfev for r in rows),
         survivors=survivors, misleading=misleading, flagged=flagged, survival_ci=(surv.ci.low, surv.ci.high),
@@ -169,13 +180,15 @@ def confident_m(row: JobRow) -> float | None:
 
 
 def worst_cases(rows: Sequence[JobRow], eps: float, penalty_m: float, cap: int = WORST_CASES,
-                stored: Mapping[str, JobRow] | None = None) -> tuple[list[WorstCase], int]:
+                stored: Mapping[str, JobRow] | None = None,
+                nominal: Mapping[str, Mapping[str, Any]] | None = None) -> tuple[list[WorstCase], int]:
     """The ``cap`` most severe breached images of ``rows`` and how many images are breached.
 
     Each image stands by its most severe row: a misleading breach before an unknown one before a flagged-only one
     (:data:`_KIND_ORDER`), then the larger error (a misleading row's: its largest confident-pose error), then the
     smaller box. Images are ordered the same way. ``stored``: the stored runs by key, for rows read off a trace
-    (their corners are those of the run when the read-off budget has the run's worst point)."""
+    (their corners are those of the run when the read-off budget has the run's worst point); ``nominal``: each
+    image's unperturbed facts (:attr:`Context.nominal <vbl_robust.report.rows.Context.nominal>`)."""
     best: dict[str, tuple[tuple[float, float, float], JobRow, BreachKind | None, float | None]] = {}
     for r in rows:
         if mx.survived(r, eps):
@@ -194,11 +207,14 @@ def worst_cases(rows: Sequence[JobRow], eps: float, penalty_m: float, cap: int =
             run = stored.get(r.key.removesuffix(f"@{r.budget_label}"))
             src = run if run is not None and run.worst_x == r.worst_x else r
         worst = (src.payload or {}).get("worst") or {}
+        nom = (nominal or {}).get(r.sample_id) or {}
+        corners0 = nom.get("corners")
         cases.append(WorstCase(r.sample_id, r.box_label or "", r.method, r.budget_label,
                                float(r.worst_m if r.worst_m is not None else penalty_m),
                                None if r.worst_x is None else dict(r.worst_x), None if kind is None else kind.value,
                                r.worst_reason, worst.get("conf"), src.worst_corners, conf_m,
-                               worst.get("position_sigma_m")))
+                               worst.get("position_sigma_m"), nom.get("error_m"), nom.get("reason"), nom.get("conf"),
+                               None if corners0 is None else tuple((float(u), float(v)) for u, v in corners0)))
     return cases, len(best)
 
 
@@ -218,7 +234,7 @@ def evidence_of(ctx: Context) -> Evidence:
     stored = None
     if any(r.read_from for r in rows):
         stored = {r.key: r for r in ctx.store.jobs(kind="search", role="main", with_trace=False)}
-    cases, breached = worst_cases(rows, ctx.eps, ctx.spec.penalty_m, stored=stored)
+    cases, breached = worst_cases(rows, ctx.eps, ctx.spec.penalty_m, stored=stored, nominal=ctx.nominal)
     runs = ctx.store.runs()
     return Evidence(experiment=ctx.spec.name, eps_safe_m=ctx.eps, level=LEVEL, jobs_done=ctx.store.count(),
                     jobs_planned=runs[-1].provenance.jobs_total if runs else None,
@@ -234,7 +250,7 @@ def _pct_ci(ci: tuple[float, float] | None) -> str:
 
 
 def _ranges(b: BoxEvidence) -> str:
-    return ", ".join(f"{n} ∈ [{fmt_num(lo)}, {fmt_num(hi)}]" for n, (lo, hi) in b.ranges.items())
+    return ", ".join(f"{param_name(n)} ∈ [{fmt_num(lo)}, {fmt_num(hi)}]" for n, (lo, hi) in b.ranges.items())
 
 
 def _bound_text(b: BoxEvidence) -> str:
@@ -243,7 +259,91 @@ def _bound_text(b: BoxEvidence) -> str:
     if b.risk:
         return "; ".join(f"p_fail {r.p_fail_pct:.3g} % [{r.ci_pct[0]:.3g}, {r.ci_pct[1]:.3g}] ({r.method}, "
                          f"{100 * r.level:g} %)" for r in b.risk)
-    return "–" if b.residual_bound is None else f"< {100 * b.residual_bound:.2g} % of Θ (random search)"
+    return "–" if b.residual_bound is None else f"< {100 * b.residual_bound:.2g} %"
+
+
+#: The verdict words of the first screen, per box (:func:`verdict_of`), and their CSS class.
+VERDICTS = {"not-safe": "Not safe", "not-shown": "Not shown safe", "safe": "Safe", "none": "Not measured"}
+
+
+def verdict_of(b: BoxEvidence) -> str:
+    """A box's verdict over its images (a key of :data:`VERDICTS`): ``not-safe`` when a search breached an image,
+    ``safe`` when every image is certified (a sound bound ≤ ε_safe over the box), ``not-shown`` otherwise (no
+    breach found, which proves nothing), ``none`` when no image was measured."""
+    if not b.images:
+        return "none"
+    if b.survivors < b.images:
+        return "not-safe"
+    return "safe" if b.certified == b.images else "not-shown"
+
+
+def _whole_pct(v: float) -> str:
+    return f"{v:.0f}" if v >= 1 or v == 0 else f"{v:.1g}"
+
+
+def verdict_sentence(b: BoxEvidence, unit: str, level: float = LEVEL) -> str:
+    """One sentence (HTML) per box: the verdict, the images breached (misleading / flagged only), survival with its
+    interval and what that interval means at this number of images."""
+    key = verdict_of(b)
+    head = f'<b class="vw vw-{key}">{VERDICTS[key]}</b> on <b>{esc(b.label)}</b>'
+    if key == "none":
+        return f"{head}: no {unit} measured (survival –)."
+    n, breached = b.images, b.images - b.survivors
+    if breached:
+        kinds = ("kinds unknown" if b.misleading is None else
+                 f"{b.misleading} misleading, {b.flagged} flagged only")
+        what = f"{breached} of {n} {unit}s breached ({kinds})"
+    elif key == "safe":
+        what = f"every one of the {n} {unit}s certified (a sound bound keeps its error ≤ ε_safe over the whole box)"
+    else:
+        what = (f"no breach found on the {n} {unit}s, which proves nothing by itself"
+                + (f" ({b.certified} of {n} certified)" if b.certified else ""))
+    lo, hi = b.survival_ci
+    surv = (f"survival {_whole_pct(100.0 * b.survivors / n)} %, and with {n} {unit}s it could be anywhere in "
+            f"{_whole_pct(lo)}–{_whole_pct(hi)} % ({100 * level:g} % interval)")
+    risk = "".join(f"; p_fail under its θ distribution {r.p_fail_pct:.3g} % [{r.ci_pct[0]:.3g}, {r.ci_pct[1]:.3g}] "
+                   f"({r.method})" for r in b.risk)
+    return f"{head}: {what}; {surv}{risk}."
+
+
+def _data_text(ctx: Context, dataset: Mapping[str, Any]) -> str:
+    """What the images were: synthetic scenes or LARD's, and how many."""
+    from pathlib import Path
+
+    src = dataset.get("source") or {}
+    kind, unit = src.get("kind"), ctx.spec.unit
+    n = dataset.get("n") or src.get("n") or len(ctx.samples)
+    if kind == "synthetic":
+        return f"{n} synthetic LARD-V2-format approach scenes (not LARD's real images)"
+    if kind == "lard":
+        return f"{n} LARD images ({esc(Path(str(src.get('csv', ''))).name)})"
+    if kind == "synthetic sequences":
+        return f"{n} synthetic approach sequences"
+    if kind == "lard sequences":
+        return f"{n} LARD approach sequences ({esc(Path(str(src.get('csv', ''))).name)})"
+    if kind == "truth":
+        return f"{len(ctx.samples)} {unit}s of the run it checks ({esc(Path(str(src.get('run', ''))).name)})"
+    return f"{n} {unit}s" + (f" ({esc(kind)})" if kind else "")
+
+
+def audited_line(ctx: Context) -> str:
+    """The first screen's line on what was audited: the model (name, short SHA-256, design, input size, engine),
+    the data (synthetic or LARD, how many), when the last run ended and the vbl-robust version that ran it."""
+    from .sections import detector_facts
+
+    runs = ctx.store.runs()
+    if not runs:
+        return ""
+    last = runs[-1]
+    prov = last.provenance
+    det = prov.detector or {}
+    facts = detector_facts(det)
+    if not det.get("design") and det.get("kind") != "oracle":
+        facts = "design not recorded" + ("" if facts == "–" else f", {facts}")
+    when = (last.finished_at or last.started_at or "")[:16].replace("T", " ")
+    return (f'<p class="audited"><b>Model</b> {esc(det.get("name", "?"))} ({esc(facts)}) · <b>data</b> '
+            f"{_data_text(ctx, prov.dataset or {})} · <b>run</b> {esc(when)} UTC · <b>vbl-robust</b> "
+            f"{esc(prov.code_version or '?')}</p>")
 
 
 def not_measured_banner(rows: Sequence[JobRow], total: int, unit: str) -> str:
@@ -258,10 +358,18 @@ def not_measured_banner(rows: Sequence[JobRow], total: int, unit: str) -> str:
             f"through the methods that ran.</p><ul>{items}</ul></div>")
 
 
+#: The name of the first screen's figure (``figures/safety_per_box.png``): an audit's headline figure.
+SAFETY_FIGURE = "safety_per_box"
+
+#: Verdict sentences shown before the rest are folded (a run of many boxes, e.g. every perturbation family).
+SENTENCES = 8
+
+
 def section_evidence(ctx: Context, ev: Evidence) -> Section | None:
-    """The first screen of the report (module docstring): per box, survival with its interval, misleading against
-    flagged-only images and the bound, then completeness; also writes ``evidence.json`` into the report's
-    directory. None when the run has no box with a result."""
+    """The first screen of the report (module docstring): per box one sentence (:func:`verdict_sentence`), what
+    was audited (:func:`audited_line`), then the table — counts and rates in columns of their own — and the
+    completeness; also writes ``evidence.json`` into the report's directory. None when the run has no box with a
+    result."""
     import json
 
     if not ev.boxes and not ev.not_measured and not ctx.store.left_out:
@@ -273,43 +381,64 @@ def section_evidence(ctx: Context, ev: Evidence) -> Section | None:
     if banner:
         s.html.append(banner)
     s.html.extend(banner_html(ctx))  # the rows inconsistent with their own evaluations (not used)
+    if ev.boxes:
+        if ev.budget:
+            s.html.append(f"<p>At the largest budget per {unit}, <b>{esc(ev.budget)}</b> (the other budgets: the "
+                          "table per method, box and budget).</p>")
+        items = [f"<li>{verdict_sentence(b, unit, ev.level)}</li>" for b in ev.boxes]
+        s.html.append(f'<ul class="verdicts">{"".join(items[:SENTENCES])}</ul>')
+        if len(items) > SENTENCES:
+            s.html.append(folded(f"The other {len(items) - SENTENCES} boxes",
+                                 f'<ul class="verdicts">{"".join(items[SENTENCES:])}</ul>'))
+    s.html.append(audited_line(ctx))
     if not ev.boxes:
         return s
-    if ev.budget:
-        s.html.append(f"<p>At the largest budget per {unit}, <b>{esc(ev.budget)}</b> (the other budgets: the table "
-                      "per method, box and budget).</p>")
     lines = []
     for b in ev.boxes:
+        measured = b.images > 0
         lines.append({
             "box": b.label, "ranges": _ranges(b), "methods": ", ".join(b.methods), "n": b.images,
-            "evals": b.evaluations,
-            "survival": f"{Rate(b.survivors, b.images).pct:.1f} {_pct_ci(b.survival_ci)}",
-            "misleading": "?" if b.misleading is None else f"{b.misleading} {_pct_ci(b.misleading_ci)}",
-            "flagged": "?" if b.flagged is None else str(b.flagged), "bound": _bound_text(b),
-            "ra": b.remaining_area_pct,
+            "evals": b.evaluations, "breached": b.images - b.survivors,
+            "survival": Rate(b.survivors, b.images).pct if measured else None,
+            "survival_ci": _pct_ci(b.survival_ci) if measured else "–",
+            "misleading": "?" if b.misleading is None else b.misleading,
+            "misleading_ci": "?" if b.misleading is None else _pct_ci(b.misleading_ci) if measured else "–",
+            "flagged": "?" if b.flagged is None else b.flagged, "bound": _bound_text(b),
+            "ra": b.remaining_area_pct, "certified": b.certified,
             "status": ", ".join(f"{k} {v}" for k, v in b.search_status.items()),
         })
     s.html.append(table(lines, [
-        ("box", "box", esc), ("n", f"{unit}s", None), ("survival", "survival % [95 % CI]", esc),
-        ("misleading", f"misleading {unit}s [95 % CI, %]", esc), ("flagged", "flagged only", esc),
-        ("bound", "bound (95 %)", esc), ("ranges", "parameters", esc),
-    ], left=("box", "ranges", "bound"), cls="headline"))
+        ("box", "box", esc), ("n", f"{unit}s", None), ("breached", "breached", None),
+        ("misleading", "misleading", None), ("flagged", "flagged only", None), ("survival", "survival %", None),
+        ("survival_ci", "survival, 95 % CI (%)", esc), ("misleading_ci", "misleading, 95 % CI (%)", esc),
+        ("bound", "breached share of Θ", esc),
+    ], left=("box", "bound"), cls="headline"))
     article = "an" if unit[0] in "aeiou" else "a"
     s.html.append(
         f'<p class="legend">Per box, over every method together: {article} {unit} <i>survives</i> when no method '
-        f"found an error above ε_safe = {ev.eps_safe_m:g} m. <i>Misleading</i>: some search found a confident pose "
-        "(confidence ≥ τ_conf, a PnP position) off by more than ε_safe — integrity lost, the system does not know. "
-        "<i>Flagged only</i>: every breach was a failure the system sees (no detection, low confidence, PnP "
-        f"failed) — availability lost. Intervals: exact (Clopper–Pearson) {100 * ev.level:g} % over the {unit}s; "
-        f"they describe the {unit}s drawn, not the searches' misses. Bound: where random search drew k independent "
-        "uniform θ and found no breach, the breached part of the box is below 1 − 0.05<sup>1/k</sup> of its volume "
-        f"at 95 % (the largest such bound over those {unit}s; DIRECT's and APGD's points are not uniform draws and "
-        "give none); a risk run's pooled failure probability p_fail under its θ distribution, with its interval.</p>")
+        f"found an error above ε_safe = {ev.eps_safe_m:g} m; <i>breached</i> counts the others. <i>Misleading</i>: "
+        "some search found a confident pose (confidence ≥ τ_conf, a PnP position) off by more than ε_safe — "
+        "integrity lost, the system does not know. <i>Flagged only</i>: every breach was a failure the system sees "
+        "(no detection, low confidence, PnP failed) — availability lost. Intervals: exact (Clopper–Pearson) "
+        f"{100 * ev.level:g} % over the {unit}s; they describe {unit}s like the ones drawn, not the searches' "
+        "misses. Breached share of Θ: where random search drew k independent uniform θ and found no breach, the "
+        "breached part of the box is below 1 − 0.05<sup>1/k</sup> of its volume at 95 % (the largest such bound "
+        f"over those {unit}s; DIRECT's and APGD's points are not uniform draws and give none); a risk run's pooled "
+        "failure probability p_fail under its θ distribution, with its interval.</p>")
+    s.html.append(ctx.figure(
+        F.survival_per_box(ev.boxes, eps_safe_m=ev.eps_safe_m, unit=unit), SAFETY_FIGURE,
+        f"Per box, the share of {unit}s that survive (green), are breached with a misleading pose (red) or with "
+        f"flagged failures only (orange); black: survival's exact {100 * ev.level:g} % interval. The numbers: the "
+        "table above."))
     s.html.append("<h3>Completeness</h3>")
-    s.html.append(table(lines, [("box", "box", esc), ("methods", "methods", esc), ("evals", "evaluations", None),
+    s.html.append(table(lines, [("box", "box", esc), ("ranges", "parameters", esc), ("methods", "methods", esc),
+                                ("evals", "evaluations", None), ("certified", f"{unit}s certified", None),
                                 ("ra", "mean remaining area RA, last iteration (%)", None),
-                                ("status", "how the searches ended (jobs)", esc)], left=("box", "methods", "status")))
+                                ("status", "how the searches ended (jobs)", esc)],
+                        left=("box", "ranges", "methods", "status")))
     planned = f" of {ev.jobs_planned} planned" if ev.jobs_planned else ""
     s.html.append(f"<p>{ev.jobs_done} jobs done{planned}. RA: the share of Θ the DIRECT-family searches had not "
-                  "pruned when they stopped (estimated, not sound without a Lipschitz constant; see the zones).</p>")
+                  "pruned when they stopped (estimated, not sound without a Lipschitz constant; see the zones). "
+                  "Certified: a sound bound keeps the error ≤ ε_safe over the whole box (needs a Lipschitz "
+                  "constant).</p>")
     return s

@@ -31,7 +31,15 @@ STYLE: dict[str, dict[str, Any]] = {
     REFERENCE: {"color": "black", "marker": "", "label": "grid (true worst case)", "linestyle": "--"},
     ANY_METHOD: {"color": "#7f7f7f", "marker": "", "label": "any method (grid included)", "linestyle": ":"},
 }
-AXIS_LABELS = {"roll_deg": "roll φ (°)", "contrast": "contrast factor α"}
+#: The display name of each perturbation parameter (:data:`vbl_robust.perturb.PERTURBATIONS`), with its unit: the one
+#: table every figure's axes and every table of the report take their names from (:func:`axis_label`,
+#: :func:`param_name`). A parameter missing here shows as its name with its unit.
+AXIS_LABELS = {
+    "roll_deg": "roll φ (°)", "pitch_deg": "pitch (°)", "yaw_deg": "yaw ψ (°)", "blur_px": "Gaussian blur σ (px)",
+    "motion_blur_px": "motion blur length (px)", "haze": "haze h (share of airlight)", "contrast": "contrast factor α",
+    "brightness": "brightness offset (full scale)", "gamma": "gamma γ", "noise_std": "noise σ (full scale)",
+}
+_UNIT_SYMBOLS = {"deg": "°"}
 EPS_STYLE = {"color": "#d62728", "linestyle": ":", "linewidth": 1.2}
 
 
@@ -42,6 +50,30 @@ def style(method: str) -> dict[str, Any]:
     s = STYLE.get(method, {"color": "grey", "marker": "x"})
     label = s.get("label") or (METHODS[method].label if method in METHODS else method)
     return {"linestyle": "-", **s, "label": label}
+
+
+def axis_label(name: str, unit: str = "") -> str:
+    """A parameter's display name with its unit, ``"roll φ (°)"`` (:data:`AXIS_LABELS`); an unknown one as
+    ``"name (unit)"``."""
+    if name in AXIS_LABELS:
+        return AXIS_LABELS[name]
+    unit = _UNIT_SYMBOLS.get(unit, unit)
+    return f"{name} ({unit})" if unit else name
+
+
+def param_name(name: str) -> str:
+    """A parameter's display name without its unit, ``"roll φ"``."""
+    label = axis_label(name)
+    return label.rsplit(" (", 1)[0] if label.endswith(")") else label
+
+
+def wrapped(text: str, width_in: float, fontsize: float) -> str:
+    """``text`` broken into lines that fit ``width_in`` inches at ``fontsize`` points (a title that would
+    otherwise run past the figure's edges, where the PNG clips it)."""
+    import textwrap
+
+    chars = max(20, int(width_in * 72 / (0.62 * fontsize)))  # DejaVu Sans: about 0.6 em a character
+    return "\n".join(textwrap.wrap(text, chars, break_on_hyphens=False)) if len(text) > chars else text
 
 
 def method_order(methods: Iterable[str]) -> list[str]:

@@ -28,19 +28,30 @@ from .figure_style import (  # noqa: E402
     PLAIN,
     REFERENCE,
     STYLE,
+    axis_label,
     ci_bars,
     method_order,
     new_fig,
     plain_log_axis,
     style,
+    wrapped,
 )
-from .view_figure import PREDICTED_CORNERS, TRUE_CORNERS, crop_side, crop_window, worst_view  # noqa: E402
-from .zone_figure import COLOURS, plot_zones  # noqa: E402
+from .view_figure import (  # noqa: E402
+    PREDICTED_CORNERS,
+    TRUE_CORNERS,
+    corner_shifts,
+    crop_side,
+    crop_window,
+    shifts_text,
+    worst_view,
+)
+from .zone_figure import COLOURS, plot_zones, zones_figure  # noqa: E402
 
 __all__ = ["AXIS_LABELS", "COLOURS", "EPS_STYLE", "PREDICTED_CORNERS", "REFERENCE", "STYLE", "TRUE_CORNERS",
-           "best_vs_evals", "convergence", "crop_side", "crop_window", "distance_profile", "family_ranking",
+           "best_vs_evals", "convergence", "corner_shifts", "crop_side", "crop_window", "distance_profile", "family_ranking",
            "family_survival", "landscape_1d", "landscape_2d", "method_order", "plot_zones", "pnp_comparison",
-           "risk_per_image", "runtime", "style", "survival_before_after", "survival_vs_level", "worst_view"]
+           "risk_per_image", "runtime", "shifts_text", "style", "survival_before_after", "survival_per_box", "survival_vs_level",
+           "worst_view", "zones_figure"]
 
 
 def survival_vs_level(summary: Sequence[Summary], *, title: str, xlabel: str,
@@ -265,22 +276,28 @@ def convergence(conv: Sequence[Mapping[str, Any]], *, title: str = "GeoRobust co
 
 
 def landscape_2d(xs: np.ndarray, fs: np.ndarray, names: Sequence[str], overlays: Mapping[str, np.ndarray], *,
-                 eps_safe_m: float, title: str, worst: Mapping[str, np.ndarray] | None = None) -> Figure:
-    """Heat map of L over a complete 2-D grid (``xs`` (n, 2), ``fs`` (n,)), the ε_safe contour, and each
-    method's evaluated points (``overlays`` method -> (m, 2)); ``worst`` marks each method's worst point."""
+                 eps_safe_m: float, title: str, worst: Mapping[str, np.ndarray] | None = None,
+                 bounds: Sequence[tuple[float, float]] | None = None) -> Figure:
+    """Heat map of L over a 2-D grid (``xs`` (n, 2), ``fs`` (n,); a grid stopped early leaves its other nodes
+    blank, never filled), the ε_safe contour, and each method's evaluated points (``overlays`` method -> (m, 2));
+    ``worst`` marks each method's worst point (a star, in the legend only when one is drawn). ``bounds``: the box
+    ``[(lo, hi), (lo, hi)]``; the axes then span the whole box, so that a title naming the box and the axes agree
+    even where the grid covers only part of it. Axes named from :data:`AXIS_LABELS`."""
     fig, ax = new_fig(size=(7.2, 6.2))
     u0, u1 = np.unique(xs[:, 0]), np.unique(xs[:, 1])
     grid = np.full((len(u1), len(u0)), np.nan)
     i0 = np.searchsorted(u0, xs[:, 0])
     i1 = np.searchsorted(u1, xs[:, 1])
-    grid[i1, i0] = fs
-    g = np.clip(np.where(np.isfinite(grid), grid, np.nanmax(grid)), 1e-2, None)
-    vmin = min(max(float(np.nanmin(g)), 1e-2), eps_safe_m / 3)  # keep ε_safe inside the colour range
-    vmax = max(float(np.nanmax(g)), eps_safe_m * 1.5)
+    finite = np.isfinite(fs)
+    top = float(np.max(fs[finite])) if finite.any() else eps_safe_m
+    grid[i1, i0] = np.where(finite, fs, top)  # a non-finite value: a failure, drawn at the top of the scale
+    g = np.ma.masked_invalid(np.clip(grid, 1e-2, None))  # NaN: a node the grid never evaluated (blank)
+    vmin = min(max(float(g.min()), 1e-2), eps_safe_m / 3)  # keep ε_safe inside the colour range
+    vmax = max(float(g.max()), eps_safe_m * 1.5)
     im = ax.pcolormesh(u0, u1, g, shading="nearest", norm=LogNorm(vmin=vmin, vmax=vmax), cmap="viridis")
     cb = fig.colorbar(im, ax=ax)
     cb.set_label("position error L (m), log scale (values < 1 cm shown at 1 cm)")
-    if np.nanmax(g) > eps_safe_m > np.nanmin(g):
+    if len(u0) > 1 and len(u1) > 1 and g.max() > eps_safe_m > g.min():
         ax.contour(u0, u1, g, levels=[eps_safe_m], colors="#ff4040", linewidths=1.4)
     for m in method_order(overlays):
         pts = overlays[m]
@@ -288,15 +305,20 @@ def landscape_2d(xs: np.ndarray, fs: np.ndarray, names: Sequence[str], overlays:
             st = style(m)
             ax.scatter(pts[:, 0], pts[:, 1], s=14, marker=st["marker"], facecolors="none", edgecolors=st["color"],
                        linewidths=1.0, label=f"{st['label']} ({len(pts)} points)")
-    for m, p in (worst or {}).items():
-        if p is not None:
-            st = style(m)
-            ax.scatter([p[0]], [p[1]], s=160, marker="*", color=st["color"], edgecolors="white", linewidths=0.8, zorder=5)
+    stars = [(m, p) for m, p in (worst or {}).items() if p is not None]
+    for m, p in stars:
+        st = style(m)
+        ax.scatter([p[0]], [p[1]], s=160, marker="*", color=st["color"], edgecolors="white", linewidths=0.8, zorder=5)
     ax.plot([], [], color="#ff4040", label=f"L = ε_safe = {eps_safe_m:g} m")
-    ax.scatter([], [], s=100, marker="*", color="grey", label="worst point found")
-    ax.set_xlabel(AXIS_LABELS.get(names[0], names[0]))
-    ax.set_ylabel(AXIS_LABELS.get(names[1], names[1]))
-    ax.set_title(title, fontsize=10)
+    if stars:  # a legend names only what is drawn
+        ax.scatter([], [], s=100, marker="*", color="grey", label="worst point found")
+    if bounds is not None:
+        (x0, x1), (y0, y1) = bounds
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
+    ax.set_xlabel(axis_label(names[0]))
+    ax.set_ylabel(axis_label(names[1]))
+    ax.set_title(wrapped(title, 5.6, 10), fontsize=10)
     fig.legend(fontsize=8, loc="outside lower center", ncol=3)
     return fig
 
@@ -315,7 +337,7 @@ def landscape_1d(xs: np.ndarray, fs: np.ndarray, name: str, overlays: Mapping[st
                        edgecolors=st["color"], label=f"{st['label']} ({len(px)} points)")
     ax.axhline(eps_safe_m, **EPS_STYLE, label=f"ε_safe = {eps_safe_m:g} m")
     ax.set_yscale("log")
-    ax.set_xlabel(AXIS_LABELS.get(name, name))
+    ax.set_xlabel(axis_label(name))
     ax.set_ylabel("position error L (m)")
     ax.set_title(title)
     ax.grid(alpha=0.3)
@@ -324,11 +346,15 @@ def landscape_1d(xs: np.ndarray, fs: np.ndarray, name: str, overlays: Mapping[st
 
 
 def best_vs_evals(curves: Mapping[str, tuple[np.ndarray, np.ndarray]], *, eps_safe_m: float, title: str) -> Figure:
-    """Median over images of the best error found so far against evaluations, one line per method."""
+    """Median over images of the worst error found so far against evaluations, one line per method
+    (``curves[method]`` = (evaluation counts, medians); every image counted at every count, so a curve never
+    falls: :func:`vbl_robust.report.sections.progress_curves`)."""
     fig, ax = new_fig()
     for m, (n, best) in curves.items():
         st = style(m)
-        ax.step(n, np.clip(best, 1e-2, None), where="post", color=st["color"], label=st["label"], linewidth=1.8)
+        # a marker where each curve starts (a search that reports once, in one batch, is a single point)
+        ax.step(n, np.clip(best, 1e-2, None), where="post", color=st["color"], label=st["label"], linewidth=1.8,
+                marker=st["marker"] or None, markevery=[0], markersize=6)
     ax.axhline(eps_safe_m, **EPS_STYLE, label=f"ε_safe = {eps_safe_m:g} m")
     ax.set_yscale("log")
     ax.set_xlabel("evaluations")
@@ -336,6 +362,42 @@ def best_vs_evals(curves: Mapping[str, tuple[np.ndarray, np.ndarray]], *, eps_sa
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
+    return fig
+
+
+def survival_per_box(boxes: Sequence[Any], *, eps_safe_m: float, unit: str = "image",
+                     title: str = "Survival per box") -> Figure:
+    """The run's safety figure (its ``headline.png``): per box (:class:`vbl_robust.report.evidence.BoxEvidence`,
+    every method together), the share of images that survive, are breached with a misleading pose and are breached
+    with flagged failures only, stacked to 100 %, and survival's exact 95 % interval as a black bar; boxes from
+    top to bottom in the order given (mildest first)."""
+    shown = [b for b in boxes if b.images]
+    fig, ax = new_fig(size=(7.2, 0.55 * len(shown) + 2.0))
+    y = np.arange(len(shown))[::-1]
+    parts = (("survivors", "survive", "#2ca02c"), ("misleading", "misleading breach", "#d62728"),
+             ("flagged", "flagged-only breach", "#ff9f1c"))
+    left = np.zeros(len(shown))
+    for key, label, colour in parts:
+        pct = np.array([100.0 * (getattr(b, key) or 0) / b.images for b in shown])
+        ax.barh(y, pct, left=left, height=0.6, color=colour, label=label, alpha=0.85)
+        left += pct
+    unknown = 100.0 - left
+    if np.any(unknown > 1e-9):
+        ax.barh(y, unknown, left=left, height=0.6, color="#bdbdbd", label="breach of unknown kind")
+    surv = np.array([100.0 * b.survivors / b.images for b in shown])
+    lo = np.array([b.survival_ci[0] for b in shown])
+    hi = np.array([b.survival_ci[1] for b in shown])
+    ax.errorbar(surv, y, xerr=[np.clip(surv - lo, 0, None), np.clip(hi - surv, 0, None)], fmt="|", color="black",
+                capsize=4, elinewidth=1.4, markersize=12, label="survival, 95 % interval")
+    ax.set_yticks(y)
+    ax.set_yticklabels([b.label for b in shown], fontsize=9)
+    ax.set_xlim(0, 100)
+    ax.set_ylim(-0.6, len(shown) - 0.4)
+    ax.set_xlabel(f"{unit}s (%); one survives when no search found an error above ε_safe = {eps_safe_m:g} m")
+    ax.grid(alpha=0.3, axis="x")
+    n = max((b.images for b in shown), default=0)
+    ax.set_title(f"{title}  [N = {n} {unit}s]", fontsize=10)
+    fig.legend(fontsize=8, loc="outside lower center", ncol=4, frameon=False)
     return fig
 
 

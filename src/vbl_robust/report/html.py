@@ -50,7 +50,7 @@ table.headline td, table.headline th { padding: 5px 10px; }
 details > summary { cursor: pointer; color: #1f4f7f; margin: .4em 0; }
 .case { display: flex; flex-wrap: wrap; gap: 0 1.2em; align-items: flex-start; border-top: 1px solid #ddd;
         padding: .6em 0; }
-.case figure { margin: 0; flex: 0 1 640px; min-width: 320px; }
+.case figure { margin: 0; flex: 1 1 600px; max-width: 800px; min-width: 320px; }
 .case .facts { flex: 1 1 300px; font-size: 14px; }
 .case .facts h3 { margin: .2em 0 .4em; font-size: 16px; overflow-wrap: anywhere; }
 .case .facts dl { display: grid; grid-template-columns: max-content 1fr; gap: .15em .8em; margin: 0; }
@@ -72,6 +72,30 @@ section.claims dd { margin: 0; }
 .verdict-partly, .verdict-tie { background: #fff1cc; color: #6b4e00; }
 .verdict-contradicted, .verdict-does-not-hold { background: #fde2e2; color: #8a1010; }
 .verdict-not-run-yet { background: #eee; color: #555; }
+.tw { max-width: 100%; overflow-x: auto; }
+ul.verdicts { padding-left: 1.2em; font-size: 16px; }
+ul.verdicts li { margin: .35em 0; }
+.vw { padding: 0 .35em; border-radius: 3px; white-space: nowrap; }
+.vw-not-safe { background: #fde2e2; color: #8a1010; }
+.vw-not-shown { background: #fff1cc; color: #6b4e00; }
+.vw-safe { background: #dff3df; color: #135f13; }
+.vw-none { background: #eee; color: #555; }
+p.audited { font-size: 14px; background: #f4f6f9; padding: .4em .8em; border-radius: 4px; }
+.nominal-warn { color: #8a4b00; font-weight: 600; }
+@media (max-width: 900px) {
+  body { margin: 1em auto; }
+  table.headline { font-size: 13px; }
+  table.headline td, table.headline th { padding: 3px 6px; }
+}
+@media print {
+  body { max-width: none; margin: 0; font-size: 11pt; }
+  .tw { overflow: visible; }
+  table { font-size: 9pt; }
+  td:not(.l), tbody[class] td { white-space: normal !important; }
+  .case, figure, tr { break-inside: avoid; }
+  h2 { break-after: avoid; }
+  .warn.banner, .vw, p.audited { -webkit-print-color-adjust: exact; print-color-adjust: exact; }
+}
 """
 
 
@@ -149,7 +173,9 @@ def table(rows: Sequence[Mapping[str, Any]], columns: Sequence[Column], *, row_c
         body.append(f"<tr{rc}>{cells}</tr>")
     attr = f' class="{classes}"' if classes else ""
     nowrap = f' class="{" ".join(short)}"' if short else ""
-    out = f"<table{attr}><thead><tr>{head}</tr></thead><tbody{nowrap}>{''.join(body)}</tbody></table>"
+    # in a scrolling box: a wide table scrolls inside the page instead of running off it (a narrow window)
+    out = f'<div class="tw"><table{attr}><thead><tr>{head}</tr></thead><tbody{nowrap}>{"".join(body)}</tbody></table></div>'
+
     if len(rows) > FOLD_ROWS:
         out = folded(f"{esc(fold or 'The table')} ({len(rows)} rows)", out)
     return out

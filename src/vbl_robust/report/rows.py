@@ -55,6 +55,12 @@ class Context:
                 if r.measured]
 
     @cached_property
+    def nominal(self) -> dict[str, Mapping[str, Any]]:
+        """Per sample, its unperturbed facts as its main jobs store them (payload ``nominal``: ``error_m`` = L(0),
+        ``reason``, ``conf``, predicted ``corners``); a sample missing: its jobs were stored before they held it."""
+        return {r.sample_id: r.payload["nominal"] for r in self.main if (r.payload or {}).get("nominal")}
+
+    @cached_property
     def unmeasured(self) -> list[JobRow]:
         """Every stored job the tool could not measure (any kind and role): in no rate, listed apart."""
         return [r for r in self.store.jobs(with_trace=False) if not r.measured]
@@ -131,8 +137,15 @@ def where(ctx: Context, sid: str) -> str:
 
 
 def theta_text(x: Mapping[str, float] | None) -> str:
-    """A worst point in short form: "roll_deg=2.22, contrast=1.05"."""
-    return ", ".join(f"{k}={v:.3g}" for k, v in (x or {}).items())
+    """A worst point in short form, parameters by their display names (:data:`~vbl_robust.report.figure_style.
+    AXIS_LABELS`): "roll φ = 2.22°, contrast factor α = 1.05"."""
+    from .figure_style import axis_label, param_name
+
+    def unit(name: str) -> str:
+        u = axis_label(name).rsplit(" (", 1)[-1].rstrip(")") if axis_label(name).endswith(")") else ""
+        return "°" if u == "°" else " px" if u == "px" else ""
+
+    return ", ".join(f"{param_name(k)} = {v:.3g}{unit(k)}" for k, v in (x or {}).items())
 
 
 def sample_cols(ctx: Context, sid: str) -> dict[str, Any]:

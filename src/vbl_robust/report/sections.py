@@ -382,18 +382,23 @@ def section_landscapes(ctx: Context) -> Section | None:
         by_method = landscape_runs(ctx, g)
         place = where(ctx, g.sample_id)
         xs, fs = g.points.xs, g.points.fs
+        # a grid stopped at its first breach covers the centre of the box only: the title says so, the axes span
+        # the whole box it names
+        stopped = "" if mx.grid_complete(g) else (f"; the grid stopped at its first breach after {len(fs)} of "
+                                                  f"{g.budget.max_evals} points (blank: not evaluated)")
+        title = f"L over {g.box_label}, {place}{stopped}"
         if len(names) == 2:
             fig = F.landscape_2d(xs, fs, names, {m: r.points.xs for m, r in by_method.items()}, eps_safe_m=ctx.eps,
                                  worst={m: r.points.xs[int(np.nanargmax(r.points.fs))] for m, r in by_method.items()},
-                                 title=f"L over {g.box_label}, {place}")
+                                 title=title, bounds=list(zip(g.box.box.lower, g.box.box.upper, strict=True)))
             name = "landscape_2d"
         else:
             fig = F.landscape_1d(xs, fs, names[0], {m: (r.points.xs, r.points.fs) for m, r in by_method.items()},
-                                 eps_safe_m=ctx.eps, title=f"L over {g.box_label}, {place}")
+                                 eps_safe_m=ctx.eps, title=title)
             name = "landscape_1d"
         lab = ", ".join(f"{F.style(m)['label']} on {r.box_label} ({r.budget_label})" for m, r in by_method.items())
-        part = "" if mx.grid_complete(g) else (f", evaluated from the centre outwards and stopped at its first "
-                                               f"breach after {len(fs)} of {g.budget.max_evals} points")
+        part = "" if not stopped else (f", evaluated from the centre outwards and stopped at its first "
+                                       f"breach after {len(fs)} of {g.budget.max_evals} points")
         s.html.append(ctx.figure(fig, name, f"Dense grid of {len(fs)} points ({esc(g.box_label)}{part}); "
                                             "markers: "
                                             f"the points each method evaluated — {esc(lab)}; stars: each method's worst "
@@ -408,30 +413,44 @@ def section_landscapes(ctx: Context) -> Section | None:
     return s
 
 
+def progress_curves(rows: Sequence[JobRow], points: int = 200) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per method, the median over its rows of the worst error found so far, at up to ``points`` evaluation
+    counts: ``{method: (counts, medians)}``. Each row's value is carried forward past its last trace point (a
+    search stopped at a breach keeps its final value), and a curve starts at the first count where every row has
+    a point: every row counts at every count, so a median never falls (a median over the rows that happen to have
+    a point at a count did: the late starters joined low)."""
+    curves = {}
+    for m in F.method_order(r.method for r in rows):
+        traces = [(np.array([t.nfev for t in r.trace]),  # no value yet (NaN): nothing found so far
+                   np.nan_to_num(np.array([t.best_value for t in r.trace], dtype=np.float64), nan=-np.inf))
+                  for r in rows if r.method == m]
+        start = max(int(n[0]) for n, _ in traces)
+        end = max(int(n[-1]) for n, _ in traces)
+        grid_n = np.unique(np.linspace(start, max(end, start), points).astype(int))
+        mat = np.array([b[np.searchsorted(n, grid_n, side="right") - 1] for n, b in traces])
+        curves[m] = (grid_n, np.median(np.maximum.accumulate(mat, axis=1), axis=0))
+    return curves
+
+
 def section_best_vs_evals(ctx: Context) -> Section | None:
+    """The worst error found against evaluations (:func:`progress_curves`): one search per image and method — on
+    the largest box, at the largest budget — so that the median is over images."""
     rows = [r for r in ctx.main if r.status is JobStatus.DONE and r.trace]
     if not rows:
         return None
-    n_max = max(r.nfev for r in rows)
-    grid_n = np.unique(np.linspace(1, max(n_max, 1), 200).astype(int))
-    curves = {}
-    for m in F.method_order(r.method for r in rows):
-        mats = []
-        for r in (r for r in rows if r.method == m):
-            n = np.array([t.nfev for t in r.trace])
-            b = np.array([t.best_value for t in r.trace], dtype=np.float64)
-            idx = np.searchsorted(n, grid_n, side="right") - 1
-            v = np.where(idx >= 0, b[np.clip(idx, 0, None)], np.nan)
-            v[grid_n > n[-1]] = b[-1]  # stopped early (breach): keeps its best
-            mats.append(v)
-        mat = np.array(mats)
-        med = np.full(len(grid_n), np.nan)
-        some = np.isfinite(mat).any(axis=0)
-        med[some] = np.nanmedian(mat[:, some], axis=0)
-        curves[m] = (grid_n, med)
+    top = max(r.box_level or 0.0 for r in rows)
+    one: dict[tuple[str, str], JobRow] = {}
+    for r in sorted((r for r in rows if (r.box_level or 0.0) == top), key=lambda r: r.nfev):
+        one[(r.method, r.sample_id)] = r  # the longest search of each image and method
+    rows = list(one.values())
+    n = len({r.sample_id for r in rows})
     s = Section("Worst error found vs evaluations")
-    s.html.append(ctx.figure(F.best_vs_evals(curves, eps_safe_m=ctx.eps, title="Search progress (median over images)"),
-                             "best_vs_evals", "A search that stopped at a breach keeps its final value."))
+    s.html.append(ctx.figure(F.best_vs_evals(progress_curves(rows), eps_safe_m=ctx.eps,
+                                             title=f"Search progress on {rows[0].box_label} (median over {n} "
+                                                   f"{ctx.spec.unit}s)"),
+                             "best_vs_evals", f"Per method, the median over the {ctx.spec.unit}s of the worst error "
+                             "found so far; each search counts at every evaluation count (one that stopped at a "
+                             "breach keeps its final value), from the first count where every search has a point."))
     return s
 
 
@@ -441,7 +460,8 @@ def section_per_image(ctx: Context) -> Section | None:
     methods = F.method_order(r.method for r in ctx.main)
     by: dict[str, dict[str, Any]] = {}
     for r in ctx.main:
-        line = by.setdefault(r.sample_id, {"sample_id": r.sample_id, **sample_cols(ctx, r.sample_id)})
+        line = by.setdefault(r.sample_id, {"sample_id": r.sample_id, **sample_cols(ctx, r.sample_id),
+                                           "nominal_m": (ctx.nominal.get(r.sample_id) or {}).get("error_m")})
         line[f"{r.method}_worst"] = r.worst_m
         line[f"{r.method}_verdict"] = r.verdict
         line[f"{r.method}_x"] = theta_text(r.worst_x)
@@ -452,11 +472,14 @@ def section_per_image(ctx: Context) -> Section | None:
                            Verdict.CERTIFIED if any(line.get(f"{m}_verdict") is Verdict.CERTIFIED for m in methods)
                            else Verdict.NO_BREACH_FOUND)
     cols = [("sample_id", ctx.spec.unit, None), ("slant_distance_m", "slant dist. (m)", None),
-            ("envelope", "envelope", None)]
+            ("envelope", "envelope", None), ("nominal_m", "unperturbed L(0) (m)", None)]
     for m in methods:
         cols += [(f"{m}_worst", f"{F.style(m)['label']} worst (m)", None), (f"{m}_x", "at θ", esc)]
     cols += [("worst", "worst of all (m)", None), ("verdict", "verdict", None)]
     s = Section(f"Per {ctx.spec.unit}: worst case found")
+    s.html.append(f"<p>L(0): the error of the {ctx.spec.unit} unperturbed (θ at its identity: roll 0, contrast 1, …; "
+                  f"the {ctx.spec.penalty_m:g} m penalty where the pipeline gives no pose; – in a run stored before "
+                  "it was). An L(0) near ε_safe means the perturbation had little to break.</p>")
     s.html.append(table(lines, cols, row_class=lambda r: "breach" if r["verdict"] is Verdict.BREACH else "",
                         left=("sample_id", "envelope", "verdict", *[f"{m}_x" for m in methods]),
                         fold=f"Each {ctx.spec.unit}'s worst case per method (breaches in red)"))

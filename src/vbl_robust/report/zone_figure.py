@@ -9,19 +9,39 @@ from typing import Any
 import numpy as np
 
 from ..search.zones import BREACHED, CLASSES, RULED_OUT, UNDECIDED, ZoneMap
+from .figure_style import axis_label, wrapped
 
 COLOURS = {BREACHED: "#d62728", UNDECIDED: "#bdbdbd", RULED_OUT: "#2ca02c"}
 
 
+#: The colour map of a landscape drawn under the zones: blues, so that no zone colour (red, grey, green) vanishes
+#: into it (viridis' greens swallowed the "ruled out" cells).
+LANDSCAPE_CMAP = "Blues"
+
+
 def plot_zones(zone_map: ZoneMap, path: str | Path, *, landscape: tuple[np.ndarray, np.ndarray] | None = None,
                title: str | None = None) -> Path:
-    """Draw the zones of a 1-D or 2-D box to a PNG and return the path.
+    """Draw the zones of a 1-D or 2-D box (:func:`zones_figure`) to a PNG and return the path."""
+    import matplotlib.pyplot as plt
+
+    fig = zones_figure(zone_map, landscape=landscape, title=title)
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def zones_figure(zone_map: ZoneMap, *, landscape: tuple[np.ndarray, np.ndarray] | None = None,
+                 title: str | None = None) -> Any:
+    """The zones of a 1-D or 2-D box as a figure.
 
     1-D: the cells as coloured bands under the values at their centres, with ε (and ``landscape = (xs (n, 1),
     fs (n,))``, e.g. a dense grid, as a line). 2-D: the cells as coloured rectangles and their centres (with a
-    ``landscape = (xs (n, 2), fs (n,))``: its values as a log-scale heat map under the rectangles, which are then
-    drawn translucent with edges of their class's colour, and its ε contour). ValueError for more than two
-    parameters or a landscape of another dimension."""
+    ``landscape = (xs (n, 2), fs (n,))``: its values as a log-scale heat map in :data:`LANDSCAPE_CMAP` under the
+    rectangles, which are then drawn translucent with edges of their class's colour, and its ε contour). Axes
+    named from :data:`~vbl_robust.report.figure_style.AXIS_LABELS`; a long title wrapped to the figure's width.
+    ValueError for more than two parameters or a landscape of another dimension."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -41,7 +61,7 @@ def plot_zones(zone_map: ZoneMap, path: str | Path, *, landscape: tuple[np.ndarr
             raise ValueError(f"plot_zones: landscape must be (xs (n, {box.dim}), fs (n,)), got xs {lx.shape}, "
                              f"fs {lf.shape}")
     fig, ax = plt.subplots(figsize=(7.0, 4.4 if box.dim == 1 else 5.6), dpi=110, layout="constrained")
-    label = lambda i: f"{box.names[i]}" + (f" ({box.units[i]})" if box.units[i] else "")  # noqa: E731
+    label = lambda i: axis_label(box.names[i], box.units[i])  # noqa: E731
     lo = np.array([z.lower for z in zone_map.zones]).reshape(-1, box.dim)
     hi = np.array([z.upper for z in zone_map.zones]).reshape(-1, box.dim)
     colour = [COLOURS[z.cls] for z in zone_map.zones]
@@ -85,12 +105,9 @@ def plot_zones(zone_map: ZoneMap, path: str | Path, *, landscape: tuple[np.ndarr
     # below the axes, not loc="best" (its search takes seconds with thousands of cells), so it hides no cell
     fig.legend(handles=handles + extra, fontsize=7, loc="outside lower center", ncol=len(handles + extra))
     basis = {"sound": "sound under the given L", "estimate": "estimate K̂: not sound", "none": "no constant"}
-    ax.set_title(title or f"{zone_map.method}: zones ({basis[zone_map.basis]})", fontsize=9)
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    # a figure title (not the axes'): centred on the figure and wrapped, it cannot run past the left edge
+    fig.suptitle(wrapped(title or f"{zone_map.method}: zones ({basis[zone_map.basis]})", 6.6, 9), fontsize=9)
+    return fig
 
 
 def _heat_map(fig: Any, ax: Any, xs: np.ndarray, fs: np.ndarray, threshold: float) -> None:
@@ -107,11 +124,11 @@ def _heat_map(fig: Any, ax: Any, xs: np.ndarray, fs: np.ndarray, threshold: floa
     if len(u0) > 1 and len(u1) > 1 and len(u0) * len(u1) <= 2 * len(xs):  # a lattice (complete or partly evaluated)
         grid = np.full((len(u1), len(u0)), np.nan)
         grid[np.searchsorted(u1, xs[:, 1]), np.searchsorted(u0, xs[:, 0])] = v
-        im = ax.pcolormesh(u0, u1, np.ma.masked_invalid(grid), shading="nearest", norm=norm, cmap="viridis")
+        im = ax.pcolormesh(u0, u1, np.ma.masked_invalid(grid), shading="nearest", norm=norm, cmap=LANDSCAPE_CMAP)
         if np.nanmin(grid) < threshold < np.nanmax(grid):
-            ax.contour(u0, u1, np.ma.masked_invalid(grid), levels=[threshold], colors="white", linewidths=1.2,
+            ax.contour(u0, u1, np.ma.masked_invalid(grid), levels=[threshold], colors="black", linewidths=1.2,
                        linestyles="--")
     else:
-        im = ax.scatter(xs[finite, 0], xs[finite, 1], c=v[finite], norm=norm, cmap="viridis", s=8)
+        im = ax.scatter(xs[finite, 0], xs[finite, 1], c=v[finite], norm=norm, cmap=LANDSCAPE_CMAP, s=8)
     fig.colorbar(im, ax=ax).set_label(f"landscape value (log scale; dashed: ε = {threshold:g})", fontsize=8)
 
