@@ -91,9 +91,11 @@ def _trace(v: str | None) -> str:
 
 
 def _box(v: str | None) -> str:
-    d = json.loads(v) if v else {"box": {"roll_deg": [-5.0, 5.0]}, "label": "±5°", "level": 5.0}
-    d["box"] = {k: [-90.0, 90.0] for k in d["box"]} if isinstance(d["box"], dict) else d["box"]
-    return json.dumps(d) if json.dumps(d) != v else json.dumps({**d, "level": 90.0})
+    """The box widened to ±90° (a valid box: the row still reads)."""
+    d = json.loads(v) if v else {"box": {"bounds": {"roll_deg": [-5.0, 5.0]}, "units": {"roll_deg": "deg"}},
+                                 "label": "±5°", "level": 5.0}
+    d["box"]["bounds"] = {k: [-90.0, 90.0] for k in d["box"]["bounds"]}
+    return json.dumps(d)
 
 
 def _budget(v: str | None) -> str:
