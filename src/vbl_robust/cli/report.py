@@ -42,15 +42,21 @@ def report(
 
 
 def _unmeasured_exit(run: Path, allow_unmeasured: bool) -> None:
-    """The jobs of ``run`` the tool could not measure, on standard error, and exit 1 unless ``allow_unmeasured``."""
+    """The jobs of ``run`` the tool could not measure, on standard error, and exit 1 unless ``allow_unmeasured``;
+    the rows inconsistent with their evaluations or digests (not used), on standard error too."""
     from vbl_robust.campaigns import ResultStore
     from vbl_robust.campaigns.spec import CampaignSpec
+    from vbl_robust.campaigns.verify import screen
 
     from .run import unmeasured_ok
 
     with one_line(), ResultStore.open_existing(run) as store:
         camp = store.campaign()
         unit = CampaignSpec.from_dict(camp["spec"]).unit if camp else "image"
+        bad = screen(store).inconsistent
+        if bad:
+            typer.secho(f"{run}: {len(bad)} job row(s) inconsistent — not used (vbl-robust verify {run} names them)",
+                        err=True, fg=typer.colors.YELLOW)
         rows = store.jobs(with_trace=False)
     if not unmeasured_ok(rows, unit, allow_unmeasured):
         raise typer.Exit(1)
