@@ -317,6 +317,6 @@ def load(n: int | None, seed: int, lard: Path | None, width: int, height: int, *
     """``n`` samples (``None``: ``default``, or all rows of a smaller ``lard`` dataset), or one line."""
     from vbl_robust.campaigns import load_samples
 
-    with one_line():
+    with one_line(ValueError, FileNotFoundError, RuntimeError):  # RuntimeError: no pose fits a strip of an image
         return load_samples(default if n is None else n, seed, lard=lard, width=width, height=height,
                             at_most=n is None)

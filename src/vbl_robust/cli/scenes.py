@@ -7,14 +7,16 @@ from typing import Annotated
 
 import typer
 
-from ..constants import MAX_IMAGES
+from ..constants import MAX_IMAGE_SIDE, MAX_IMAGES
 from .common import one_line
 
 N = Annotated[int, typer.Option("--n", min=1, max=MAX_IMAGES, help="Number of approach images (without --sequences).")]
 Seed = Annotated[int, typer.Option("--seed", min=0, help="Seed; the same seed gives the same dataset.")]
 Out = Annotated[Path, typer.Option("--out", help="Output directory (images/, metadata CSV, runway DB JSON).")]
-Width = Annotated[int, typer.Option(help="Image width in pixels.")]
-Height = Annotated[int, typer.Option(help="Image height in pixels.")]
+Width = Annotated[int, typer.Option("--width", min=16, max=MAX_IMAGE_SIDE, help="Image width in pixels (16 to "
+                                    f"{MAX_IMAGE_SIDE}).")]
+Height = Annotated[int, typer.Option("--height", min=16, max=MAX_IMAGE_SIDE, help="Image height in pixels (16 to "
+                                     f"{MAX_IMAGE_SIDE}).")]
 Fov = Annotated[float, typer.Option("--fov", help="Horizontal field of view in degrees.")]
 Envelopes = Annotated[str, typer.Option(help="Comma-separated LARD V2 envelopes to sample (single images only).")]
 Sequences = Annotated[int | None, typer.Option("--sequences", min=1, help="Write this many approach sequences (one "

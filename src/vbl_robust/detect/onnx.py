@@ -19,6 +19,7 @@ import os
 import shutil
 import tempfile
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -86,18 +87,70 @@ def _export_with_sigma(model: torch.nn.Module, out_path: Path, size: int) -> Pat
     return out_path
 
 
+#: Longest metadata value read (``kpt_shape``, ``names``, ``imgsz``): an export writes a few dozen characters.
+MAX_METADATA_CHARS = 100_000
+
+
+def _literal(path: Path, key: str, text: str) -> object:
+    """The Python literal of metadata ``key`` (``ast.literal_eval``: no code runs), or ``ValueError`` naming the
+    file, the key and the value."""
+    shown = text if len(text) <= 40 else text[:37] + "..."
+    if len(text) > MAX_METADATA_CHARS:
+        raise ValueError(f"{path}: ONNX metadata {key!r} is longer than {MAX_METADATA_CHARS} characters")
+    try:
+        return ast.literal_eval(text)
+    except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
+        raise ValueError(f"{path}: ONNX metadata {key} = {shown!r} is not readable (a Python literal such as "
+                         "[4, 3])") from None
+
+
 def pose_metadata(path: Path, meta: dict[str, str]) -> tuple[int, int | None]:
-    """``(classes, imgsz or None)`` from an ultralytics pose export's metadata; ``ValueError`` naming the file when
-    it is not a 4-keypoint pose model."""
+    """``(classes, imgsz or None)`` from an ultralytics pose export's metadata; ``ValueError`` naming the file, the
+    key and the value when it is not a 4-keypoint pose model (``kpt_shape`` [4, 3]: x, y, visibility per corner) or
+    its ``names`` / ``imgsz`` cannot be read."""
     kpt = meta.get("kpt_shape")
     if kpt is None:
         raise ValueError(f"{path}: no 'kpt_shape' in the ONNX metadata; not an ultralytics pose export")
-    kpt_shape = ast.literal_eval(kpt)
-    if int(kpt_shape[0]) != 4:
+    kpt_shape = _literal(path, "kpt_shape", kpt)
+    if not (isinstance(kpt_shape, list | tuple) and len(kpt_shape) == 2
+            and all(isinstance(v, int) and not isinstance(v, bool) for v in kpt_shape)):
+        raise ValueError(f"{path}: ONNX metadata kpt_shape = {kpt!r}: expected [keypoints, values per keypoint], "
+                         "e.g. [4, 3]")
+    if kpt_shape[0] != 4:
         raise ValueError(f"{path}: pose model has {kpt_shape[0]} keypoints; runway corners need 4")
-    nc = max(1, len(ast.literal_eval(meta.get("names", "{0: 'runway'}"))))
-    size = ast.literal_eval(meta.get("imgsz", "None"))
-    return nc, (size if isinstance(size, int) or size is None else max(size))
+    if kpt_shape[1] != 3:
+        raise ValueError(f"{path}: pose model has {kpt_shape[1]} values per keypoint; the layout read here is x, y, "
+                         "visibility (kpt_shape [4, 3])")
+    names = _literal(path, "names", meta.get("names", "{0: 'runway'}"))
+    if not isinstance(names, dict | list | tuple):
+        raise ValueError(f"{path}: ONNX metadata names = {meta.get('names')!r}: expected the class names "
+                         "({0: 'runway'})")
+    nc = max(1, len(names))
+    size = _literal(path, "imgsz", meta.get("imgsz", "None"))
+    if isinstance(size, list | tuple) and size and all(isinstance(v, int) for v in size):
+        size = max(size)
+    if size is not None and not (isinstance(size, int) and not isinstance(size, bool) and 0 < size <= 8192):
+        raise ValueError(f"{path}: ONNX metadata imgsz = {meta.get('imgsz')!r}: expected a side in pixels (1 to "
+                         "8192) or [height, width]")
+    return nc, size
+
+
+def check_output_shape(path: Path, shape: Sequence[object], nc: int) -> bool:
+    """Whether an output of ``shape`` — (B, 4 + nc + 12, A), or with the 8 σ channels of an uncertainty head
+    (B, 4 + nc + 20, A); a dimension may be symbolic (a name, or None) — gives σ; ``ValueError`` naming the file
+    and the shape for any other (a model that would fail every evaluation is refused when it is loaded)."""
+    plain, sigma = 4 + nc + 12, 4 + nc + 20
+    layout = f"(batch, {plain} or {sigma} channels: 4 box + {nc} class + 12 keypoint [+ 8 σ], anchors)"
+    if len(shape) != 3:
+        raise ValueError(f"{path}: output shape {list(shape)}: expected {layout}")
+    channels, anchors = shape[1], shape[2]
+    if isinstance(anchors, int) and anchors == 6 + 12:
+        raise ValueError(f"{path}: end-to-end (NMS-free) output layout is not supported")
+    if isinstance(channels, int) and channels not in (plain, sigma):
+        raise ValueError(f"{path}: output shape {list(shape)}: {channels} channels, expected {layout}")
+    if isinstance(anchors, int) and anchors < 1:
+        raise ValueError(f"{path}: output shape {list(shape)}: no anchors")
+    return channels == sigma
 
 
 class OnnxDetector(PoseDetector):
@@ -143,10 +196,10 @@ class OnnxDetector(PoseDetector):
         self.nc, size = pose_metadata(p, self.session.get_modelmeta().custom_metadata_map)
         inp = self.session.get_inputs()[0]
         self.input_name = inp.name
+        if len(inp.shape) != 4 or (isinstance(inp.shape[1], int) and inp.shape[1] != 3):
+            raise ValueError(f"{p}: input shape {list(inp.shape)}: expected (batch, 3, side, side) RGB views")
         out_shape = self.session.get_outputs()[0].shape
-        if len(out_shape) == 3 and isinstance(out_shape[2], int) and out_shape[2] == 6 + 12:
-            raise ValueError(f"{p}: end-to-end (NMS-free) output layout is not supported")
-        self.gives_sigma = len(out_shape) == 3 and out_shape[1] == 4 + self.nc + 12 + 8
+        self.gives_sigma = check_output_shape(p, out_shape, self.nc)
         self.imgsz = int(imgsz or size or 640)
         if not isinstance(inp.shape[0], str) and not isinstance(inp.shape[2], str):
             if imgsz is not None and int(inp.shape[2]) != self.imgsz:
@@ -156,6 +209,20 @@ class OnnxDetector(PoseDetector):
             self.chunk = int(chunk)
         self.input_size = self.imgsz
         self.path = p
+        if not all(isinstance(d, int) for d in out_shape[1:]):
+            # a symbolic channel count: the layout is known only from a forward pass
+            self._probe(self.chunk if isinstance(inp.shape[0], int) else 1)
+
+    def _probe(self, batch: int) -> None:
+        """One forward pass on blank views: the output's layout checked (:func:`check_output_shape`) before any
+        job runs, where the graph's declared shape leaves it open."""
+        x = np.zeros((batch, 3, self.imgsz, self.imgsz), np.float32)
+        try:
+            y = self.session.run(None, {self.input_name: x})[0]
+        except Exception as e:  # noqa: BLE001 - ORT's errors have many types; each means the same here
+            raise ValueError(f"{self.path}: cannot run on a {list(x.shape)} input ({type(e).__name__}: "
+                             f"{str(e).strip().splitlines()[0] if str(e).strip() else ''})") from None
+        self.gives_sigma = check_output_shape(self.path, y.shape, self.nc)
 
     def __repr__(self) -> str:
         return f"OnnxDetector({str(self.path)!r}, imgsz={self.imgsz})"

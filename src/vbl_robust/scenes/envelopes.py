@@ -229,6 +229,13 @@ def corners_visible(approach: Approach, K: np.ndarray, width: int, height: int, 
     )
 
 
+def fit_margin(margin_px: float, width: int, height: int) -> float:
+    """The visibility margin used for a ``width`` × ``height`` image: ``margin_px``, at most a quarter of the
+    smaller side less one pixel — so the smallest images (16 px) keep half their side for the runway; from 33 px
+    up it is ``margin_px`` (8 px by default) unchanged."""
+    return min(float(margin_px), (min(width, height) - 1) / 4.0)
+
+
 def sample_approach(
     rng: np.random.Generator,
     envelope: Envelope,
@@ -246,10 +253,11 @@ def sample_approach(
 
     With ``require_visible`` the pose is redrawn (at most :data:`MAX_VISIBILITY_TRIES` times, then
     ``RuntimeError``) until :func:`corners_visible` holds for intrinsics ``K`` (default: 60° FOV for
-    ``width`` × ``height``).
+    ``width`` × ``height``) with the margin :func:`fit_margin` gives.
     """
     if K is None:
         K = intrinsics(width, height)
+    margin_px = fit_margin(margin_px, width, height)
     for tries in range(1, MAX_VISIBILITY_TRIES + 1):
         d, a_h, a_v, dyaw, pitch, roll = _draw_pose(rng, envelope)
         app = approach_from_angles(

@@ -40,7 +40,7 @@ from vbl_robust.geometry.camera import intrinsics, project
 from vbl_robust.geometry.geodesy import runway_db_entry
 
 from .airports import MAX_POOL, REFERENCE_LAT_LON_ALT, RUNWAY_LENGTH_RANGE_M, Airport, make_airport
-from .envelopes import ENVELOPES, Approach, approach_from_angles, corners_visible
+from .envelopes import ENVELOPES, Approach, approach_from_angles, corners_visible, fit_margin
 from .export import _streamed
 from .generate import _layout, _sample_meta, _world_of, render_sample
 from .render import render_scene, sample_look
@@ -133,6 +133,7 @@ def _draw_trajectory(rng: np.random.Generator, i: int, airport: Airport, K: np.n
     """Sequence ``i``'s approaches, one per frame time ``t``, drawn from ``rng`` until the runway stays in view
     (``require_visible``); with its glide-path angle, lateral path angle and the number of draws."""
     frames = len(t)
+    margin_px = fit_margin(margin_px, width, height)
     for tries in range(1, MAX_SEQUENCE_TRIES + 1):
         d_end = float(rng.uniform(lo, hi - span))
         gamma = glide_deg + float(rng.uniform(-glide_jitter_deg, glide_jitter_deg))

@@ -42,6 +42,25 @@ PACKED = STORE + ".xz"
 _UNPACK_CHUNK = 1 << 20
 
 
+def unpack(packed: Path, target: Path) -> Path:
+    """Decompress the packed store ``packed`` (xz) into the file ``target``, streamed in chunks of
+    :data:`_UNPACK_CHUNK` bytes (memory bounded whatever the store's size); ``ValueError`` (one line, ``target``
+    removed) for a file that is not a complete xz stream."""
+    import lzma
+    import shutil
+
+    try:
+        with lzma.open(packed, "rb") as src, open(target, "wb") as dst:
+            shutil.copyfileobj(src, dst, _UNPACK_CHUNK)
+    except (lzma.LZMAError, EOFError) as exc:
+        Path(target).unlink(missing_ok=True)
+        raise ValueError(f"{packed}: not a complete packed store ({exc})") from None
+    except BaseException:
+        Path(target).unlink(missing_ok=True)
+        raise
+    return Path(target)
+
+
 class ResultStore:
     """A campaign's results in one SQLite file (see :mod:`~vbl_robust.campaigns.store.schema` for the layout).
 
@@ -120,18 +139,13 @@ class ResultStore:
     @classmethod
     def _unpacked(cls, packed: Path) -> ResultStore:
         """A packed store opened read-only through a temporary copy (streamed: bounded memory)."""
-        import lzma
         import shutil
         import tempfile
 
         tmp = Path(tempfile.mkdtemp(prefix="vbl-robust-store-"))
         try:
-            with lzma.open(packed, "rb") as src, open(tmp / STORE, "wb") as dst:
-                shutil.copyfileobj(src, dst, _UNPACK_CHUNK)
+            unpack(packed, tmp / STORE)
             store = cls(tmp / STORE, readonly=True)
-        except (lzma.LZMAError, EOFError) as exc:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise ValueError(f"{packed}: not a complete packed store ({exc})") from None
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
@@ -163,6 +177,15 @@ class ResultStore:
         if row is None:
             return None
         return {"name": row[0], "spec": json.loads(row[1]), "detector": json.loads(row[2]), "created_at": row[3]}
+
+    def require_campaign(self) -> dict[str, Any]:
+        """The stored campaign (:meth:`campaign`); ``ValueError`` (one line) for a store that holds none — a 0-byte
+        file, or a store nothing was run into (left by a command refused before its run, or a refused merge):
+        there is nothing to read."""
+        camp = self.campaign()
+        if camp is None:
+            raise ValueError(f"{self.path}: the results store holds no campaign yet (nothing was run into it)")
+        return camp
 
     def bind_campaign(self, name: str, spec: Mapping[str, Any], detector: Mapping[str, Any]) -> None:
         """Bind the store to a campaign and detector, or check that it holds this one.
