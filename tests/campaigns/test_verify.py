@@ -215,6 +215,9 @@ def test_an_unedited_store_verifies_clean_and_its_head_is_the_reported_one(prist
     assert res.exit_code == 1 and "not the one reported" in res.output
     assert _verify(pristine, "--head", "xyz").exit_code == 2
     assert _verify(tmp_path / "nothing").exit_code == 2
+    ResultStore(tmp_path / "empty" / "results.sqlite").close()
+    res = _verify(tmp_path / "empty")
+    assert res.exit_code == 2 and "nothing to verify" in res.output
 
 
 def test_the_report_leaves_the_edited_row_out_says_so_and_prints_the_head(pristine, tmp_path):
