@@ -59,7 +59,8 @@ def first_screen(page: str) -> str:
 
 
 def text(html: str) -> str:
-    return re.sub(r"\s+", " ", re.sub(r"<[^>]+>", "", html))
+    """What a reader sees of ``html``: tags and soft hyphens dropped, white space collapsed."""
+    return re.sub(r"\s+", " ", re.sub(r"<[^>]+>", "", html)).replace("\u00ad", "")
 
 
 def test_the_first_screen_says_the_verdict_its_interval_and_the_model(run, page):
@@ -128,3 +129,19 @@ def box(survivors, n=10, certified=0, misleading=2):
 def test_one_sentence_per_box(b, verdict, says):
     assert verdict_of(b) == verdict
     assert says in verdict_sentence(b, "image")
+
+
+def test_a_truth_run_stands_by_its_dense_grids(tmp_path):
+    """A run of dense grids alone (``vbl-robust truth``) has a first screen too: the grid is its search; its card's
+    figure stays the landscape."""
+    from vbl_robust.campaigns import Block, CampaignSpec
+    from vbl_robust.scenes import generate
+
+    blk = Block(boxes=(roll_box(20),), methods=("grid",), budgets=(Budget(max_evals=9),), role="reference")
+    spec = CampaignSpec("spatial-1d-truth", (blk,), figures=("landscape",), eps_safe_m=40.0)
+    with ResultStore(tmp_path / "results.sqlite") as st:
+        run_campaign(spec, list(generate(3, seed=5, width=128, height=128)), st,
+                     detector=DetectorSpec("oracle", options={"noise_px": 1.0}), dataset_source=SOURCE)
+    first = text(first_screen(build_report(tmp_path).read_text()))
+    assert re.search(r"(Not safe|Not shown safe) on ±20°: .*with 3 images it could be anywhere in", first)
+    assert (tmp_path / "headline.png").read_bytes() == (tmp_path / "figures" / "landscape_1d.png").read_bytes()

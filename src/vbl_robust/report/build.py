@@ -87,11 +87,13 @@ SECTIONS: dict[str, Callable[[Context], Section | None]] = {
 
 #: The figure that stands for a paper experiment's run on an index card (``headline.png`` beside the report): the
 #: first of these names drawn (a prefix matches, e.g. ``runtime_2d_time``), else the run's first figure. Any other
-#: run (an audit, a risk run, a truth run) stands by its safety figure, survival per box with its intervals
+#: run (an audit, a risk run) stands by its safety figure, survival per box with its intervals
 #: (:data:`AUDIT_HEADLINE`), never by a search's convergence.
 HEADLINE = ("survival_", "runtime_", "distance_profile", "families_ranking", "sequence_errors", "convergence",
             "pnp_solvers", "risk", SAFETY_FIGURE, "landscape_", "best_vs_evals")
 AUDIT_HEADLINE = (SAFETY_FIGURE, "survival_", "risk", "sequence_errors", "landscape_")
+#: A truth run (``vbl-robust truth``) stands by its dense grid's landscape, its one figure worth a card.
+TRUTH_HEADLINE = ("landscape_", SAFETY_FIGURE)
 HEADLINE_FILE = "headline.png"
 
 
@@ -155,6 +157,6 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
         body.append("</section>")
     path = out_dir / "report.html"
     atomic_write(path, page(f"vbl-robust {spec.name}", "\n".join(body)))
-    _headline(ctx.figures, out_dir, HEADLINE if exp is not None and not spec.name.endswith("-truth")
+    _headline(ctx.figures, out_dir, TRUTH_HEADLINE if spec.name.endswith("-truth") else HEADLINE if exp is not None
               else AUDIT_HEADLINE)
     return path

@@ -221,8 +221,11 @@ def worst_cases(rows: Sequence[JobRow], eps: float, penalty_m: float, cap: int =
 def evidence_of(ctx: Context) -> Evidence:
     """The run's :class:`Evidence` from its main rows and its failure-probability rows (rows read off a trace
     included, per budget: each budget is a box's evidence of its own only when the run has one budget; otherwise the
-    largest budget stands for it)."""
+    largest budget stands for it). A run without either (``vbl-robust truth``) stands by its dense grids."""
     rows = [r for r in [*ctx.main, *ctx.risk] if r.chain is None and r.box is not None]
+    if not rows:  # a truth run (vbl-robust truth): its dense grids are its searches
+        rows = [r for r in ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
+                if r.measured and r.chain is None and r.box is not None]
     budget = None
     if len({r.budget_label for r in rows}) > 1:  # runtime experiments: the evidence of the largest budget
         top = max(rows, key=lambda r: (mx.budget_value(r, "max_seconds"), mx.budget_value(r, "max_evals")))
@@ -409,8 +412,9 @@ def section_evidence(ctx: Context, ev: Evidence) -> Section | None:
         })
     s.html.append(table(lines, [
         ("box", "box", esc), ("n", f"{unit}s", None), ("breached", "breached", None),
-        ("misleading", "misleading", None), ("flagged", "flagged only", None), ("survival", "survival %", None),
-        ("survival_ci", "survival, 95 % CI (%)", esc), ("misleading_ci", "misleading, 95 % CI (%)", esc),
+        # soft hyphens (U+00AD): a narrow window may break the long headers
+        ("misleading", "mis\u00adleading", None), ("flagged", "flagged only", None), ("survival", "survival %", None),
+        ("survival_ci", "survival, 95 % CI (%)", esc), ("misleading_ci", "mis\u00adleading, 95 % CI (%)", esc),
         ("bound", "breached share of Θ", esc),
     ], left=("box", "bound"), cls="headline"))
     article = "an" if unit[0] in "aeiou" else "a"

@@ -84,8 +84,8 @@ p.audited { font-size: 14px; background: #f4f6f9; padding: .4em .8em; border-rad
 .nominal-warn { color: #8a4b00; font-weight: 600; }
 @media (max-width: 900px) {
   body { margin: 1em auto; }
-  table.headline { font-size: 13px; }
-  table.headline td, table.headline th { padding: 3px 6px; }
+  table.headline { font-size: 12px; }
+  table.headline td, table.headline th { padding: 3px 5px; }
 }
 @media print {
   body { max-width: none; margin: 0; font-size: 11pt; }
