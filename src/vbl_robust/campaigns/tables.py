@@ -142,6 +142,43 @@ def summary_records(store: ResultStore) -> list[dict[str, Any]]:
     return out
 
 
+#: Columns of a risk run's summary (:func:`risk_records`): per estimator, the failure probability pooled over the
+#: images (a fraction) with its interval at ``ci_level``, the verdicts on p_fail ≤ ``tau`` per image, evaluations.
+RISK_SUMMARY_COLUMNS = (
+    "experiment", "method", "box_label", "images", "p_fail", "p_fail_ci_low", "p_fail_ci_high", "ci_level", "tau",
+    "holds", "violated", "undecided", "not_measured", "evaluations",
+)
+
+
+def risk_records(store: ResultStore) -> list[dict[str, Any]]:
+    """A risk run's summary (:func:`vbl_robust.campaigns.risk.pooled_risk` per estimator), one record of
+    :data:`RISK_SUMMARY_COLUMNS` per estimator; none for a run without risk rows."""
+    from .risk import pooled_risk
+
+    camp = store.require_campaign()
+    rows = store.jobs(kind="risk", with_points=True, with_trace=False)
+    boxes = {r.method: r.box_label for r in rows}
+    unmeasured: dict[str, int] = {}
+    for r in rows:
+        unmeasured[r.method] = unmeasured.get(r.method, 0) + (not r.measured)
+    out = [{"experiment": camp["name"], "method": p.method, "box_label": boxes.get(p.method), "images": p.images,
+            "p_fail": p.p_fail, "p_fail_ci_low": p.ci.low, "p_fail_ci_high": p.ci.high, "ci_level": p.ci.level,
+            "tau": p.tau, "holds": p.holds, "violated": p.violated, "undecided": p.undecided,
+            "not_measured": unmeasured.pop(p.method, 0), "evaluations": p.evaluations} for p in pooled_risk(rows)]
+    out += [{"experiment": camp["name"], "method": m, "box_label": boxes.get(m), "images": 0, "not_measured": k}
+            for m, k in unmeasured.items()]  # an estimator whose every job was not measured
+    return out
+
+
+def summary_table(store: ResultStore) -> tuple[list[dict[str, Any]], tuple[str, ...]]:
+    """What ``report --format csv|json`` prints: the records and their columns — a risk run's per-estimator
+    failure probability (:func:`risk_records`), any other run's survival table (:func:`summary_records`)."""
+    camp = store.require_campaign()
+    if any(blk.get("kind") == "risk" for blk in camp["spec"].get("blocks", [])):
+        return risk_records(store), RISK_SUMMARY_COLUMNS
+    return summary_records(store), SUMMARY_COLUMNS
+
+
 def write_records(records: list[dict[str, Any]], columns: tuple[str, ...], fmt: str, stream: Any) -> None:
     """``records`` to ``stream`` as ``csv`` (a header, then one line each) or ``json`` (a list of objects)."""
     if fmt == "csv":

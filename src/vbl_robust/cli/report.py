@@ -156,15 +156,16 @@ def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None
 
 
 def _summary(run: Path, fmt: str) -> None:
-    """The run's summary table (:func:`vbl_robust.campaigns.tables.summary_records`) on standard output."""
+    """The run's summary table (:func:`vbl_robust.campaigns.tables.summary_table`: survival, or a risk run's
+    failure probability per estimator) on standard output."""
     import sys
 
     from vbl_robust.campaigns import ResultStore
-    from vbl_robust.campaigns.tables import SUMMARY_COLUMNS, summary_records, write_records
+    from vbl_robust.campaigns.tables import summary_table, write_records
 
     with one_line(), ResultStore.open_existing(run) as store:
-        records = summary_records(store)
-    write_records(records, SUMMARY_COLUMNS, fmt, sys.stdout)
+        records, columns = summary_table(store)
+    write_records(records, columns, fmt, sys.stdout)
 
 
 def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:

@@ -54,6 +54,8 @@ def zones(
         fail("--lipschitz and --estimate are exclusive (a sound constant, or the searches' own estimate)")
     if norm not in ("2", "inf", "1"):
         fail(f"--norm {norm}: choose 2, inf or 1")
+    if threshold is not None and not (math.isfinite(threshold) and threshold > 0):
+        fail(f"--threshold {threshold:g}: an error threshold ε in metres must be finite and > 0")
     lip = parse_lipschitz(lipschitz)
     try:
         jobs = zones_of_run(run, roles=None if role == "all" else (role,), threshold=threshold, lipschitz=lip,

@@ -39,7 +39,7 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from ..geometry.camera import intrinsics, project
-from ..geometry.geodesy import RunwayFrame
+from ..geometry.geodesy import DB_CORNERS, RunwayFrame
 from .lard import (
     ALTITUDE_RANGE_M,
     CORNER_COLUMNS,
@@ -262,6 +262,12 @@ def _size(row: dict, field: str, where: str, override: int | None) -> int:
 
 def _runway_frame(entry, airport: str, db_key: str, db_file: Path) -> tuple[RunwayFrame, np.ndarray]:
     where = f"{db_file}: airport {airport!r} runway {db_key!r}"
+    if isinstance(entry, dict):  # a fifth corner would be ignored silently: the DB is not what its author meant
+        extra = sorted(str(k) for k, v in entry.items() if k not in DB_CORNERS and isinstance(v, dict)
+                       and ("coordinate" in v or "position" in v))
+        if extra:
+            raise ValueError(f"{where}: corner(s) {', '.join(extra)} beside {', '.join(DB_CORNERS)}: a runway has "
+                             "four corners")
     try:
         frame = RunwayFrame.from_corners(entry)
     except ValueError as exc:

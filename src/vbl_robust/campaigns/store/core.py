@@ -13,6 +13,7 @@ import sqlite3
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from stat import S_ISREG
 from typing import Any
 
 from .digest import record_forgotten, record_stored
@@ -288,9 +289,12 @@ class ResultStore:
         for owner in samples:  # a sequence campaign's sample is an approach sequence: each frame has its file
             for s in getattr(owner, "samples", None) or (owner,):
                 path = getattr(s, "image_path", None)
-                if path is None or not Path(path).is_file():
-                    continue  # rendered in memory, or missing (the job records that failure)
-                st = Path(path).stat()
+                try:
+                    st = None if path is None else Path(path).stat()
+                except OSError:  # missing, or a name the file system refuses (too long …)
+                    st = None
+                if st is None or not S_ISREG(st.st_mode):
+                    continue  # rendered in memory, or not a readable file (the job records that failure)
                 old = stored.get(s.id)
                 digest = (digests or {}).get(s.id) or file_sha256(path)
                 if old is not None and old[3] != digest and owner.id in with_jobs:
