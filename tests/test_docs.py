@@ -74,6 +74,69 @@ def test_cli_reference_lists_every_command(built_site: Path) -> None:
         assert f"Usage: vbl-robust {name} [OPTIONS]" in html, name
 
 
+def _page_text(html: str) -> str:
+    """The visible text of a page: tags dropped, entities resolved, whitespace collapsed."""
+    import html as html_lib
+
+    return " ".join(html_lib.unescape(re.sub(r"<[^>]+>", " ", html)).split())
+
+
+def test_cli_reference_is_generated_from_the_command_objects(built_site: Path) -> None:
+    """The navigation gives every command's whole summary (never cut by "…"); each command's section has a table
+    with a row, and an anchor, for every option — its type and default beside its help."""
+    html = (built_site / "reference" / "cli.html").read_text()
+    text = _page_text(html)
+    group, commands = _commands()
+    for name, command in commands.items():
+        assert f'href="#vbl-robust-{name}"' in html, name
+        summary = " ".join((command.help or "").replace("`", "").split())
+        assert summary and summary in text, f"the whole summary of {name} is not on the page"
+        section = html.split(f'id="vbl-robust-{name}"', 1)[1].split('<h2 id="vbl-robust-', 1)[0]
+        for param in command.params:
+            if param.param_type_name != "option" or param.hidden:
+                continue
+            long = next(o for o in param.opts if o.startswith("--"))
+            assert f'id="{name}-{long[2:]}"' in section, f"no row for vbl-robust {name} {long}"
+            assert " ".join((param.help or "").split()).replace("`", "")[:40] in _page_text(section), (name, long)
+    for param in group.params:
+        long = next(o for o in param.opts if o.startswith("--"))
+        assert f'id="global-{long[2:]}"' in html, long
+    audit = html.split('id="vbl-robust-audit"', 1)[1].split('<h2 id="vbl-robust-', 1)[0]
+    assert re.search(r'id="audit-max-evals".*?</td>\s*<td>int 0–\d+</td>\s*<td><span class="cli-default"><code>200</code>',
+                     audit, flags=re.S), "the --max-evals row: type and default"
+    # pages that link to an option's row link to one that exists (the strict build checks the anchors too)
+    for page in DOCS.rglob("*.md"):
+        for anchor in re.findall(r"reference/cli\.md#([\w-]+)", page.read_text()):
+            assert f'id="{anchor}"' in html, f"{page.relative_to(ROOT)}: #{anchor}"
+
+
+def test_the_paper_results_page_shows_the_bundle_figures(built_site: Path) -> None:
+    """docs/hooks/bundle_figures.py serves results/paper/*/headline.png from where they live; the results page
+    shows them and its survival numbers as tables, not slash-separated runs."""
+    for figure in (ROOT / "results" / "paper").glob("*/headline.png"):
+        assert (built_site / "results" / "paper-figures" / f"{figure.parent.name}.png").is_file(), figure
+    page = (DOCS / "results" / "paper.md").read_text()
+    assert "paper-figures/spatial-1d.png" in page
+    for path in sorted((DOCS / "results").glob("*.md")):
+        run = re.search(r"\d[\d.]*(?: ?/ ?\d[\d.]*){2,}", path.read_text())
+        assert not run, f"{path.name}: a slash-separated run of numbers, {run.group()!r}: make it a table"
+
+
+#: The pages a user reads; the project's own history (issues, sessions, commits) belongs in CHANGELOG.md, and the
+#: records (REPRODUCTION.md, BENCHMARKS.md, the model card) may name the commits their numbers were measured at.
+USER_PAGES = ("index.md", "getting-started.md", "concepts.md", "conventions.md", "security.md", "how-to/*.md",
+              "reference/*.md", "results/*.md")
+
+
+def test_user_pages_carry_no_project_history() -> None:
+    history = re.compile(r"\b(?:issues?|sessions?) \d+|`[0-9a-f]{7,40}`|\bthis project.s sessions\b",
+                         flags=re.I)
+    for pattern in USER_PAGES:
+        for page in sorted(DOCS.glob(pattern)):
+            found = history.search(page.read_text())
+            assert not found, f"{page.relative_to(ROOT)}: {found.group()!r} is project history (CHANGELOG.md)"
+
+
 def test_api_reference_is_generated_from_docstrings(built_site: Path) -> None:
     html = (built_site / "reference" / "api.html").read_text()
     for name in ("ParameterBox", "Objective", "maximize", "run_campaign", "clopper_pearson"):
