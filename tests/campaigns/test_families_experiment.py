@@ -21,6 +21,7 @@ from vbl_robust.campaigns.spec import Block, Budget, roll_box
 from vbl_robust.constants import EPS_SAFE_M, Verdict
 from vbl_robust.perturb import PERTURBATIONS
 from vbl_robust.report import build_report
+from vbl_robust.report.evidence import SAFETY_FIGURE
 from vbl_robust.report.html import fmt_num
 
 TINY = Options(methods=("georobust", "random"), max_evals=6, family_grid=21)
@@ -146,7 +147,8 @@ def test_families_end_to_end_on_the_oracle(tmp_path, small_samples):
     html = build_report(tmp_path).read_text()
     stems = {p.stem for p in (tmp_path / "figures").glob("*.png")}
     assert {"families_ranking", "families_survival"} <= stems  # besides them only the zones section's figures
-    assert all(s.startswith("zones_") for s in stems - {"families_ranking", "families_survival"})
+    # besides them only the first screen's survival per box and the zones section's figures
+    assert all(s.startswith("zones_") for s in stems - {"families_ranking", "families_survival", SAFETY_FIGURE})
     table = {(c[1], c[2]): c for c in _cells(html) if len(c) == 11 and c[0].isdigit()}
     grids = [r for r in rows if r.role == "reference"]
     assert len(grids) == len(samples) * len(PERTURBATIONS)
