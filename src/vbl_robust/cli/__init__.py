@@ -33,6 +33,13 @@ class _Commands(TyperGroup):
                 option = name if eq else (args[i - 1] if i and args[i - 1].startswith("-") else "an argument")
                 raise typer.BadParameter("an empty value (name a file or directory, or leave the option out)",
                                          param_hint=option)
+            try:  # bytes that are not UTF-8 reach Python as surrogates: no store, report or config can hold them
+                arg.encode("utf-8")
+            except UnicodeEncodeError:
+                option = args[i - 1] if i and args[i - 1].startswith("-") and not eq else (name if eq else "an argument")
+                raise typer.BadParameter(f"{arg.encode('utf-8', 'backslashreplace').decode()!r} is not valid UTF-8 "
+                                         "(rename it: the stores, reports and config.yaml hold names as UTF-8)",
+                                         param_hint=option) from None
         # the command's name: the first argument that is not an option (the group's own options are flags)
         ctx.meta["vbl_command"] = next((a for a in args if not a.startswith("-")), None)
         return super().parse_args(ctx, args)

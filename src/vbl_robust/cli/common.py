@@ -133,6 +133,9 @@ def parse_box(roll: str, contrast: str | None, perturb: list[str] | None) -> Any
     extra = parse_perturb(perturb)
     if roll.strip().lower() != "none" and "roll_deg" not in extra:
         bounds["roll_deg"] = parse_range(roll, name="--roll", symmetric=True)
+        lo, hi, spec = *bounds["roll_deg"], PERTURBATIONS["roll_deg"]
+        if lo < spec.minimum or hi > spec.maximum:
+            fail(f"--roll {roll}: roll_deg must lie within [{spec.minimum:g}, {spec.maximum:g}] degrees")
     if contrast is not None:
         if "contrast" in extra:
             fail("--contrast and --perturb contrast=...: give the contrast range once")
@@ -150,7 +153,10 @@ def parse_methods(text: str) -> tuple[str, ...]:
     """``--methods a,b``: search methods, each known and given once."""
     from vbl_robust.search import METHODS
 
-    methods = tuple(m.strip() for m in text.split(",") if m.strip())
+    methods = tuple(m.strip() for m in text.split(","))
+    if methods != ("",) and not all(methods):  # "random," is a typo, not "random"
+        raise typer.BadParameter(f"--methods {text}: an empty method name (a stray comma)")
+    methods = tuple(m for m in methods if m)
     bad = [m for m in methods if m not in METHODS]
     if not methods or bad:
         raise typer.BadParameter(f"--methods: unknown method(s) {bad or text!r}; methods are {', '.join(METHODS)}")

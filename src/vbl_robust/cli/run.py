@@ -149,6 +149,14 @@ def check_store(out: Path, spec: Any, samples: list, detector: Any, *, wait: boo
             return
         check_same(path, have, spec.to_dict(), detector.identity())
         store.changed_contents(samples)
+        stored = store.samples()
+    from vbl_robust.campaigns.provenance import sample_fingerprint
+
+    other = [s.id for s in samples if s.id in stored and stored[s.id]["fingerprint"] != sample_fingerprint(s)]
+    if other:  # the same names, another image (size, camera, geometry): the stored rows describe the old ones
+        raise ValueError(f"{path}: samples {', '.join(other[:5])}{' …' if len(other) > 5 else ''} differ from those "
+                         "its results were computed on (another size, camera or geometry under the same names); "
+                         "run them into another --out")
 
 
 def _refuse_in_use(path: Path) -> None:

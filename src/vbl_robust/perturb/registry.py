@@ -85,25 +85,25 @@ def _upto(*highs: float) -> tuple[tuple[float, float], ...]:
 #: The parameter names a box may use, in the order they are applied (module docstring).
 PERTURBATIONS: dict[str, PerturbationSpec] = {
     "roll_deg": PerturbationSpec(
-        "roll_deg", "geometric", 0.0, -np.inf,
+        "roll_deg", "geometric", 0.0, -180.0,
         "camera roll about the optical axis, degrees, positive = right wing down (image turns counter-clockwise)",
-        unit="deg", default=(-15.0, 15.0), levels=_sym(2.0, 5.0, 10.0, 20.0, 30.0),
+        maximum=180.0, unit="deg", default=(-15.0, 15.0), levels=_sym(2.0, 5.0, 10.0, 20.0, 30.0),
         rationale="a stabilised final approach banks a few degrees (±2–5°); gusts and corrections reach ±10°; "
                   "±20–30° is a turning approach (30° is the usual bank limit); the roll budgets of the paper",
         family=".rotation:CAMERA_ATTITUDE",
     ),
     "pitch_deg": PerturbationSpec(
-        "pitch_deg", "geometric", 0.0, -np.inf,
+        "pitch_deg", "geometric", 0.0, -180.0,
         "camera pitch about its left axis, degrees, positive = nose up (scene moves down in the image)",
-        unit="deg", default=(-5.0, 5.0), levels=_sym(1.0, 2.0, 5.0, 10.0, 15.0),
+        maximum=180.0, unit="deg", default=(-5.0, 5.0), levels=_sym(1.0, 2.0, 5.0, 10.0, 15.0),
         rationale="±1° is an attitude-estimate or camera-mount error; ±2° a glide-path deviation; ±5° turbulence "
                   "and flare; ±10–15° go-around or upset attitudes (the runway leaves a 60° FOV beyond ~±20°)",
         family=".rotation:CAMERA_ATTITUDE",
     ),
     "yaw_deg": PerturbationSpec(
-        "yaw_deg", "geometric", 0.0, -np.inf,
+        "yaw_deg", "geometric", 0.0, -180.0,
         "camera yaw about its up axis, degrees, positive = nose right (scene moves left in the image)",
-        unit="deg", default=(-5.0, 5.0), levels=_sym(1.0, 2.0, 5.0, 10.0, 20.0),
+        maximum=180.0, unit="deg", default=(-5.0, 5.0), levels=_sym(1.0, 2.0, 5.0, 10.0, 20.0),
         rationale="±1–2° is a heading-estimate or mount error; ±5–10° the crab angle of a crosswind approach; "
                   "±20° an extreme crab (the LARD envelopes sample ±24° of heading offset)",
         family=".rotation:CAMERA_ATTITUDE",

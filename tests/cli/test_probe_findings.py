@@ -1,0 +1,72 @@
+"""Bad findings of the adversarial probe (benchmarks/adversarial_probes.py): nonsense that ran to exit 0 is
+refused in one line before anything is created — a stray comma in ``--methods``, an angle range beyond ±180°."""
+
+from __future__ import annotations
+
+import pytest
+from typer.testing import CliRunner
+
+from vbl_robust.cli import app
+from vbl_robust.perturb import Perturbation
+from vbl_robust.space import ParameterBox
+
+runner = CliRunner()
+SMALL = ["--oracle", "--n", "1", "--max-evals", "2", "--no-landscape", "--workers", "1", "--no-report", "-q",
+         "--width", "96", "--height", "96"]
+
+
+def _refused(res, *words: str) -> None:
+    assert res.exit_code == 2, res.output
+    lines = [ln for ln in res.output.splitlines() if ln.strip() and not ln.startswith(("Usage: ", "Try '"))]
+    assert len(lines) == 1 and "Traceback" not in res.output, res.output
+    assert all(w in lines[0] for w in words), res.output
+
+
+@pytest.mark.parametrize("methods", ["random,", ",random", "random,,georobust"])
+def test_a_stray_comma_in_methods_is_refused(tmp_path, methods):
+    _refused(runner.invoke(app, ["audit", "--methods", methods, "--out", str(tmp_path / "r"), *SMALL]), "--methods")
+    assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("args", [["--roll", "720"], ["--roll", "-200,10"], ["--perturb", "yaw_deg=-1e300,1e300"],
+                                  ["--perturb", "pitch_deg=0,181"]])
+def test_an_angle_beyond_180_degrees_is_refused(tmp_path, args):
+    _refused(runner.invoke(app, ["audit", *args, "--out", str(tmp_path / "r"), *SMALL]), "180")
+    assert not (tmp_path / "r").exists()
+
+
+def test_the_library_refuses_an_angle_box_beyond_180_degrees():
+    Perturbation(ParameterBox({"roll_deg": (-180.0, 180.0)}))  # the whole circle is a box
+    for name in ("roll_deg", "pitch_deg", "yaw_deg"):
+        with pytest.raises(ValueError, match=name):
+            Perturbation(ParameterBox({name: (-10.0, 190.0)}))
+
+
+def _tree(d):
+    return {p.relative_to(d): p.read_bytes() for p in sorted(d.rglob("*")) if p.is_file()}
+
+
+def test_a_run_on_other_pixels_under_the_same_sample_names_is_refused_and_changes_nothing(tmp_path):
+    """The same synthetic samples at another size have the same ids and another fingerprint: their rows would sit
+    beside the stored ones under the same names (2 images reported as 4)."""
+    out = tmp_path / "run"
+    args = ["audit", "--oracle", "--n", "1", "--max-evals", "2", "--roll", "5", "--methods", "random",
+            "--no-landscape", "--workers", "1", "--no-report", "-q", "--out", str(out)]
+    assert runner.invoke(app, [*args, "--width", "96", "--height", "96"]).exit_code == 0
+    before = _tree(out)
+    _refused(runner.invoke(app, [*args, "--width", "128", "--height", "128"]), "synth_", "another size")
+    assert _tree(out) == before
+
+
+def test_a_name_that_is_not_utf8_is_refused_in_one_line(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    bad = os.fsencode(str(tmp_path)) + b"/run\xff\xfe"
+    vbl = os.path.join(os.path.dirname(sys.executable), "vbl-robust")
+    res = subprocess.run([vbl, "audit", *SMALL, "--roll", "5", "--methods", "random", "--out", bad],
+                         capture_output=True, env={**os.environ, "VBL_ROBUST_WORKERS": "1"})
+    out = res.stdout.decode() + res.stderr.decode("utf-8", "replace")
+    assert res.returncode == 2 and "Traceback" not in out and "not valid UTF-8" in out, out
+    assert not os.path.exists(bad)
