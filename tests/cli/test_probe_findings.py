@@ -70,3 +70,12 @@ def test_a_name_that_is_not_utf8_is_refused_in_one_line(tmp_path):
     out = res.stdout.decode() + res.stderr.decode("utf-8", "replace")
     assert res.returncode == 2 and "Traceback" not in out and "not valid UTF-8" in out, out
     assert not os.path.exists(bad)
+
+
+def test_an_integer_of_5000_digits_is_refused_in_one_line(tmp_path):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("seed: " + "9" * 5000 + "\n")
+    _refused(runner.invoke(app, ["audit", *SMALL, "--config", str(cfg), "--out", str(tmp_path / "r")]), "--config")
+    _refused(runner.invoke(app, ["audit", *SMALL, "--method-option", "random.batch_size=" + "9" * 5000,
+                                 "--out", str(tmp_path / "r")]), "--method-option")
+    assert not (tmp_path / "r").exists()

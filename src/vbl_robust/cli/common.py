@@ -187,7 +187,7 @@ def parse_method_options(values: list[str] | None) -> dict[str, dict[str, Any]]:
                  f"{', '.join(allowed)}")
         try:
             value = yaml.safe_load(raw)
-        except yaml.YAMLError:
+        except (yaml.YAMLError, ValueError):  # ValueError: an integer past Python's digit limit
             fail(f"--method-option {text!r}: value {raw!r} is not a number, boolean, string or list")
         if name in out.setdefault(method, {}):
             fail(f"--method-option {text!r}: {method}.{name} is given twice")

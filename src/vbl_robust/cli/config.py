@@ -164,6 +164,10 @@ def load_yaml(path: Path) -> Any:
         return loader.construct_document(node)
     except yaml.YAMLError as exc:
         raise ConfigError(f"not YAML ({' '.join(str(exc).split())})") from None
+    except ConfigError:
+        raise
+    except ValueError as exc:  # a value YAML reads but Python will not hold (an integer of 5000 digits)
+        raise ConfigError(f"a value it cannot read ({' '.join(str(exc).split())[:120]})") from None
     except RecursionError:
         raise ConfigError("not YAML (nested too deeply)") from None
     finally:
