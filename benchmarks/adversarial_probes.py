@@ -133,6 +133,7 @@ class Probe:
     fn: Callable[[], tuple] | None = None  # a custom probe: returns (Result, findings)
     timeout: float = TIMEOUT
     setup: Callable[[], None] | None = None
+    one_line: bool = True  # a refusal must be one error line (not for click's own help screen)
 
 
 @dataclass
@@ -169,7 +170,7 @@ def classify(p: Probe, res: Result, before: dict, extra: list) -> tuple[str, str
             found.append(("weak", "exit 2 where 1 is documented"))
         else:
             found.append(("bad" if res.rc not in (1, 2) else "weak", f"exit {res.rc}, expected {expect}"))
-    if res.rc == 2 and 2 in expect:
+    if res.rc == 2 and 2 in expect and p.one_line:
         msg = message_lines(res.out)
         errs = [ln for ln in msg if ln.lower().startswith("error")]
         if len(errs) != 1 or len(msg) != 1:
@@ -178,8 +179,10 @@ def classify(p: Probe, res: Result, before: dict, extra: list) -> tuple[str, str
             found.append(("weak", f"slow refusal ({res.seconds:.0f} s)"))
     if p.absent and res.rc != 0:
         made = [str(Path(a).name) for a in p.absent if Path(a).exists()]
-        if made:
+        if made and res.rc == 2:
             found.append(("bad", "a refusal created " + ", ".join(made)))
+        elif made:
+            found.append(("weak", "failed after partial work (created " + ", ".join(made) + ")"))
     if not found:
         msg = message_lines(res.out)
         if res.rc == 2 and msg:
@@ -246,7 +249,7 @@ class Fx:
                          "--no-landscape", "--width", "160", "--height", "160", "-q"]
         must(run(["audit", *self.run_args, "--out", self.run]), "audit run")
         self.risk = T / "runs" / "risk"
-        self.risk_args = ["--oracle", "--n", "2", "--max-evals", "16", "--roll", "5", "--methods", "mc",
+        self.risk_args = ["--oracle", "--n", "2", "--max-evals", "128", "--roll", "5", "--methods", "mc",
                           "--width", "160", "--height", "160", "-q"]
         must(run(["risk", *self.risk_args, "--out", self.risk]), "risk run")
         self.pt = T / "user.pt"
@@ -436,7 +439,7 @@ def probes(fx: Fx) -> list[Probe]:
         add(f"help {c}", [c, "--help"], 0, check=contains("Usage"))
     add("version", ["--version"], 0, check=not_empty)
     add("unknown command", ["frobnicate"], 2)
-    add("no command", [], (0, 2))
+    add("no command (the help screen)", [], (0, 2), one_line=False, check=contains("Commands"))
 
     # --- audit: bad option values (a fresh --out each: nothing may be created) --------------------------------
     bad_audit = [
@@ -596,8 +599,8 @@ def probes(fx: Fx) -> list[Probe]:
         ("runway DB alias-free deep nesting", lambda: _db_bytes(fx, "dbdeep", b"[" * 100000 + b"]" * 100000), 2),
         ("CSV 0-byte", lambda: _csv_bytes(fx, "csv0", lambda b: b""), 2),
         ("CSV header only", lambda: _csv_bytes(fx, "csvhdr", lambda b: b.split(b"\n")[0] + b"\n"), 2),
-        ("CSV truncated mid-row", lambda: _csv_bytes(fx, "csvcut", lambda b: b[: len(b) - 40]), (1, 2)),
-        ("CSV non-UTF-8", lambda: _csv_bytes(fx, "csvlatin", lambda b: b.replace(b"VBLA", b"VBL\xff", 1)), 2),
+        ("CSV truncated mid-row", lambda: _csv_bytes(fx, "csvcut", lambda b: b[: len(b) - 260]), 2),
+        ("CSV non-UTF-8", lambda: _csv_bytes(fx, "csvlatin", lambda b: b.replace(b";", b";\xff", 30)), 2),
         ("CSV missing column", lambda: _drop_column(fx, "nocol", "x_TR"), 2),
         ("symlinked image outside", lambda: _symlink_image(fx), 2),
     ]
@@ -608,19 +611,19 @@ def probes(fx: Fx) -> list[Probe]:
     def add_lazy(name, mk, expect, **kw):
         P.append(Probe(name, [], expect, fn=_lazy_run(mk, kw.pop("check", None)), **kw))
     o = fx.fresh()
-    add_lazy("audit --lard JPEG truncated, --allow-unmeasured", lambda: [
+    add_lazy("audit --lard JPEG truncated, --allow-unmeasured", lambda o=o: [
         "audit", *lard, "--allow-unmeasured", "--lard", fx.ds_image_bytes("third2", lambda b: b[: len(b) // 3]),
         "--out", o], 0)
     o = fx.fresh()
-    add_lazy("audit --lard image name with | and markup (report escaped)", lambda: [
+    add_lazy("audit --lard image name with | and markup (report escaped)", lambda o=o: [
         "audit", *lard[:-1], "--lard", fx.ds_image_named("markup", f"a|b{SVG}.jpg"), "--out", o], 0,
         check=file_escaped(lambda o=o: [o / "report.html"]))
     o = fx.fresh()
-    add_lazy("audit --lard 300-char image name fails one sample", lambda: [
+    add_lazy("audit --lard 300-char image name fails one sample", lambda o=o: [
         "audit", *lard, "--allow-unmeasured", "--lard", fx.ds_image_named("long", "n" * 300 + ".jpg"), "--out", o],
         (0, 1))
     o = fx.fresh()
-    add_lazy("audit --lard non-UTF-8 image name", lambda: [
+    add_lazy("audit --lard non-UTF-8 image name", lambda o=o: [
         "audit", *lard, "--lard", _latin_name(fx), "--out", o], (0, 1, 2))
 
     # --- audit --config: hostile configs ------------------------------------------------------------------------
@@ -684,7 +687,7 @@ def probes(fx: Fx) -> list[Probe]:
                              "--out", fx.fresh("demo")], 0, timeout=240)
 
     # --- risk -----------------------------------------------------------------------------------------------------
-    rsmall = ["--oracle", "--n", "1", "--max-evals", "8", "--roll", "5", "--width", "160", "--height", "160", "-q",
+    rsmall = ["--oracle", "--n", "1", "--max-evals", "64", "--guide-evals", "8", "--roll", "5", "--width", "160", "--height", "160", "-q",
               "--no-report"]
     for name, extra in [
         ("tau negative", ["--tau", "-0.1"]), ("tau above 1", ["--tau", "2"]), ("tau nan", ["--tau", "nan"]),
@@ -707,7 +710,9 @@ def probes(fx: Fx) -> list[Probe]:
         unchanged=(risk_,))
     add("risk refusal keeps the audit run (another campaign)", ["risk", *fx.risk_args, "--out", run_], 2,
         unchanged=(run_,))
-    add("risk mc alone with its default guide-evals", ["risk", *rsmall, "--methods", "mc", "--out", fx.fresh()], 0)
+    add("risk --methods mc --max-evals 16 (guided's default option unused)",
+        ["risk", "--oracle", "--n", "1", "--max-evals", "16", "--roll", "5", "--width", "160", "--height", "160",
+         "-q", "--no-report", "--methods", "mc", "--out", fx.fresh()], 0)
     add("risk normal dist", ["risk", *rsmall, "--methods", "mc", "--dist", "roll_deg=normal:0,2",
                              "--out", fx.fresh()], 0)
     add("risk rerun of a finished run", ["risk", *fx.risk_args, "--out", risk_, "--no-report"], 0)
@@ -1270,6 +1275,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, help="write the Markdown table here (default: standard output)")
     ap.add_argument("--only", default=None, help="run only the probes whose name contains this")
     ap.add_argument("--keep", action="store_true", help="keep the temporary directory (printed)")
+    ap.add_argument("--start", type=int, default=1, help="begin at probe number START (1-based; to finish a run "
+                    "cut short by --stop-after)")
     ap.add_argument("--stop-after", type=float, default=None,
                     help="start no probe after this many seconds (those left are counted as not run)")
     ns = ap.parse_args(argv)
@@ -1282,14 +1289,16 @@ def main(argv: list[str] | None = None) -> int:
         ps = probes(fx)
         if ns.only:
             ps = [p for p in ps if ns.only in p.name]
+        first = ns.start
+        ps = ps[first - 1:]
         outcomes, skipped = [], 0
-        for i, p in enumerate(ps, 1):
+        for i, p in enumerate(ps, first):
             if ns.stop_after is not None and time.monotonic() - t_start > ns.stop_after:
-                skipped = len(ps) - i + 1
+                skipped = len(ps) - (i - first)
                 break
             o = run_probe(p)
             outcomes.append(o)
-            print(f"[{i}/{len(ps)}] {o.level:4s} {o.res.seconds:6.1f}s {p.name}" + (f" — {o.note}" if o.note else ""),
+            print(f"[{i}/{len(ps) + first - 1}] {o.level:4s} {o.res.seconds:6.1f}s {p.name}" + (f" — {o.note}" if o.note else ""),
                   file=sys.stderr, flush=True)
     finally:
         if not ns.keep:
@@ -1303,7 +1312,7 @@ def main(argv: list[str] | None = None) -> int:
     lines = [f"# Adversarial probes of vbl-robust ({len(outcomes)} probes, default workers)", "",
              "Fixtures: " + "; ".join(fx.log), "",
              "| # | probe | command | expected | exit | outcome | note |", "|---|---|---|---|---|---|---|"]
-    for i, o in enumerate(outcomes, 1):
+    for i, o in enumerate(outcomes, first):
         cmd = o.res.cmd.replace(str(T), "$T")
         note = o.note.replace(str(T), "$T")
         lines.append(f"| {i} | {cell(o.probe.name, 90)} | `{cell(cmd, 200)}` | {expect(o.probe.expect)} | "
