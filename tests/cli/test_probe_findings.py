@@ -79,3 +79,20 @@ def test_an_integer_of_5000_digits_is_refused_in_one_line(tmp_path):
     _refused(runner.invoke(app, ["audit", *SMALL, "--method-option", "random.batch_size=" + "9" * 5000,
                                  "--out", str(tmp_path / "r")]), "--method-option")
     assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("methods", ["mc,", ",guided", "mc,,guided"])
+def test_risk_refuses_a_stray_comma_in_methods(tmp_path, methods):
+    _refused(runner.invoke(app, ["risk", "--oracle", "--n", "1", "--roll", "5", "--methods", methods,
+                                 "--out", str(tmp_path / "r"), "--workers", "1", "-q", "--no-report"]), "--methods")
+    assert not (tmp_path / "r").exists()
+
+
+def test_risk_mc_alone_is_not_refused_over_guided_options_default(tmp_path):
+    res = runner.invoke(app, ["risk", "--oracle", "--n", "1", "--roll", "5", "--methods", "mc", "--max-evals", "16",
+                              "--width", "96", "--height", "96", "--out", str(tmp_path / "r"), "--workers", "1", "-q",
+                              "--no-report"])
+    assert res.exit_code == 0, res.output
+    _refused(runner.invoke(app, ["risk", "--oracle", "--n", "1", "--roll", "5", "--methods", "mc,guided",
+                                 "--max-evals", "16", "--out", str(tmp_path / "g"), "--workers", "1", "-q"]),
+             "--guide-evals")

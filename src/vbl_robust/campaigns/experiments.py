@@ -425,7 +425,7 @@ def risk_spec(box: BoxSpec, *, methods: Sequence[str] = ("mc", "guided"), max_ev
         raise ValueError(f"--delta must be in (0, 1), got {delta}")
     if not 2 <= max_evals <= MAX_EVALS:
         raise ValueError(f"--max-evals must be in [2, {MAX_EVALS}], got {max_evals}")
-    if not 1 <= guide_evals < max_evals:
+    if "guided" in methods and not 1 <= guide_evals < max_evals:  # an option of guided alone
         raise ValueError(f"--guide-evals must be in [1, --max-evals), got {guide_evals}")
     d = ThetaDistribution.over(box.box, dist)  # refuses a parameter not in the box, a normal with no mass
     base = {"dist": {k: list(v) for k, v in sorted((dist or {}).items())}, "tau": tau, "delta": delta}

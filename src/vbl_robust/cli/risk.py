@@ -51,8 +51,8 @@ def risk(
 
     quiet = set_verbosity(quiet=quiet, verbose=verbose)
     box = parse_box(roll, contrast, perturb)
-    method_list = tuple(m.strip() for m in methods.split(",") if m.strip())
-    bad = [m for m in method_list if m not in RISK_METHODS]
+    method_list = tuple(m.strip() for m in methods.split(","))
+    bad = [m for m in method_list if m not in RISK_METHODS]  # "mc," (a stray comma) too
     if bad or not method_list or len(set(method_list)) != len(method_list):
         fail(f"--methods {methods}: choose among {', '.join(RISK_METHODS)}, each once")
     for name, v in (("--tau", tau), ("--delta", delta)):
