@@ -96,3 +96,15 @@ def test_risk_mc_alone_is_not_refused_over_guided_options_default(tmp_path):
     _refused(runner.invoke(app, ["risk", "--oracle", "--n", "1", "--roll", "5", "--methods", "mc,guided",
                                  "--max-evals", "16", "--out", str(tmp_path / "g"), "--workers", "1", "-q"]),
              "--guide-evals")
+
+
+def test_zones_refuses_a_store_that_holds_no_campaign(tmp_path):
+    (tmp_path / "results.sqlite").write_bytes(b"")
+    _refused(runner.invoke(app, ["zones", str(tmp_path)]), "no campaign")
+
+
+@pytest.mark.parametrize("option", ["--time-budgets", "--eval-budgets"])
+def test_reproduce_refuses_a_stray_comma_in_budgets(tmp_path, option):
+    _refused(runner.invoke(app, ["reproduce", "runtime-1d", option, "1,", "--images", "1", "--oracle",
+                                 "--workers", "1", "--out", str(tmp_path / "r")]), option)
+    assert not (tmp_path / "r").exists()

@@ -187,7 +187,7 @@ def _floats(text: str | None, name: str) -> tuple[float, ...] | None:
     if text is None:
         return None
     try:
-        vals = tuple(float(v) for v in text.split(",") if v.strip())
+        vals = tuple(float(v) for v in text.split(","))  # "0.1," (a stray comma) is no number either
     except ValueError:
         raise typer.BadParameter(f"{name}: expected comma-separated numbers, got {text!r}") from None
     if not vals or any(not math.isfinite(v) or v <= 0 for v in vals):

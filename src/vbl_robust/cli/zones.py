@@ -58,6 +58,10 @@ def zones(
         fail(f"--threshold {threshold:g}: an error threshold ε in metres must be finite and > 0")
     lip = parse_lipschitz(lipschitz)
     try:
+        from vbl_robust.campaigns import ResultStore
+
+        with ResultStore.open_existing(run) as store:  # a 0-byte store, or one nothing ran into: nothing to zone
+            store.require_campaign()
         jobs = zones_of_run(run, roles=None if role == "all" else (role,), threshold=threshold, lipschitz=lip,
                             norm=norm, estimate=estimate)
     except ReplayError as exc:
