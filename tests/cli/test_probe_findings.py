@@ -108,3 +108,10 @@ def test_reproduce_refuses_a_stray_comma_in_budgets(tmp_path, option):
     _refused(runner.invoke(app, ["reproduce", "runtime-1d", option, "1,", "--images", "1", "--oracle",
                                  "--workers", "1", "--out", str(tmp_path / "r")]), option)
     assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("value", ["5,", ",5", "1,,2"])
+def test_a_stray_comma_in_lipschitz_is_refused(tmp_path, value):
+    _refused(runner.invoke(app, ["audit", *SMALL, "--lipschitz", value, "--out", str(tmp_path / "r")]),
+             "--lipschitz")
+    _refused(runner.invoke(app, ["zones", str(tmp_path / "none"), "--lipschitz", value]), "--lipschitz")

@@ -88,7 +88,7 @@ def parse_lipschitz(text: str | None) -> float | tuple[float, ...] | None:
     if text is None:
         return None
     try:
-        vals = tuple(float(v) for v in text.split(",") if v.strip())
+        vals = tuple(float(v) for v in text.split(","))  # "5," (a stray comma) is no number either
     except ValueError:
         vals = ()
     if not vals or any(not math.isfinite(v) or v < 0 for v in vals):
