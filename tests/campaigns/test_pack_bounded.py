@@ -45,8 +45,9 @@ def test_a_packed_store_round_trips_and_a_truncated_one_is_refused(tmp_path):
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS and /proc (Linux)")
-def test_packing_a_store_stays_in_bounded_memory(tmp_path):
-    src = _store(tmp_path / "results.sqlite", 48)
+def test_packing_a_store_stays_in_bounded_memory(tmp_path, full):
+    # 48 MB of incompressible ballast under --full (about a minute of xz); 8 MB in make test's small form
+    src = _store(tmp_path / "results.sqlite", 48 if full else 8)
     code = textwrap.dedent(f"""
         import resource, sys
         from pathlib import Path

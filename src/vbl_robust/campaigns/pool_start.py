@@ -7,7 +7,7 @@ the process's target is :func:`start_worker`, in this module that imports nothin
 light package, which asks Linux to kill the worker when its parent dies (``PR_SET_PDEATHSIG``) and then checks that
 the parent it was started by is still its parent (a parent that died before that call is not signalled: the
 worker was re-parented, and ends at once). Only then are the worker's arguments (pickled by the parent, as bytes)
-unpickled and the worker imported (:func:`vbl_robust.campaigns.runner._pool_worker`).
+unpickled and the worker's modules imported (:func:`pool_worker`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import os
 import sys
 from typing import Any
 
-__all__ = ["die_with_parent", "start_worker"]
+__all__ = ["die_with_parent", "pool_worker", "start_worker"]
 
 #: ``prctl`` option: the signal this process gets when its parent thread ends (Linux).
 PR_SET_PDEATHSIG = 1
@@ -44,6 +44,27 @@ def start_worker(parent: int, tasks: Any, results: Any, payload: bytes) -> None:
     die_with_parent(parent)
     import pickle
 
-    from .runner import _pool_worker
+    pool_worker(tasks, results, *pickle.loads(payload))
 
-    _pool_worker(tasks, results, *pickle.loads(payload))
+
+def pool_worker(tasks: Any, results: Any, detector: Any, settings: Any, run_id: int) -> None:
+    """A worker process: one torch thread; runs sample tasks from ``tasks`` until ``None`` and sends each job's
+    rows (``("rows", rows)``), then ``("done", None)`` per task; a detector that cannot be built is one line
+    (``("error", line)``). Its modules (torch, the detector) are imported here, once :func:`start_worker` has tied
+    the process's life to its parent's."""
+    import warnings
+
+    from ..constants import TORCH_JIT_WARNING
+    from .work import detector_for, one_core, run_sample_task
+
+    warnings.filterwarnings("ignore", message=TORCH_JIT_WARNING, category=FutureWarning)
+    one_core()
+    try:
+        det = detector_for(detector)
+    except Exception as exc:  # noqa: BLE001 - reported to the parent as one line, not a traceback
+        results.put(("error", f"{type(exc).__name__}: {exc}"))
+        return
+    while (task := tasks.get()) is not None:
+        for rows in run_sample_task(task, det, settings, run_id):
+            results.put(("rows", rows))
+        results.put(("done", None))

@@ -385,28 +385,6 @@ def _stored_breaches(store: ResultStore) -> int:
 
 
 # -- worker processes ---------------------------------------------------------------------------------------------
-def _pool_worker(tasks: Any, results: Any, detector: DetectorSpec, settings: Settings, run_id: int) -> None:
-    """A worker process: one torch thread; runs sample tasks from ``tasks`` until ``None`` and sends each job's
-    rows (``("rows", rows)``), then ``("done", None)`` per task. Started by
-    :func:`~vbl_robust.campaigns.pool_start.start_worker`, which has tied its life to its parent's before this
-    module (torch, the detector) was imported."""
-    import warnings
-
-    from ..constants import TORCH_JIT_WARNING
-
-    warnings.filterwarnings("ignore", message=TORCH_JIT_WARNING, category=FutureWarning)
-    one_core()
-    try:
-        det = detector_for(detector)
-    except Exception as exc:  # noqa: BLE001 - reported to the parent as one line, not a traceback
-        results.put(("error", f"{type(exc).__name__}: {exc}"))
-        return
-    while (task := tasks.get()) is not None:
-        for rows in run_sample_task(task, det, settings, run_id):
-            results.put(("rows", rows))
-        results.put(("done", None))
-
-
 def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Settings, run_id: int,
                workers: int) -> Iterator[list[JobRow]]:
     """Run the sample tasks in ``workers`` processes (spawned: a fresh interpreter each) and yield their rows in

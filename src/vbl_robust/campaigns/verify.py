@@ -175,7 +175,7 @@ def row_findings(row: JobRow, *, eps_safe_m: float, penalty_m: float, committed:
         if row.kind == "risk":
             expected = _risk_fields(row, penalty_m, eps_safe_m)
         else:
-            from .readoff import row_result
+            from .rebuild import row_result
             from .work import result_fields
 
             expected = result_fields(row_result(row), eps_safe_m, penalty_m)

@@ -142,6 +142,7 @@ def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None
     a GPU, a cluster without a shared disk): rows it lacks, their samples and runs; rows it holds stay. Refused
     while a run writes it, and for a detector that names code unless --trust-model."""
     from vbl_robust.campaigns.store import MergeReport, merge_runs
+    from vbl_robust.campaigns.verify import screen
 
     def merged(report: MergeReport) -> None:
         part = report.sources[-1]
@@ -150,7 +151,8 @@ def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None
                       if part.inconsistent else ""))
 
     with one_line(ValueError, OSError):
-        done = merge_runs(sources, into, trust=trust_model, progress=merged)
+        done = merge_runs(sources, into, trust=trust_model, progress=merged,
+                          left_out=lambda store: screen(store).inconsistent)  # rows contradicting themselves
     if len(done.code_versions) > 1:  # runs of other code versions joined: say which
         typer.echo(f"code versions joined in {done.into}: {', '.join(done.code_versions)}")
 

@@ -314,7 +314,8 @@ def _check_file(s: Any, fh: Any, shown: str, sha256: bool) -> ImageCheck:
     stated = (int(s.width), int(s.height))
     try:
         im = Image.open(fh)
-    except UnidentifiedImageError:
+    except (UnidentifiedImageError, ImportError):  # ImportError: a third-party opener another library registered
+        fh.seek(0)  # (e.g. one that needs pi_heif) tried the file and lacked its own module: not PIL's format
         return _check_with_opencv(s, shown, sha256)
     except Exception as exc:  # noqa: BLE001 - a malformed header can raise anything inside PIL's parsers
         return ImageCheck(s.id, shown, False, f"unreadable image header ({_one_line(exc)})", kind="undecodable")

@@ -16,7 +16,7 @@ from pathlib import Path
 from stat import S_ISREG
 from typing import Any
 
-from .digest import record_forgotten, record_stored
+from .digest import mark_before, record_forgotten, record_stored
 from .identity import check_same
 from .rows import JobRow, JobStatus, RunProvenance, RunRecord, RunStatus, now_iso
 from .schema import (
@@ -85,7 +85,7 @@ class ResultStore:
             try:
                 self._con.execute("PRAGMA journal_mode=WAL")
                 self._con.execute("PRAGMA synchronous=NORMAL")  # durable against process kills (not power loss)
-                migrate(self._con, self.path)
+                migrate(self._con, self.path, mark_before)
             except BaseException:
                 self._con.close()
                 raise
@@ -115,7 +115,7 @@ class ResultStore:
             con.backup(mem)
             con.close()
             con = mem
-            migrate(con, self.path)
+            migrate(con, self.path, mark_before)
         con.execute("PRAGMA query_only = ON")
         return con
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 import tempfile
 import zlib
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -78,7 +78,8 @@ def check_mergeable(store: ResultStore, other: ResultStore, campaign: Mapping[st
     return theirs
 
 
-def merge_store(store: ResultStore, other: ResultStore, *, source: str = "", trust: bool = False) -> MergedSource:
+def merge_store(store: ResultStore, other: ResultStore, *, source: str = "", trust: bool = False,
+                left_out: Callable[[ResultStore], Iterable[str]] | None = None) -> MergedSource:
     """Copy into ``store`` the job rows of ``other`` that it lacks, with their samples, image digests and runs.
 
     ``other`` must hold the same campaign and detector (checked as a resuming run is: ``ValueError``); a sample
@@ -88,7 +89,9 @@ def merge_store(store: ResultStore, other: ResultStore, *, source: str = "", tru
     there (the same key: the same job, context and sample) are kept as they are. One transaction: all of it or
     nothing. A detector that needs consent is refused unless ``trust`` (:func:`check_mergeable`); a source whose
     stored evaluations cannot be decoded is refused (``ValueError``) before anything is written. The caller holds
-    ``store``'s writer lock."""
+    ``store``'s writer lock. ``left_out`` names the keys of ``other``'s rows not to merge (the command passes
+    :func:`vbl_robust.campaigns.verify.screen`'s: rows that contradict their own evaluations or digests; the check
+    lives a floor above the store)."""
     theirs = check_mergeable(store, other, trust=trust)
     label = source or str(other.path)
     try:
@@ -99,10 +102,8 @@ def merge_store(store: ResultStore, other: ResultStore, *, source: str = "", tru
     if store.campaign() is None or store.count() == 0:
         store.bind_campaign(theirs["name"], theirs["spec"], theirs["detector"])
     have = store.done_keys()
-    from ..verify import screen  # rows that contradict their evaluations or digests are not merged
-
-    left_out = screen(other).inconsistent
-    stored = [r for r in stored if r.key not in left_out]
+    skipped = set(left_out(other)) if left_out is not None else set()  # e.g. rows inconsistent with themselves
+    stored = [r for r in stored if r.key not in skipped]
     rows = [r for r in stored if r.key not in have]
     runs = {r.run_id: r for r in other.runs()}
     new_id: dict[int | None, int | None] = {None: None}
@@ -115,7 +116,7 @@ def merge_store(store: ResultStore, other: ResultStore, *, source: str = "", tru
         store.insert_contents(other.contents())
         store.insert_samples(other.samples().values())  # before the rows: their digests cover their samples' rows
         store.insert_jobs(r.replace(run_id=new_id.get(r.run_id)) for r in rows)
-    return MergedSource(label, len(rows), len(stored) - len(rows), len(left_out))
+    return MergedSource(label, len(rows), len(stored) - len(rows), len(skipped))
 
 
 def _store_path(into: Path) -> Path:
@@ -134,7 +135,8 @@ def _unpacked(source: Path, scratch: Path) -> Path:
 
 
 def merge_runs(sources: Sequence[str | Path], into: str | Path, *, trust: bool = False,
-               progress: Callable[[MergeReport], None] | None = None) -> MergeReport:
+               progress: Callable[[MergeReport], None] | None = None,
+               left_out: Callable[[ResultStore], Iterable[str]] | None = None) -> MergeReport:
     """Merge the job rows of ``sources`` (run directories, ``.sqlite`` files or packed stores ``.sqlite.xz`` as
     ``bundle --stores`` writes them) into the run ``into`` (a directory or ``.sqlite`` file; created when missing)
     with :func:`merge_store`, each source recorded under the name given.
@@ -144,7 +146,7 @@ def merge_runs(sources: Sequence[str | Path], into: str | Path, *, trust: bool =
     first and against ``into`` before anything is written (``ValueError``); ``into`` is refused while a run writes
     it (:class:`~vbl_robust.campaigns.store.lock.WriterLock`: ``ValueError``); a missing packed store is a
     ``FileNotFoundError``, a damaged one a ``ValueError``. ``progress`` is called with the report so far after each
-    source is merged (its last entry: that source)."""
+    source is merged (its last entry: that source); ``left_out``: as :func:`merge_store`'s."""
     dst = _store_path(Path(into))
     report = MergeReport(dst)
     with tempfile.TemporaryDirectory() as tmp:
@@ -162,7 +164,7 @@ def merge_runs(sources: Sequence[str | Path], into: str | Path, *, trust: bool =
                     first = check_mergeable(store, other, first, trust=trust)
             for src, path in zip(sources, paths, strict=True):
                 with ResultStore.open_existing(path) as other:
-                    part = merge_store(store, other, source=str(src), trust=trust)
+                    part = merge_store(store, other, source=str(src), trust=trust, left_out=left_out)
                 report = dataclasses.replace(report, sources=(*report.sources, part))
                 if progress is not None:
                     progress(report)

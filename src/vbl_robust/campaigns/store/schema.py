@@ -292,15 +292,16 @@ def schema_version(con: sqlite3.Connection, path: str | Path) -> int:
     return version
 
 
-def migrate(con: sqlite3.Connection, path: str | Path) -> None:
+def migrate(con: sqlite3.Connection, path: str | Path,
+            before_digests: Callable[[sqlite3.Connection], None] | None = None) -> None:
     """Create the tables of a new store; bring an older one to :data:`SCHEMA_VERSION` (adds the columns of the
-    versions since; ``ValueError`` for a newer one)."""
+    versions since; ``ValueError`` for a newer one). ``before_digests`` records the rows of a store older than
+    :data:`DIGESTS_SINCE` as written before digests (:func:`~vbl_robust.campaigns.store.digest.mark_before`, passed
+    in by the store: the digests' module builds on this one)."""
     version = schema_version(con, path)
     con.executescript(DDL)
     if version == SCHEMA_VERSION:
         return
-    from .digest import mark_before
-
     with Transaction(con):
         for table in TABLES:
             added = [c for c in table.columns if c.since]
@@ -308,6 +309,6 @@ def migrate(con: sqlite3.Connection, path: str | Path) -> None:
             for c in added:
                 if c.name not in have:
                     con.execute(f"ALTER TABLE {table.name} ADD COLUMN {c.name} {c.decl}")
-        if version < DIGESTS_SINCE:
-            mark_before(con)
+        if version < DIGESTS_SINCE and before_digests is not None:
+            before_digests(con)
         con.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
