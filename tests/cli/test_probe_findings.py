@@ -115,3 +115,10 @@ def test_a_stray_comma_in_lipschitz_is_refused(tmp_path, value):
     _refused(runner.invoke(app, ["audit", *SMALL, "--lipschitz", value, "--out", str(tmp_path / "r")]),
              "--lipschitz")
     _refused(runner.invoke(app, ["zones", str(tmp_path / "none"), "--lipschitz", value]), "--lipschitz")
+
+
+def test_reproduce_resume_from_a_directory_without_packed_stores_is_refused(tmp_path):
+    (tmp_path / "b" / "spatial-1d").mkdir(parents=True)
+    _refused(runner.invoke(app, ["reproduce", "spatial-1d", "--images", "1", "--oracle", "--workers", "1",
+                                 "--resume-from", str(tmp_path / "b"), "--out", str(tmp_path / "r")]), "--resume-from")
+    assert not (tmp_path / "r").exists()

@@ -109,6 +109,11 @@ def reproduce(
     if resume_from is not None and not resume_from.is_dir():
         fail(f"--resume-from {resume_from}: not a directory")
     if resume_from is not None:
+        from vbl_robust.campaigns.store import PACKED
+
+        if not any((resume_from / exp.name / PACKED).is_file() for exp in exps):  # a run, or a bundle without --stores
+            fail(f"--resume-from {resume_from}: holds no packed store of {', '.join(e.name for e in exps)} "
+                 f"(<experiment>/{PACKED}, written by `vbl-robust bundle --stores`)")
         _refuse_code(resume_from, [exp.name for exp in exps], trust_model)
     references = {exp.name: _reference(check_against, exp.name) for exp in exps} if check_against else {}
     differ = incomplete = False  # an incomplete experiment does not stop the next ones; the exit code says it
