@@ -385,8 +385,11 @@ def file_escaped(path: Callable[[], Path | list[Path]]) -> Callable[[Result], li
 
 
 def json_out(res: Result) -> list:
+    text = res.out  # standard output and error together: the JSON starts at its first line opening with { or [
+    lines = text.splitlines(keepends=True)
+    start = next((i for i, ln in enumerate(lines) if ln.startswith(("{", "["))), 0)
     try:
-        json.loads(res.out)
+        json.loads("".join(lines[start:]))
         return []
     except ValueError:
         return [("weak", "--format json output is not JSON")]
@@ -727,10 +730,10 @@ def probes(fx: Fx) -> list[Probe]:
         ("time-budgets empty", ["runtime-1d", "--time-budgets", ""]),
         ("eval-budgets word", ["runtime-1d", "--eval-budgets", "many"]),
         ("eval-budgets zero", ["runtime-1d", "--eval-budgets", "0"]),
-        ("grid-step 0", ["spatial-1d", "--grid-step", "0"]), ("grid-step negative", ["spatial-1d", "--grid-step", "-1"]),
+        ("grid-step inf", ["spatial-1d", "--grid-step", "inf"]), ("grid-step negative", ["spatial-1d", "--grid-step", "-1"]),
         ("grid-step nan", ["spatial-1d", "--grid-step", "nan"]),
         ("iterations 0", ["convergence", "--iterations", "0"]),
-        ("family-grid 0", ["families", "--family-grid", "0"]),
+        ("family-grid negative", ["families", "--family-grid", "-1"]),
         ("resume-from missing", ["spatial-1d", "--resume-from", fx.T / "none"]),
         ("resume-from a run, not a bundle", ["spatial-1d", "--resume-from", run_]),
         ("check-against missing", ["spatial-1d", "--check-against", fx.T / "none"]),
@@ -1246,7 +1249,7 @@ def _live_store(fx: Fx) -> tuple[Result, list]:
         elif r.rc not in expect:
             found.append(("weak", f"{label}: exit {r.rc}"))
         if label == "report md" and r.rc == 0 and not any(w in r.out.lower() for w in
-                                                          ("unfinished", "being written", "still", "to come",
+                                                          ("unfinished", "incomplete", "being written", "still", "to come",
                                                            "in progress", "not yet", "running")):
             found.append(("weak", "report on a live store does not say it is unfinished"))
     os.kill(p.pid, signal.SIGKILL)
@@ -1265,7 +1268,7 @@ def _live_store(fx: Fx) -> tuple[Result, list]:
 
 
 def cell(s: str, n: int = 160) -> str:
-    s = " ".join(str(s).split())
+    s = " ".join(str(s).encode("utf-8", "backslashreplace").decode("utf-8").split())
     s = s if len(s) <= n else s[: n - 1] + "…"
     return s.replace("&", "&amp;").replace("|", "\\|").replace("<", "&lt;").replace(">", "&gt;")
 
@@ -1273,7 +1276,8 @@ def cell(s: str, n: int = 160) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, help="write the Markdown table here (default: standard output)")
-    ap.add_argument("--only", default=None, help="run only the probes whose name contains this")
+    ap.add_argument("--only", action="append", default=None,
+                    help="run only the probes whose name contains this (repeatable: any of them)")
     ap.add_argument("--keep", action="store_true", help="keep the temporary directory (printed)")
     ap.add_argument("--start", type=int, default=1, help="begin at probe number START (1-based; to finish a run "
                     "cut short by --stop-after)")
@@ -1288,7 +1292,7 @@ def main(argv: list[str] | None = None) -> int:
         fx.run_jobs = jobs_of(fx.run)
         ps = probes(fx)
         if ns.only:
-            ps = [p for p in ps if ns.only in p.name]
+            ps = [p for p in ps if any(w in p.name for w in ns.only)]
         first = ns.start
         ps = ps[first - 1:]
         outcomes, skipped = [], 0
@@ -1322,7 +1326,7 @@ def main(argv: list[str] | None = None) -> int:
     lines += ["", summary, ""]
     text = "\n".join(lines)
     if ns.out:
-        ns.out.write_text(text, encoding="utf-8")
+        ns.out.write_text(text, encoding="utf-8", errors="backslashreplace")  # a probe's non-UTF-8 name
     else:
         print(text)
     print(summary, file=sys.stderr)
