@@ -122,3 +122,12 @@ def test_reproduce_resume_from_a_directory_without_packed_stores_is_refused(tmp_
     _refused(runner.invoke(app, ["reproduce", "spatial-1d", "--images", "1", "--oracle", "--workers", "1",
                                  "--resume-from", str(tmp_path / "b"), "--out", str(tmp_path / "r")]), "--resume-from")
     assert not (tmp_path / "r").exists()
+
+
+def test_merging_a_run_into_itself_is_refused_and_changes_nothing(tmp_path):
+    out = tmp_path / "run"
+    assert runner.invoke(app, ["audit", *SMALL, "--roll", "5", "--methods", "random", "--out", str(out)]).exit_code == 0
+    before = _tree(out)
+    _refused(runner.invoke(app, ["merge", str(out), "--into", str(out)]), "itself")
+    _refused(runner.invoke(app, ["merge", str(out / "results.sqlite"), "--into", str(out)]), "itself")
+    assert _tree(out) == before

@@ -150,6 +150,12 @@ def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None
                    + (f"; {part.inconsistent} inconsistent — not merged (vbl-robust verify {part.source} names them)"
                       if part.inconsistent else ""))
 
+    def store_of(p: Path) -> Path:
+        return (p / "results.sqlite" if p.is_dir() or not p.suffix else p).resolve()
+
+    same = [s for s in sources if store_of(s) == store_of(into)]
+    if same:  # merging a run into itself copies nothing and would open it for writing
+        fail(f"merge {same[0]} --into {into}: a run cannot be merged into itself")
     with one_line(ValueError, OSError):
         done = merge_runs(sources, into, trust=trust_model, progress=merged,
                           left_out=lambda store: screen(store).inconsistent)  # rows contradicting themselves
