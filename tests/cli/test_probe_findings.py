@@ -131,3 +131,16 @@ def test_merging_a_run_into_itself_is_refused_and_changes_nothing(tmp_path):
     _refused(runner.invoke(app, ["merge", str(out), "--into", str(out)]), "itself")
     _refused(runner.invoke(app, ["merge", str(out / "results.sqlite"), "--into", str(out)]), "itself")
     assert _tree(out) == before
+
+
+@pytest.mark.parametrize("lr0", ["-1", "nan", "0"])
+def test_train_refuses_a_learning_rate_before_making_its_directory(tmp_path, lr0):
+    _refused(runner.invoke(app, ["train", "--n-train", "2", "--n-val", "1", "--epochs", "1", "--imgsz", "32",
+                                 "--lr0", lr0, "--out", str(tmp_path / "t")]), "--lr0")
+    assert not (tmp_path / "t").exists()
+
+
+def test_zones_refuses_a_plot_directory_that_is_a_file(tmp_path):
+    (tmp_path / "f").write_text("x")
+    _refused(runner.invoke(app, ["zones", str(tmp_path / "none"), "--plot", str(tmp_path / "f")]), "--plot")
+    assert (tmp_path / "f").read_text() == "x"

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -63,6 +64,8 @@ def train(
     from vbl_robust.detect import train as tr
     from vbl_robust.scenes.airports import DEFAULT_POOL
 
+    if lr0 is not None and not (math.isfinite(lr0) and lr0 > 0):  # before the working directory is made
+        fail(f"--lr0 {lr0}: a learning rate must be a finite number > 0")
     init_path = None if init is None else _weights(init, trust_model, "--init")
     samples = None
     if lard is not None:

@@ -56,6 +56,8 @@ def zones(
         fail(f"--norm {norm}: choose 2, inf or 1")
     if threshold is not None and not (math.isfinite(threshold) and threshold > 0):
         fail(f"--threshold {threshold:g}: an error threshold ε in metres must be finite and > 0")
+    if plot is not None and plot.exists() and not plot.is_dir():
+        fail(f"--plot {plot}: is a file, not a directory")
     lip = parse_lipschitz(lipschitz)
     try:
         from vbl_robust.campaigns import ResultStore
