@@ -144,3 +144,9 @@ def test_zones_refuses_a_plot_directory_that_is_a_file(tmp_path):
     (tmp_path / "f").write_text("x")
     _refused(runner.invoke(app, ["zones", str(tmp_path / "none"), "--plot", str(tmp_path / "f")]), "--plot")
     assert (tmp_path / "f").read_text() == "x"
+
+
+def test_reproduce_refuses_an_infinite_grid_step(tmp_path):
+    _refused(runner.invoke(app, ["reproduce", "spatial-1d", "--grid-step", "inf", "--images", "1", "--oracle",
+                                 "--workers", "1", "--out", str(tmp_path / "r")]), "--grid-step")
+    assert not (tmp_path / "r").exists()

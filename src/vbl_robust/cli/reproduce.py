@@ -87,6 +87,8 @@ def reproduce(
     check_executor(executor, address)
     group, exps = _experiments(experiment)
     eb = _floats(eval_budgets, "--eval-budgets")
+    if grid_step is not None and not math.isfinite(grid_step):  # inf passes the option's range
+        fail(f"--grid-step {grid_step}: a step in degrees must be finite (0 = no reference)")
     opts = with_options(
         Options(), methods=parse_methods(methods) if methods else None, max_evals=max_evals, grid_step_deg=grid_step,
         time_budgets=_floats(time_budgets, "--time-budgets"), eval_budgets=tuple(int(v) for v in eb) if eb else None,
