@@ -742,7 +742,7 @@ def probes(fx: Fx) -> list[Probe]:
         ("config python tag", ["spatial-1d", "--config", fx.T / "cfg_py_r.yaml"]),
         ("estimate probe-seconds 0", ["spatial-1d", "--estimate", "--probe-seconds", "0"]),
     ]:
-        add(f"reproduce {name}", ["reproduce", *extra, *rp, "--out", o := fx.fresh("repro")], 2, absent=(o,),
+        add(f"reproduce {name}", ["reproduce", *rp, *extra, "--out", o := fx.fresh("repro")], 2, absent=(o,),
             marker=fx.marker)
     (fx.T / "cfg_py_r.yaml").write_text(cfgs["python tag"])
     add("reproduce refusal keeps the audit run", ["reproduce", "spatial-1d", *rp, "--out", run_], 2,
