@@ -85,7 +85,7 @@ def check_plugin(spec: CampaignSpec, sample: Any, detector: DetectorSpec) -> Non
     from .work import Settings, build_objective, detector_for
 
     box = next(b.box for blk in spec.blocks for b in blk.boxes)
-    centre = ((np.asarray(box.lower, dtype=np.float64) + np.asarray(box.upper, dtype=np.float64)) / 2)[None]
+    centre = np.asarray(box.center, dtype=np.float64)[None]
     try:
         build_objective(sample, detector_for(detector), box, Settings.from_spec(spec)).evaluate(centre)
     except Exception as exc:  # noqa: BLE001 - whatever the user's code raises is one line here

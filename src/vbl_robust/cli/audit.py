@@ -131,7 +131,9 @@ def audit(
     check_exports(csv, parquet, out)
     det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device, plugin=detector_plugin,
                         plugin_digest=plugin_digest)
-    if monitor_sigma is not None and not getattr(det.build(), "gives_sigma", False):
+    from vbl_robust.campaigns.work import detector_for  # built once per process: the run reuses it
+
+    if monitor_sigma is not None and not getattr(detector_for(det), "gives_sigma", False):
         fail(f"--monitor-sigma {monitor_sigma:g}: the detector ({det.name}) gives no per-corner σ; the σ monitor "
              "needs a network with an uncertainty head (YOLO26-pose, see train --arch)")
     samples, source = _samples(sequences, lard, n, seed, width, height, frames, rate)
