@@ -125,3 +125,41 @@ def test_a_bundle_killed_midway_leaves_the_previous_bundle_whole(tmp_path, monke
     monkeypatch.setattr(report, "build_report", real)
     write_bundle(root, out)  # without --stores: the packed stores stay
     assert (out / "exp-b" / PACKED).read_bytes() == before[Path("exp-b") / PACKED]
+
+
+def test_a_bundles_report_shows_its_figures_as_files_and_is_rebuilt_from_its_packed_store(tmp_path, monkeypatch):
+    """A committed bundle's report.html links figures/*.png (no base64: pages of kB, figures git can share between
+    versions); refresh_bundle(reports=True) rebuilds it from the packed store alone, the rest left as it was."""
+    import re
+
+    from vbl_robust.campaigns.store import PACKED
+    from vbl_robust.report.bundle import refresh_bundle, write_bundle
+
+    spec = CampaignSpec("bundle-files", (Block(boxes=(roll_box(5),), methods=("random",),
+                                               budgets=(Budget(max_evals=4),)),), seed=1)
+    root, out = tmp_path / "runs", tmp_path / "bundle"
+    source = {"kind": "synthetic", "n": 1, "seed": 0, "width": 96, "height": 96}  # the gallery rebuilds its image
+    with ResultStore(root / "exp" / "results.sqlite") as store:
+        run_campaign(spec, list(generate(1, seed=0, width=96, height=96)), store, detector=DetectorSpec.oracle(1.0),
+                     dataset_source=source)
+    write_bundle(root, out, stores=True)
+    exp = out / "exp"
+    page = (exp / "report.html").read_text()
+    shown = re.findall(r'<img alt="[^"]*" src="([^"]*)"', page)
+    assert "figures/gallery_01.png" in shown and "data:image" not in page
+    assert sorted(shown) == sorted(p.relative_to(exp).as_posix() for p in (exp / "figures").glob("*.png"))
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    # the report of an older code version: another page, a stale figure; its store and job table are the truth
+    (exp / "report.html").write_text("old")
+    (exp / "figures" / "gone.png").write_bytes(b"stale")
+    (exp / "figures" / shown[0].split("/")[-1]).unlink()
+    monkeypatch.chdir(tmp_path)  # the bundle as a checkout names it, relative
+    refresh_bundle(Path("bundle"), reports=True)
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after.keys() == before.keys()
+    assert after[Path("exp/report.html")] == before[Path("exp/report.html")]
+    for name in (Path("exp") / PACKED, Path("exp/jobs.parquet"), Path("exp/provenance.json")):
+        assert after[name] == before[name]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bundle", "runs"]
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []  # no staging left

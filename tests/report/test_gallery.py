@@ -125,6 +125,32 @@ def test_the_gallery_draws_each_rebuilt_image_beside_its_facts(run):
     assert (run / "headline.png").read_bytes() in figures
 
 
+def test_a_page_without_embedding_shows_every_figure_from_its_file_beside_it(run, tmp_path):
+    """build_report(embed=False), what a committed bundle writes: no base64 in the page, each <img> a relative path
+    to a file of figures/ (the gallery's pictures among them), each file there shown; the default embeds them."""
+    out = tmp_path / "linked"
+    page = build_report(run, out, embed=False).read_text()
+    assert "data:image" not in page
+    shown = re.findall(r'<img alt="[^"]*" src="([^"]*)"', page)
+    assert shown and len(shown) == page.count("<img")
+    assert {f"figures/gallery_{i:02d}.png" for i in (1, 2, 3)} <= set(shown)
+    assert sorted(shown) == sorted(p.relative_to(out).as_posix() for p in (out / "figures").glob("*.png"))
+    embedded = build_report(run, tmp_path / "embedded").read_text()
+    assert embedded.count('src="data:image/png;base64,') == len(shown) and 'src="figures/' not in embedded
+    assert len(page) < len(embedded) / 5
+
+
+def test_a_linked_figure_names_a_file_below_the_page_and_nothing_else():
+    from vbl_robust.report.html import img_file
+
+    assert 'src="figures/gallery_01.png"' in img_file("figures/gallery_01.png", "gallery_01")
+    odd = img_file('figures/javascript:alert(1) "x<y>#.png', EVIL)
+    assert 'src="figures/javascript%3Aalert%281%29%20%22x%3Cy%3E%23.png"' in odd and EVIL not in odd
+    for bad in ("/etc/passwd", "../x.png", "figures/../../x.png", "figures//x.png", ""):
+        with pytest.raises(ValueError, match="relative"):
+            img_file(bad, "x")
+
+
 def test_every_id_is_escaped_and_a_sample_missing_from_the_rebuilt_dataset_is_said(run, tmp_path):
     con = copy_store(run, tmp_path / "evil")
     for table in ("jobs", "samples", "contents"):

@@ -120,9 +120,16 @@ def _guarded(name: str, build: Callable[..., Any], *args: Any) -> Any:
         return Section(name, ['<p class="warn">This section failed to build; see the log.</p>'])
 
 
-def build_report(run: str | Path, out: str | Path | None = None) -> Path:
-    """Write ``report.html`` (self-contained) and ``figures/*.png`` for the run directory (or store file) ``run``;
-    returns the HTML path. ``out`` defaults to the run directory."""
+def build_report(run: str | Path, out: str | Path | None = None, *, embed: bool = True) -> Path:
+    """Write ``report.html`` and ``figures/*.png`` for the run directory (or store file) ``run``; returns the HTML
+    path. ``out`` defaults to the run directory.
+
+    ``embed`` (the default, ``vbl-robust report``): the page carries every figure (base64), so ``report.html`` alone
+    is the whole report — what a user mails, attaches to a ticket or keeps as a CI artefact, where a folder beside
+    it gets lost; 1–2 MB with a full worst-case gallery is nothing for one run. ``embed=False`` (a committed
+    bundle, :mod:`.bundle`): the page shows ``figures/*.png`` by relative path — a folder that opens offline, a page
+    of tens of kB, and a figure that did not change is the same file in git, not another megabyte of base64 in its
+    history each time the page is regenerated."""
     run = Path(run)
     with ResultStore.open_existing(run) as store:
         camp = store.campaign()
@@ -131,7 +138,7 @@ def build_report(run: str | Path, out: str | Path | None = None) -> Path:
         spec = CampaignSpec.from_dict(camp["spec"])
         out_dir = Path(out) if out is not None else (run if run.is_dir() else run.parent)
         out_dir.mkdir(parents=True, exist_ok=True)
-        ctx = Context(store, spec, out_dir, mx.main_rows(store, spec), store.samples())
+        ctx = Context(store, spec, out_dir, mx.main_rows(store, spec), store.samples(), embed=embed)
         exp = EXPERIMENTS.get(spec.name)
         title = exp.title if exp else TITLES.get(spec.name, "Robustness audit")
         if spec.name.endswith("-truth"):  # vbl-robust truth RUN: the dense grid behind "no breach found"

@@ -6,7 +6,9 @@ or ``all`` writes them; a run still in progress is read as it stands) and writes
 
 - ``jobs.parquet``: the job table (:func:`~vbl_robust.campaigns.tables.export`: one line per job and per read-off
   budget; traces and evaluated points stay in the store);
-- ``report.html``: the self-contained report (figures embedded);
+- ``report.html`` and ``figures/``: the report, showing its figures from that folder by relative path
+  (``build_report(embed=False)``: the folder opens offline; a page of tens of kB instead of megabytes of base64,
+  and a figure that did not change is the same file in git), with ``evidence.json`` and ``headline.png``;
 - ``provenance.json``: the campaign spec and every run of the store (code version, model SHA-256, detector,
   dataset, options, seed, executor, workers, clock, started / finished, wall seconds), and the totals: jobs done
   of planned, images, worker seconds (the sum of the jobs' own seconds: CPU seconds when each worker has one
@@ -29,8 +31,10 @@ Atomic as a whole: everything is written into a staging directory beside ``out``
 when complete (:func:`_publish`), so a bundle killed midway leaves the previous bundle as it was, never experiments
 without their ``index.html`` or ``claims.md``.
 
-:func:`refresh_bundle` rewrites only the top files (and REPRODUCTION.md's generated part) of a committed bundle
-from its own packed stores and provenance, without the run directories: after a change of the claims' rules.
+:func:`refresh_bundle` rewrites the top files (and REPRODUCTION.md's generated part) of a committed bundle from its
+own packed stores and provenance, without the run directories: after a change of the claims' rules; with
+``reports=True`` it first rebuilds each experiment's report from its packed store (:func:`rebuild_report`): after
+a change of the report. Neither reruns an experiment.
 """
 
 from __future__ import annotations
@@ -49,6 +53,8 @@ from .markdown import esc_md
 
 #: Markers of the generated part of a REPRODUCTION.md (:func:`write_bundle`).
 BEGIN, END = "<!-- bundle:begin -->", "<!-- bundle:end -->"
+#: What :func:`~vbl_robust.report.build.build_report` writes into an experiment's directory of a bundle.
+REPORT_FILES = ("report.html", "figures", "evidence.json", "headline.png")
 
 
 def run_dirs(root: Path, names: Sequence[str] | None = None) -> list[Path]:
@@ -115,9 +121,34 @@ def write_experiment(run: Path, out: Path, stores: bool = False, keep: Path | No
         elif keep is not None and (keep / PACKED).is_file():
             shutil.copy2(keep / PACKED, out / PACKED)
     atomic_write(out / "provenance.json", json.dumps(prov, indent=1, sort_keys=True, default=str) + "\n")
-    build_report(run, out)
-    shutil.rmtree(out / "figures", ignore_errors=True)  # embedded in report.html
+    build_report(run, out, embed=False)
     return prov["totals"]
+
+
+def rebuild_report(experiment: Path) -> Path:
+    """Rebuild a bundled experiment's report (:data:`REPORT_FILES`) from its own packed store, in place: built
+    beside it first, then each file replaced (``figures/`` by two renames), a file the new report does not write
+    removed; killed before that, the old report stays whole. Returns the report's path."""
+    from . import build_report
+
+    experiment = Path(experiment)
+    stage = experiment.parent / f".{experiment.name}.report"
+    shutil.rmtree(stage, ignore_errors=True)
+    try:
+        build_report(experiment, stage, embed=False)  # reads <experiment>/results.sqlite.xz
+        for name in REPORT_FILES:
+            new, target = stage / name, experiment / name
+            if new.is_dir():
+                _replace_dir(new, target)
+            elif new.is_file():
+                os.replace(new, target)
+            elif target.is_dir():
+                shutil.rmtree(target)
+            else:
+                target.unlink(missing_ok=True)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    return experiment / "report.html"
 
 
 def _publish(stage: Path, out: Path) -> None:
@@ -128,16 +159,21 @@ def _publish(stage: Path, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     entries = sorted(stage.iterdir(), key=lambda p: (p.is_file(), p.name == "index.html", p.name))
     for entry in entries:
-        target = out / entry.name
         if entry.is_dir():
-            old = out / f".{entry.name}.old"
-            shutil.rmtree(old, ignore_errors=True)
-            if target.exists():
-                target.rename(old)
-            entry.rename(target)
-            shutil.rmtree(old, ignore_errors=True)
+            _replace_dir(entry, out / entry.name)
         else:
-            os.replace(entry, target)
+            os.replace(entry, out / entry.name)
+
+
+def _replace_dir(new: Path, target: Path) -> None:
+    """``new`` moved to ``target`` by two renames: the old ``target`` is removed only once the new one is in
+    place."""
+    old = target.with_name(f".{target.name}.old")
+    shutil.rmtree(old, ignore_errors=True)
+    if target.exists():
+        target.rename(old)
+    new.rename(target)
+    shutil.rmtree(old, ignore_errors=True)
 
 def status_markdown(totals: dict[str, dict[str, Any]]) -> str:
     """The per-experiment status table of a bundle (Markdown; names escaped, :func:`esc_md`): wall hours of its runs; worker hours (each job's wall
@@ -223,12 +259,14 @@ def _write_reproduction(path: Path, text: str, claims: str, status: str) -> None
                        f"## Status of the runs\n\n{status}{END}{tail}")
 
 
-def refresh_bundle(out: Path, reproduction: Path | None = None) -> dict[str, dict[str, Any]]:
+def refresh_bundle(out: Path, reproduction: Path | None = None, *, reports: bool = False) -> dict[str, dict[str, Any]]:
     """Rewrite a bundle's ``status.md``, ``claims.md`` and ``index.html`` (and the generated part of
     ``reproduction``) from what the bundle itself holds — each experiment's ``provenance.json`` totals and its
-    packed store (:func:`~vbl_robust.report.claims.claims_of` reads ``results.sqlite.xz``) — without rerunning or
-    rebuilding a report: after a change of the claims' rules or of the index. ``FileNotFoundError`` when ``out``
-    holds no bundled experiment; ``ValueError`` when ``reproduction`` lacks the markers (checked first)."""
+    packed store (:func:`~vbl_robust.report.claims.claims_of` reads ``results.sqlite.xz``) — without rerunning
+    anything: after a change of the claims' rules or of the index. With ``reports``, each experiment's report is
+    first rebuilt from its packed store (:func:`rebuild_report`; an experiment without one keeps its report).
+    ``FileNotFoundError`` when ``out`` holds no bundled experiment; ``ValueError`` when ``reproduction`` lacks the
+    markers (checked first)."""
     out = Path(out)
     text = _reproduction_text(reproduction) if reproduction is not None else None
     totals = {}
@@ -236,6 +274,10 @@ def refresh_bundle(out: Path, reproduction: Path | None = None) -> dict[str, dic
         totals[prov.parent.name] = json.loads(prov.read_text())["totals"]
     if not totals:
         raise FileNotFoundError(f"{out}: no bundled experiment (<experiment>/provenance.json) found")
+    if reports:
+        for name in totals:
+            if (out / name / PACKED).is_file():
+                rebuild_report(out / name)
     claims = _write_top(out, totals, out)  # each file replaced atomically; the experiments are left as they are
     if text is not None:
         _write_reproduction(Path(reproduction), text, claims, status_markdown(_ordered(totals)))

@@ -16,7 +16,9 @@ copy). Where that is not possible (another machine without the dataset, a change
 without its picture, with the reason.
 
 Pictures: ``figures/gallery_NN.png`` beside the report (two crops scaled to the runway, drawn pixel by pixel, about
-800 × 470 px, a palette of :data:`GALLERY_COLORS` colours), also embedded in the page.
+800 × 470 px, a palette of :data:`GALLERY_COLORS` colours), embedded in the page too (``vbl-robust report``: one
+file holds the report) or shown from those files (a committed bundle: the gallery is most of a page's weight, about
+0.8 MB of base64 for twelve cases; see :func:`~vbl_robust.report.build.build_report`'s ``embed``).
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
-"""Small HTML building blocks for a self-contained report: tables (sortable when long, folded when very long),
-embedded PNG figures, escaped text, and the page (its CSS and the few lines of script that sort a table)."""
+"""Small HTML building blocks for a report: tables (sortable when long, folded when very long), PNG figures —
+embedded (:func:`img`) or linked as a file beside the page (:func:`img_file`) —, escaped text, and the page (its CSS
+and the few lines of script that sort a table)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import html
 import io
 import math
 import re
+import urllib.parse
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -202,10 +204,25 @@ def figure_png(fig: Figure, dpi: int = 110, colors: int | None = None) -> bytes:
     return small.getvalue()
 
 
-def img(png: bytes, alt: str, caption: str = "") -> str:
-    data = base64.b64encode(png).decode()
+def _figure(src: str, alt: str, caption: str) -> str:
     cap = f"<figcaption>{caption}</figcaption>" if caption else ""
-    return f'<figure><img alt="{esc(alt)}" src="data:image/png;base64,{data}">{cap}</figure>'
+    return f'<figure><img alt="{esc(alt)}" src="{esc(src)}">{cap}</figure>'
+
+
+def img(png: bytes, alt: str, caption: str = "") -> str:
+    """A ``<figure>`` holding ``png`` itself (base64): the page carries its picture wherever it is copied.
+    ``caption`` is HTML, escaped by the caller."""
+    return _figure(f"data:image/png;base64,{base64.b64encode(png).decode()}", alt, caption)
+
+
+def img_file(path: str, alt: str, caption: str = "") -> str:
+    """A ``<figure>`` showing the picture at ``path``, relative to the page with ``/`` between its parts (e.g.
+    ``figures/gallery_01.png``); each part is percent-encoded, so a name can neither leave the attribute nor become
+    another URL (``javascript:…``, ``//host``). ``caption`` is HTML, escaped by the caller."""
+    parts = path.split("/")
+    if path.startswith("/") or any(part in ("", ".", "..") for part in parts):
+        raise ValueError(f"img_file: path {path!r} must be relative, below the page's directory")
+    return _figure("/".join(urllib.parse.quote(part, safe="") for part in parts), alt, caption)
 
 
 def page(title: str, body: str) -> str:

@@ -18,7 +18,7 @@ from ..campaigns import metrics as mx
 from ..campaigns.spec import BoxSpec, CampaignSpec
 from ..campaigns.store import JobRow, JobStatus, ResultStore
 from . import figures as F
-from .html import figure_png, img
+from .html import figure_png, img, img_file
 
 
 @dataclass
@@ -29,7 +29,9 @@ class Section:
 
 @dataclass
 class Context:
-    """What every section builder needs: the stored rows, the spec and where figures go."""
+    """What every section builder needs: the stored rows, the spec and where figures go (``figures/`` under
+    ``out_dir``); ``embed``: the page carries each figure itself, else it shows the file (``build_report``'s
+    ``embed``)."""
 
     store: ResultStore
     spec: CampaignSpec
@@ -37,6 +39,7 @@ class Context:
     main: list[JobRow]
     samples: dict[str, dict[str, Any]]
     figures: list[Path] = field(default_factory=list)
+    embed: bool = True
 
     @property
     def eps(self) -> float:
@@ -67,19 +70,21 @@ class Context:
 
     def figure(self, fig: Any, name: str, caption: str, *, colors: int | None = None) -> str:
         """``fig`` written to ``figures/<name>.png`` (atomically; ``colors``: a palette of that many colours, see
-        :func:`~vbl_robust.report.html.figure_png`) and closed; returns its embedded ``<figure>`` HTML."""
+        :func:`~vbl_robust.report.html.figure_png`) and closed; returns its ``<figure>`` HTML (:meth:`show`)."""
         png = figure_png(fig, colors=colors)
         plt.close(fig)
         path = self.out_dir / "figures" / f"{name}.png"
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(path, png)
-        self.figures.append(path)
-        return img(png, name, caption)
+        return self.figure_file(path, name, caption, png)
 
-    def figure_file(self, path: Path, name: str, caption: str) -> str:
-        """A PNG already written under ``figures/`` (e.g. by :func:`vbl_robust.report.figures.plot_zones`), embedded."""
+    def figure_file(self, path: Path, name: str, caption: str, png: bytes | None = None) -> str:
+        """A PNG already written under ``figures/`` (e.g. by :func:`vbl_robust.report.figures.plot_zones`; ``png``:
+        its bytes when at hand): embedded, or with ``embed`` off shown from its file, relative to the page."""
         self.figures.append(path)
-        return img(path.read_bytes(), name, caption)
+        if self.embed:
+            return img(path.read_bytes() if png is None else png, name, caption)
+        return img_file(path.relative_to(self.out_dir).as_posix(), name, caption)
 
 
 def anchor(title: str) -> str:
