@@ -19,11 +19,14 @@ Fixed before any hardening run (2026-12-03, session 32), so that no choice is ma
 
 Written then as ``benchmarks/measure_harden.sh`` (git history); this is the same sequence of commands in Python
 (issue 46). Every step is skipped when its outputs are there, and the stores and the harden rounds resume (the
-training passes ``--trust-model``: the rounds it resumes are its own), so running it again goes on where it stopped,
-on this checkout or a new one: each audit's store is packed into ``results/harden/audits/<run>/`` (``vbl-robust bundle
---stores``, after each step, and by hand before a session stops: the KEEP line below) and a checkout without the run
-restores it from there (``vbl-robust merge``). One thread per process; run it alone on the machine (it is CPU-bound
-for hours)::
+training passes ``--trust-model``: the rounds it resumes are its own), so running it again goes on where it stopped:
+each audit's store is packed into ``results/harden/audits/<run>/`` (``vbl-robust bundle --stores``, after each step,
+and by hand before a session stops: the KEEP line below) and a run directory without its store restores it from
+there (``vbl-robust merge``). The measurement is complete: git keeps its tables, job tables and ``compare.html``, not
+the packed stores or reports (docs/conventions.md; git ignores the stores packed there, ``results/README.md`` says
+how to restore them as measured), so a clean clone finds every step done; removing a step's outputs (its
+``*_compare.md`` and ``compare.html``) measures it again (steps 3–5: about 4.4 h with two workers). One thread per
+process; run it alone on the machine (it is CPU-bound for hours)::
 
     python benchmarks/measure_harden.py             # all of it; --dry-run: the commands left to run
     .venv/bin/vbl-robust bundle runs/harden/audits --out results/harden/audits --stores   # KEEP: pack what is done
