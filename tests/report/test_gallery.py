@@ -14,7 +14,7 @@ import pytest
 from vbl_robust.campaigns import Budget, DetectorSpec, ResultStore, run_campaign
 from vbl_robust.campaigns import store as store_module
 from vbl_robust.campaigns.experiments import audit_spec
-from vbl_robust.campaigns.spec import CampaignSpec, roll_contrast_box
+from vbl_robust.campaigns.spec import roll_contrast_box
 from vbl_robust.campaigns.store import JobRow, Points
 from vbl_robust.campaigns.store.digest import reseal
 from vbl_robust.perturb import Perturbation
@@ -60,7 +60,7 @@ def test_the_predicted_corners_are_stored_where_the_detector_put_them(run, sampl
 
     with ResultStore.open_existing(run) as st:
         rows = {r.sample_id: r for r in st.jobs(role="main")}
-        spec = CampaignSpec.from_dict(st.campaign()["spec"])
+        spec = st.spec()
     detector = DetectorSpec("oracle", options={"noise_px": 0.5}).build()
     for s in samples[:2]:
         r = rows[s.id]
@@ -227,6 +227,17 @@ def test_a_run_whose_images_cannot_be_rebuilt_shows_the_cases_without_pictures(r
     gallery = page.split("<h2", 4)[3]
     assert "No pictures: the images cannot be rebuilt here" in gallery and "<img" not in gallery
     assert gallery.count('<div class="case">') == 3 and gallery.count("drawn (red)") == 3
+    # a source no one can rebuild, or a truth run's (the images of the run it checks): said without the store's
+    # path (a packed store's is a temporary copy's: a committed page would change at each rebuild)
+    for name, source, said in (("other", '{"source": {"kind": "camera"}}', "its dataset source {'kind': 'camera'}"),
+                               ("truth", '{"source": {"kind": "truth", "run": "runs/x", "samples": ["a"]}}',
+                                "a truth run grids images of the run it checks (runs/x); their pictures are in")):
+        con = copy_store(run, tmp_path / name)
+        con.execute("UPDATE runs SET dataset_json = ?", (source,))
+        con.commit()
+        con.close()
+        page = build_report(tmp_path / name).read_text()
+        assert html.escape(said) in page and str(tmp_path) not in page
 
 
 # -- the order of the cases, on rows made by hand ------------------------------------------------------------

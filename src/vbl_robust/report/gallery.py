@@ -54,10 +54,17 @@ def _samples(ctx: Context, ids: Sequence[str]) -> tuple[dict[str, Any], str]:
     """The samples ``ids`` rebuilt from the run's dataset source, or ({}, why not)."""
     if getattr(ctx.spec, "sustain", None) is not None:
         return {}, "a sequence campaign: each case is an approach sequence (its frames: the sequence section)"
+    runs = ctx.store.runs()
+    source = ((runs[-1].provenance.dataset if runs else None) or {}).get("source") or {}
+    if source.get("kind") == "truth":  # vbl-robust truth: the images of the run it checks, named, not recorded
+        return {}, (f"a truth run grids {ctx.spec.unit}s of the run it checks ({source.get('run')}); their pictures "
+                    "are in that run's gallery")
     try:
         return {s.id: s for s in load_run_samples(ctx.store, ids)}, ""
     except (ValueError, KeyError, TypeError, OSError) as exc:
-        return {}, f"the {ctx.spec.unit}s cannot be rebuilt here ({type(exc).__name__}: {exc})"
+        # without the store's path: a packed store is read through a temporary copy, whose name means nothing
+        why = str(exc).removeprefix(f"{ctx.store.path}: ")
+        return {}, f"the {ctx.spec.unit}s cannot be rebuilt here ({type(exc).__name__}: {why})"
 
 
 def _differs(ctx: Context, sample: Any, digests: dict[str, str]) -> str:
