@@ -54,7 +54,6 @@ def misleading_points(limit: int | None) -> list[tuple[str, object, np.ndarray]]
     """(sample id, box, θ) of each misleading job's worst silent point, one per image and θ."""
     from vbl_robust.campaigns import ResultStore
     from vbl_robust.campaigns import metrics as mx
-    from vbl_robust.campaigns.spec import CampaignSpec
     from vbl_robust.constants import BreachKind
 
     WORK.mkdir(parents=True, exist_ok=True)
@@ -64,7 +63,7 @@ def misleading_points(limit: int | None) -> list[tuple[str, object, np.ndarray]]
             shutil.copyfileobj(src, dst)
     out, seen = [], set()
     with ResultStore(store, readonly=True) as st:
-        spec = CampaignSpec.from_dict(st.campaign()["spec"])
+        spec = st.spec()
         for r in mx.main_rows(st, spec, with_trace=False):
             if mx.breach_kind(r, spec.eps_safe_m) is not BreachKind.MISLEADING:
                 continue

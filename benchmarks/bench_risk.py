@@ -52,7 +52,7 @@ def _grids() -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], float]:
             shutil.copyfileobj(src, dst)
     with ResultStore(store, readonly=True) as st:
         rows = [r for r in st.jobs(kind="search", role="reference", with_points=True) if mx.grid_complete(r)]
-        eps = st.campaign()["spec"]["eps_safe_m"]
+        eps = st.spec().eps_safe_m
     out = {}
     for g in rows:
         order = np.argsort(g.points.xs[:, 0])

@@ -151,7 +151,7 @@ def test_a_run_that_fails_before_its_first_job_does_not_bind_the_store(tmp_path,
         assert st.count() == 0
         s = run_campaign(small_spec(methods=("random",)), small_samples[:1], st, detector=oracle)  # other settings too
         assert s.done == 1 and set(st.samples()) == {small_samples[0].id}
-        assert st.campaign()["detector"]["kind"] == "oracle"
+        assert st.campaign().detector["kind"] == "oracle"
         with pytest.raises(ValueError, match="holds results of detector"):  # now bound: a job row was computed
             run_campaign(small_spec(methods=("random",)), small_samples[:1], st, detector=refused)
 

@@ -1,3 +1,4 @@
+import dataclasses
 import math
 import re
 import sqlite3
@@ -74,16 +75,37 @@ def test_campaign_binding_refuses_other_settings_once_a_job_is_stored(tmp_path):
         st.add_samples([{"sample_id": "s1", "sample_index": 0}])
         # nothing computed yet (e.g. the run failed on its model): the store is bound anew, its samples forgotten
         st.bind_campaign("x", {"a": 1, "b": [1, 3]}, model)
-        assert st.campaign()["spec"] == {"a": 1, "b": [1, 3]} and st.campaign()["detector"] == model
+        assert st.campaign().stored_spec == {"a": 1, "b": [1, 3]} and st.campaign().detector == model
         assert st.samples() == {}
         st.commit([row("a")])
         st.bind_campaign("x", {"b": [1, 3], "a": 1}, model)  # same: fine
         st.bind_campaign("x", {"b": [1, 3], "a": 1, "figures": ["pnp"]}, model)  # presentation only: recorded
-        assert st.campaign()["spec"]["figures"] == ["pnp"]
+        assert st.campaign().stored_spec["figures"] == ["pnp"]
         with pytest.raises(ValueError, match=r"other settings \(b\[1\]"):
             st.bind_campaign("x", {"a": 1, "b": [1, 2]}, model)
         with pytest.raises(ValueError, match="holds results of detector 'm'"):
             st.bind_campaign("x", {"a": 1, "b": [1, 3]}, oracle)
+
+
+def test_the_stored_campaign_is_a_record_with_its_spec_and_one_error_when_there_is_none(tmp_path):
+    from vbl_robust.campaigns import Block, CampaignSpec, roll_box
+
+    spec = CampaignSpec("t", (Block(boxes=(roll_box(5),), methods=("random",), budgets=(Budget(max_evals=3),)),),
+                        seed=4)
+    detector = {"kind": "oracle", "sha256": None}
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        assert st.campaign() is None and not st.holds_campaign()
+        for read in (st.spec, st.require_campaign):  # the one error of a store nothing was run into
+            with pytest.raises(ValueError, match=r"r\.sqlite: the results store holds no campaign yet"):
+                read()
+        st.bind_campaign(spec.name, spec.to_dict(), detector)
+        camp = st.require_campaign()
+        assert st.holds_campaign() and st.spec() == spec == camp.spec and camp.name == "t"
+        assert camp.detector == detector and camp.stored_spec == spec.to_dict()
+        assert camp.to_dict() == {"name": "t", "spec": spec.to_dict(), "detector": detector,
+                                  "created_at": camp.created_at}
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            camp.name = "other"  # type: ignore[misc]
 
 
 def test_runs_record_provenance(tmp_path):

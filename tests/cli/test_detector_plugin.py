@@ -46,7 +46,7 @@ def test_a_plugin_runs_audit_risk_and_reproduce_with_the_default_options(tmp_pat
     rows, camp = _rows(out)
     assert {r.method for r in rows if r.role == "main"} == {"georobust-av", "random", "apgd"}  # APGD too
     assert all(r.measured for r in rows)
-    ident = camp["detector"]
+    ident = camp.detector
     assert ident["kind"] == "plugin" and ident["factory"] == f"{HELPERS}:noisy_corners"
     assert ident["sha256"] == file_sha256(HELPERS) and ident["options"] == {"weights_sha256": digest}
     html = (out / "report.html").read_text()

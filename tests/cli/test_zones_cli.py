@@ -62,7 +62,7 @@ def gated_run(tmp_path_factory):
 def test_replayed_cells_are_the_live_optimizers(gated_run):
     out, live = gated_run
     with ResultStore.open_existing(out) as store:
-        spec = CampaignSpec.from_dict(store.campaign()["spec"])
+        spec = store.spec()
         rows = store.jobs(kind="search", with_points=True)
     assert len(rows) == 2 * (4 * 2 + 1) and all(r.status == "done" for r in rows)
     checked = 0
@@ -221,7 +221,7 @@ def test_report_markdown_survival_table_from_the_store(gated_run, tmp_path):
     assert res.exit_code == 0, res.output
     assert "2 images measured by every method (of 2 started)" in res.output
     with ResultStore.open_existing(out) as store:
-        spec = CampaignSpec.from_dict(store.campaign()["spec"])
+        spec = store.spec()
         from vbl_robust.campaigns.metrics import main_rows, summarize
 
         lines = summarize(main_rows(store, spec, with_trace=False), spec.eps_safe_m)
@@ -256,7 +256,7 @@ def test_report_compare_pairs_two_runs_per_image(gated_run, tmp_path):
 
     before, _ = gated_run
     with ResultStore.open_existing(before) as st:
-        spec = CampaignSpec.from_dict(st.campaign()["spec"])
+        spec = st.spec()
         rows = [r for r in st.jobs(kind="search", role="main", with_trace=False)]
     after = tmp_path / "after"
     with ResultStore(after / "results.sqlite") as store:

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from vbl_robust.campaigns import metrics as mx
 from vbl_robust.campaigns.pnpcheck import TRUNCATED
-from vbl_robust.campaigns.spec import CampaignSpec, roll_box
+from vbl_robust.campaigns.spec import roll_box
 from vbl_robust.campaigns.store import JobRow, JobStatus, Points, ResultStore
 from vbl_robust.cli import app
 from vbl_robust.report import claims as C
@@ -44,7 +44,7 @@ def claims(root):
 
 def _open(root, name):
     store = ResultStore.open_existing(root / name)
-    return store, CampaignSpec.from_dict(store.campaign()["spec"])
+    return store, store.spec()
 
 
 def _survival(rows, eps):
@@ -174,8 +174,8 @@ def _copy_store(root, dst, keep, extra_sample=False):
     image without rows), written through the store's own API."""
     src, _ = _open(root, "spatial-1d")
     with src, ResultStore(dst / "spatial-1d" / "results.sqlite") as out:
-        camp = src.campaign()
-        out.bind_campaign(camp["name"], camp["spec"], camp["detector"])
+        camp = src.require_campaign()
+        out.bind_campaign(camp.name, camp.stored_spec, camp.detector)
         samples = list(src.samples().values())
         if extra_sample:
             samples.append({**samples[-1], "sample_id": "not_yet", "sample_index": len(samples)})

@@ -8,7 +8,6 @@ from typer.testing import CliRunner
 
 from vbl_robust.campaigns import ResultStore
 from vbl_robust.campaigns import metrics as mx
-from vbl_robust.campaigns.spec import CampaignSpec
 from vbl_robust.cli import app
 from vbl_robust.constants import BreachKind
 from vbl_robust.stats import Rate, breach_fraction_bound
@@ -28,7 +27,7 @@ def run(tmp_path_factory):
 def test_evidence_counts_images_over_every_method_with_exact_intervals(run):
     ev = json.loads((run / "evidence.json").read_text())
     with ResultStore.open_existing(run) as st:
-        spec = CampaignSpec.from_dict(st.campaign()["spec"])
+        spec = st.spec()
         rows = mx.main_rows(st, spec)
     eps = spec.eps_safe_m
     [box] = ev["boxes"]

@@ -66,7 +66,7 @@ def gated_2d(tmp_path_factory, samples):
 
 
 def _context(run: Path, store: ResultStore) -> Context:
-    spec = CampaignSpec.from_dict(store.campaign()["spec"])
+    spec = store.spec()
     return Context(store, spec, run, mx.main_rows(store, spec), store.samples())
 
 

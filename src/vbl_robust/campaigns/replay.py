@@ -184,13 +184,11 @@ def zones_of_run(run: str | Path, *, roles: Sequence[str] | None = None, thresho
     """:func:`job_zones` of every search job of a run directory (or its ``results.sqlite``), in store order;
     ``roles`` keeps only those roles ("main", "reference", "landscape"). Rows inconsistent with their own
     evaluations or their digests are left out (:func:`vbl_robust.campaigns.verify.screen`; logged as a warning)."""
-    from .spec import CampaignSpec
     from .store import ResultStore
     from .verify import screen
 
     with ResultStore.open_existing(run) as store:
-        campaign = store.campaign()
-        spec = None if campaign is None else CampaignSpec.from_dict(campaign["spec"])
+        spec = store.spec() if store.holds_campaign() else None
         left_out = screen(store, spec).inconsistent
         if left_out:
             logger.warning("%s: %d job row(s) inconsistent — not used (vbl-robust verify %s names them)", run,

@@ -67,10 +67,10 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
     from .metrics import breach_kind, read_off, residual_bound
 
     samples = store.samples()
-    camp = store.campaign()
-    eps, penalty = ((camp["spec"].get("eps_safe_m"), camp["spec"].get("penalty_m")) if camp else (None, None))
+    camp = store.require_campaign() if store.holds_campaign() else None
+    eps, penalty = ((camp.stored_spec.get("eps_safe_m"), camp.stored_spec.get("penalty_m")) if camp else (None, None))
     eps_kind = EPS_SAFE_M if eps is None else eps
-    ident = (camp or {}).get("detector") or {}
+    ident = (camp.detector if camp else None) or {}
     detector = {col: ident.get(key) for col, key in DETECTOR_COLUMNS.items()}
     stored = store.jobs(with_trace=False, with_points=True)
     if any(r.budget is not None and r.budget.reads for r in stored):
@@ -118,12 +118,8 @@ def summary_records(store: ResultStore) -> list[dict[str, Any]]:
     import math
 
     from .metrics import main_rows, reference_rows, summarize
-    from .spec import CampaignSpec
 
-    camp = store.campaign()
-    if camp is None:
-        raise ValueError(f"{store.path}: no campaign stored")
-    spec = CampaignSpec.from_dict(camp["spec"])
+    spec = store.spec()
     rows = main_rows(store, spec, with_trace=False, measured_only=False)  # counted apart (not_measured)
     boxes = list({r.box.label: r.box for r in rows if r.box is not None}.values())
     ref = store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
@@ -161,11 +157,11 @@ def risk_records(store: ResultStore) -> list[dict[str, Any]]:
     unmeasured: dict[str, int] = {}
     for r in rows:
         unmeasured[r.method] = unmeasured.get(r.method, 0) + (not r.measured)
-    out = [{"experiment": camp["name"], "method": p.method, "box_label": boxes.get(p.method), "images": p.images,
+    out = [{"experiment": camp.name, "method": p.method, "box_label": boxes.get(p.method), "images": p.images,
             "p_fail": p.p_fail, "p_fail_ci_low": p.ci.low, "p_fail_ci_high": p.ci.high, "ci_level": p.ci.level,
             "tau": p.tau, "holds": p.holds, "violated": p.violated, "undecided": p.undecided,
             "not_measured": unmeasured.pop(p.method, 0), "evaluations": p.evaluations} for p in pooled_risk(rows)]
-    out += [{"experiment": camp["name"], "method": m, "box_label": boxes.get(m), "images": 0, "not_measured": k}
+    out += [{"experiment": camp.name, "method": m, "box_label": boxes.get(m), "images": 0, "not_measured": k}
             for m, k in unmeasured.items()]  # an estimator whose every job was not measured
     return out
 
@@ -173,8 +169,7 @@ def risk_records(store: ResultStore) -> list[dict[str, Any]]:
 def summary_table(store: ResultStore) -> tuple[list[dict[str, Any]], tuple[str, ...]]:
     """What ``report --format csv|json`` prints: the records and their columns — a risk run's per-estimator
     failure probability (:func:`risk_records`), any other run's survival table (:func:`summary_records`)."""
-    camp = store.require_campaign()
-    if any(blk.get("kind") == "risk" for blk in camp["spec"].get("blocks", [])):
+    if any(blk.kind == "risk" for blk in store.spec().blocks):
         return risk_records(store), RISK_SUMMARY_COLUMNS
     return summary_records(store), SUMMARY_COLUMNS
 

@@ -51,10 +51,7 @@ def _at_largest(rows: Sequence[JobRow]) -> tuple[BoxSpec, list[JobRow]]:
 def survivors_of_every_method(store: ResultStore) -> tuple[CampaignSpec, BoxSpec, list[str], list[str]]:
     """The run's spec, its largest box, the methods, and the images every method ran at that box (at the largest
     budget) and left surviving (sorted by sample index)."""
-    camp = store.campaign()
-    if camp is None:
-        raise ValueError(f"{store.path}: holds no campaign")
-    spec = CampaignSpec.from_dict(camp["spec"])
+    spec = store.spec()
     rows = [r for r in main_rows(store, spec, with_trace=False) if r.chain is None]
     box, at = _at_largest(rows)
     methods = list(dict.fromkeys(r.method for r in at))
@@ -112,7 +109,7 @@ def true_survival(run: str | Path, truth: str | Path | None = None) -> TrueSurvi
     with ResultStore.open_existing(truth) as tstore:
         grids = {r.sample_id: r for r in tstore.jobs(role="reference", with_trace=False)
                  if r.status is JobStatus.DONE}
-        counts = tuple(CampaignSpec.from_dict(tstore.campaign()["spec"]).blocks[0].options["grid"]["counts"])
+        counts = tuple(tstore.spec().blocks[0].options["grid"]["counts"])
     eps = spec.eps_safe_m
     done = [sid for sid in keep if sid in grids]
     hit = {sid for sid in done if not survived(grids[sid], eps)}

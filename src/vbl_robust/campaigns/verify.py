@@ -199,12 +199,9 @@ def row_findings(row: JobRow, *, eps_safe_m: float, penalty_m: float, committed:
 # -- a store ------------------------------------------------------------------------------------------------------
 def _settings(store: ResultStore, spec: Any) -> tuple[float, float] | None:
     if spec is None:
-        camp = store.campaign()
-        if camp is None:
+        if not store.holds_campaign():
             return None
-        from .spec import CampaignSpec
-
-        spec = CampaignSpec.from_dict(camp["spec"])
+        spec = store.spec()
     return float(spec.eps_safe_m), float(spec.penalty_m)
 
 

@@ -45,14 +45,12 @@ def _unmeasured_exit(run: Path, allow_unmeasured: bool) -> None:
     """The jobs of ``run`` the tool could not measure, on standard error, and exit 1 unless ``allow_unmeasured``;
     the rows inconsistent with their evaluations or digests (not used), on standard error too."""
     from vbl_robust.campaigns import ResultStore
-    from vbl_robust.campaigns.spec import CampaignSpec
     from vbl_robust.campaigns.verify import screen
 
     from .run import unmeasured_ok
 
     with one_line(), ResultStore.open_existing(run) as store:
-        camp = store.campaign()
-        unit = CampaignSpec.from_dict(camp["spec"]).unit if camp else "image"
+        unit = store.spec().unit if store.holds_campaign() else "image"
         bad = screen(store).inconsistent
         if bad:
             typer.secho(f"{run}: {len(bad)} job row(s) inconsistent — not used (vbl-robust verify {run} names them)",
@@ -178,7 +176,6 @@ def _summary(run: Path, fmt: str) -> None:
 
 def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:
     from vbl_robust.campaigns import ResultStore
-    from vbl_robust.campaigns.spec import CampaignSpec
     from vbl_robust.report.markdown import compare_markdown, families_markdown, survival_markdown
 
     with one_line():
@@ -186,7 +183,7 @@ def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:
             return compare_markdown(run, compare)
         text = survival_markdown(run, others)
         with ResultStore.open_existing(run) as store:
-            name = CampaignSpec.from_dict(store.campaign()["spec"]).name
+            name = store.spec().name
         if name == "families":
             text += "\n" + families_markdown(run)
     return text

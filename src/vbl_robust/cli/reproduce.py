@@ -174,8 +174,8 @@ def _refuse_code(bundle: Path, names: list[str], trust: bool) -> None:
         if packed.is_file():
             with one_line(ValueError, prefix=f"--resume-from {bundle}: "):
                 with ResultStore.open_existing(packed) as stored:
-                    camp = stored.campaign()
-                refuse_without_consent((camp or {}).get("detector") or {}, trust, where=f"{name}: ")
+                    detector = stored.require_campaign().detector if stored.holds_campaign() else {}
+                refuse_without_consent(detector or {}, trust, where=f"{name}: ")
 
 
 def _restore(bundle: Path, name: str, out_dir: Path) -> None:

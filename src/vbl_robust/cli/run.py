@@ -144,10 +144,9 @@ def check_store(out: Path, spec: Any, samples: list, detector: Any, *, wait: boo
     if not wait:
         _refuse_in_use(path)
     with ResultStore(path, readonly=True) as store:
-        have = store.campaign()
-        if have is None or store.count() == 0:
+        if not store.holds_campaign() or store.count() == 0:
             return
-        check_same(path, have, spec.to_dict(), detector.identity())
+        check_same(path, store.require_campaign(), spec.to_dict(), detector.identity())
         store.changed_contents(samples)
         stored = store.samples()
     from vbl_robust.campaigns.provenance import sample_fingerprint
@@ -228,10 +227,9 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
     it can — a run that did not finish, or did not measure what it was asked to, never exits 0."""
     from vbl_robust.campaigns import ResultStore, export
     from vbl_robust.campaigns.metrics import main_rows
-    from vbl_robust.campaigns.spec import CampaignSpec
 
     with ResultStore.open_existing(out) as store:
-        spec = CampaignSpec.from_dict(store.campaign()["spec"])
+        spec = store.spec()
         # runs that read smaller budgets off their trace: per budget; jobs not measured counted apart
         rows = main_rows(store, spec, with_trace=False, measured_only=False)
         every = store.jobs(with_trace=False)

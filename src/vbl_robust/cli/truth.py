@@ -45,11 +45,10 @@ def truth(
     out = out if out is not None else run.with_name(run.name + TRUTH_SUFFIX)
     with one_line():
         with ResultStore.open_existing(run) as store:
-            camp = store.campaign()
             # the run's detector is data from its store: one that names code (a factory, a .pt) is refused first,
             # before anything else is read, unless --trust-model
-            det = None if camp is None else DetectorSpec.from_identity(camp.get("detector") or {},
-                                                                      trust=trust_model, where=f"{run}: ")
+            det = DetectorSpec.from_identity(store.require_campaign().detector or {}, trust=trust_model,
+                                             where=f"{run}: ")
             run_spec, box, methods, keep = survivors_of_every_method(store)
             samples = load_run_samples(store, keep)
         spec = truth_spec(run_spec, box, grid)

@@ -25,7 +25,7 @@ def verify(run: o.StoredRun, head: Head = None) -> None:
         fail(f"--head {head}: not a SHA-256 (64 hex digits)")
     try:
         with ResultStore.open_existing(run) as store:
-            if store.campaign() is None and store.count() == 0:
+            if not store.holds_campaign() and store.count() == 0:
                 fail(f"{run}: the results store holds no campaign yet: nothing to verify")
             check = check_store(store)
     except (ValueError, FileNotFoundError) as exc:

@@ -47,7 +47,7 @@ from typing import Any
 from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.experiments import EXPERIMENTS
-from ..campaigns.spec import FIGURES, CampaignSpec
+from ..campaigns.spec import FIGURES
 from ..campaigns.store import ResultStore
 from .evidence import SAFETY_FIGURE, Evidence, evidence_of, section_evidence
 from .gallery import section_gallery
@@ -132,10 +132,7 @@ def build_report(run: str | Path, out: str | Path | None = None, *, embed: bool 
     history each time the page is regenerated."""
     run = Path(run)
     with ResultStore.open_existing(run) as store:
-        camp = store.campaign()
-        if camp is None:
-            raise ValueError(f"{run}: the results store holds no campaign yet")
-        spec = CampaignSpec.from_dict(camp["spec"])
+        spec = store.spec()
         out_dir = Path(out) if out is not None else (run if run.is_dir() else run.parent)
         out_dir.mkdir(parents=True, exist_ok=True)
         ctx = Context(store, spec, out_dir, mx.main_rows(store, spec), store.samples(), embed=embed)

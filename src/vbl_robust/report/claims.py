@@ -77,7 +77,6 @@ from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.experiments import PAPER, PAPER_METHODS
 from ..campaigns.pnpcheck import TRUNCATED
-from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import PACKED, STORE, JobRow, JobStatus, ResultStore
 from ..constants import Verdict
 from ..search import direct_family
@@ -162,10 +161,12 @@ def _open(root: Path, name: str, stack: ExitStack) -> _Exp | str:
         store = stack.enter_context(ResultStore.open_existing(path))
     except (ValueError, sqlite3.Error) as exc:  # e.g. a store of a newer vbl-robust: say so, read the others
         return f"{path}: {exc}"
-    camp = store.campaign()
-    if camp is None or camp["name"] != name:
-        return f"{path} holds {'no campaign' if camp is None else 'campaign ' + repr(camp['name'])}"
-    spec = CampaignSpec.from_dict(camp["spec"])
+    if not store.holds_campaign():
+        return f"{path} holds no campaign"
+    camp = store.require_campaign()
+    if camp.name != name:
+        return f"{path} holds campaign {camp.name!r}"
+    spec = camp.spec
     samples = store.samples()
     planned = Counter(j.sample_id for j in spec.expand([(s, d["fingerprint"] or "") for s, d in samples.items()]))
     stored = Counter(r.sample_id for r in store.jobs(with_trace=False))

@@ -89,10 +89,7 @@ class Comparison:
 
 def _read(run: str | Path) -> tuple[CampaignSpec, list[JobRow], str, dict[str, str]]:
     with ResultStore.open_existing(run) as store:
-        camp = store.campaign()
-        if camp is None:
-            raise ValueError(f"{run}: the results store holds no campaign yet")
-        spec = CampaignSpec.from_dict(camp["spec"])
+        spec = store.spec()
         runs = store.runs()
         det = str(((runs[-1].provenance.detector if runs else None) or {}).get("name", "?"))
         envelopes = {sid: str(rec["envelope"]) for sid, rec in store.samples().items() if rec.get("envelope")}

@@ -64,7 +64,7 @@ def _kinds(line: mx.Summary) -> str:
 
 def _read(run: str | Path):
     with ResultStore.open_existing(run) as store:
-        spec = CampaignSpec.from_dict(store.require_campaign()["spec"])
+        spec = store.spec()
         rows = mx.main_rows(store, spec, with_trace=False)
         land = store.jobs(kind="search", role="landscape", with_points=True, with_trace=False)
     return spec, rows, land
@@ -173,7 +173,7 @@ def families_markdown(run: str | Path, series: str = "all") -> str:
     if series not in ("all", "any"):
         raise ValueError(f"series must be 'all' or 'any', got {series!r}")
     with ResultStore.open_existing(run) as store:
-        spec = CampaignSpec.from_dict(store.require_campaign()["spec"])
+        spec = store.spec()
         main_rows = mx.main_rows(store, spec)
         ctx = R.Context(store, spec, Path(run), main_rows, store.samples())
         ref = R.reference(ctx, R.main_boxes(ctx))

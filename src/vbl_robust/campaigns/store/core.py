@@ -14,11 +14,11 @@ from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from stat import S_ISREG
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .digest import mark_before, record_forgotten, record_stored
 from .identity import check_same
-from .rows import JobRow, JobStatus, RunProvenance, RunRecord, RunStatus, now_iso
+from .rows import JobRow, JobStatus, RunProvenance, RunRecord, RunStatus, StoredCampaign, now_iso
 from .schema import (
     CAMPAIGN,
     CONTENTS,
@@ -34,6 +34,9 @@ from .schema import (
     schema_version,
     to_columns,
 )
+
+if TYPE_CHECKING:
+    from ..spec import CampaignSpec
 
 #: File name of the store in a run directory.
 STORE = "results.sqlite"
@@ -172,14 +175,19 @@ class ResultStore:
         return Transaction(self._con)
 
     # -- campaign -------------------------------------------------------------------------------------------
-    def campaign(self) -> dict[str, Any] | None:
-        """The stored campaign ``{"name", "spec", "detector", "created_at"}`` or None for a new store."""
+    def campaign(self) -> StoredCampaign | None:
+        """The stored campaign, or None for a new store (readers outside the store ask :meth:`spec` or
+        :meth:`require_campaign`, which say in one line that there is none)."""
         row = self._con.execute("SELECT name, spec_json, detector_json, created_at FROM campaign WHERE id = 1").fetchone()
         if row is None:
             return None
-        return {"name": row[0], "spec": json.loads(row[1]), "detector": json.loads(row[2]), "created_at": row[3]}
+        return StoredCampaign(row[0], json.loads(row[1]), json.loads(row[2]), row[3])
 
-    def require_campaign(self) -> dict[str, Any]:
+    def holds_campaign(self) -> bool:
+        """Whether a campaign is stored (a store nothing was run into holds none)."""
+        return self._con.execute("SELECT 1 FROM campaign WHERE id = 1").fetchone() is not None
+
+    def require_campaign(self) -> StoredCampaign:
         """The stored campaign (:meth:`campaign`); ``ValueError`` (one line) for a store that holds none — a 0-byte
         file, or a store nothing was run into (left by a command refused before its run, or a refused merge):
         there is nothing to read."""
@@ -187,6 +195,11 @@ class ResultStore:
         if camp is None:
             raise ValueError(f"{self.path}: the results store holds no campaign yet (nothing was run into it)")
         return camp
+
+    def spec(self) -> CampaignSpec:
+        """The stored campaign's spec; ``ValueError`` (one line, :meth:`require_campaign`) for a store that holds
+        none."""
+        return self.require_campaign().spec
 
     def bind_campaign(self, name: str, spec: Mapping[str, Any], detector: Mapping[str, Any]) -> None:
         """Bind the store to a campaign and detector, or check that it holds this one.
@@ -207,7 +220,7 @@ class ResultStore:
         with self.transaction():
             if not bound:
                 self._con.execute("DELETE FROM samples")
-            created = have["created_at"] if bound else now_iso()
+            created = have.created_at if bound else now_iso()
             self._con.execute(CAMPAIGN.insert(verb="INSERT OR REPLACE"), (1, name, spec_j, det_j, created))
 
     # -- runs -----------------------------------------------------------------------------------------------

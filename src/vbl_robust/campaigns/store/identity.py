@@ -7,28 +7,30 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .rows import StoredCampaign
 
 #: Keys of a campaign spec that only change how results are shown (the report's figures): they never make a
 #: store refuse a run, and the newer value is recorded.
 PRESENTATION_KEYS = ("figures",)
 
 
-def check_same(path: str | Path, have: Mapping[str, Any], spec: Mapping[str, Any], detector: Mapping[str, Any], *,
+def check_same(path: str | Path, have: StoredCampaign, spec: Mapping[str, Any], detector: Mapping[str, Any], *,
                hint: str = "rerun with the same options to resume, or use another --out") -> None:
-    """``ValueError`` (naming the store ``path`` and the first difference, then ``hint``) unless the campaign
-    ``have`` (``{"name", "spec", "detector", …}`` as stored) has the settings ``spec`` and the detector
-    ``detector``."""
+    """``ValueError`` (naming the store ``path`` and the first difference, then ``hint``) unless the stored campaign
+    ``have`` has the settings ``spec`` (a spec's dict) and the detector ``detector``."""
     def shown(d: Mapping[str, Any]) -> str:
         return json.dumps({k: v for k, v in d.items() if k not in PRESENTATION_KEYS}, sort_keys=True)
 
-    if shown(have["spec"]) != shown(spec):
-        diff = first_difference(have["spec"], dict(spec))
-        raise ValueError(f"{path}: holds campaign {have['name']!r} with other settings ({diff}); {hint}")
-    mine, theirs = detector_identity(have["detector"]), detector_identity(detector)
+    if shown(have.stored_spec) != shown(spec):
+        diff = first_difference(have.stored_spec, dict(spec))
+        raise ValueError(f"{path}: holds campaign {have.name!r} with other settings ({diff}); {hint}")
+    mine, theirs = detector_identity(have.detector), detector_identity(detector)
     if mine != theirs:
         diff = first_difference(mine, theirs)
-        name, sha = have["detector"].get("name"), have["detector"].get("sha256")
+        name, sha = have.detector.get("name"), have.detector.get("sha256")
         held = f"{name!r}" + (f" (sha256 {str(sha)[:12]}…)" if sha else "")
         other = "the same detector with other options" if detector.get("name") == name else repr(detector.get("name"))
         raise ValueError(f"{path}: holds results of detector {held}, not of {other} ({diff}); "

@@ -7,17 +7,16 @@ from __future__ import annotations
 import dataclasses
 import tempfile
 import zlib
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from ...detect.shipped import refuse_without_consent
 from .core import STORE, ResultStore
 from .identity import check_same
 from .lock import WriterLock
 from .pack import restore_store
-from .rows import RunRecord, RunStatus, now_iso
+from .rows import RunRecord, RunStatus, StoredCampaign, now_iso
 
 
 @dataclass(frozen=True)
@@ -51,8 +50,8 @@ class MergeReport:
         return sum(s.already for s in self.sources)
 
 
-def check_mergeable(store: ResultStore, other: ResultStore, campaign: Mapping[str, Any] | None = None, *,
-                    trust: bool = False) -> dict[str, Any]:
+def check_mergeable(store: ResultStore, other: ResultStore, campaign: StoredCampaign | None = None, *,
+                    trust: bool = False) -> StoredCampaign:
     """``ValueError`` unless ``other`` holds job rows of ``store``'s campaign and detector (or of ``campaign``, when
     given: several sources checked against the first before anything is written) on samples that agree with
     ``store``'s; returns ``other``'s campaign. A campaign whose detector names code (a factory's
@@ -61,10 +60,10 @@ def check_mergeable(store: ResultStore, other: ResultStore, campaign: Mapping[st
     theirs = other.campaign()
     if theirs is None or other.count() == 0:
         raise ValueError(f"{other.path}: holds no job rows to merge")
-    refuse_without_consent(theirs.get("detector") or {}, trust, where=f"{other.path}: ")
+    refuse_without_consent(theirs.detector or {}, trust, where=f"{other.path}: ")
     mine = campaign if campaign is not None else (store.campaign() if store.count() else None)
     if mine is not None:
-        check_same(store.path, mine, theirs["spec"], theirs["detector"],
+        check_same(store.path, mine, theirs.stored_spec, theirs.detector,
                    hint=f"{other.path} belongs to another campaign or detector: merge only runs of one")
     here = store.samples()
     clash = [sid for sid, s in other.samples().items() if sid in here
@@ -100,7 +99,7 @@ def merge_store(store: ResultStore, other: ResultStore, *, source: str = "", tru
         raise ValueError(f"{label}: a job row's stored evaluations cannot be decoded ({type(exc).__name__}: "
                          f"{exc}); nothing merged") from None
     if store.campaign() is None or store.count() == 0:
-        store.bind_campaign(theirs["name"], theirs["spec"], theirs["detector"])
+        store.bind_campaign(theirs.name, theirs.stored_spec, theirs.detector)
     have = store.done_keys()
     skipped = set(left_out(other)) if left_out is not None else set()  # e.g. rows inconsistent with themselves
     stored = [r for r in stored if r.key not in skipped]
@@ -155,7 +154,7 @@ def merge_runs(sources: Sequence[str | Path], into: str | Path, *, trust: bool =
             with ResultStore.open_existing(path) as other:
                 camp = other.campaign()
                 if camp is not None:
-                    refuse_without_consent(camp.get("detector") or {}, trust, where=f"{src}: ")
+                    refuse_without_consent(camp.detector or {}, trust, where=f"{src}: ")
         dst.parent.mkdir(parents=True, exist_ok=True)
         with WriterLock(dst), ResultStore(dst) as store:
             first = None

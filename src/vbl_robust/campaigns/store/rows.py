@@ -1,6 +1,7 @@
-"""What a results store holds, as typed rows: a finished job (:class:`JobRow`, its evaluated :class:`Points`) and a
-run (:class:`RunRecord`: its :class:`RunProvenance` and how it ended, :class:`RunStatus`). No SQL here: how each
-field is stored is :mod:`~vbl_robust.campaigns.store.schema`'s business.
+"""What a results store holds, as typed rows: the campaign it is bound to (:class:`StoredCampaign`), a finished job
+(:class:`JobRow`, its evaluated :class:`Points`) and a run (:class:`RunRecord`: its :class:`RunProvenance` and how it
+ended, :class:`RunStatus`). No SQL here: how each field is stored is :mod:`~vbl_robust.campaigns.store.schema`'s
+business.
 """
 
 from __future__ import annotations
@@ -13,18 +14,48 @@ import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 
 from ...constants import MAX_BLOB_BYTES, NotMeasured, Verdict
 from ...search.result import TraceRow
-from ..spec import BoxSpec, Budget
+from ..spec import BoxSpec, Budget, CampaignSpec
 
 
 def now_iso() -> str:
     """Now, UTC, ISO 8601 to the second: the stores' timestamps."""
     return dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+
+
+@dataclass(frozen=True)
+class StoredCampaign:
+    """The campaign a store is bound to (:meth:`~vbl_robust.campaigns.store.ResultStore.campaign`).
+
+    Attributes:
+        name: the campaign's name (its spec's ``name``).
+        stored_spec: the spec as stored (decoded JSON), kept as written: a store compares it and a merge binds
+            another store to it (:mod:`~vbl_robust.campaigns.store.identity`) without a round trip that could
+            change a byte. :attr:`spec` is the same as a :class:`~vbl_robust.campaigns.spec.CampaignSpec`.
+        detector: the detector's identity (:meth:`~vbl_robust.campaigns.DetectorSpec.identity`).
+        created_at: when the store was bound (ISO time, UTC).
+    """
+
+    name: str
+    stored_spec: Mapping[str, Any]
+    detector: Mapping[str, Any]
+    created_at: str
+
+    @cached_property
+    def spec(self) -> CampaignSpec:
+        """The campaign spec (decoded on first use: a store holding a spec of another form can still be compared,
+        merged and listed)."""
+        return CampaignSpec.from_dict(self.stored_spec)
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"name", "spec", "detector", "created_at"}`` (the spec as stored): a bundle's ``provenance.json``."""
+        return {"name": self.name, "spec": self.stored_spec, "detector": self.detector, "created_at": self.created_at}
 
 
 class JobStatus(StrEnum):
