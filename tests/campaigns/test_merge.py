@@ -71,10 +71,10 @@ def test_merge_refuses_another_campaign_a_held_store_and_an_empty_source(tmp_pat
     runner = CliRunner()
     res = runner.invoke(app, ["merge", str(tmp_path / "a"), str(tmp_path / "b"), "--into", str(tmp_path / "new")])
     assert res.exit_code == 2 and "belongs to another campaign or detector" in res.output, res.output
-    with ResultStore.open_existing(tmp_path / "new") as new:  # every source is checked before anything is written
-        assert new.count() == 0
-    with WriterLock(tmp_path / "a" / "results.sqlite"):  # a run is writing it
-        res = runner.invoke(app, ["merge", str(tmp_path / "b"), "--into", str(tmp_path / "a")])
+    assert not (tmp_path / "new").exists()  # every source is checked before anything is created
+    _run(tmp_path / "c", samples)  # the same campaign as a: mergeable, but a run is writing a
+    with WriterLock(tmp_path / "a" / "results.sqlite"):
+        res = runner.invoke(app, ["merge", str(tmp_path / "c"), "--into", str(tmp_path / "a")])
     assert res.exit_code == 2 and "in use by PID" in res.output
     ResultStore(tmp_path / "e" / "results.sqlite").close()
     res = runner.invoke(app, ["merge", str(tmp_path / "e"), "--into", str(tmp_path / "a")])

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..constants import EPS_SAFE_M
+from ..search.bounds import check_lipschitz
 from ..search.zones import ZoneMap, zones
 from ..space import ParameterBox
 
@@ -194,8 +195,16 @@ def zones_of_run(run: str | Path, *, roles: Sequence[str] | None = None, thresho
             logger.warning("%s: %d job row(s) inconsistent — not used (vbl-robust verify %s names them)", run,
                            len(left_out), run)
         rows = store.jobs(kind="search", with_points=True, with_trace=False)
+    rows = [r for r in rows if roles is None or r.role in roles]
+    for r in rows:  # a constant that fits no box of the run is refused, even where no job keeps cells to zone
+        box = None if r.box is None else r.box.box
+        if box is not None and isinstance(lipschitz, Sequence) and len(lipschitz) != box.dim:
+            raise ValueError(f"lipschitz: {len(lipschitz)} numbers, but the run's box {r.box_label} has {box.dim} "
+                             f"parameter(s) ({', '.join(box.names)}): give one number, or one per parameter")
+        if box is not None:
+            check_lipschitz(lipschitz, norm, box.dim)
     return [job_zones(r, spec, threshold=threshold, lipschitz=lipschitz, norm=norm, estimate=estimate)
-            for r in rows if roles is None or r.role in roles]
+            for r in rows]
 
 
 # -- refinement -------------------------------------------------------------------------------------------------

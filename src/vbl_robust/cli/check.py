@@ -19,7 +19,7 @@ from typing import Annotated, Any
 import typer
 
 from . import options as o
-from .common import fail, one_line, set_verbosity
+from .common import check_writable, fail, one_line, set_verbosity
 
 #: Rows the table shows without ``--all`` (the rows with a problem first).
 SHOWN_ROWS = 20
@@ -113,6 +113,7 @@ def check(
 
         doc = {"data": str(data), "csv": str(csv_path), "runway_db": str(db_path), "sequences": sequences,
                "summary": summary, "rows": [r.to_json() for r in rows]}
+        json_out.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(json_out, json.dumps(doc, indent=1, allow_nan=False) + "\n")
         typer.echo(f"rows written to {json_out}")
     if summary["unmeasured"]:
@@ -120,15 +121,8 @@ def check(
 
 
 def _check_json_target(path: Path | None) -> None:
-    import os
-
-    if path is None:
-        return
-    if path.is_dir():
-        fail(f"--json {path}: is a directory")
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir() or not os.access(parent, os.W_OK):
-        fail(f"--json {path}: cannot write there ({parent} is not a writable directory)")
+    if path is not None:
+        check_writable("--json", path)
 
 
 @contextmanager

@@ -50,6 +50,40 @@ def fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
+def check_names(option: str, path: Path) -> None:
+    """Refuse a path with a name longer than its file system allows (255 bytes on most), before any work: the
+    run would stop at its first write."""
+    import os
+
+    limit = 255
+    try:
+        limit = os.pathconf(next((p for p in (path, *path.parents) if p.exists()), Path(".")), "PC_NAME_MAX")
+    except (OSError, ValueError):
+        pass
+    long = next((part for part in path.parts if len(os.fsencode(part)) > limit), None)
+    if long is not None:
+        fail(f"{option} {path}: a name in it is {len(os.fsencode(long))} bytes long, over the file system's "
+             f"{limit}")
+
+
+def check_writable(option: str, path: Path) -> None:
+    """Refuse, before any work, an output file the command could not write at its end: a directory, or a place
+    where no file can be created — tried for real in the nearest existing folder (a file made and removed at once:
+    a writable mode bit says nothing on /proc, a read-only mount or a full disk)."""
+    import os
+    import tempfile
+
+    if path.is_dir():
+        fail(f"{option} {path}: is a directory")
+    parent = next((p for p in (path.parent, *path.parent.parents) if p.exists()), Path("."))
+    try:
+        fd, probe = tempfile.mkstemp(dir=parent, prefix=".vbl-robust-probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        fail(f"{option} {path}: cannot write there ({parent}: {exc.strerror or exc})")
+
+
 @contextmanager
 def one_line(*errors: type[Exception], prefix: str = "") -> Iterator[None]:
     """Inside: ``errors`` (default ``ValueError``, ``FileNotFoundError``: the library's refusals) end the command in

@@ -12,7 +12,7 @@ from typing import Annotated
 import typer
 
 from . import options as o
-from .common import fail, one_line
+from .common import check_writable, fail, one_line
 
 ReportOut = Annotated[Path | None, typer.Option("--out", help="Directory for report.html and figures/ (default: RUN).")]
 Csv = Annotated[Path | None, typer.Option("--csv", help="Also export the job rows to CSV.")]
@@ -36,7 +36,8 @@ def report(
 ) -> None:
     """Regenerate a run's self-contained HTML report (figures, tables, provenance) from its store (a run directory,
     its results.sqlite, or a bundle's packed results.sqlite.xz, read through a temporary copy). Exit 1 when some job
-    of the run was not measured, unless --allow-unmeasured."""
+    of the run was not measured, unless --allow-unmeasured, and when a row contradicts its own evaluations or
+    digest (left out of the report; `vbl-robust verify` names it)."""
     _report(run, out, csv, parquet, fmt, others, compare)
     _unmeasured_exit(run, allow_unmeasured)
 
@@ -56,7 +57,7 @@ def _unmeasured_exit(run: Path, allow_unmeasured: bool) -> None:
             typer.secho(f"{run}: {len(bad)} job row(s) inconsistent — not used (vbl-robust verify {run} names them)",
                         err=True, fg=typer.colors.YELLOW)
         rows = store.jobs(with_trace=False)
-    if not unmeasured_ok(rows, unit, allow_unmeasured):
+    if not unmeasured_ok(rows, unit, allow_unmeasured) or bad:  # a row that contradicts itself: never exit 0
         raise typer.Exit(1)
 
 
@@ -90,6 +91,9 @@ def _report(run: Path, out: Path | None, csv: Path | None, parquet: Path | None,
         with one_line():
             typer.echo(f"compare: {compare_html(run, compare, out)}")
         return
+    for option, target in (("--csv", csv), ("--parquet", parquet)):
+        if target is not None:
+            check_writable(option, target)
     with one_line():
         path = build_report(run, out)
         if csv or parquet:
@@ -176,14 +180,23 @@ def _summary(run: Path, fmt: str) -> None:
 
 def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:
     from vbl_robust.campaigns import ResultStore
-    from vbl_robust.report.markdown import compare_markdown, families_markdown, survival_markdown
+    from vbl_robust.report.markdown import (
+        compare_markdown,
+        families_markdown,
+        risk_markdown,
+        survival_markdown,
+    )
 
     with one_line():
         if compare is not None:
             return compare_markdown(run, compare)
-        text = survival_markdown(run, others)
         with ResultStore.open_existing(run) as store:
-            name = store.spec().name
-        if name == "families":
+            spec = store.spec()
+        if any(b.kind == "risk" for b in spec.blocks):
+            if others:
+                fail("--with: a risk run's table has no other runs beside it")
+            return risk_markdown(run)
+        text = survival_markdown(run, others)
+        if spec.name == "families":
             text += "\n" + families_markdown(run)
     return text

@@ -10,7 +10,7 @@ from typing import Any
 
 import typer
 
-from .common import fail, one_line
+from .common import check_names, check_writable, fail, one_line
 from .options import DEFAULT_IMAGES
 
 
@@ -204,20 +204,17 @@ def _remove(made: list[Path]) -> None:
 def check_exports(csv: Path | None, parquet: Path | None, out: Path | None = None) -> None:
     """Refuse, before a run, an export the run could not write at its end: a ``--csv`` / ``--parquet`` name with
     another suffix, a directory, or a place that cannot be created or written; also an ``--out`` that is a file."""
-    import os
-
-    if out is not None and out.exists() and not out.is_dir():
-        fail(f"--out {out}: is a file, not a run directory")
+    if out is not None:
+        check_names("--out", out)
+        if out.exists() and not out.is_dir():
+            fail(f"--out {out}: is a file, not a run directory")
     for option, path, suffix in (("--csv", csv, ".csv"), ("--parquet", parquet, ".parquet")):
         if path is None:
             continue
         if path.suffix.lower() != suffix:
             fail(f"{option} {path}: the file name must end in {suffix}")
-        if path.is_dir():
-            fail(f"{option} {path}: is a directory")
-        parent = next((p for p in (path.parent, *path.parent.parents) if p.exists()), Path("."))
-        if not parent.is_dir() or not os.access(parent, os.W_OK):
-            fail(f"{option} {path}: cannot write there ({parent} is not a writable directory)")
+        check_names(option, path)
+        check_writable(option, path)
 
 
 def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, report: bool, quiet: bool = False,

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from ..constants import MAX_IMAGE_SIDE, MAX_IMAGES
-from .common import one_line
+from .common import fail, one_line
 
 N = Annotated[int, typer.Option("--n", min=1, max=MAX_IMAGES, help="Number of approach images (without --sequences).")]
 Seed = Annotated[int, typer.Option("--seed", min=0, help="Seed; the same seed gives the same dataset.")]
@@ -36,6 +36,11 @@ def scenes(
     """Generate approach scenes with exact ground truth, written in LARD V2 format."""
     from vbl_robust import scenes as sc
 
+    if out.exists() and not out.is_dir():
+        fail(f"--out {out}: is a file, not a directory")
+    if out.is_dir() and (held := sorted(p.name for p in out.iterdir())):
+        fail(f"--out {out}: not empty (holds {', '.join(held[:3])}{', …' if len(held) > 3 else ''}): a dataset is "
+             "written into a new or empty directory, never over another")
     with one_line(ValueError, FileNotFoundError, RuntimeError):
         if sequences is not None:
             csv_path = sc.write_sequences(out, sequences, frames, rate, seed=seed, width=width, height=height,

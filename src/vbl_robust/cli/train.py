@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import math
+import zipfile
 from pathlib import Path
 from typing import Annotated
 
@@ -99,6 +100,9 @@ def _weights(model: str | Path, trust: bool, option: str) -> Path:
         fail(f"{option} {model}: training starts from a .pt file")
     if spec.model_file is None:
         fail(f"{option} {model}: {default_model_status(spec.shipped_name)}")
+    if not zipfile.is_zipfile(spec.model_file):  # checked here: ultralytics would fail mid-set-up with a traceback
+        fail(f"{option} {model}: not a PyTorch checkpoint (torch.save writes a zip archive; this file of "
+             f"{spec.model_file.stat().st_size} bytes is not one)")
     return spec.model_file
 
 

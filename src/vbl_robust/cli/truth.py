@@ -43,6 +43,8 @@ def truth(
     except ValueError:
         fail(f"--counts {counts}: expected comma-separated integers")
     out = out if out is not None else run.with_name(run.name + TRUTH_SUFFIX)
+    if _same_run(out, run):
+        fail(f"--out {out}: is the run itself; the truth run goes beside it (default {run.name}{TRUTH_SUFFIX})")
     with one_line():
         with ResultStore.open_existing(run) as store:
             # the run's detector is data from its store: one that names code (a factory, a .pt) is refused first,
@@ -71,3 +73,10 @@ def truth(
                + "; true breaches missed: " + ", ".join(f"{m} {k}" for m, k in t.missed.items()))
     if not complete:
         raise typer.Exit(1)
+
+
+def _same_run(out: Path, run: Path) -> bool:
+    """``out`` names ``run``'s directory or its store file."""
+    def directory(p: Path) -> Path:
+        return (p.parent if p.suffix == ".sqlite" or p.is_file() else p).resolve()
+    return directory(out) == directory(run)

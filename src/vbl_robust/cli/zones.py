@@ -21,7 +21,7 @@ import typer
 
 from ..atomic import atomic_write
 from . import options as o
-from .common import fail, parse_lipschitz
+from .common import check_writable, fail, parse_lipschitz
 
 FORMATS = ("json", "csv", "md")
 
@@ -58,6 +58,8 @@ def zones(
         fail(f"--threshold {threshold:g}: an error threshold ε in metres must be finite and > 0")
     if plot is not None and plot.exists() and not plot.is_dir():
         fail(f"--plot {plot}: is a file, not a directory")
+    if out is not None:
+        check_writable("--out", out)
     lip = parse_lipschitz(lipschitz)
     try:
         from vbl_robust.campaigns import ResultStore

@@ -32,7 +32,7 @@ from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import ResultStore
 from ..stats import Rate
 
-__all__ = ["compare_markdown", "families_markdown", "survival_markdown", "zones_markdown"]
+__all__ = ["compare_markdown", "families_markdown", "risk_markdown", "survival_markdown", "zones_markdown"]
 
 
 def esc_md(text: object) -> str:
@@ -78,6 +78,24 @@ def _unmeasured(run: str | Path, unit: str) -> list[str]:
     return [f"**{esc_md(lines[0])}**", *(f"- {esc_md(line)}" for line in lines[1:]), ""] if lines else []
 
 
+def _progress(run: str | Path) -> list[str]:
+    """A line when the store holds fewer jobs than its last run planned — a run writing it now, or one stopped
+    before its end — so a partial table is never read as the whole run; none otherwise."""
+    from ..campaigns.store import RunStatus
+
+    with ResultStore.open_existing(run) as store:
+        runs = store.runs()
+        stored = store.count()
+    planned = int(runs[-1].provenance.jobs_total or 0) if runs else 0
+    if not runs or stored >= planned:
+        return []
+    if runs[-1].status == RunStatus.RUNNING:
+        return [f"**A run is writing this store now: {stored} of {planned} planned jobs stored so far; the table "
+                "holds the images every method has completed.**", ""]
+    return [f"**{stored} of {planned} planned jobs stored (the last run {esc_md(runs[-1].status)}): the table holds "
+            "the images every method completed; rerun the command to resume.**", ""]
+
+
 def _read_alike(run: str | Path, spec: CampaignSpec, rows: Sequence, other: str | Path):
     """``other``'s spec and main rows, ``ValueError`` unless it is ``run``'s experiment and seed on its images."""
     from .compare import check_alike
@@ -85,6 +103,27 @@ def _read_alike(run: str | Path, spec: CampaignSpec, rows: Sequence, other: str 
     ospec, more, _ = _read(other)
     check_alike(run, spec, rows, other, ospec, more)
     return ospec, more
+
+
+def risk_markdown(run: str | Path) -> str:
+    """A risk run's failure probability per estimator and box as a Markdown table
+    (:func:`~vbl_robust.campaigns.tables.risk_records`, what ``--format csv|json`` print), each estimate with its
+    interval, and the run's jobs not measured."""
+    from ..campaigns.tables import risk_records
+
+    with ResultStore.open_existing(run) as store:
+        records = risk_records(store)
+    if not records:
+        raise ValueError(f"{run}: no risk jobs stored yet")
+    rows = [(r["method"], r["box_label"], str(r["images"]),
+             f"{r['p_fail']:.4g} [{r['p_fail_ci_low']:.4g}, {r['p_fail_ci_high']:.4g}]",
+             f"{r['tau']:g}", f"{r['holds']} / {r['violated']} / {r['undecided']}", str(r["not_measured"]),
+             str(r["evaluations"])) for r in records]
+    level = f"{100 * records[0]['ci_level']:g} %"
+    head = f"{run}: failure probability per image under the run's distribution of θ, with its {level} interval"
+    return "\n".join([esc_md(head), "", *_table(
+        ("estimator", "box", "images", f"P(fail) [{level}]", "τ", "holds / violated / undecided", "not measured",
+         "evaluations"), rows), "", *_unmeasured(run, "image")])
 
 
 def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str:
@@ -121,7 +160,7 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
     where = f"; box {boxes[0]}" if one else ""
     out = [f"{run}: {len(done)} {spec.unit}s measured by every method (of {len(per_image)} started); "
            f"ε_safe = {eps:g} m{where}; cell = survival % [exact 95 % interval] (breaches)", "",
-           *_unmeasured(run, spec.unit)]
+           *_progress(run), *_unmeasured(run, spec.unit)]
     table = [[m, *(f"{cell[(m, c)].survival_rate.text(1, percent=False)} ({cell[(m, c)].breaches})"
                    if (m, c) in cell else "–" for c in cols)] for m in methods]
     kinds = [[m, *(_kinds(cell[(m, c)]) if (m, c) in cell else "–" for c in cols)] for m in methods]

@@ -133,6 +133,16 @@ def _unpacked(source: Path, scratch: Path) -> Path:
     return scratch
 
 
+def _check_all(dst: Path, paths: Sequence[Path], trust: bool) -> None:
+    """:func:`check_mergeable` of every source, read-only, before ``dst`` is locked or created: against ``dst`` when
+    it exists, else against the first source (the checks are repeated under the lock)."""
+    with ResultStore.open_existing(dst if dst.is_file() else paths[0]) as mine:
+        first = None
+        for path in paths:
+            with ResultStore.open_existing(path) as other:
+                first = check_mergeable(mine, other, first, trust=trust)
+
+
 def merge_runs(sources: Sequence[str | Path], into: str | Path, *, trust: bool = False,
                progress: Callable[[MergeReport], None] | None = None,
                left_out: Callable[[ResultStore], Iterable[str]] | None = None) -> MergeReport:
@@ -155,6 +165,7 @@ def merge_runs(sources: Sequence[str | Path], into: str | Path, *, trust: bool =
                 camp = other.campaign()
                 if camp is not None:
                     refuse_without_consent(camp.detector or {}, trust, where=f"{src}: ")
+        _check_all(dst, paths, trust)  # a refusal leaves into as it was: not even its lock file is written
         dst.parent.mkdir(parents=True, exist_ok=True)
         with WriterLock(dst), ResultStore(dst) as store:
             first = None
