@@ -19,6 +19,7 @@ from vbl_robust.campaigns.store import (
     Points,
     RunProvenance,
     RunStatus,
+    SampleRecord,
     decode_points,
     encode_points,
     schema,
@@ -72,7 +73,7 @@ def test_campaign_binding_refuses_other_settings_once_a_job_is_stored(tmp_path):
     model = {"kind": "default", "sha256": "ff", "name": "m"}
     with ResultStore(tmp_path / "r.sqlite") as st:
         st.bind_campaign("x", {"a": 1, "b": [1, 2]}, oracle)
-        st.add_samples([{"sample_id": "s1", "sample_index": 0}])
+        st.add_samples([SampleRecord("s1", 0)])
         # nothing computed yet (e.g. the run failed on its model): the store is bound anew, its samples forgotten
         st.bind_campaign("x", {"a": 1, "b": [1, 3]}, model)
         assert st.campaign().stored_spec == {"a": 1, "b": [1, 3]} and st.campaign().detector == model
@@ -106,6 +107,19 @@ def test_the_stored_campaign_is_a_record_with_its_spec_and_one_error_when_there_
                                   "created_at": camp.created_at}
         with pytest.raises(dataclasses.FrozenInstanceError):
             camp.name = "other"  # type: ignore[misc]
+
+
+def test_samples_are_records_read_back_as_written(tmp_path):
+    a = SampleRecord("a", 1, 2500.5, "q1", 96, 64, "f" * 8, '{"image": "a.png"}')
+    b = SampleRecord("b", 0)
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        st.add_samples([a, b])
+        st.add_samples([SampleRecord("a", 7)])  # a sample already stored is kept
+        got = st.samples()
+    assert list(got) == ["b", "a"] and got == {"a": a, "b": b}  # by sample index
+    assert a.meta == {"image": "a.png"} and b.meta == {} and a.columns()["meta_json"] == a.meta_json
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        a.width = 1  # type: ignore[misc]
 
 
 def test_runs_record_provenance(tmp_path):

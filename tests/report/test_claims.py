@@ -3,6 +3,7 @@ same stores; missing and partial experiments; Markdown and HTML; each verdict ru
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 
@@ -178,7 +179,7 @@ def _copy_store(root, dst, keep, extra_sample=False):
         out.bind_campaign(camp.name, camp.stored_spec, camp.detector)
         samples = list(src.samples().values())
         if extra_sample:
-            samples.append({**samples[-1], "sample_id": "not_yet", "sample_index": len(samples)})
+            samples.append(dataclasses.replace(samples[-1], sample_id="not_yet", sample_index=len(samples)))
         out.add_samples(samples)
         out.commit([r for r in src.jobs(with_points=True) if keep(r)])
 

@@ -34,7 +34,7 @@ from .provenance import (
     sample_fingerprint,
 )
 from .spec import CampaignSpec, Job
-from .store import JobRow, ResultStore, RunProvenance, RunStatus, WriterLock
+from .store import JobRow, ResultStore, RunProvenance, RunStatus, SampleRecord, WriterLock
 from .work import SampleTask, Settings, detector_for, one_core, run_sample_task
 
 logger = logging.getLogger(__name__)
@@ -238,14 +238,14 @@ def grpc_answers(host: str, port: int, timeout_s: float) -> bool:
         channel.close()
 
 
-def sample_record(sample: Any, index: int) -> dict[str, Any]:
-    """Row of the ``samples`` table."""
+def sample_record(sample: Any, index: int) -> SampleRecord:
+    """The store's record of ``sample``, the ``index``-th of the run."""
     import json
 
     meta = {k: v for k, v in (sample.meta or {}).items() if isinstance(v, str | int | float | bool)}
-    return {"sample_id": sample.id, "sample_index": index, "slant_distance_m": float(sample.slant_distance_m),
-            "envelope": (sample.meta or {}).get("envelope"), "width": int(sample.width), "height": int(sample.height),
-            "fingerprint": sample_fingerprint(sample), "meta_json": json.dumps(meta, sort_keys=True, default=str)}
+    return SampleRecord(sample.id, index, float(sample.slant_distance_m), (sample.meta or {}).get("envelope"),
+                        int(sample.width), int(sample.height), sample_fingerprint(sample),
+                        json.dumps(meta, sort_keys=True, default=str))
 
 
 def plan(spec: CampaignSpec, samples: Sequence[Any], detector: DetectorSpec) -> list[Job]:

@@ -82,13 +82,14 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
     nominal = {r.sample_id: (r.payload or {})["nominal"].get("error_m") for r in stored
                if "nominal" in (r.payload or {})}  # L(0): the image's, whatever the job
     for r in stored:
-        s = samples.get(r.sample_id, {})
+        s = samples.get(r.sample_id)
         b = {} if r.budget is None else r.budget.to_dict()
         d = {c: _plain(getattr(r, c, None)) for c in COLUMNS}
         d.update(detector)
         d["nominal_m"] = nominal.get(r.sample_id)
-        d.update(slant_distance_m=s.get("slant_distance_m"), envelope=s.get("envelope"), max_evals=b.get("max_evals"),
-                 max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"), stop_at_breach=b.get("stop_at_breach"))
+        d.update(slant_distance_m=None if s is None else s.slant_distance_m, envelope=None if s is None else s.envelope,
+                 max_evals=b.get("max_evals"), max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"),
+                 stop_at_breach=b.get("stop_at_breach"))
         risk = (r.payload or {}).get("risk") if r.kind == "risk" else None
         if risk is not None:
             has_risk = True

@@ -229,7 +229,8 @@ def _check(store: ResultStore, spec: Any) -> StoreCheck:
         key = str(values["key"])
         seen.add(key)
         entry = chains.latest.get(key)
-        row_f = check_row(values, entry, samples.get(values["sample_id"]))
+        sample = samples.get(values["sample_id"])
+        row_f = check_row(values, entry, None if sample is None else sample.columns())
         if entry is not None:
             covered += entry["event"] == STORED
             before += entry["event"] == BEFORE

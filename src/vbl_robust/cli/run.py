@@ -151,7 +151,7 @@ def check_store(out: Path, spec: Any, samples: list, detector: Any, *, wait: boo
         stored = store.samples()
     from vbl_robust.campaigns.provenance import sample_fingerprint
 
-    other = [s.id for s in samples if s.id in stored and stored[s.id]["fingerprint"] != sample_fingerprint(s)]
+    other = [s.id for s in samples if s.id in stored and stored[s.id].fingerprint != sample_fingerprint(s)]
     if other:  # the same names, another image (size, camera, geometry): the stored rows describe the old ones
         raise ValueError(f"{path}: samples {', '.join(other[:5])}{' …' if len(other) > 5 else ''} differ from those "
                          "its results were computed on (another size, camera or geometry under the same names); "

@@ -168,7 +168,7 @@ def _open(root: Path, name: str, stack: ExitStack) -> _Exp | str:
         return f"{path} holds campaign {camp.name!r}"
     spec = camp.spec
     samples = store.samples()
-    planned = Counter(j.sample_id for j in spec.expand([(s, d["fingerprint"] or "") for s, d in samples.items()]))
+    planned = Counter(j.sample_id for j in spec.expand([(s, d.fingerprint or "") for s, d in samples.items()]))
     stored = Counter(r.sample_id for r in store.jobs(with_trace=False))
     ids = frozenset(s for s, n in planned.items() if stored[s] >= n)
     main = [r for r in mx.main_rows(store, spec) if r.sample_id in ids]
@@ -339,7 +339,7 @@ def _distance(e: _Exp) -> Row:
     rows = [r for r in e.ctx.main if r.chain is not None]
     budgets = sorted({r.box_level for r in rows})
     limit = max(budgets, default=math.nan)
-    dist = {sid: s["slant_distance_m"] for sid, s in e.ctx.samples.items() if sid in e.ids}
+    dist = {sid: s.slant_distance_m for sid, s in e.ctx.samples.items() if sid in e.ids}
     every = rows + e.reference()
     prof = [p for p in mx.distance_profile(every, dist, budgets) if p["n"]]
     levels = mx.smallest_breach_levels(every)

@@ -92,7 +92,7 @@ def _read(run: str | Path) -> tuple[CampaignSpec, list[JobRow], str, dict[str, s
         spec = store.spec()
         runs = store.runs()
         det = str(((runs[-1].provenance.detector if runs else None) or {}).get("name", "?"))
-        envelopes = {sid: str(rec["envelope"]) for sid, rec in store.samples().items() if rec.get("envelope")}
+        envelopes = {sid: str(rec.envelope) for sid, rec in store.samples().items() if rec.envelope}
         return spec, mx.main_rows(store, spec, with_trace=False), det, envelopes
 
 

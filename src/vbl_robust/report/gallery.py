@@ -72,7 +72,7 @@ def _differs(ctx: Context, sample: Any, digests: dict[str, str]) -> str:
     from ..campaigns.provenance import sample_fingerprint
     from ..digest import file_sha256
 
-    stored = (ctx.samples.get(sample.id) or {}).get("fingerprint")
+    stored = ctx.samples[sample.id].fingerprint if sample.id in ctx.samples else None
     if stored and stored != sample_fingerprint(sample):
         return "its rebuilt geometry differs from the stored one"
     path, digest = getattr(sample, "image_path", None), digests.get(sample.id)

@@ -16,7 +16,7 @@ import numpy as np
 from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.spec import BoxSpec, CampaignSpec
-from ..campaigns.store import JobRow, JobStatus, ResultStore
+from ..campaigns.store import JobRow, JobStatus, ResultStore, SampleRecord
 from . import figures as F
 from .html import figure_png, img, img_file
 
@@ -37,7 +37,7 @@ class Context:
     spec: CampaignSpec
     out_dir: Path
     main: list[JobRow]
-    samples: dict[str, dict[str, Any]]
+    samples: dict[str, SampleRecord]
     figures: list[Path] = field(default_factory=list)
     embed: bool = True
 
@@ -137,7 +137,7 @@ def landscape_runs(ctx: Context, g: JobRow) -> dict[str, JobRow]:
 
 
 def where(ctx: Context, sid: str) -> str:
-    dist = ctx.samples.get(sid, {}).get("slant_distance_m")
+    dist = ctx.samples[sid].slant_distance_m if sid in ctx.samples else None
     return f"image {sid}" + (f" (slant distance {dist:.0f} m)" if dist else "")
 
 
@@ -154,8 +154,8 @@ def theta_text(x: Mapping[str, float] | None) -> str:
 
 
 def sample_cols(ctx: Context, sid: str) -> dict[str, Any]:
-    s = ctx.samples.get(sid, {})
-    return {"slant_distance_m": s.get("slant_distance_m"), "envelope": s.get("envelope")}
+    s = ctx.samples.get(sid)
+    return {"slant_distance_m": None if s is None else s.slant_distance_m, "envelope": None if s is None else s.envelope}
 
 
 def interesting(grids: Sequence[JobRow], eps: float) -> JobRow:

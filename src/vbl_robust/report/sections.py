@@ -244,7 +244,7 @@ def section_distance(ctx: Context) -> Section | None:
     rows = [r for r in ctx.main if r.chain is not None]
     if not rows:
         return None
-    distances = {sid: s["slant_distance_m"] for sid, s in ctx.samples.items()}
+    distances = {sid: s.slant_distance_m for sid, s in ctx.samples.items()}
     budgets = sorted({r.box_level for r in rows})
     limit = max(budgets)
     ref = reference(ctx, main_boxes(ctx))

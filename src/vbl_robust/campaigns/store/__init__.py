@@ -3,8 +3,8 @@ resumable and crash-safe.
 
 Modules, each importing only those above it:
 
-- :mod:`.rows` — the typed rows: :class:`StoredCampaign`, :class:`JobRow`, :class:`Points`, :class:`JobStatus`,
-  :class:`RunRecord` (a :class:`RunProvenance` and how the run ended, :class:`RunStatus`);
+- :mod:`.rows` — the typed rows: :class:`StoredCampaign`, :class:`SampleRecord`, :class:`JobRow`, :class:`Points`,
+  :class:`JobStatus`, :class:`RunRecord` (a :class:`RunProvenance` and how the run ended, :class:`RunStatus`);
 - :mod:`.schema` — the tables, each declared once as columns (DDL, migrations, row ↔ columns), :data:`SCHEMA_VERSION`;
 - :mod:`.identity` — what makes two runs parts of one campaign (spec, detector identity);
 - :mod:`.lock` — :class:`WriterLock`, one writer per store;
@@ -26,6 +26,7 @@ from .rows import (
     RunProvenance,
     RunRecord,
     RunStatus,
+    SampleRecord,
     StoredCampaign,
     decode_points,
     encode_points,
@@ -49,6 +50,7 @@ __all__ = [
     "RunProvenance",
     "RunRecord",
     "RunStatus",
+    "SampleRecord",
     "StoredCampaign",
     "WriterLock",
     "check_mergeable",

@@ -18,7 +18,16 @@ from typing import TYPE_CHECKING, Any
 
 from .digest import mark_before, record_forgotten, record_stored
 from .identity import check_same
-from .rows import JobRow, JobStatus, RunProvenance, RunRecord, RunStatus, StoredCampaign, now_iso
+from .rows import (
+    JobRow,
+    JobStatus,
+    RunProvenance,
+    RunRecord,
+    RunStatus,
+    SampleRecord,
+    StoredCampaign,
+    now_iso,
+)
 from .schema import (
     CAMPAIGN,
     CONTENTS,
@@ -263,20 +272,19 @@ class ResultStore:
         return [run_record(dict(zip(RUNS.names, r, strict=True))) for r in cur.fetchall()]
 
     # -- samples ------------------------------------------------------------------------------------------
-    def add_samples(self, rows: Iterable[Mapping[str, Any]]) -> None:
+    def add_samples(self, records: Iterable[SampleRecord]) -> None:
         with self.transaction():
-            self.insert_samples(rows)
+            self.insert_samples(records)
 
-    def insert_samples(self, rows: Iterable[Mapping[str, Any]]) -> None:
-        """The samples' rows (``{column: value}``; a sample already stored is kept), inside the caller's
-        transaction."""
-        self._con.executemany(SAMPLES.insert(verb="INSERT OR IGNORE"), [tuple(r.get(c) for c in SAMPLES.names)
-                                                                        for r in rows])
+    def insert_samples(self, records: Iterable[SampleRecord]) -> None:
+        """The samples' records (a sample already stored is kept), inside the caller's transaction."""
+        self._con.executemany(SAMPLES.insert(verb="INSERT OR IGNORE"), [tuple(getattr(r, c) for c in SAMPLES.names)
+                                                                        for r in records])
 
-    def samples(self) -> dict[str, dict[str, Any]]:
-        cur = self._con.execute("SELECT * FROM samples ORDER BY sample_index")
-        names = [c[0] for c in cur.description]
-        return {r[0]: dict(zip(names, r, strict=True)) for r in cur.fetchall()}
+    def samples(self) -> dict[str, SampleRecord]:
+        """Every stored sample by id, in sample index order."""
+        cur = self._con.execute(f"SELECT {', '.join(SAMPLES.names)} FROM samples ORDER BY sample_index")
+        return {r[0]: SampleRecord(**dict(zip(SAMPLES.names, r, strict=True))) for r in cur.fetchall()}
 
     def check_contents(self, samples: Iterable[Any], digests: Mapping[str, str] | None = None) -> None:
         """Record the image-file digest of each sample (each frame of a sequence) read from a file (``image_path``), and refuse

@@ -67,7 +67,7 @@ def check_mergeable(store: ResultStore, other: ResultStore, campaign: StoredCamp
                    hint=f"{other.path} belongs to another campaign or detector: merge only runs of one")
     here = store.samples()
     clash = [sid for sid, s in other.samples().items() if sid in here
-             and (here[sid]["fingerprint"], here[sid]["sample_index"]) != (s["fingerprint"], s["sample_index"])]
+             and (here[sid].fingerprint, here[sid].sample_index) != (s.fingerprint, s.sample_index)]
     if clash:
         raise ValueError(f"{other.path}: samples {clash[:5]} differ from {store.path}'s (another image set)")
     pixels = store.differing_pixels(other)

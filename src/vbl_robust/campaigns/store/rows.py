@@ -1,5 +1,5 @@
-"""What a results store holds, as typed rows: the campaign it is bound to (:class:`StoredCampaign`), a finished job
-(:class:`JobRow`, its evaluated :class:`Points`) and a run (:class:`RunRecord`: its :class:`RunProvenance` and how it
+"""What a results store holds, as typed rows: the campaign it is bound to (:class:`StoredCampaign`), its samples
+(:class:`SampleRecord`), a finished job (:class:`JobRow`, its evaluated :class:`Points`) and a run (:class:`RunRecord`: its :class:`RunProvenance` and how it
 ended, :class:`RunStatus`). No SQL here: how each field is stored is :mod:`~vbl_robust.campaigns.store.schema`'s
 business.
 """
@@ -56,6 +56,39 @@ class StoredCampaign:
     def to_dict(self) -> dict[str, Any]:
         """``{"name", "spec", "detector", "created_at"}`` (the spec as stored): a bundle's ``provenance.json``."""
         return {"name": self.name, "spec": self.stored_spec, "detector": self.detector, "created_at": self.created_at}
+
+
+@dataclass(frozen=True)
+class SampleRecord:
+    """One sample as a store records it (a row of the ``samples`` table; the field names are its columns, the values
+    as stored: what a sample's digest covers, :func:`~vbl_robust.campaigns.store.digest.sample_digest`).
+
+    Attributes:
+        sample_id: the sample's id; ``sample_index``: its place in the run's sample list.
+        slant_distance_m: metres from the camera to the runway threshold.
+        envelope: the approach-envelope cell it was drawn from (synthetic samples), else None.
+        width, height: the image's size, pixels.
+        fingerprint: what the image is (:func:`~vbl_robust.campaigns.provenance.sample_fingerprint`).
+        meta_json: its plain metadata (JSON, sorted keys; :attr:`meta` decoded).
+    """
+
+    sample_id: str
+    sample_index: int
+    slant_distance_m: float | None = None
+    envelope: str | None = None
+    width: int | None = None
+    height: int | None = None
+    fingerprint: str | None = None
+    meta_json: str | None = None
+
+    @property
+    def meta(self) -> dict[str, Any]:
+        """The sample's plain metadata (``{}`` when none was stored)."""
+        return json.loads(self.meta_json) if self.meta_json else {}
+
+    def columns(self) -> dict[str, Any]:
+        """``{column: value}`` as stored (what a digest of the row reads)."""
+        return dataclasses.asdict(self)
 
 
 class JobStatus(StrEnum):
