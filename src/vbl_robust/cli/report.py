@@ -114,18 +114,46 @@ Stores = Annotated[bool, typer.Option("--stores", help="Also a compact copy of e
                                       "which `reproduce --resume-from DIR` resumes an unfinished run elsewhere.")]
 
 
-def bundle(root: Root, out: BundleOut, reproduction: Reproduction = None, stores: Stores = False) -> None:
+Detector = Annotated[list[str] | None, typer.Option(
+    "--detector", help="LABEL=DIR: the same experiments run with another detector (DIR holds one run directory, or "
+    "bundled experiment, per experiment); repeatable. The bundle then compares the claims across the detectors "
+    "(detectors.md, the index, --reproduction).")]
+DetectorLabel = Annotated[str, typer.Option("--detector-label", help="With --detector: the label of ROOT's own "
+                                            "detector in the comparison.")]
+
+
+def bundle(root: Root, out: BundleOut, reproduction: Reproduction = None, stores: Stores = False,
+           detector: Detector = None, detector_label: DetectorLabel = "this bundle's detector") -> None:
     """Write a results bundle: per experiment the job table (Parquet), the report and the provenance, and a
     status table; runs still in progress are bundled as they stand (rerun to refresh)."""
     from vbl_robust.report.bundle import write_bundle
 
     if out.exists() and not out.is_dir():
         fail(f"--out {out}: is a file; a bundle is a directory")
+    detectors = _detectors(root, detector_label, detector or [])
     with one_line():
-        totals = write_bundle(root, out, reproduction=reproduction, stores=stores)
+        totals = write_bundle(root, out, reproduction=reproduction, stores=stores, detectors=detectors)
     for name, t in totals.items():
         typer.echo(f"{name}: {t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} images")
     typer.echo(f"bundle: {out}")
+
+
+def _detectors(root: Path, label: str, items: list[str]) -> dict[str, Path] | None:
+    """``--detector LABEL=DIR`` items as label → root, ``root`` first under ``label``; None without items."""
+    if not items:
+        return None
+    found = {label.strip(): root}
+    for item in items:
+        name, sep, where = item.partition("=")
+        name = name.strip()
+        if not sep or not name or not where.strip():
+            fail(f"--detector {item}: expected LABEL=DIR")
+        if name in found:
+            fail(f"--detector {item}: the label {name!r} is given twice (--detector-label names ROOT's)")
+        if not Path(where).is_dir():
+            fail(f"--detector {item}: {where} is not a directory")
+        found[name] = Path(where)
+    return found
 
 
 Sources = Annotated[list[Path], typer.Argument(help="Run directories, .sqlite files, or packed stores (.sqlite.xz, as "

@@ -43,7 +43,7 @@ import datetime as dt
 import json
 import os
 import shutil
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -194,10 +194,13 @@ def status_markdown(totals: dict[str, dict[str, Any]]) -> str:
 
 
 def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
-                 reproduction: Path | None = None, stores: bool = False) -> dict[str, dict[str, Any]]:
+                 reproduction: Path | None = None, stores: bool = False,
+                 detectors: Mapping[str, Path] | None = None) -> dict[str, dict[str, Any]]:
     """Bundle every experiment run under ``root`` (those of ``names`` that exist) into ``out``; writes
     ``out/status.md``, ``out/claims.md`` and ``out/index.html`` (and the generated part of ``reproduction``) and
-    returns the totals per experiment. ``FileNotFoundError`` when there is no run; ``ValueError`` when
+    returns the totals per experiment. ``detectors`` (label → root, the first being ``root``'s own detector): the
+    same experiments run with other detectors, compared claim by claim (:mod:`.detectors`) in ``out/detectors.md``,
+    the index and ``reproduction``. ``FileNotFoundError`` when there is no run; ``ValueError`` when
     ``reproduction`` lacks the markers (checked before any work)."""
     if Path(out).resolve() == Path(root).resolve():
         raise ValueError(f"--out {out}: the bundle goes beside the runs, not into their directory (it would replace "
@@ -212,12 +215,12 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
     stage.mkdir(parents=True)
     try:
         totals = {run.name: write_experiment(run, stage / run.name, stores, keep=out / run.name) for run in runs}
-        claims = _write_top(stage, totals, root)
+        claims, compared = _write_top(stage, totals, root, detectors)
         _publish(stage, out)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
     if text is not None:
-        _write_reproduction(Path(reproduction), text, claims, status_markdown(_ordered(totals)))
+        _write_reproduction(Path(reproduction), text, claims, status_markdown(_ordered(totals)), compared)
     return totals
 
 
@@ -227,20 +230,28 @@ def _ordered(totals: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
     return {n: totals[n] for n in paper_order(list(totals))}
 
 
-def _write_top(out: Path, totals: dict[str, dict[str, Any]], root: Path) -> str:
-    """Write ``out/status.md``, ``out/claims.md`` (the claims of the stores under ``root``) and ``out/index.html``
-    (the experiments ``totals`` names, in the paper's order); returns the claims' Markdown."""
+def _write_top(out: Path, totals: dict[str, dict[str, Any]], root: Path,
+               detectors: Mapping[str, Path] | None = None) -> tuple[str, str]:
+    """Write ``out/status.md``, ``out/claims.md`` (the claims of the stores under ``root``), with ``detectors``
+    ``out/detectors.md``, and ``out/index.html`` (the experiments ``totals`` names, in the paper's order); returns
+    the claims' Markdown and the detectors' ("" without)."""
     from .claims import claims_html, claims_markdown, claims_of, write_index
+    from .detectors import detectors_html, detectors_markdown
 
     totals = _ordered(totals)
     checked = claims_of(root)
     claims = claims_markdown(checked, str(root))
     atomic_write(out / "status.md", status_markdown(totals))
     atomic_write(out / "claims.md", claims)
-    write_index(out, list(totals), claims_html(checked, str(root)),
+    compared, extra = "", ""
+    if detectors:
+        compared = detectors_markdown(detectors)
+        atomic_write(out / "detectors.md", compared)
+        extra = detectors_html(detectors)
+    write_index(out, list(totals), claims_html(checked, str(root)) + extra,
                 {n: f"{t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} of {t['images']} "
                     f"images" for n, t in totals.items()}, claims=checked)
-    return claims
+    return claims, compared
 
 
 def _reproduction_text(reproduction: Path) -> str:
@@ -251,20 +262,24 @@ def _reproduction_text(reproduction: Path) -> str:
     return text
 
 
-def _write_reproduction(path: Path, text: str, claims: str, status: str) -> None:
-    """Replace the generated part of ``text`` (a REPRODUCTION.md) by the claims and status tables."""
+def _write_reproduction(path: Path, text: str, claims: str, status: str, detectors: str = "") -> None:
+    """Replace the generated part of ``text`` (a REPRODUCTION.md) by the claims and status tables (and the claims on
+    several detectors, when given)."""
     head, rest = text.split(BEGIN)
     tail = rest.split(END)[1]
-    atomic_write(path, f"{head}{BEGIN}\n## The paper's claims, checked\n\n{claims}\n"
+    compared = f"## The claims on several detectors\n\n{detectors}\n" if detectors else ""
+    atomic_write(path, f"{head}{BEGIN}\n## The paper's claims, checked\n\n{claims}\n{compared}"
                        f"## Status of the runs\n\n{status}{END}{tail}")
 
 
-def refresh_bundle(out: Path, reproduction: Path | None = None, *, reports: bool = False) -> dict[str, dict[str, Any]]:
+def refresh_bundle(out: Path, reproduction: Path | None = None, *, reports: bool = False,
+                   detectors: Mapping[str, Path] | None = None) -> dict[str, dict[str, Any]]:
     """Rewrite a bundle's ``status.md``, ``claims.md`` and ``index.html`` (and the generated part of
     ``reproduction``) from what the bundle itself holds — each experiment's ``provenance.json`` totals and its
     packed store (:func:`~vbl_robust.report.claims.claims_of` reads ``results.sqlite.xz``) — without rerunning
     anything: after a change of the claims' rules or of the index. With ``reports``, each experiment's report is
-    first rebuilt from its packed store (:func:`rebuild_report`; an experiment without one keeps its report).
+    first rebuilt from its packed store (:func:`rebuild_report`; an experiment without one keeps its report);
+    ``detectors``: as :func:`write_bundle`'s (the first root is then ``out`` itself).
     ``FileNotFoundError`` when ``out`` holds no bundled experiment; ``ValueError`` when ``reproduction`` lacks the
     markers (checked first)."""
     out = Path(out)
@@ -278,9 +293,9 @@ def refresh_bundle(out: Path, reproduction: Path | None = None, *, reports: bool
         for name in totals:
             if (out / name / PACKED).is_file():
                 rebuild_report(out / name)
-    claims = _write_top(out, totals, out)  # each file replaced atomically; the experiments are left as they are
-    if text is not None:
-        _write_reproduction(Path(reproduction), text, claims, status_markdown(_ordered(totals)))
+    claims, compared = _write_top(out, totals, out, detectors)  # each file replaced atomically; the experiments
+    if text is not None:                                            # are left as they are
+        _write_reproduction(Path(reproduction), text, claims, status_markdown(_ordered(totals)), compared)
     return totals
 
 
