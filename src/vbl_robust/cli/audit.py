@@ -1,51 +1,49 @@
-"""``vbl-robust audit`` (the main job) and ``vbl-robust demo`` (a small audit on the defaults, with its report)."""
+"""``vbl-robust audit`` (the main job) and ``vbl-robust demo`` (a small audit on the defaults, with its report).
+
+From an option to the objective: the options become request objects (:mod:`.requests`: the box, the detector, the
+images, how the run runs) and a :class:`~vbl_robust.campaigns.spec.CampaignSpec`
+(:func:`vbl_robust.campaigns.experiments.audit_spec`: methods, budget, target, monitors); :meth:`RunRequest.run
+<.requests.RunRequest.run>` runs it (:func:`vbl_robust.campaigns.runner.run_campaign`), and each job's objective
+is built from the spec's settings, the sample and the detector by
+:func:`vbl_robust.campaigns.work.build_objective` (:class:`vbl_robust.pipeline.Objective`).
+"""
 
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from vbl_robust.campaigns.experiments import AUDIT_METHODS
-from vbl_robust.constants import MAX_EVALS, MAX_IMAGES
-from vbl_robust.perturb.registry import known
+from vbl_robust.campaigns.experiments import AUDIT_METHODS, audit_spec
+from vbl_robust.campaigns.spec import Budget, roll_contrast_box
+from vbl_robust.constants import MAX_EVALS, MAX_IMAGES, TARGETS
 
 from . import options as o
 from .common import (
-    detector_spec,
     fail,
     one_line,
-    parse_box,
     parse_lipschitz,
     parse_method_options,
     parse_methods,
     set_verbosity,
     with_method_options,
 )
-from .run import (
-    check_executor,
-    check_exports,
-    finish,
-    load,
-    load_sequence_samples,
-    run_settings,
-    run_with_progress,
-)
+from .config import parameters, run_config
+from .requests import BoxRequest, DetectorRequest, ExportRequest, ImagesRequest, RunRequest
+from .run import load_sequence_samples
+from .zones import refine_audit
+
+if TYPE_CHECKING:
+    from vbl_robust.detect.shipped import DetectorSpec
 
 #: Fixed corner noise of the demo's oracle (``--oracle``, or no validated model installed): exact corners make
 #: L(θ) flat in roll (< 1 cm), which shows nothing; 1 px is about what a good detector achieves.
 DEMO_ORACLE_NOISE_PX = 1.0
 
 # -- audit's own options ------------------------------------------------------------------------------------------
-Contrast = Annotated[str | None, typer.Option("--contrast", help="Contrast factor range 'lo,hi' (e.g. 0.7,1.4).")]
-Perturb = Annotated[list[str] | None, typer.Option(
-    "--perturb", help="Another perturbation family and its range, NAME=LO,HI (repeatable; a bare NAME takes its "
-    f"plausible default range): {known()} (roll_deg here replaces --roll; contrast here or in --contrast, not both).")]
-Methods = Annotated[str, typer.Option("--methods", help="Comma-separated search methods.")]
-MaxEvals = Annotated[int | None, typer.Option("--max-evals", min=0, max=MAX_EVALS, help="Evaluations per image and "
-                                              "method (0 = no evaluation cap: then give --max-seconds).")]
 MaxSeconds = Annotated[float | None, typer.Option("--max-seconds", min=0.0, help="Seconds per image and method.")]
 EarlyStop = Annotated[bool, typer.Option("--early-stop/--no-early-stop", help="Stop an image's search at its first "
                                          "breach (answers 'is there a breach?').")]
@@ -86,9 +84,9 @@ def audit(
     model: o.Model = None, trust_model: o.TrustModel = False, design: o.Design = "auto", engine: o.Engine = "auto",
     detector_plugin: o.DetectorPlugin = None, plugin_digest: o.PluginDigest = None,
     device: o.Device = "cpu", oracle: o.Oracle = False, oracle_noise: o.OracleNoise = 0.0,
-    roll: o.Roll = "15", contrast: Contrast = None, perturb: Perturb = None,
-    methods: Methods = ",".join(AUDIT_METHODS), method_option: o.MethodOption = None,
-    max_evals: MaxEvals = 200, max_seconds: MaxSeconds = None, early_stop: EarlyStop = True,
+    roll: o.Roll = "15", contrast: o.Contrast = None, perturb: o.Perturb = None,
+    methods: o.Methods = ",".join(AUDIT_METHODS), method_option: o.MethodOption = None,
+    max_evals: o.MaxEvals = 200, max_seconds: MaxSeconds = None, early_stop: EarlyStop = True,
     lipschitz: Lipschitz = None, pnp: o.Pnp = "ippe_lm", landscape: Landscape = None,
     executor: o.Executor = "local", workers: o.Workers = 0, clock: o.Clock = "auto", wait: o.Wait = False,
     retry_failed: o.RetryFailed = False, address: o.Address = None, allow_unmeasured: o.AllowUnmeasured = False,
@@ -99,16 +97,13 @@ def audit(
     sustain: Sustain = 1, frames: Frames = None, rate: Rate = None, refine_zones: RefineZones = 0,
 ) -> None:
     """Find each image's worst case over a perturbation box: worst θ, worst error, verdict, survival, report."""
-    from dataclasses import replace
-
-    from vbl_robust.campaigns import Budget, audit_spec
-    from vbl_robust.constants import TARGETS
-
+    params = parameters()
     quiet = set_verbosity(quiet=quiet, verbose=verbose)
-    box_spec = parse_box(roll, contrast, perturb)
+    box_spec = BoxRequest.of(params).spec()
     if target not in TARGETS:
         fail(f"--target {target}: choose {' or '.join(TARGETS)}")
-    check_executor(executor, address)
+    run = RunRequest.of(params)
+    run.check()
     frames, rate = _sequence_settings(sequences, sustain, frames, rate)
     with one_line(ValueError):
         budget = Budget(max_evals=max_evals or None, max_seconds=max_seconds, stop_at_breach=early_stop)
@@ -127,34 +122,31 @@ def audit(
         with one_line(ValueError):
             spec = replace(spec, monitor_sigma_m=float(monitor_sigma))
             spec.check()
-    spec, workers = run_settings(spec, clock, device, workers)
-    check_exports(csv, parquet, out)
-    det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device, plugin=detector_plugin,
-                        plugin_digest=plugin_digest)
-    from vbl_robust.campaigns.work import detector_for  # built once per process: the run reuses it
-
-    if monitor_sigma is not None and not getattr(detector_for(det), "gives_sigma", False):
-        fail(f"--monitor-sigma {monitor_sigma:g}: the detector ({det.name}) gives no per-corner σ; the σ monitor "
-             "needs a network with an uncertainty head (YOLO26-pose, see train --arch)")
-    samples, source = _samples(sequences, lard, n, seed, width, height, frames, rate)
-    config = {"command": "audit", "n": len(samples) if sequences is None else n, "seed": seed,
-              "lard": str(lard) if lard else None, "roll": roll, "contrast": contrast, "methods": list(method_list),
-              "max_evals": max_evals, "max_seconds": max_seconds, "early_stop": early_stop, "lipschitz": lipschitz,
-              "pnp": pnp, "width": width, "height": height, **({"perturb": list(perturb)} if perturb else {}),
-              **({} if sequences is None else {"sequences": sequences, "sustain": sustain, "frames": frames,
-                                               "rate": rate}),
-              **({"method_options": method_opts} if method_opts else {})}
-    summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
-                                config=config, quiet=quiet, workers=workers, wait=wait, retry_failed=retry_failed,
-                                allow_unmeasured=allow_unmeasured)
-    complete = finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet,
-                      allow_unmeasured=allow_unmeasured)
+    spec, workers = run.settings(spec, device)
+    exports = ExportRequest.of(params)
+    exports.check(out)
+    det = DetectorRequest.of(params).spec()
+    if monitor_sigma is not None:
+        _check_sigma(det, monitor_sigma)
+    samples, source = _samples(sequences, ImagesRequest.of(params), frames, rate)
+    config = run_config("audit", n=len(samples) if sequences is None else n, methods=list(method_list),
+                        **({} if sequences is None else {"frames": frames, "rate": rate}),
+                        **({"method_options": method_opts} if method_opts else {}))
+    summary = run.run(spec, samples, out, det, source=source, config=config, quiet=quiet, workers=workers)
+    complete = exports.finish(out, summary, quiet=quiet, allow_unmeasured=allow_unmeasured)
     if refine_zones:
-        from .zones import refine_audit
-
         refine_audit(out, samples, det, refine_zones, lipschitz=parse_lipschitz(lipschitz), quiet=quiet)
     if not complete:
         raise typer.Exit(1)
+
+
+def _check_sigma(det: DetectorSpec, monitor_sigma: float) -> None:
+    """``--monitor-sigma`` needs a detector that gives each corner's σ (built here once: the run reuses it)."""
+    from vbl_robust.campaigns.work import detector_for  # torch: not for ``--help``
+
+    if not getattr(detector_for(det), "gives_sigma", False):
+        fail(f"--monitor-sigma {monitor_sigma:g}: the detector ({det.name}) gives no per-corner σ; the σ monitor "
+             "needs a network with an uncertainty head (YOLO26-pose, see train --arch)")
 
 
 def _sequence_settings(sequences: str | None, sustain: int, frames: int | None, rate: float | None,
@@ -168,14 +160,13 @@ def _sequence_settings(sequences: str | None, sustain: int, frames: int | None, 
     return frames or 20, 10.0 if rate is None else rate
 
 
-def _samples(sequences: str | None, lard: Path | None, n: int | None, seed: int, width: int, height: int,
-             frames: int, rate: float) -> tuple[list, dict]:
+def _samples(sequences: str | None, images: ImagesRequest, frames: int, rate: float) -> tuple[list, dict]:
     """The audit's images, or its approach sequences (``--sequences``)."""
     if sequences is None:
-        return load(n, seed, lard, width, height)
-    if lard is not None:
+        return images.load()
+    if images.lard is not None:
         fail("--lard and --sequences: give a LARD V2 directory of sequences as --sequences DIR")
-    return load_sequence_samples(sequences, frames, rate, seed, width, height)
+    return load_sequence_samples(sequences, frames, rate, images.seed, images.width, images.height)
 
 
 # -- demo's own options -------------------------------------------------------------------------------------------
@@ -194,21 +185,18 @@ def demo(
 ) -> None:
     """A small audit on the defaults (10 synthetic images, georobust-av / random / APGD, roll ±15° and contrast
     [0.7, 1.4], early stop at a breach) with its HTML report — a few minutes on a laptop CPU."""
-    import torch
+    import torch  # not for ``--help``
 
-    from vbl_robust.campaigns import Budget, audit_spec, roll_contrast_box
-
+    params = parameters()
     quiet = set_verbosity(quiet=quiet, verbose=verbose)
     if "OMP_NUM_THREADS" not in os.environ:
         torch.set_num_threads(max(1, min(4, os.cpu_count() or 1)))
     spec = audit_spec(roll_contrast_box(15.0, (0.7, 1.4)), budget=Budget(max_evals=max_evals), seed=seed,
                       landscape=(21, 11) if landscape else None)
-    spec, workers = run_settings(spec, "auto", device, workers)
-    det = detector_spec(None, False, oracle, DEMO_ORACLE_NOISE_PX, engine=engine, device=device,
-                        noise_needs_oracle=False)
-    samples, source = load(n, seed, None, 1024, 1024)
-    config = {"command": "demo", "n": n, "seed": seed, "max_evals": max_evals, "landscape": landscape}
-    summary = run_with_progress(spec, samples, out, det, executor="local", address=None, source=source,
-                                config=config, quiet=quiet, workers=workers)
-    if not finish(out, summary, csv=out / "jobs.csv", parquet=None, report=True, quiet=quiet):
+    run = RunRequest.of(params)
+    spec, workers = run.settings(spec, device)
+    det = DetectorRequest.of(params, oracle_noise=DEMO_ORACLE_NOISE_PX).spec(noise_needs_oracle=False)
+    samples, source = ImagesRequest.of(params).load()
+    summary = run.run(spec, samples, out, det, source=source, config=run_config("demo"), quiet=quiet, workers=workers)
+    if not ExportRequest(csv=out / "jobs.csv").finish(out, summary, quiet=quiet, allow_unmeasured=False):
         raise typer.Exit(1)

@@ -6,14 +6,25 @@ from __future__ import annotations
 
 import logging
 import math
+import os
+import signal
+import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
+import yaml
 
+from vbl_robust.campaigns.spec import BoxSpec, box_label
 from vbl_robust.perturb.registry import PERTURBATIONS, known
+from vbl_robust.space import ParameterBox
+
+from .config import get_current_context
+
+if TYPE_CHECKING:  # torch behind it: imported where a detector is chosen, so that ``vbl-robust --help`` is instant
+    from vbl_robust.detect.shipped import DetectorSpec
 
 #: what the options before the command said (``vbl-robust -q audit …``)
 _GLOBAL = {"quiet": False, "verbose": False}
@@ -23,8 +34,6 @@ def stop_on_sigterm() -> None:
     """Make SIGTERM (``kill PID``, a scheduler's or a session's stop) end the command as Ctrl-C does: a campaign
     records its run as interrupted with its wall time, its finished jobs stay, and the command exits with one line.
     A second SIGTERM kills at once (the default action is restored by the first)."""
-    import signal
-
     def _interrupt(signum: int, frame: object) -> None:
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         raise KeyboardInterrupt
@@ -53,8 +62,6 @@ def fail(message: str, code: int = 2) -> None:
 def check_names(option: str, path: Path) -> None:
     """Refuse a path with a name longer than its file system allows (255 bytes on most), before any work: the
     run would stop at its first write."""
-    import os
-
     limit = 255
     try:
         limit = os.pathconf(next((p for p in (path, *path.parents) if p.exists()), Path(".")), "PC_NAME_MAX")
@@ -70,9 +77,6 @@ def check_writable(option: str, path: Path) -> None:
     """Refuse, before any work, an output file the command could not write at its end: a directory, or a place
     where no file can be created — tried for real in the nearest existing folder (a file made and removed at once:
     a writable mode bit says nothing on /proc, a read-only mount or a full disk)."""
-    import os
-    import tempfile
-
     if path.is_dir():
         fail(f"{option} {path}: is a directory")
     parent = next((p for p in (path.parent, *path.parent.parents) if p.exists()), Path("."))
@@ -156,13 +160,9 @@ def parse_perturb(items: list[str] | None) -> dict[str, tuple[float, float]]:
     return out
 
 
-def parse_box(roll: str, contrast: str | None, perturb: list[str] | None) -> Any:
+def parse_box(roll: str, contrast: str | None, perturb: list[str] | None) -> BoxSpec:
     """The :class:`~vbl_robust.campaigns.spec.BoxSpec` of ``--roll``, ``--contrast`` and ``--perturb`` (level: the
     roll half-width, 0 without roll), or one line naming the option at fault."""
-    from vbl_robust.campaigns import BoxSpec
-    from vbl_robust.campaigns.spec import box_label
-    from vbl_robust.space import ParameterBox
-
     bounds: dict[str, tuple[float, float]] = {}
     extra = parse_perturb(perturb)
     if roll.strip().lower() != "none" and "roll_deg" not in extra:
@@ -185,7 +185,7 @@ def parse_box(roll: str, contrast: str | None, perturb: list[str] | None) -> Any
 
 def parse_methods(text: str) -> tuple[str, ...]:
     """``--methods a,b``: search methods, each known and given once."""
-    from vbl_robust.search import METHODS
+    from vbl_robust.search.api import METHODS  # scipy behind it: not for ``--help``
 
     methods = tuple(m.strip() for m in text.split(","))
     if methods != ("",) and not all(methods):  # "random," is a typo, not "random"
@@ -203,9 +203,7 @@ def parse_methods(text: str) -> tuple[str, ...]:
 def parse_method_options(values: list[str] | None) -> dict[str, dict[str, Any]]:
     """``--method-option METHOD.OPTION=VALUE`` (repeatable) → ``{method: {option: value}}``; a one-line error
     naming the flag and the value for an unknown method or option or an unreadable value."""
-    import yaml
-
-    from vbl_robust.search import METHODS, method_options
+    from vbl_robust.search.api import METHODS, method_options  # scipy behind it: not for ``--help``
 
     out: dict[str, dict[str, Any]] = {}
     for text in values or []:
@@ -239,11 +237,12 @@ def with_method_options(spec: Any, options: dict[str, dict[str, Any]], strict: b
 
 def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_noise: float,
                   design: str = "auto", engine: str = "torch", device: str = "cpu", *,
-                  noise_needs_oracle: bool = True, plugin: str | None = None, plugin_digest: str | None = None) -> Any:
+                  noise_needs_oracle: bool = True, plugin: str | None = None, plugin_digest: str | None = None,
+                  ) -> DetectorSpec:
     """:meth:`DetectorSpec.from_choice <vbl_robust.detect.shipped.DetectorSpec.from_choice>` of the detector
     options, or one line; notes on standard error when the oracle stands in for the shipped model (and why) or
     when the shipped model has open accuracy goals."""
-    from vbl_robust.detect.shipped import DetectorSpec, default_model_status
+    from vbl_robust.detect.shipped import DetectorSpec, default_model_status  # torch: not for ``--help``
 
     # consent to run code (a .pt pickle, a plug-in) is the user's typing, never a value read from a --config file:
     # a plug-in named on the command line is consent to import it; one from a file needs --trust-model typed
@@ -273,15 +272,13 @@ def from_config(param: str, ctx: Any = None) -> bool:
     map) — data, not the user's typing. Compared by name: typer carries its own copy of click (and its
     ``ParameterSource``); ``ctx`` defaults to the running command's."""
     if ctx is None:
-        from typer._click.globals import get_current_context  # typer's own click: where its commands run
-
         ctx = get_current_context(silent=True)
     return ctx is not None and getattr(ctx.get_parameter_source(param), "name", None) == "DEFAULT_MAP"
 
 
 def _note_open_goals(name: str = "default") -> None:
     """Tell the user which accuracy goals the shipped model ``name`` has not reached (also in the report)."""
-    from vbl_robust.detect.shipped import default_model_caveats
+    from vbl_robust.detect.shipped import default_model_caveats  # torch: not for ``--help``
 
     which = "" if name == "default" else f"{name} "
     for goal in default_model_caveats(name=name):

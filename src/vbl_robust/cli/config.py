@@ -34,6 +34,8 @@ from pathlib import Path
 from typing import Annotated, Any, get_args, get_origin
 
 import typer
+import yaml
+from typer._click.globals import get_current_context  # typer's own click: where its commands run
 from typer.core import TyperCommand
 
 from ..atomic import atomic_write
@@ -80,8 +82,6 @@ def _keys(params: Iterable[Any]) -> dict[str, Any]:
 
 def _strict_loader() -> type:
     """A YAML safe loader (libyaml's when installed) that refuses a mapping's key given twice."""
-    import yaml
-
     base = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
     class StrictLoader(base):  # type: ignore[misc, valid-type]
@@ -108,8 +108,6 @@ def expanded_size(root: Any, limit: int) -> int:
     """The size of the YAML node graph ``root`` with every alias expanded (a scalar counts its characters + 1, a
     collection 1 + its items; at most ``limit`` + 1: counting stops there), each node's size computed once — so an
     alias bomb is measured in the time it takes to read its few nodes. ``ConfigError`` for a recursive alias."""
-    import yaml
-
     def items(node: Any) -> list[Any]:
         if isinstance(node, yaml.SequenceNode):
             return list(node.value)
@@ -140,8 +138,6 @@ def expanded_size(root: Any, limit: int) -> int:
 def load_yaml(path: Path) -> Any:
     """The YAML document of the configuration file ``path``, read within bounds (module docstring);
     ``ConfigError`` (one line, without the path) for anything refused, ``OSError`` when it cannot be read."""
-    import yaml
-
     st = os.stat(path)
     if not stat.S_ISREG(st.st_mode):
         raise ConfigError("not a regular file")
@@ -285,25 +281,46 @@ def write_config(command: str, params: dict[str, Any], keys: dict[str, str] | No
     """``config.yaml`` of a run: every option of the invocation (Paths as text; ``keys``: parameter name → key as
     the option is spelt), if its run directory holds a store (its own, or its experiments' for ``reproduce
     paper|all``); returns its path, or None."""
-    import yaml
-
     where = run_directory(command, params)
     if where is None or not where.is_dir():
         return None
     if not ((where / "results.sqlite").exists() or any(where.glob("*/results.sqlite"))):
         return None
-
-    def plain(v: Any) -> Any:
-        if isinstance(v, Path):
-            return str(v)
-        if isinstance(v, list | tuple):
-            return [plain(x) for x in v]
-        return v
-
-    keys = keys or {}
-    body = {"command": command, **{keys.get(k, k): plain(v) for k, v in sorted(params.items())
-                                   if k not in _NOT_RECORDED}}
+    body = recorded(command, params, keys)
     return atomic_write(where / CONFIG_FILE, yaml.safe_dump(body, sort_keys=False, allow_unicode=True))
+
+
+def _plain(v: Any) -> Any:
+    if isinstance(v, Path):
+        return str(v)
+    if isinstance(v, list | tuple):
+        return [_plain(x) for x in v]
+    return v
+
+
+def recorded(command: str, params: dict[str, Any], keys: dict[str, str] | None = None) -> dict[str, Any]:
+    """What ``config.yaml`` holds of ``command``'s ``params``: ``command`` first, then every option but
+    :data:`_NOT_RECORDED` (keys as the options are spelt: ``keys``, parameter name → key; Paths as text)."""
+    keys = keys or {}
+    return {"command": command, **{keys.get(k, k): _plain(v) for k, v in sorted(params.items())
+                                   if k not in _NOT_RECORDED}}
+
+
+def parameters() -> dict[str, Any]:
+    """The running command's parameters (parameter name → the value it runs with), as typer parsed them; empty
+    outside a command."""
+    ctx = get_current_context(silent=True)
+    return dict(ctx.params) if ctx is not None else {}
+
+
+def run_config(command: str, **resolved: Any) -> dict[str, Any]:
+    """A run's configuration as its provenance keeps it: the running command's parameters as ``config.yaml``
+    records them (:func:`recorded`), with what the run resolved from them in place of what was typed
+    (``resolved``: the images counted, the methods parsed, …)."""
+    ctx = get_current_context(silent=True)
+    params = dict(ctx.params) if ctx is not None else {}
+    keys = {p.name: option_key(p) for p in ctx.command.params if p.name} if ctx is not None else {}
+    return {**recorded(command, params, keys), **resolved}
 
 
 def record_configuration() -> Path | None:

@@ -1,21 +1,42 @@
 """The options several commands take, declared once as typer ``Annotated`` types: a command writes
 ``seed: o.Seed = 0`` after ``from . import options as o`` (the default stays at the parameter, as typer wants it).
-A command's own options are declared beside it, in its module."""
+Where a command words or bounds a shared option its own way (``risk --max-evals`` counts estimator evaluations, up
+to 1,000,000), it takes a :func:`variant` of the declaration here: the option's name and kind stay declared once.
+A command's own options are declared beside it, in its module; the families of options that several campaigns read
+together (images, detector, box, how a run runs, what it writes) become one request object each
+(:mod:`.requests`)."""
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any, get_args
 
 import typer
 
-from ..constants import MAX_IMAGE_SIDE, MAX_IMAGES, MAX_SEED
+from ..constants import MAX_EVALS, MAX_IMAGE_SIDE, MAX_IMAGES, MAX_SEED
+from ..perturb.registry import known
 from .config import Config
 
-__all__ = ["DEFAULT_IMAGES", "Address", "AllowUnmeasured", "DetectorPlugin", "PluginDigest", "Batch", "Clock", "Config", "Csv", "Design", "Device", "Engine", "Executor",
-           "Height", "Images", "Imgsz", "Lard", "MethodOption", "Model", "Oracle", "OracleNoise", "Out", "Parquet", "Pnp",
-           "Quiet", "Report", "RetryFailed", "Roll", "Seed", "StoredRun", "Threads", "TrustModel", "Verbose", "Wait",
-           "Width", "Workers"]
+__all__ = ["DEFAULT_IMAGES", "Address", "AllowUnmeasured", "Batch", "Clock", "Config", "Contrast", "Csv", "Design",
+           "DetectorPlugin", "Device", "Engine", "Executor", "Height", "Images", "Imgsz", "Lard", "MaxEvals",
+           "MethodOption", "Methods", "Model", "Oracle", "OracleNoise", "Out", "Parquet", "Perturb", "PluginDigest",
+           "Pnp", "Quiet", "Report", "RetryFailed", "Roll", "Seed", "StoredRun", "Threads", "TrustModel", "Verbose",
+           "Wait", "Width", "Workers", "variant"]
+
+
+def variant(option: Any, annotation: Any = None, **changes: Any) -> Any:
+    """``option`` (an ``Annotated`` option of this module) as one command words or bounds it: a copy of its
+    declaration with ``changes`` (``help``, ``min``, ``max``, …) and, given ``annotation``, another value type
+    (``int`` where the shared option admits ``None``). The option's name stays the shared one's."""
+    kind, info = get_args(option)
+    info = copy.copy(info)
+    for name, value in changes.items():
+        if not hasattr(info, name):
+            raise TypeError(f"variant: a typer option has no attribute {name!r}")
+        setattr(info, name, value)
+    return Annotated[annotation if annotation is not None else kind, info]
+
 
 #: Images of an audit or a risk run when ``--n`` is not given (all rows of a smaller ``--lard`` dataset).
 DEFAULT_IMAGES = 20
@@ -68,8 +89,17 @@ Oracle = Annotated[bool, typer.Option("--oracle", help="Use the oracle detector 
 OracleNoise = Annotated[float, typer.Option("--oracle-noise", min=0.0, help="Oracle: fixed per-image corner noise "
                                             "(px).")]
 
-# -- the searches -------------------------------------------------------------------------------------------------
+# -- the perturbation box (BoxRequest) ----------------------------------------------------------------------------
 Roll = Annotated[str, typer.Option("--roll", help="Roll range in degrees: '15' (= ±15) or 'lo,hi'; 'none' to omit.")]
+Contrast = Annotated[str | None, typer.Option("--contrast", help="Contrast factor range 'lo,hi' (e.g. 0.7,1.4).")]
+Perturb = Annotated[list[str] | None, typer.Option(
+    "--perturb", help="Another perturbation family and its range, NAME=LO,HI (repeatable; a bare NAME takes its "
+    f"plausible default range): {known()} (roll_deg here replaces --roll; contrast here or in --contrast, not both).")]
+
+# -- the searches -------------------------------------------------------------------------------------------------
+Methods = Annotated[str, typer.Option("--methods", help="Comma-separated search methods.")]
+MaxEvals = Annotated[int | None, typer.Option("--max-evals", min=0, max=MAX_EVALS, help="Evaluations per image and "
+                                              "method (0 = no evaluation cap: then give --max-seconds).")]
 Pnp = Annotated[str, typer.Option("--pnp", help="PnP solver: ippe_lm, iterative, sqpnp, ippe.")]
 MethodOption = Annotated[list[str] | None, typer.Option(
     "--method-option", help="A search method's option, METHOD.OPTION=VALUE (repeatable; VALUE read as YAML: 9, 0.5, "

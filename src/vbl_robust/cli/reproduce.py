@@ -14,11 +14,18 @@ from typing import Annotated, Any
 
 import typer
 
-from ..campaigns.experiments import EXPERIMENTS, PAPER
-from ..constants import MAX_EVALS, MAX_IMAGES
+from ..campaigns.estimate import (
+    PROBE_IMAGES,
+    Probe,
+    expected_seconds,
+    measured_remaining,
+    planned_work,
+    probe,
+)
+from ..campaigns.experiments import EXPERIMENTS, PAPER, Options, experiment, with_options
+from ..constants import MAX_IMAGES
 from . import options as o
 from .common import (
-    detector_spec,
     fail,
     one_line,
     parse_method_options,
@@ -26,20 +33,20 @@ from .common import (
     set_verbosity,
     with_method_options,
 )
-from .run import check_executor, check_exports, finish, load, run_settings, run_with_progress
+from .config import parameters, run_config
+from .requests import DetectorRequest, ExportRequest, ImagesRequest, RunRequest
 
 Experiment = Annotated[str, typer.Argument(help=f"One of: {', '.join(EXPERIMENTS)}; 'paper' (the paper's seven) or "
                                            "'all'.")]
-Out = Annotated[Path | None, typer.Option("--out", help="Run directory (default runs/<experiment>).")]
+Out = o.variant(o.Out, Path | None, help="Run directory (default runs/<experiment>).")
 Images = Annotated[int | None, typer.Option("--images", min=1, max=MAX_IMAGES, help="Number of images (default: the "
                                             "paper's, 100; 1000 for pnp-validation).")]
-Methods = Annotated[str | None, typer.Option("--methods", help="Comma-separated methods (default "
-                                             "georobust,georobust-av,random,apgd; families: the same less apgd).")]
+Methods = o.variant(o.Methods, str | None, help="Comma-separated methods (default georobust,georobust-av,random,"
+                    "apgd; families: the same less apgd).")
 Landscape = Annotated[bool, typer.Option("--landscape/--no-landscape", help="spatial-2d / runtime-2d: the dense "
                                          "61 × 36 grid on the first image (the report's heat map, about 2200 "
                                          "evaluations).")]
-MaxEvals = Annotated[int | None, typer.Option("--max-evals", min=1, max=MAX_EVALS, help="Per-image evaluations of the "
-                                              "spatial experiments (default 200).")]
+MaxEvals = o.variant(o.MaxEvals, min=1, help="Per-image evaluations of the spatial experiments (default 200).")
 GridStep = Annotated[float | None, typer.Option("--grid-step", min=0.0, help="1-D dense-grid reference step in degrees "
                                                 "(default 0.05; 0 = no reference).")]
 TimeBudgets = Annotated[str | None, typer.Option("--time-budgets", help="Runtime experiments: seconds per image, "
@@ -81,10 +88,10 @@ def reproduce(
     quiet: o.Quiet = False, verbose: o.Verbose = False, config: o.Config = None,
 ) -> None:
     """Run one of the paper's experiments, or all; rerunning the same command resumes it."""
-    from vbl_robust.campaigns.experiments import Options, with_options
-
+    params = parameters()
     quiet = set_verbosity(quiet=quiet, verbose=verbose)
-    check_executor(executor, address)
+    run = RunRequest.of(params)
+    run.check()
     group, exps = _experiments(experiment)
     eb = _floats(eval_budgets, "--eval-budgets")
     if grid_step is not None and not math.isfinite(grid_step):  # inf passes the option's range
@@ -94,24 +101,23 @@ def reproduce(
         time_budgets=_floats(time_budgets, "--time-budgets"), eval_budgets=tuple(int(v) for v in eb) if eb else None,
         iterations=iterations, family_grid=family_grid, landscape=None if landscape else (0, 0),
     )
-    check_exports(csv, parquet, out)
+    exports = ExportRequest.of(params)
+    exports.check(out)
     method_opts = parse_method_options(method_option)
     _check_method_options(method_opts, [exp.build(seed, opts) for exp in exps])
-    det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device, plugin=detector_plugin,
-                        plugin_digest=plugin_digest)
+    det = DetectorRequest.of(params).spec()
+    images_of = ImagesRequest.of(params, n=images)
     root = out or Path("runs") / (experiment if group else exps[0].name)
     if estimate:
-        from vbl_robust.campaigns.estimate import PROBE_IMAGES
-
-        run_spec, n_workers = run_settings(exps[0].build(seed, opts), clock, device, workers)
-        probe_samples = load(None, seed, lard, width, height, default=PROBE_IMAGES)[0]
+        run_spec, n_workers = run.settings(exps[0].build(seed, opts), device)
+        probe_samples = ImagesRequest.of(params, n=None).load(default=PROBE_IMAGES)[0]  # --images: the run's
         _estimate(exps, opts, seed, images, det, probe_samples, n_workers, experiment if group else "", probe_seconds,
                   run_spec.clock, root)
         return
     if resume_from is not None and not resume_from.is_dir():
         fail(f"--resume-from {resume_from}: not a directory")
     if resume_from is not None:
-        from vbl_robust.campaigns.store import PACKED
+        from vbl_robust.campaigns.store import PACKED  # torch behind the store: not for ``--help``
 
         if not any((resume_from / exp.name / PACKED).is_file() for exp in exps):  # a run, or a bundle without --stores
             fail(f"--resume-from {resume_from}: holds no packed store of {', '.join(e.name for e in exps)} "
@@ -121,19 +127,15 @@ def reproduce(
     differ = incomplete = False  # an incomplete experiment does not stop the next ones; the exit code says it
     for exp in exps:
         spec = with_method_options(exp.build(seed, opts), method_opts, strict=False)  # checked over all above
-        spec, n_workers = run_settings(spec, clock, device, workers)
+        spec, n_workers = run.settings(spec, device)
         out_dir = root / exp.name if group else root
         if resume_from is not None:
             _restore(resume_from, exp.name, out_dir)
-        samples, source = load(images, seed, lard, width, height, default=exp.images)
-        config = {"command": "reproduce", "experiment": exp.name, "images": len(samples), "seed": seed,
-                  "lard": str(lard) if lard else None, "options": repr(opts), "width": width, "height": height,
-                  **({"method_options": method_opts} if method_opts else {})}
-        summary = run_with_progress(spec, samples, out_dir, det, executor=executor, address=address, source=source,
-                                    config=config, quiet=quiet, workers=n_workers, wait=wait,
-                                    retry_failed=retry_failed, allow_unmeasured=allow_unmeasured)
-        incomplete |= not finish(out_dir, summary, csv=csv, parquet=parquet, report=report, quiet=quiet,
-                                 allow_unmeasured=allow_unmeasured)
+        samples, source = images_of.load(default=exp.images)
+        config = run_config("reproduce", experiment=exp.name, images=len(samples), options=repr(opts),
+                            **({"method_options": method_opts} if method_opts else {}))
+        summary = run.run(spec, samples, out_dir, det, source=source, config=config, quiet=quiet, workers=n_workers)
+        incomplete |= not exports.finish(out_dir, summary, quiet=quiet, allow_unmeasured=allow_unmeasured)
         if references:
             differ |= _check(exp.name, out_dir, references[exp.name])
     if group:
@@ -148,8 +150,6 @@ def reproduce(
 def _experiments(name: str) -> tuple[tuple[str, ...] | None, list]:
     """``reproduce NAME``'s experiments: the group's names (``all``, ``paper``; None for one experiment) and the
     experiments, or one line."""
-    from vbl_robust.campaigns.experiments import experiment
-
     group = {"all": tuple(EXPERIMENTS), "paper": PAPER}.get(name)
     with one_line(ValueError):
         return group, [EXPERIMENTS[n] for n in group] if group else [experiment(name)]
@@ -206,8 +206,7 @@ def _estimate(exps: list, opts: Any, seed: int, images: int | None, det: Any, pr
               group: str, probe_seconds: float, clock: str = "wall", root: Path | None = None) -> None:
     """Print each experiment's expected duration and its upper bound (:mod:`vbl_robust.campaigns.estimate`), the
     probe's rates measured on the run's ``clock`` (process: CPU seconds, the durations of an idle machine)."""
-    from vbl_robust.campaigns.estimate import Probe, expected_seconds, measured_remaining, planned_work, probe
-    from vbl_robust.campaigns.store import ResultStore
+    from vbl_robust.campaigns.store import ResultStore  # torch behind it: not for ``--help``
 
     specs = [exp.build(seed, opts) for exp in exps]
     pr = probe(det, specs, probe_samples, seconds=probe_seconds, clock=clock)

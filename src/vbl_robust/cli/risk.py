@@ -10,20 +10,24 @@ from typing import Annotated
 
 import typer
 
-from . import options as o
-from .common import detector_spec, fail, one_line, parse_box, set_verbosity
-from .run import check_executor, check_exports, finish, load, run_settings, run_with_progress
+from vbl_robust.campaigns.experiments import risk_spec
+from vbl_robust.campaigns.risk import RISK_METHODS, parse_dist, pooled_risk
 
-Contrast = Annotated[str | None, typer.Option("--contrast", help="Contrast factor range 'lo,hi'.")]
-Perturb = Annotated[list[str] | None, typer.Option("--perturb", help="Another perturbation family and its range, "
-                                                   "NAME=LO,HI (repeatable), as for audit.")]
+from . import options as o
+from .common import fail, one_line, set_verbosity
+from .config import parameters, run_config
+from .requests import BoxRequest, DetectorRequest, ExportRequest, ImagesRequest, RunRequest
+
+Contrast = o.variant(o.Contrast, help="Contrast factor range 'lo,hi'.")
+Perturb = o.variant(o.Perturb, help="Another perturbation family and its range, NAME=LO,HI (repeatable), as for "
+                    "audit.")
 Dist = Annotated[list[str] | None, typer.Option("--dist", help="A parameter's distribution over its range: "
                                                 "NAME=normal:MEAN,SD (truncated to the range) or NAME=uniform "
                                                 "(repeatable; default uniform).")]
-Methods = Annotated[str, typer.Option("--methods", help="Estimators: mc (Monte Carlo with a sequential test, stops "
-                                      "once decided) and guided (stratified over a worst-case search's cells).")]
-MaxEvals = Annotated[int, typer.Option("--max-evals", min=2, max=1_000_000, help="Evaluations per image and estimator "
-                                       "(at most 1,000,000).")]
+Methods = o.variant(o.Methods, help="Estimators: mc (Monte Carlo with a sequential test, stops once decided) and "
+                    "guided (stratified over a worst-case search's cells).")
+MaxEvals = o.variant(o.MaxEvals, int, min=2, max=1_000_000, help="Evaluations per image and estimator (at most "
+                     "1,000,000).")
 Tau = Annotated[float, typer.Option("--tau", help="The limit on p_fail of the verdict (a fraction, e.g. 0.01).")]
 Delta = Annotated[float, typer.Option("--delta", help="1 − confidence of the intervals and the verdict.")]
 GuideEvals = Annotated[int, typer.Option("--guide-evals", min=1, help="guided: evaluations of its worst-case search "
@@ -46,11 +50,9 @@ def risk(
 ) -> None:
     """Failure probability per image when θ is drawn from a distribution over the box (turbulence, not a worst
     case): p_fail with a valid interval, a verdict on p_fail ≤ τ, and the rate pooled over the images."""
-    from vbl_robust.campaigns import risk_spec
-    from vbl_robust.campaigns.risk import RISK_METHODS, parse_dist
-
+    params = parameters()
     quiet = set_verbosity(quiet=quiet, verbose=verbose)
-    box = parse_box(roll, contrast, perturb)
+    box = BoxRequest.of(params).spec()
     method_list = tuple(m.strip() for m in methods.split(","))
     bad = [m for m in method_list if m not in RISK_METHODS]  # "mc," (a stray comma) too
     if bad or not method_list or len(set(method_list)) != len(method_list):
@@ -58,25 +60,21 @@ def risk(
     for name, v in (("--tau", tau), ("--delta", delta)):
         if not math.isfinite(v):
             fail(f"{name} {v}: must be finite")
-    check_executor(executor, address)
+    run = RunRequest.of(params)
+    run.check()
     with one_line(ValueError):
         spec = risk_spec(box, methods=method_list, max_evals=max_evals, seed=seed,
                          dist=parse_dist(dist, box.box.names),
                          tau=tau, delta=delta, guide_evals=guide_evals, pnp=pnp)
-    spec, workers = run_settings(spec, "auto", device, workers)
-    check_exports(csv, parquet, out)
-    det = detector_spec(model, trust_model, oracle, oracle_noise, design, engine, device, plugin=detector_plugin,
-                        plugin_digest=plugin_digest)
-    samples, source = load(n, seed, lard, width, height)
-    config = {"command": "risk", "n": len(samples), "seed": seed, "lard": str(lard) if lard else None,
-              "roll": roll, "contrast": contrast, "perturb": list(perturb or []), "dist": list(dist or []),
-              "methods": list(method_list), "max_evals": max_evals, "tau": tau, "delta": delta,
-              "guide_evals": guide_evals, "pnp": pnp, "width": width, "height": height}
-    summary = run_with_progress(spec, samples, out, det, executor=executor, address=address, source=source,
-                                config=config, quiet=quiet, workers=workers, wait=wait, retry_failed=retry_failed,
-                                allow_unmeasured=allow_unmeasured)
-    complete = finish(out, summary, csv=csv, parquet=parquet, report=report, quiet=quiet,
-                      allow_unmeasured=allow_unmeasured)
+    spec, workers = run.settings(spec, device)
+    exports = ExportRequest.of(params)
+    exports.check(out)
+    det = DetectorRequest.of(params).spec()
+    samples, source = ImagesRequest.of(params).load()
+    config = run_config("risk", n=len(samples), perturb=list(perturb or []), dist=list(dist or []),
+                        methods=list(method_list))
+    summary = run.run(spec, samples, out, det, source=source, config=config, quiet=quiet, workers=workers)
+    complete = exports.finish(out, summary, quiet=quiet, allow_unmeasured=allow_unmeasured)
     if not quiet:
         _print_pooled(out)
     if not complete:
@@ -85,8 +83,7 @@ def risk(
 
 def _print_pooled(out: Path) -> None:
     """Per estimator: the verdict counts and the failure rate pooled over the images."""
-    from vbl_robust.campaigns import ResultStore
-    from vbl_robust.campaigns.risk import pooled_risk
+    from vbl_robust.campaigns.store import ResultStore  # torch behind it: not for ``--help``
 
     with ResultStore.open_existing(out) as store:
         rows = store.jobs(kind="risk", with_points=True, with_trace=False)

@@ -10,12 +10,13 @@ import typer
 
 from . import options as o
 from .common import fail, from_config, one_line, set_verbosity
-from .run import finish, run_settings, run_with_progress
+from .config import parameters, run_config
+from .requests import ExportRequest, RunRequest
 
 Run = Annotated[Path, typer.Argument(help="A run directory (e.g. runs/paper/spatial-2d).")]
 Counts = Annotated[str, typer.Option("--counts", help="Grid points per parameter of the run's largest box, "
                                      "comma-separated (e.g. 61,31: 1° × 0.07 over ±30° × [0.4, 2.5]).")]
-Out = Annotated[Path | None, typer.Option("--out", help="The truth run's directory (default: RUN-truth).")]
+Out = o.variant(o.Out, Path | None, help="The truth run's directory (default: RUN-truth).")
 
 
 def truth(
@@ -25,7 +26,7 @@ def truth(
 ) -> None:
     """Dense grid on the images every method of RUN left surviving at its largest box: is "no breach found"
     true? Prints the true survival there and the true breaches each method missed."""
-    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.campaigns.store import ResultStore  # torch behind these: not for ``--help``
     from vbl_robust.campaigns.truth import (
         TRUTH_SUFFIX,
         load_run_samples,
@@ -35,6 +36,7 @@ def truth(
     )
     from vbl_robust.detect.shipped import DetectorSpec
 
+    params = parameters()
     quiet = set_verbosity(quiet=quiet, verbose=verbose)
     if trust_model and from_config("trust_model"):  # consent to run the store's code is the user's, not a file's
         fail("--trust-model: give it on the command line; a --config file cannot consent to run a store's code")
@@ -58,14 +60,13 @@ def truth(
     if not samples:
         typer.echo(f"{run}: every image is breached by some method at {box.label}; nothing to grid")
         return
-    spec, n_workers = run_settings(spec, "auto", str(det.options.get("device", "cpu")), workers)
+    running = RunRequest.of(params)
+    spec, n_workers = running.settings(spec, str(det.options.get("device", "cpu")))
     typer.echo(f"{len(samples)} images every method ({', '.join(methods)}) left surviving at {box.label}; "
                f"grid {' × '.join(map(str, grid))}")
-    summary = run_with_progress(spec, samples, out, det, executor="local", address=None,
-                                source={"kind": "truth", "run": str(run), "samples": keep},
-                                config={"command": "truth", "run": str(run), "counts": list(grid)},
-                                quiet=quiet, workers=n_workers, wait=wait)
-    complete = finish(out, summary, csv=None, parquet=None, report=report, quiet=True)
+    summary = running.run(spec, samples, out, det, source={"kind": "truth", "run": str(run), "samples": keep},
+                          config=run_config("truth", counts=list(grid)), quiet=quiet, workers=n_workers)
+    complete = ExportRequest.of(params).finish(out, summary, quiet=True, allow_unmeasured=False)
     t = true_survival(run, out)
     typer.echo(f"{t.box_label}: {t.gridded} of {t.survivors_any} survivors gridded, {t.grid_breaches} breached "
                f"by the grid; true survival "
