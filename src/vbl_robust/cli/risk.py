@@ -11,7 +11,6 @@ from typing import Annotated
 import typer
 
 from vbl_robust.campaigns.experiments import risk_spec
-from vbl_robust.campaigns.risk import RISK_METHODS, parse_dist, pooled_risk
 
 from . import options as o
 from .common import fail, one_line, set_verbosity
@@ -50,6 +49,8 @@ def risk(
 ) -> None:
     """Failure probability per image when θ is drawn from a distribution over the box (turbulence, not a worst
     case): p_fail with a valid interval, a verdict on p_fail ≤ τ, and the rate pooled over the images."""
+    from vbl_robust.campaigns.risk import RISK_METHODS, parse_dist  # torch behind it: not for ``--help``
+
     params = parameters()
     quiet = set_verbosity(quiet=quiet, verbose=verbose)
     box = BoxRequest.of(params).spec()
@@ -83,7 +84,8 @@ def risk(
 
 def _print_pooled(out: Path) -> None:
     """Per estimator: the verdict counts and the failure rate pooled over the images."""
-    from vbl_robust.campaigns.store import ResultStore  # torch behind it: not for ``--help``
+    from vbl_robust.campaigns.risk import pooled_risk  # torch behind these: not for ``--help``
+    from vbl_robust.campaigns.store import ResultStore
 
     with ResultStore.open_existing(out) as store:
         rows = store.jobs(kind="risk", with_points=True, with_trace=False)
