@@ -116,5 +116,6 @@ def test_an_os_error_outside_a_campaign_is_one_line_without_the_resume_hint(tmp_
         run_campaign(spec, list(generate(1, seed=0, width=96, height=96)), store, detector=DetectorSpec.oracle(1.0))
     (tmp_path / "dir").mkdir()
     res = runner.invoke(app, ["zones", str(tmp_path / "run"), "--out", str(tmp_path / "dir")])
-    assert res.exit_code == 1 and "Traceback" not in res.output, res.output
-    assert res.output.strip().splitlines()[-1] == f"error: Is a directory: {tmp_path / 'dir'}"
+    # refused before any work since the output places are tried first (cli.common.check_writable)
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert res.output.strip().splitlines()[-1] == f"error: --out {tmp_path / 'dir'}: is a directory"

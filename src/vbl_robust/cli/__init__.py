@@ -7,11 +7,16 @@ Heavy imports (torch, ultralytics, OpenCV) happen inside the commands, so ``vbl-
 
 from __future__ import annotations
 
+import errno
+import sqlite3
 import warnings
+from importlib.metadata import version as installed_version
 from typing import Annotated
 
 import typer
 from typer.core import TyperGroup
+
+from vbl_robust.constants import TORCH_JIT_WARNING
 
 from . import audit, check, report, reproduce, risk, scenes, train, truth, verify, zones
 from .common import set_verbosity, stop_on_sigterm
@@ -48,9 +53,6 @@ class _Commands(TyperGroup):
         """Run the command; an operating-system or SQLite error that no command handles (a full disk, a store or
         report directory without write permission, …) ends it in one line naming the file, exit 1; in a campaign
         every job committed before stays in the store, and a rerun resumes once the cause is fixed."""
-        import errno
-        import sqlite3
-
         resumable = ctx.meta.get("vbl_command") in _CAMPAIGNS
         kept = " (jobs stored before it are kept: fix the cause and rerun to resume)" if resumable else ""
         try:
@@ -79,9 +81,7 @@ app = typer.Typer(
 
 def _version(value: bool) -> None:
     if value:
-        from importlib.metadata import version
-
-        typer.echo(f"vbl-robust {version('vbl-robust')}")
+        typer.echo(f"vbl-robust {installed_version('vbl-robust')}")
         raise typer.Exit()
 
 
@@ -95,8 +95,6 @@ def _main(
                                           "exit.")] = False,
 ) -> None:
     set_verbosity(quiet=quiet, verbose=verbose, before_command=True)
-    from vbl_robust.constants import TORCH_JIT_WARNING
-
     warnings.filterwarnings("ignore", message=TORCH_JIT_WARNING, category=FutureWarning)
 
 

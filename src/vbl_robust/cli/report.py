@@ -6,6 +6,7 @@ run (:func:`vbl_robust.campaigns.store.merge_runs`)."""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -13,6 +14,7 @@ import typer
 
 from . import options as o
 from .common import check_writable, fail, one_line
+from .run import unmeasured_ok
 
 ReportOut = Annotated[Path | None, typer.Option("--out", help="Directory for report.html and figures/ (default: RUN).")]
 Csv = Annotated[Path | None, typer.Option("--csv", help="Also export the job rows to CSV.")]
@@ -45,10 +47,8 @@ def report(
 def _unmeasured_exit(run: Path, allow_unmeasured: bool) -> None:
     """The jobs of ``run`` the tool could not measure, on standard error, and exit 1 unless ``allow_unmeasured``;
     the rows inconsistent with their evaluations or digests (not used), on standard error too."""
-    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.campaigns.store import ResultStore
     from vbl_robust.campaigns.verify import screen
-
-    from .run import unmeasured_ok
 
     with one_line(), ResultStore.open_existing(run) as store:
         unit = store.spec().unit if store.holds_campaign() else "image"
@@ -63,8 +63,9 @@ def _unmeasured_exit(run: Path, allow_unmeasured: bool) -> None:
 
 def _report(run: Path, out: Path | None, csv: Path | None, parquet: Path | None, fmt: str, others: list[Path] | None,
             compare: Path | None) -> None:
-    from vbl_robust.campaigns import ResultStore, export
-    from vbl_robust.report import build_report
+    from vbl_robust.campaigns.store import ResultStore
+    from vbl_robust.campaigns.tables import export
+    from vbl_robust.report.build import build_report
 
     if fmt not in ("html", "md", "csv", "json"):
         fail(f"--format {fmt}: choose html, md, csv or json")
@@ -196,9 +197,7 @@ def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None
 def _summary(run: Path, fmt: str) -> None:
     """The run's summary table (:func:`vbl_robust.campaigns.tables.summary_table`: survival, or a risk run's
     failure probability per estimator) on standard output."""
-    import sys
-
-    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.campaigns.store import ResultStore
     from vbl_robust.campaigns.tables import summary_table, write_records
 
     with one_line(), ResultStore.open_existing(run) as store:
@@ -207,7 +206,7 @@ def _summary(run: Path, fmt: str) -> None:
 
 
 def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:
-    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.campaigns.store import ResultStore
     from vbl_robust.report.markdown import (
         compare_markdown,
         families_markdown,

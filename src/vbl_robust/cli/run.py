@@ -1,16 +1,36 @@
 """Running a campaign from the command line: its settings (clock, workers, executor), the run into
-``--out/results.sqlite`` with a rich progress bar, the summary table, the exports and the report; the images it
-runs on (used by audit, demo, risk, reproduce and truth)."""
+``--out/results.sqlite`` with a rich progress bar (:func:`vbl_robust.campaigns.runner.run_campaign`), the summary
+table, the exports and the report; the images it runs on (used by audit, demo, risk, reproduce and truth, through
+:mod:`.requests`).
+
+The library modules behind the run (the runner, the store, the detector, the samples, the report) import torch:
+they are imported inside the functions that use them, so that ``vbl-robust --help`` stays instant."""
 
 from __future__ import annotations
 
+import fcntl
 import math
+import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import typer
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+from rich.table import Table
+
+from vbl_robust.data.check import first_problem
 
 from .common import check_names, check_writable, fail, one_line
+from .config import record_configuration
 from .options import DEFAULT_IMAGES
 
 
@@ -25,10 +45,8 @@ def check_executor(executor: str, address: str | None) -> None:
 def run_settings(spec: Any, clock: str, device: str, workers: int) -> tuple[Any, int]:
     """``spec`` on the clock the user chose (``auto``: process time on a CPU, wall time on a GPU) and the worker
     count (0: :func:`~vbl_robust.campaigns.runner.default_workers`); a bad value fails with one line."""
-    from dataclasses import replace
-
     from vbl_robust.campaigns.runner import default_workers
-    from vbl_robust.search import CLOCKS
+    from vbl_robust.search.base import CLOCKS
 
     if clock == "auto":
         clock = "process" if device == "cpu" else "wall"
@@ -47,19 +65,9 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
     executor; ``wait``: wait for another run writing the same store instead of refusing; ``allow_unmeasured``: run
     past images that cannot be read, whose jobs are then not measured, instead of refusing the run); returns the
     run summary."""
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    from vbl_robust.campaigns import ResultStore, run_campaign
     from vbl_robust.campaigns.precheck import check_run
-
-    from .config import record_configuration
+    from vbl_robust.campaigns.runner import run_campaign
+    from vbl_robust.campaigns.store import ResultStore
 
     with one_line(ValueError):
         spec.check()  # before anything is created or run
@@ -71,8 +79,6 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
     with one_line(ValueError):
         check_store(out, spec, samples, detector, wait=wait)  # the store there accepts this run, read only
     if allow_unmeasured:
-        from vbl_robust.data.check import first_problem
-
         if problem := first_problem(samples):
             typer.secho(f"warning: {problem}; their jobs will be not measured (--allow-unmeasured)",
                         fg=typer.colors.YELLOW, err=True)
@@ -135,7 +141,8 @@ def check_store(out: Path, spec: Any, samples: list, detector: Any, *, wait: boo
     """``ValueError`` when the store in ``out`` (if any) would refuse this run: another run is writing it (unless
     ``wait``), it holds results of another campaign or detector, or of other pixels of the same images — all read
     without writing, so a refusal leaves the run directory as it was."""
-    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.campaigns.provenance import sample_fingerprint
+    from vbl_robust.campaigns.store import ResultStore
     from vbl_robust.campaigns.store.identity import check_same
 
     path = out / "results.sqlite"
@@ -149,8 +156,6 @@ def check_store(out: Path, spec: Any, samples: list, detector: Any, *, wait: boo
         check_same(path, store.require_campaign(), spec.to_dict(), detector.identity())
         store.changed_contents(samples)
         stored = store.samples()
-    from vbl_robust.campaigns.provenance import sample_fingerprint
-
     other = [s.id for s in samples if s.id in stored and stored[s.id].fingerprint != sample_fingerprint(s)]
     if other:  # the same names, another image (size, camera, geometry): the stored rows describe the old ones
         raise ValueError(f"{path}: samples {', '.join(other[:5])}{' …' if len(other) > 5 else ''} differ from those "
@@ -161,9 +166,6 @@ def check_store(out: Path, spec: Any, samples: list, detector: Any, *, wait: boo
 def _refuse_in_use(path: Path) -> None:
     """``ValueError`` naming the PID when another process holds the store's writer lock
     (:class:`~vbl_robust.campaigns.store.WriterLock`), probed without writing the lock file."""
-    import fcntl
-    import os
-
     lock = Path(f"{path}.lock")
     try:
         fd = os.open(lock, os.O_RDONLY)
@@ -222,8 +224,10 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
     """Print the summary table, export, and write the HTML report; False when the run is incomplete or some job
     could not be measured (unless ``allow_unmeasured``): its caller ends with exit code 1 once it has done what else
     it can — a run that did not finish, or did not measure what it was asked to, never exits 0."""
-    from vbl_robust.campaigns import ResultStore, export
-    from vbl_robust.campaigns.metrics import main_rows
+    from vbl_robust.campaigns.readoff import main_rows
+    from vbl_robust.campaigns.store import ResultStore
+    from vbl_robust.campaigns.tables import export
+    from vbl_robust.report.build import build_report
 
     with ResultStore.open_existing(out) as store:
         spec = store.spec()
@@ -243,8 +247,6 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
     if summary.status != "finished":
         typer.secho(f"run {summary.status}: rerun the same command to resume", fg=typer.colors.YELLOW, err=True)
     if report:
-        from vbl_robust.report import build_report
-
         typer.echo(f"report: {build_report(out)}")
     return summary.status == "finished" and unmeasured_ok(every, spec.unit, allow_unmeasured)
 
@@ -252,7 +254,7 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
 def unmeasured_ok(rows: list, unit: str, allow_unmeasured: bool) -> bool:
     """Tell the user what could not be measured (stderr, one line per reason) and whether the command may exit 0:
     yes when every job was measured, or ``--allow-unmeasured`` was given."""
-    from vbl_robust.campaigns.metrics import not_measured_lines
+    from vbl_robust.campaigns.breach import not_measured_lines
 
     lines = not_measured_lines(rows, len(rows), unit)
     for line in lines:
@@ -266,10 +268,7 @@ def unmeasured_ok(rows: list, unit: str, allow_unmeasured: bool) -> bool:
 def print_summary(spec: Any, rows: list) -> None:
     """The survival table of a campaign's main rows (per method, and per box or budget where they vary) and its
     legend."""
-    from rich.console import Console
-    from rich.table import Table
-
-    from vbl_robust.campaigns import summarize
+    from vbl_robust.campaigns.summary import summarize
 
     lines = summarize(rows, spec.eps_safe_m)
     cols = ["method"] + [c for c in ("box_label", "budget_label") if len({getattr(ln, c) for ln in lines}) > 1]
@@ -309,7 +308,7 @@ def print_summary(spec: Any, rows: list) -> None:
 def load_sequence_samples(source: str, frames: int, rate: float, seed: int, width: int, height: int,
                           ) -> tuple[list, dict]:
     """The approach sequences of ``--sequences`` (:func:`vbl_robust.campaigns.load_sequences`), or one line."""
-    from vbl_robust.campaigns import load_sequences
+    from vbl_robust.campaigns.samples import load_sequences
 
     with one_line(ValueError, FileNotFoundError, RuntimeError):
         return load_sequences(source, frames=frames, rate_hz=rate, seed=seed, width=width, height=height)
@@ -318,7 +317,7 @@ def load_sequence_samples(source: str, frames: int, rate: float, seed: int, widt
 def load(n: int | None, seed: int, lard: Path | None, width: int, height: int, *,
          default: int = DEFAULT_IMAGES) -> tuple[list, dict]:
     """``n`` samples (``None``: ``default``, or all rows of a smaller ``lard`` dataset), or one line."""
-    from vbl_robust.campaigns import load_samples
+    from vbl_robust.campaigns.samples import load_samples
 
     with one_line(ValueError, FileNotFoundError, RuntimeError):  # RuntimeError: no pose fits a strip of an image
         return load_samples(default if n is None else n, seed, lard=lard, width=width, height=height,

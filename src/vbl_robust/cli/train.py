@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import zipfile
 from pathlib import Path
@@ -12,6 +13,8 @@ from typing import Annotated
 import typer
 
 from ..constants import MAX_IMAGES
+from ..data.lard_read import read_lard
+from ..space import ParameterBox
 from . import options as o
 from .common import fail, one_line, parse_perturb
 
@@ -70,8 +73,7 @@ def train(
     init_path = None if init is None else _weights(init, trust_model, "--init")
     samples = None
     if lard is not None:
-        from vbl_robust.campaigns.samples import find_lard_files
-        from vbl_robust.data import read_lard
+        from vbl_robust.campaigns.samples import find_lard_files  # torch behind it: not for ``--help``
 
         with one_line():
             csv_path, db_path = find_lard_files(lard)
@@ -130,8 +132,6 @@ def ship(
 ) -> None:
     """Ship a trained checkpoint as a shipped detector (two-stage, 320 px): the default, or with --as hardened
     beside it; its default.json from the checkpoint's protocol."""
-    import json
-
     from vbl_robust.detect.protocol import info_from_protocol, replacement_verdict
     from vbl_robust.detect.shipped import SHIPPED_MODELS, refuse_untrusted, shipped_model_dir
 
@@ -206,7 +206,6 @@ def harden(
     from vbl_robust.detect.protocol import HARDEN_FORBIDDEN_SEEDS, HARDEN_SEED
     from vbl_robust.detect.train import SHIPPED_DATA, VAL_SEED_OFFSET
     from vbl_robust.scenes import generate
-    from vbl_robust.space import ParameterBox
 
     scenes = {"audit": {}, "shipped": SHIPPED_DATA}
     if data not in scenes:

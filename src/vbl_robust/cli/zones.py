@@ -14,12 +14,16 @@ import csv
 import io
 import json
 import math
+from collections import Counter
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from rich.console import Console
+from rich.table import Table
 
 from ..atomic import atomic_write
+from ..campaigns.refine import refine_run
 from . import options as o
 from .common import check_writable, fail, parse_lipschitz
 
@@ -43,7 +47,9 @@ def zones(
     threshold: Threshold = None, role: Role = "all", fmt: Format = "json", out: Out = None, plot: Plot = None,
 ) -> None:
     """Breached / undecided / ruled-out zones of Θ for each search job of a run (replayed, not re-evaluated)."""
+    # scipy, torch and matplotlib behind these: imported here, not for ``--help``
     from vbl_robust.campaigns.replay import ReplayError, zones_of_run
+    from vbl_robust.campaigns.store import ResultStore
     from vbl_robust.report.figures import plot_zones
 
     if fmt not in FORMATS:
@@ -62,8 +68,6 @@ def zones(
         check_writable("--out", out)
     lip = parse_lipschitz(lipschitz)
     try:
-        from vbl_robust.campaigns import ResultStore
-
         with ResultStore.open_existing(run) as store:  # a 0-byte store, or one nothing ran into: nothing to zone
             store.require_campaign()
         jobs = zones_of_run(run, roles=None if role == "all" else (role,), threshold=threshold, lipschitz=lip,
@@ -97,8 +101,6 @@ def zones(
 def _notes(jobs: list[Any]) -> list[str]:
     """One line per method and reason, with its count (a campaign of thousands of jobs gives a few lines, not one
     per job); ``--format json`` lists every skipped job and its note."""
-    from collections import Counter
-
     skipped = Counter((j.method, j.note.removeprefix(f"{j.method}: ")) for j in jobs if j.zones is None)
     outside = Counter(j.method for j in jobs if j.zones is not None and j.note)
     return ([f"note: skipped {n} {method} job(s): {why}" for (method, why), n in sorted(skipped.items())]
@@ -145,8 +147,7 @@ def _cell(v: float | None) -> str | float:
 def refine_audit(out: Path, samples: list, detector: Any, budget: int, *,
                  lipschitz: float | tuple[float, ...] | None, quiet: bool = False) -> Path:
     """After an audit: :func:`vbl_robust.campaigns.refine.refine_run`, then how the fractions changed (a table)."""
-    from vbl_robust.campaigns.refine import refine_run
-    from vbl_robust.campaigns.replay import ReplayError
+    from vbl_robust.campaigns.replay import ReplayError  # scipy behind it: not for ``--help``
 
     try:
         path, refined = refine_run(out, samples, detector, budget, lipschitz=lipschitz)
@@ -155,9 +156,6 @@ def refine_audit(out: Path, samples: list, detector: Any, budget: int, *,
     except ValueError as exc:
         fail(f"--refine-zones: {exc}")
     if not quiet:
-        from rich.console import Console
-        from rich.table import Table
-
         t = Table(title=f"zones refined with {budget} evaluations per job (volume %, before → after)")
         for c in ("image", "method", "evals", "breached", "undecided", "ruled out", "basis"):
             t.add_column(c, justify="left" if c in ("image", "method", "basis") else "right")
