@@ -21,6 +21,7 @@ from vbl_robust.constants import TORCH_JIT_WARNING
 from . import audit, check, report, reproduce, risk, scenes, train, truth, verify, zones
 from .common import set_verbosity, stop_on_sigterm
 from .config import RecordingCommand
+from .options import Quiet, Verbose, variant
 
 #: The commands that run a campaign into a store (a rerun resumes them).
 _CAMPAIGNS = frozenset({"audit", "demo", "risk", "reproduce", "truth"})
@@ -85,12 +86,14 @@ def _version(value: bool) -> None:
         raise typer.Exit()
 
 
+#: ``-v`` / ``-q`` before the command (they apply to the whole invocation)
+_Verbose = variant(Verbose, help="Log progress details (INFO); also after the command.")
+_Quiet = variant(Quiet, help="No progress bars or tables; also after the command.")
+
+
 @app.callback()
 def _main(
-    verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Log progress details (INFO); also after the "
-                                          "command.")] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bars or tables; also after the "
-                                        "command.")] = False,
+    verbose: _Verbose = False, quiet: _Quiet = False,
     version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and "
                                           "exit.")] = False,
 ) -> None:

@@ -19,7 +19,7 @@ import typer
 
 from vbl_robust.campaigns.experiments import AUDIT_METHODS, audit_spec
 from vbl_robust.campaigns.spec import Budget, roll_contrast_box
-from vbl_robust.constants import MAX_EVALS, MAX_IMAGES, TARGETS
+from vbl_robust.constants import TARGETS
 
 from . import options as o
 from .common import (
@@ -47,11 +47,6 @@ DEMO_ORACLE_NOISE_PX = 1.0
 MaxSeconds = Annotated[float | None, typer.Option("--max-seconds", min=0.0, help="Seconds per image and method.")]
 EarlyStop = Annotated[bool, typer.Option("--early-stop/--no-early-stop", help="Stop an image's search at its first "
                                          "breach (answers 'is there a breach?').")]
-Lipschitz = Annotated[str | None, typer.Option("--lipschitz", help="Lipschitz constant of the error (m per unit, one "
-                                               "number or one per parameter): enables 'certified' verdicts.")]
-Landscape = Annotated[bool | None, typer.Option(
-    "--landscape/--no-landscape", help="Dense grid on the first image for the report's landscape figure (default: "
-    "on; with --sequences off, as each grid point costs every frame of the first sequence).")]
 Sequences = Annotated[str | None, typer.Option(
     "--sequences", help="Audit approach sequences instead of images: a number N (generated) or a LARD V2 directory "
     "grouped into sequences; one θ is held over each sequence (see --sustain).")]
@@ -68,10 +63,6 @@ Target = Annotated[str, typer.Option(
     "every method hunts the worst confident pose, the hazardously misleading error).")]
 Sustain = Annotated[int, typer.Option("--sustain", min=1, help="With --sequences: frames the error must hold (the "
                                       "worst error sustained over K consecutive frames).")]
-Frames = Annotated[int | None, typer.Option("--frames", min=1, help="With --sequences N: frames per sequence "
-                                            "(default 20).")]
-Rate = Annotated[float | None, typer.Option("--rate", help="With --sequences: frame rate in Hz (generated sequences; "
-                                            "LARD data without times; default 10).")]
 RefineZones = Annotated[int, typer.Option(
     "--refine-zones", min=0, help="After the search: spend this many more evaluations per main DIRECT-family/grid "
     "job inside its undecided zones (GeoRobust per zone, largest first) and report how the breached / undecided / "
@@ -87,14 +78,14 @@ def audit(
     roll: o.Roll = "15", contrast: o.Contrast = None, perturb: o.Perturb = None,
     methods: o.Methods = ",".join(AUDIT_METHODS), method_option: o.MethodOption = None,
     max_evals: o.MaxEvals = 200, max_seconds: MaxSeconds = None, early_stop: EarlyStop = True,
-    lipschitz: Lipschitz = None, pnp: o.Pnp = "ippe_lm", landscape: Landscape = None,
+    lipschitz: o.Lipschitz = None, pnp: o.Pnp = "ippe_lm", landscape: o.Landscape = None,
     executor: o.Executor = "local", workers: o.Workers = 0, clock: o.Clock = "auto", wait: o.Wait = False,
     retry_failed: o.RetryFailed = False, address: o.Address = None, allow_unmeasured: o.AllowUnmeasured = False,
     csv: o.Csv = None, parquet: o.Parquet = None, report: o.Report = True,
     quiet: o.Quiet = False, verbose: o.Verbose = False, config: o.Config = None,
     sequences: Sequences = None, monitor_residual: MonitorResidual = None, monitor_sigma: MonitorSigma = None,
     target: Target = "any",
-    sustain: Sustain = 1, frames: Frames = None, rate: Rate = None, refine_zones: RefineZones = 0,
+    sustain: Sustain = 1, frames: o.Frames = None, rate: o.Rate = None, refine_zones: RefineZones = 0,
 ) -> None:
     """Find each image's worst case over a perturbation box: worst θ, worst error, verdict, survival, report."""
     params = parameters()
@@ -170,12 +161,11 @@ def _samples(sequences: str | None, images: ImagesRequest, frames: int, rate: fl
 
 
 # -- demo's own options -------------------------------------------------------------------------------------------
-DemoOut = Annotated[Path, typer.Option("--out", help="Run directory.")]
-DemoImages = Annotated[int, typer.Option("--n", "--images", min=1, max=MAX_IMAGES, help="Number of synthetic images.")]
-DemoMaxEvals = Annotated[int, typer.Option("--max-evals", min=1, max=MAX_EVALS, help="Evaluations per image and "
-                                           "method.")]
-DemoLandscape = Annotated[bool, typer.Option("--landscape/--no-landscape", help="Dense 21 × 11 grid on the first "
-                                             "image for the report's landscape figure.")]
+DemoOut = o.variant(o.Out, help="Run directory.")
+DemoImages = o.variant(o.Images, int, show_default=True, help="Number of synthetic images.")
+DemoMaxEvals = o.variant(o.MaxEvals, int, min=1, help="Evaluations per image and method.")
+DemoLandscape = o.variant(o.Landscape, bool, help="Dense 21 × 11 grid on the first image for the report's landscape "
+                          "figure.")
 
 
 def demo(

@@ -19,9 +19,9 @@ from ..perturb.registry import known
 from .config import Config
 
 __all__ = ["DEFAULT_IMAGES", "Address", "AllowUnmeasured", "Batch", "Clock", "Config", "Contrast", "Csv", "Design",
-           "DetectorPlugin", "Device", "Engine", "Executor", "Height", "Images", "Imgsz", "Lard", "MaxEvals",
+           "DetectorPlugin", "Device", "Engine", "Executor", "Frames", "Height", "Images", "Imgsz", "Landscape", "Lard", "Lipschitz", "MaxEvals",
            "MethodOption", "Methods", "Model", "Oracle", "OracleNoise", "Out", "Parquet", "Perturb", "PluginDigest",
-           "Pnp", "Quiet", "Report", "RetryFailed", "Roll", "Seed", "StoredRun", "Threads", "TrustModel", "Verbose",
+           "Pnp", "Quiet", "Rate", "Report", "RetryFailed", "Roll", "Seed", "StoredRun", "Threads", "TrustModel", "Verbose",
            "Wait", "Width", "Workers", "variant"]
 
 
@@ -101,9 +101,20 @@ Methods = Annotated[str, typer.Option("--methods", help="Comma-separated search 
 MaxEvals = Annotated[int | None, typer.Option("--max-evals", min=0, max=MAX_EVALS, help="Evaluations per image and "
                                               "method (0 = no evaluation cap: then give --max-seconds).")]
 Pnp = Annotated[str, typer.Option("--pnp", help="PnP solver: ippe_lm, iterative, sqpnp, ippe.")]
+Lipschitz = Annotated[str | None, typer.Option("--lipschitz", help="Lipschitz constant of the error (m per unit, one "
+                                               "number or one per parameter): enables 'certified' verdicts.")]
+Landscape = Annotated[bool | None, typer.Option(
+    "--landscape/--no-landscape", help="Dense grid on the first image for the report's landscape figure (default: "
+    "on; with --sequences off, as each grid point costs every frame of the first sequence).")]
 MethodOption = Annotated[list[str] | None, typer.Option(
     "--method-option", help="A search method's option, METHOD.OPTION=VALUE (repeatable; VALUE read as YAML: 9, 0.5, "
     "true, [3, 5]), e.g. georobust-a.min_ratio=9 or georobust.alpha=3; recorded in the store and the job keys.")]
+
+# -- approach sequences ------------------------------------------------------------------------------------------
+Frames = Annotated[int | None, typer.Option("--frames", min=1, help="With --sequences N: frames per sequence "
+                                            "(default 20).")]
+Rate = Annotated[float | None, typer.Option("--rate", help="With --sequences: frame rate in Hz (generated sequences; "
+                                            "LARD data without times; default 10).")]
 
 # -- how a campaign runs ------------------------------------------------------------------------------------------
 Executor = Annotated[str, typer.Option("--executor", help="local or ray.")]

@@ -17,8 +17,8 @@ from .common import check_writable, fail, one_line
 from .run import unmeasured_ok
 
 ReportOut = Annotated[Path | None, typer.Option("--out", help="Directory for report.html and figures/ (default: RUN).")]
-Csv = Annotated[Path | None, typer.Option("--csv", help="Also export the job rows to CSV.")]
-Parquet = Annotated[Path | None, typer.Option("--parquet", help="Also export the job rows to Parquet.")]
+Csv = o.variant(o.Csv, help="Also export the job rows to CSV.")
+Parquet = o.variant(o.Parquet, help="Also export the job rows to Parquet.")
 Format = Annotated[str, typer.Option(
     "--format", help="html (the report); md: print the survival tables (and a families run's ranking) as Markdown "
     "instead, on the images every method completed; csv or json: print the summary table, one row per method, box "
@@ -163,9 +163,8 @@ Into = Annotated[Path, typer.Option("--into", help="The run directory (or .sqlit
                                     "missing.")]
 
 
-MergeTrust = Annotated[bool, typer.Option("--trust-model", help="Allow joining a campaign whose detector names code "
-                                          "(a factory's module:callable, a .pt outside the package): the joined "
-                                          "run would build it.")]
+MergeTrust = o.variant(o.TrustModel, help="Allow joining a campaign whose detector names code (a factory's "
+                       "module:callable, a .pt outside the package): the joined run would build it.")
 
 
 def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None:

@@ -43,9 +43,8 @@ Images = Annotated[int | None, typer.Option("--images", min=1, max=MAX_IMAGES, h
                                             "paper's, 100; 1000 for pnp-validation).")]
 Methods = o.variant(o.Methods, str | None, help="Comma-separated methods (default georobust,georobust-av,random,"
                     "apgd; families: the same less apgd).")
-Landscape = Annotated[bool, typer.Option("--landscape/--no-landscape", help="spatial-2d / runtime-2d: the dense "
-                                         "61 × 36 grid on the first image (the report's heat map, about 2200 "
-                                         "evaluations).")]
+Landscape = o.variant(o.Landscape, bool, help="spatial-2d / runtime-2d: the dense 61 × 36 grid on the first image "
+                      "(the report's heat map, about 2200 evaluations).")
 MaxEvals = o.variant(o.MaxEvals, min=1, help="Per-image evaluations of the spatial experiments (default 200).")
 GridStep = Annotated[float | None, typer.Option("--grid-step", min=0.0, help="1-D dense-grid reference step in degrees "
                                                 "(default 0.05; 0 = no reference).")]

@@ -2,28 +2,26 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from ..constants import MAX_IMAGE_SIDE, MAX_IMAGES
+from . import options as o
 from .common import fail, one_line
 
 N = Annotated[int, typer.Option("--n", min=1, max=MAX_IMAGES, help="Number of approach images (without --sequences).")]
-Seed = Annotated[int, typer.Option("--seed", min=0, help="Seed; the same seed gives the same dataset.")]
-Out = Annotated[Path, typer.Option("--out", help="Output directory (images/, metadata CSV, runway DB JSON).")]
-Width = Annotated[int, typer.Option("--width", min=16, max=MAX_IMAGE_SIDE, help="Image width in pixels (16 to "
-                                    f"{MAX_IMAGE_SIDE}).")]
-Height = Annotated[int, typer.Option("--height", min=16, max=MAX_IMAGE_SIDE, help="Image height in pixels (16 to "
-                                     f"{MAX_IMAGE_SIDE}).")]
+Seed = o.variant(o.Seed, max=None, help="Seed; the same seed gives the same dataset.")
+Out = o.variant(o.Out, help="Output directory (images/, metadata CSV, runway DB JSON).")
+Width = o.variant(o.Width, help=f"Image width in pixels (16 to {MAX_IMAGE_SIDE}).")
+Height = o.variant(o.Height, help=f"Image height in pixels (16 to {MAX_IMAGE_SIDE}).")
 Fov = Annotated[float, typer.Option("--fov", help="Horizontal field of view in degrees.")]
 Envelopes = Annotated[str, typer.Option(help="Comma-separated LARD V2 envelopes to sample (single images only).")]
 Sequences = Annotated[int | None, typer.Option("--sequences", min=1, help="Write this many approach sequences (one "
                                                "airport each) instead of single images; CSV columns sequence_id, "
                                                "frame_index, time_s.")]
-Frames = Annotated[int, typer.Option("--frames", min=1, help="Frames per sequence.")]
-Rate = Annotated[float, typer.Option("--rate", help="Frame rate of a sequence, Hz.")]
+Frames = o.variant(o.Frames, int, help="Frames per sequence.")
+Rate = o.variant(o.Rate, float, help="Frame rate of a sequence, Hz.")
 Speed = Annotated[float, typer.Option("--speed", help="Ground speed along the glide path, m/s (20 frames at 10 Hz fly "
                                       "133 m; 80 frames at 1 Hz fly most of the far → close approach).")]
 

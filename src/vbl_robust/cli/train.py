@@ -19,23 +19,21 @@ from . import options as o
 from .common import fail, one_line, parse_perturb
 
 # -- train's own options ------------------------------------------------------------------------------------------
-TrainOut = Annotated[Path, typer.Option("--out", help="Working directory (dataset + stages).")]
+TrainOut = o.variant(o.Out, help="Working directory (dataset + stages).")
 Resume = Annotated[bool, typer.Option("--resume", help="Continue the latest stage, or start a new stage from its best "
                                       "weights.")]
-TrainLard = Annotated[Path | None, typer.Option("--lard", help="Train on a LARD V2 directory (CSV + runway DB JSON) "
-                                                "instead of synthetic scenes.")]
+TrainLard = o.variant(o.Lard, help="Train on a LARD V2 directory (CSV + runway DB JSON) instead of synthetic scenes.")
 TrainNTrain = Annotated[int, typer.Option("--n-train", min=2, max=MAX_IMAGES, help="Synthetic training approaches.")]
 TrainNVal = Annotated[int, typer.Option("--n-val", min=1, max=MAX_IMAGES, help="Validation approaches.")]
 Airports = Annotated[int | None, typer.Option("--airports", min=1, help="Synthetic airports (runway sizes) of the "
                                               "generated data (default: the generator's pool).")]
 TrainEpochs = Annotated[int, typer.Option("--epochs", min=1, help="Epochs of this stage.")]
-TrainSeed = Annotated[int, typer.Option("--seed", min=0, help="Seed of the rendered samples, the crops and the "
-                                        "training.")]
-TrainDesign = Annotated[str, typer.Option("--detector", help="'twostage' (full view + runway crop) or 'single'.")]
+TrainSeed = o.variant(o.Seed, max=None, help="Seed of the rendered samples, the crops and the training.")
+TrainDesign = o.variant(o.Design, help="'twostage' (full view + runway crop) or 'single'.")
 Init = Annotated[str | None, typer.Option("--init", help="Initial weights of a first stage: a .pt path or 'default' "
                                           "(the shipped model).")]
-TrainTrust = Annotated[bool, typer.Option("--trust-model", help="Allow loading an --init .pt pickle from outside the "
-                                          "package, and (--resume) the checkpoints of --out.")]
+TrainTrust = o.variant(o.TrustModel, help="Allow loading an --init .pt pickle from outside the package, and (--resume) "
+                       "the checkpoints of --out.")
 Crops = Annotated[int, typer.Option("--crops", min=0, help="Jittered runway crops rendered per training sample "
                                     "(two-stage).")]
 CropsUsed = Annotated[int | None, typer.Option("--crops-used", min=0, help="Train on only the first N crops of each "
@@ -120,7 +118,7 @@ Against = Annotated[Path | None, typer.Option("--against", help="The shipped mod
                                               "0.05) is checked before anything is written.")]
 Force = Annotated[bool, typer.Option("--force", help="Ship even without --against or when the rule is not met (a first "
                                      "model, or a rule set aside on purpose: say why in the model card).")]
-ShipTrust = Annotated[bool, typer.Option("--trust-model", help="The checkpoint is a pickle: confirm you trust it.")]
+ShipTrust = o.variant(o.TrustModel, help="The checkpoint is a pickle: confirm you trust it.")
 As = Annotated[str, typer.Option("--as", help="Which shipped model it becomes: default (the replacement rule applies) "
                                  "or hardened (shipped beside the default, replacing none; --against then only prints "
                                  "the paired comparison).")]
@@ -167,26 +165,22 @@ def ship(
 
 
 # -- harden's own options -----------------------------------------------------------------------------------------
-HardenPerturb = Annotated[list[str], typer.Option("--perturb", help="A perturbation family and its range, NAME=LO,HI "
-                                                  "(repeatable; a bare NAME takes its plausible default range): the "
-                                                  "box the training views are drawn from.")]
-HardenOut = Annotated[Path, typer.Option("--out", help="Working directory (one roundNN per round).")]
-HardenModel = Annotated[Path | None, typer.Option("--model", help="The .pt to harden, or a shipped model's name "
-                                                  "(default, hardened; default: the shipped default model).")]
-HardenTrust = Annotated[bool, typer.Option("--trust-model", help="Allow loading a --model .pt pickle from outside the "
-                                           "package.")]
+HardenPerturb = o.variant(o.Perturb, list[str], help="A perturbation family and its range, NAME=LO,HI (repeatable; a "
+                          "bare NAME takes its plausible default range): the box the training views are drawn from.")
+HardenOut = o.variant(o.Out, help="Working directory (one roundNN per round).")
+HardenModel = o.variant(o.Model, help="The .pt to harden, or a shipped model's name (default, hardened; default: the "
+                        "shipped default model).")
+HardenTrust = o.variant(o.TrustModel, help="Allow loading a --model .pt pickle from outside the package.")
 Rounds = Annotated[int, typer.Option("--rounds", min=1, max=100, help="Rounds: search the worst views, then fine-tune "
                                      "(at most 100).")]
 K = Annotated[int, typer.Option("--k", min=1, max=10_000, help="Candidates per training image and round (worst of k, "
                                 "at most 10000).")]
-HardenEpochs = Annotated[int, typer.Option("--epochs", min=1, help="Epochs per round.")]
-HardenNTrain = Annotated[int, typer.Option("--n-train", min=1, max=MAX_IMAGES, help="Synthetic training approaches.")]
-HardenNVal = Annotated[int, typer.Option("--n-val", min=1, max=MAX_IMAGES, help="Synthetic validation approaches "
-                                         "(clean).")]
-HardenSeed = Annotated[int | None, typer.Option(
-    "--seed", min=0, help="Seed of the training approaches (their own airports), the candidates and the training "
-    "(default: detect.protocol.HARDEN_SEED); the audits' seed 0 and the protocol's validation and test seeds are "
-    "refused.")]
+HardenEpochs = o.variant(TrainEpochs, help="Epochs per round.")
+HardenNTrain = o.variant(TrainNTrain, min=1)
+HardenNVal = o.variant(TrainNVal, help="Synthetic validation approaches (clean).")
+HardenSeed = o.variant(o.Seed, int | None, max=None, help="Seed of the training approaches (their own airports), the "
+                       "candidates and the training (default: detect.protocol.HARDEN_SEED); the audits' seed 0 and the "
+                       "protocol's validation and test seeds are refused.")
 Clean = Annotated[bool, typer.Option("--clean/--no-clean", help="Train on the clean images too (half the views).")]
 Data = Annotated[str, typer.Option(
     "--data", help="Which synthetic approaches: audit (the generator's defaults, as the audits draw them) or shipped "

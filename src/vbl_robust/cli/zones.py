@@ -29,9 +29,8 @@ from .common import check_writable, fail, parse_lipschitz
 
 FORMATS = ("json", "csv", "md")
 
-Lipschitz = Annotated[str | None, typer.Option(
-    "--lipschitz", help="A Lipschitz constant of the error (m per unit; one number with --norm, or one per "
-    "parameter): sound zones under that assumption. Default: the run's own --lipschitz, if any.")]
+Lipschitz = o.variant(o.Lipschitz, help="A Lipschitz constant of the error (m per unit; one number with --norm, or one "
+                      "per parameter): sound zones under that assumption. Default: the run's own --lipschitz, if any.")
 Norm = Annotated[str, typer.Option("--norm", help="Norm of a scalar --lipschitz: 2, inf or 1 (real units).")]
 Estimate = Annotated[bool, typer.Option("--estimate", help="Classify with each search's own slope estimate "
                                         "(GeoRobust's K̂: NOT sound; labelled an estimate).")]
