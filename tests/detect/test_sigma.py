@@ -185,11 +185,12 @@ def test_a_campaign_runs_the_sigma_monitor_and_stores_the_worst_candidates_sigma
     details, corners = worst_details(build_objective(sample, _SureOracle(0.5), box, Settings(1000.0, 5000.0, 0.25,
                                                                                               "ippe_lm")),
                                      np.array([2.0]))
-    assert corners is not None and details["corner_sigma_px"] == [[0.5, 0.5]] * 4
-    assert details["position_sigma_m"] > 0
+    assert corners is not None and details.corner_sigma_px == ((0.5, 0.5),) * 4
+    assert details.position_sigma_m > 0 and details.to_json()["corner_sigma_px"] == [[0.5, 0.5]] * 4
     plain, _ = worst_details(build_objective(sample, OracleDetector(), box, Settings(1000.0, 5000.0, 0.25, "ippe_lm")),
                              np.array([2.0]))
-    assert "corner_sigma_px" not in plain and "position_sigma_m" not in plain
+    assert plain.corner_sigma_px is None and plain.position_sigma_m is None
+    assert "corner_sigma_px" not in plain.to_json() and "position_sigma_m" not in plain.to_json()
 
 
 @pytest.mark.parametrize("which", ["v9", "yolo26"])

@@ -44,6 +44,7 @@ import numpy as np
 
 from ..space import ParameterBox
 from ..stats import SequentialTest, Stratum, binomial_bounds, risk_verdict, stratified_interval
+from .store.payloads import RiskPayload, RiskStratum
 
 __all__ = ["RISK_METHODS", "Marginal", "PooledRisk", "RiskResult", "ThetaDistribution", "estimate_risk", "parse_dist",
            "pooled_risk"]
@@ -209,11 +210,11 @@ class RiskResult:
     split: tuple[tuple[float, float], ...] = ()  # the shares of δ of each stratum's (lower, upper) bound
 
     def payload(self, tau: float, delta: float, dist: ThetaDistribution) -> dict[str, Any]:
-        return {"risk": {"method": self.method, "p_fail": self.p_fail, "eps_safe_m": self.eps_safe_m, "ci_low": self.ci.low, "ci_high": self.ci.high,
-                         "ci_level": self.ci.level, "ci_method": self.ci.method, "verdict": self.verdict, "tau": tau,
-                         "delta": delta, "evaluations": self.evaluations, "distribution": dist.to_dict(),
-                         "strata": [{"mass": s.mass, "k": s.k, "n": s.n, "share_low": a, "share_high": b}
-                                    for s, (a, b) in zip(self.strata, self.split, strict=True)]}}
+        """The job row's payload (:class:`~vbl_robust.campaigns.store.payloads.RiskPayload`)."""
+        return RiskPayload(self.method, self.p_fail, self.eps_safe_m, self.ci.low, self.ci.high, self.ci.level,
+                           self.ci.method, self.verdict, tau, delta, self.evaluations, dist.to_dict(),
+                           tuple(RiskStratum(s.mass, s.k, s.n, a, b)
+                                 for s, (a, b) in zip(self.strata, self.split, strict=True))).to_json()
 
 
 def _evaluate(f: Callable[[np.ndarray], Any], x: np.ndarray) -> tuple[np.ndarray, tuple[str, ...]]:
@@ -359,10 +360,10 @@ def estimate_risk(f: Callable[[np.ndarray], Any], dist: ThetaDistribution, metho
 
 
 
-def _stored_split(strata: Sequence[Mapping[str, Any]]) -> list[tuple[float, float]] | None:
+def _stored_split(strata: Sequence[RiskStratum]) -> list[tuple[float, float]] | None:
     """The δ split a stored guided result used (None: an older row, written with the even split)."""
-    if all("share_low" in s for s in strata):
-        return [(float(s["share_low"]), float(s["share_high"])) for s in strata]
+    if all(s.share_low is not None for s in strata):
+        return [(float(s.share_low), float(s.share_high)) for s in strata]
     return None
 
 
@@ -396,25 +397,24 @@ def pooled_risk(rows: Sequence[Any]) -> list[PooledRisk]:
     """
     from ..stats import Interval, clopper_pearson
 
-    by: dict[str, list[Any]] = {}
-    for r in rows:
-        if r.kind == "risk" and r.status == "done" and r.payload and "risk" in r.payload:  # (no store import: spec
-            # imports this module)
-            by.setdefault(r.method, []).append(r)
+    by: dict[str, list[tuple[Any, RiskPayload]]] = {}
+    for r in rows:  # (the store's package is not imported: spec imports this module)
+        if r.kind == "risk" and r.status == "done" and (p := RiskPayload.of(r)) is not None:
+            by.setdefault(r.method, []).append((r, p))
     out = []
-    for method, rs in by.items():
-        info = [r.payload["risk"] for r in rs]
-        m, delta, tau = len(rs), float(info[0]["delta"]), float(info[0]["tau"])
-        verdicts = [i["verdict"] for i in info]
+    for method, got in by.items():
+        rs, info = [r for r, _ in got], [p for _, p in got]
+        m, delta, tau = len(rs), float(info[0].delta), float(info[0].tau)
+        verdicts = [i.verdict for i in info]
         if method == "mc":
             if any(r.points is None for r in rs):
                 raise ValueError("pooled_risk: the mc rows need their points (store.jobs(with_points=True))")
             n_min = min(len(r.points) for r in rs)
-            k = sum(int(_failed(r.points.fs[:n_min], float(i["eps_safe_m"])).sum()) for r, i in zip(rs, info, strict=True))
+            k = sum(int(_failed(r.points.fs[:n_min], float(i.eps_safe_m)).sum()) for r, i in got)
             est, ci = k / (m * n_min), clopper_pearson(k, m * n_min, 1.0 - delta)
         else:
-            parts = [stratified_interval([Stratum(s["mass"], s["k"], s["n"]) for s in i["strata"]], 1.0 - delta / m,
-                                         _stored_split(i["strata"])) for i in info]
+            parts = [stratified_interval([Stratum(s.mass, s.k, s.n) for s in i.strata], 1.0 - delta / m,
+                                         _stored_split(i.strata)) for i in info]
             est = float(np.mean([p[0] for p in parts]))
             ci = Interval(float(np.mean([p[1].low for p in parts])), float(np.mean([p[1].high for p in parts])),
                           1.0 - delta, "mean of per-image intervals, Bonferroni over the images")

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from .store import ResultStore
+from .store.payloads import RiskPayload, SequencePayload, WorstPayload
 
 COLUMNS = (
     "experiment", "kind", "role", "method", "sample_id", "sample_index", "slant_distance_m", "envelope", "box_label",
@@ -79,8 +80,8 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
                   ([r] + ([read_off(full[r.key], b, eps, penalty) for b in r.budget.read_budgets()]
                           if r.key in full else []))]
     rows, params, sequences, has_risk = [], [], False, False
-    nominal = {r.sample_id: (r.payload or {})["nominal"].get("error_m") for r in stored
-               if "nominal" in (r.payload or {})}  # L(0): the image's, whatever the job
+    nominal = {r.sample_id: p.nominal.error_m for r in stored
+               if (p := WorstPayload.of(r)) is not None and p.nominal}  # L(0): the image's, whatever the job
     for r in stored:
         s = samples.get(r.sample_id)
         b = {} if r.budget is None else r.budget.to_dict()
@@ -90,10 +91,10 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
         d.update(slant_distance_m=None if s is None else s.slant_distance_m, envelope=None if s is None else s.envelope,
                  max_evals=b.get("max_evals"), max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"),
                  stop_at_breach=b.get("stop_at_breach"))
-        risk = (r.payload or {}).get("risk") if r.kind == "risk" else None
+        risk = RiskPayload.of(r) if r.kind == "risk" else None
         if risk is not None:
             has_risk = True
-            d.update({c: risk.get(c) for c in RISK_COLUMNS if c in risk}, risk_verdict=risk.get("verdict"))
+            d.update({c: getattr(risk, c) for c in RISK_COLUMNS if c != "risk_verdict"}, risk_verdict=risk.verdict)
         if r.kind == "search" and r.measured:
             kind = breach_kind(r, eps_kind)
             d.update(breach_kind=None if kind is None else kind.value, residual_bound=residual_bound(r, eps_kind))
@@ -102,12 +103,11 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
             if col not in params:
                 params.append(col)
             d[col] = v
-        seq = None if r.read_from else (r.payload or {}).get("sequence")
+        seq = None if r.read_from else SequencePayload.of(r)
         if seq is not None:
             sequences = True
-            d.update({c: seq["worst"].get(c) for c in SEQUENCE_COLUMNS[:7]},
-                     nominal_sustained_m=seq["nominal"].get("sustained_m"),
-                     nominal_breached_frames=seq["nominal"].get("breached_frames"))
+            d.update({c: getattr(seq.worst, c) for c in SEQUENCE_COLUMNS[:7]},
+                     nominal_sustained_m=seq.nominal.sustained_m, nominal_breached_frames=seq.nominal.breached_frames)
         rows.append(d)
     return rows, [*COLUMNS, *params, *(SEQUENCE_COLUMNS if sequences else ()), *(RISK_COLUMNS if has_risk else ())]
 

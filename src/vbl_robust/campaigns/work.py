@@ -34,6 +34,7 @@ from ..search.result import verdict_for
 from .provenance import DetectorSpec
 from .spec import Job
 from .store import Corners, JobRow, JobStatus, Points, now_iso
+from .store.payloads import Nominal, SequenceFacts, SequenceFrames, SequencePayload, WorstPayload, WorstPoint
 
 if TYPE_CHECKING:  # typing only: the pipeline (torch) is imported where an objective is built
     from ..data import Sample
@@ -187,7 +188,7 @@ def implied_row(job: Job, breach: JobRow, settings: Settings, run_id: int | None
                 worst_corners=breach.worst_corners, search_s=0.0, job_s=0.0)
 
 
-def worst_details(objective: SearchObjective, x: np.ndarray) -> tuple[dict[str, Any], Corners | None]:
+def worst_details(objective: SearchObjective, x: np.ndarray) -> tuple[WorstPoint, Corners | None]:
     """What the pipeline gives at the worst point (one more evaluation): the payload's top confidence, position
     error and estimated position (the failure reason is the one the search recorded, ``JobRow.worst_reason``), and
     the four corners of the selected candidate in the sample's pixels (``JobRow.worst_corners``; None when the
@@ -198,14 +199,13 @@ def worst_details(objective: SearchObjective, x: np.ndarray) -> tuple[dict[str, 
     err = float(rec.error_m[0])
     kp = np.asarray(rec.keypoints[0], dtype=np.float64)
     corners = tuple((float(u), float(v)) for u, v in kp) if kp.shape == (4, 2) and np.isfinite(kp).all() else None
-    out = {"conf": _finite(conf), "error_m": _finite(err), "position": [_finite(float(v)) for v in rec.position[0]]}
-    if rec.keypoint_sigma is not None:
-        out["corner_sigma_px"] = [[_finite(float(v)) for v in c] for c in rec.keypoint_sigma[0]]
-        out["position_sigma_m"] = _finite(float(rec.position_sigma_m[0]))
-    return out, corners
+    sigma = None if rec.keypoint_sigma is None else tuple(tuple(_finite(float(v)) for v in c)
+                                                          for c in rec.keypoint_sigma[0])
+    return WorstPoint(_finite(conf), _finite(err), tuple(_finite(float(v)) for v in rec.position[0]), sigma,
+                      None if sigma is None else _finite(float(rec.position_sigma_m[0]))), corners
 
 
-def nominal_details(objective: SearchObjective) -> dict[str, Any]:
+def nominal_details(objective: SearchObjective) -> Nominal:
     """The unperturbed image's facts (one evaluation at the identity θ: roll 0, contrast 1, …), stored beside the
     worst point as the payload's ``nominal``: ``error_m`` = L(0) (the objective: the penalty where it failed),
     ``reason`` (``""``: a pose), ``conf`` and the predicted ``corners`` (sample's pixels, TR TL BL BR; None: none)."""
@@ -213,11 +213,11 @@ def nominal_details(objective: SearchObjective) -> dict[str, Any]:
 
     rec = objective.evaluate(nominal_theta(objective.box))
     kp = np.asarray(rec.keypoints[0], dtype=np.float64)
-    return {"error_m": _finite(float(rec.loss[0])), "reason": rec.reason[0], "conf": _finite(float(rec.conf[0])),
-            "corners": kp.tolist() if kp.shape == (4, 2) and np.isfinite(kp).all() else None}
+    return Nominal(_finite(float(rec.loss[0])), rec.reason[0], _finite(float(rec.conf[0])),
+                   tuple(map(tuple, kp.tolist())) if kp.shape == (4, 2) and np.isfinite(kp).all() else None)
 
 
-def sequence_details(objective: SearchObjective, x: np.ndarray, eps_safe_m: float) -> dict[str, Any]:
+def sequence_details(objective: SearchObjective, x: np.ndarray, eps_safe_m: float) -> SequencePayload:
     """What a sequence job stores about its worst θ (two more evaluations of the sequence): the breach facts of the
     worst θ and of the unperturbed θ (:meth:`~vbl_robust.sequences.SequenceRecord.summary` at ``eps_safe_m``, with
     each frame's error and failure reason) and the frames (image id, index, time, distance from the runway
@@ -225,17 +225,15 @@ def sequence_details(objective: SearchObjective, x: np.ndarray, eps_safe_m: floa
     from ..sequences import nominal_theta
 
     seq = objective.sequence
-    out: dict[str, Any] = {"frames": {"image": [str(s.id) for s in seq.samples],
-                                      "frame_index": [int(i) for i in seq.frame_index],
-                                      "time_s": [_finite(float(t)) for t in seq.times],
-                                      "distance_m": [float(d) for d in seq.distances_m]}}
-    for name, theta in (("worst", np.asarray(x, dtype=np.float64)[None]), ("nominal", nominal_theta(objective.box))):
+    frames = SequenceFrames(tuple(str(s.id) for s in seq.samples), tuple(int(i) for i in seq.frame_index),
+                            tuple(_finite(float(t)) for t in seq.times), tuple(float(d) for d in seq.distances_m))
+    facts = []
+    for theta in (np.asarray(x, dtype=np.float64)[None], nominal_theta(objective.box)):
         rec = objective.evaluate(theta)
-        facts = {k: (_finite(v) if isinstance(v, float) else v) for k, v in rec.summary(0, eps_safe_m).items()}
-        facts["errors_m"] = [_finite(float(v)) for v in rec.loss[:, 0]]
-        facts["reasons"] = [r[0] for r in rec.reasons]
-        out[name] = facts
-    return out
+        summary = {k: (_finite(v) if isinstance(v, float) else v) for k, v in rec.summary(0, eps_safe_m).items()}
+        facts.append(SequenceFacts.of_summary(summary, [_finite(float(v)) for v in rec.loss[:, 0]],
+                                              [r[0] for r in rec.reasons]))
+    return SequencePayload(frames, *facts)
 
 
 def run_search_job(job: Job, objective: SearchObjective, settings: Settings) -> SearchResult:
@@ -328,7 +326,7 @@ def run_sample_task(task: SampleTask, detector: Detector, settings: Settings, ru
                     ) -> Iterator[list[JobRow]]:
     """Run a sample's jobs in order; yield the rows to commit after each job."""
     objectives: dict[str, SearchObjective] = {}
-    nominals: dict[str, dict[str, Any]] = {}
+    nominals: dict[str, Nominal] = {}
     breached: dict[str, JobRow] = {}  # chain -> breaching row
     for job in task.jobs:
         if job.chain is not None and job.chain in breached:
@@ -356,12 +354,12 @@ def run_sample_task(task: SampleTask, detector: Detector, settings: Settings, ru
             result = run_search_job(job, objective, settings)
             row = search_row(job, result, settings, run_id, time.perf_counter() - t0)
             if job.role == "main" and result.x is not None and settings.sustain is not None:
-                row = row.replace(payload={"sequence": sequence_details(objective, result.x, settings.eps_safe_m)})
+                row = row.replace(payload=sequence_details(objective, result.x, settings.eps_safe_m).to_json())
             elif job.role == "main" and result.x is not None:
                 details, corners = worst_details(objective, result.x)
                 if label not in nominals:  # L(0): one evaluation per image and box, shared by its jobs
                     nominals[label] = nominal_details(objective)
-                row = row.replace(payload={"worst": details, "nominal": nominals[label]}, worst_corners=corners)
+                row = row.replace(payload=WorstPayload(details, nominals[label]).to_json(), worst_corners=corners)
         except Exception as exc:  # the tool could not complete the job: not measured, recorded, the campaign goes on
             kind, detail = not_measured_reason(exc)
             logger.warning("sample %s, job %s/%s not measured (%s): %s", job.sample_id, job.method,

@@ -30,6 +30,7 @@ import numpy as np
 from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.store import JobRow
+from ..campaigns.store.payloads import Nominal, WorstPayload, WorstPoint
 from ..constants import BreachKind, Verdict
 from ..search import direct_family
 from ..stats import LEVEL, Rate
@@ -181,7 +182,7 @@ def confident_m(row: JobRow) -> float | None:
 
 def worst_cases(rows: Sequence[JobRow], eps: float, penalty_m: float, cap: int = WORST_CASES,
                 stored: Mapping[str, JobRow] | None = None,
-                nominal: Mapping[str, Mapping[str, Any]] | None = None) -> tuple[list[WorstCase], int]:
+                nominal: Mapping[str, Nominal] | None = None) -> tuple[list[WorstCase], int]:
     """The ``cap`` most severe breached images of ``rows`` and how many images are breached.
 
     Each image stands by its most severe row: a misleading breach before an unknown one before a flagged-only one
@@ -206,15 +207,15 @@ def worst_cases(rows: Sequence[JobRow], eps: float, penalty_m: float, cap: int =
         if r.read_from and stored is not None:  # read off a run: its corners hold where its worst point is the run's
             run = stored.get(r.key.removesuffix(f"@{r.budget_label}"))
             src = run if run is not None and run.worst_x == r.worst_x else r
-        worst = (src.payload or {}).get("worst") or {}
-        nom = (nominal or {}).get(r.sample_id) or {}
-        corners0 = nom.get("corners")
+        payload = WorstPayload.of(src)
+        worst = WorstPoint() if payload is None else payload.worst
+        nom = (nominal or {}).get(r.sample_id) or Nominal()
         cases.append(WorstCase(r.sample_id, r.box_label or "", r.method, r.budget_label,
                                float(r.worst_m if r.worst_m is not None else penalty_m),
                                None if r.worst_x is None else dict(r.worst_x), None if kind is None else kind.value,
-                               r.worst_reason, worst.get("conf"), src.worst_corners, conf_m,
-                               worst.get("position_sigma_m"), nom.get("error_m"), nom.get("reason"), nom.get("conf"),
-                               None if corners0 is None else tuple((float(u), float(v)) for u, v in corners0)))
+                               r.worst_reason, worst.conf, src.worst_corners, conf_m, worst.position_sigma_m,
+                               nom.error_m, nom.reason, nom.conf,
+                               None if nom.corners is None else tuple((float(u), float(v)) for u, v in nom.corners)))
     return cases, len(best)
 
 

@@ -5,17 +5,19 @@ from __future__ import annotations
 
 from ..campaigns.risk import pooled_risk
 from ..campaigns.store import JobStatus
+from ..campaigns.store.payloads import RiskPayload
 from . import figures as F
 from .html import esc, table
 from .rows import Context, Section, sample_cols
 
 
 def section_risk(ctx: Context) -> Section | None:
-    rows = [r for r in ctx.risk if r.status is JobStatus.DONE and r.payload and "risk" in r.payload]
+    rows = [r for r in ctx.risk if r.status is JobStatus.DONE and RiskPayload.of(r) is not None]
     if not rows:
         return None
-    info = rows[0].payload["risk"]
-    tau, level = float(info["tau"]), 1.0 - float(info["delta"])
+    info = {r.key: RiskPayload.of(r) for r in rows}
+    first = info[rows[0].key]
+    tau, level = float(first.tau), 1.0 - float(first.delta)
     s = Section("Failure probability under the θ distribution")
     pooled = pooled_risk(rows)
     s.html.append(
@@ -35,18 +37,18 @@ def section_risk(ctx: Context) -> Section | None:
                   "distribution (mc: the first draws of every image, before any stop; guided: the mean of per-image "
                   "intervals, Bonferroni over the images).</p>")
     order = {sid: k for k, sid in enumerate(sorted({r.sample_id for r in rows}))}
-    series = {m: [(order[r.sample_id], r.payload["risk"]["p_fail"], r.payload["risk"]["ci_low"],
-                   r.payload["risk"]["ci_high"]) for r in rows if r.method == m]
+    series = {m: [(order[r.sample_id], info[r.key].p_fail, info[r.key].ci_low, info[r.key].ci_high)
+                  for r in rows if r.method == m]
               for m in dict.fromkeys(r.method for r in rows)}
     s.html.append(ctx.figure(F.risk_per_image(series, len(order), tau), "risk", "Each image's p_fail and interval per estimator; the "
                              "dotted line is τ."))
     lines = []
     for r in sorted(rows, key=lambda r: (r.sample_id, r.method)):
-        i = r.payload["risk"]
+        i = info[r.key]
         lines.append({"sample_id": r.sample_id, **sample_cols(ctx, r.sample_id), "method": r.method,
-                      "p_fail": 100 * i["p_fail"], "ci": f"[{100 * i['ci_low']:.2f}, {100 * i['ci_high']:.2f}]",
-                      "verdict": i["verdict"], "evals": i["evaluations"], "worst": r.worst_m,
-                      "strata": "; ".join(f"mass {100 * t['mass']:.3g} %: {t['k']}/{t['n']}" for t in i["strata"])})
+                      "p_fail": 100 * i.p_fail, "ci": f"[{100 * i.ci_low:.2f}, {100 * i.ci_high:.2f}]",
+                      "verdict": i.verdict, "evals": i.evaluations, "worst": r.worst_m,
+                      "strata": "; ".join(f"mass {100 * t.mass:.3g} %: {t.k}/{t.n}" for t in i.strata)})
     s.html.append(table(lines, [("sample_id", "image", esc), ("slant_distance_m", "slant dist. (m)", None),
                                 ("method", "estimator", esc), ("p_fail", "p_fail %", None), ("ci", "interval (%)", esc),
                                 ("verdict", f"p_fail ≤ {tau:g}", esc), ("evals", "evaluations", None),

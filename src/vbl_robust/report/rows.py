@@ -17,6 +17,7 @@ from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.spec import BoxSpec, CampaignSpec
 from ..campaigns.store import JobRow, JobStatus, ResultStore, SampleRecord
+from ..campaigns.store.payloads import Nominal, WorstPayload
 from . import figures as F
 from .html import figure_png, img, img_file
 
@@ -58,10 +59,11 @@ class Context:
                 if r.measured]
 
     @cached_property
-    def nominal(self) -> dict[str, Mapping[str, Any]]:
-        """Per sample, its unperturbed facts as its main jobs store them (payload ``nominal``: ``error_m`` = L(0),
-        ``reason``, ``conf``, predicted ``corners``); a sample missing: its jobs were stored before they held it."""
-        return {r.sample_id: r.payload["nominal"] for r in self.main if (r.payload or {}).get("nominal")}
+    def nominal(self) -> dict[str, Nominal]:
+        """Per sample, its unperturbed facts as its main jobs store them (:class:`~vbl_robust.campaigns.store.
+        payloads.Nominal`: L(0), reason, confidence, predicted corners); a sample missing: its jobs were stored
+        before they held it."""
+        return {r.sample_id: p.nominal for r in self.main if (p := WorstPayload.of(r)) is not None and p.nominal}
 
     @cached_property
     def unmeasured(self) -> list[JobRow]:

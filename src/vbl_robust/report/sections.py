@@ -461,7 +461,7 @@ def section_per_image(ctx: Context) -> Section | None:
     by: dict[str, dict[str, Any]] = {}
     for r in ctx.main:
         line = by.setdefault(r.sample_id, {"sample_id": r.sample_id, **sample_cols(ctx, r.sample_id),
-                                           "nominal_m": (ctx.nominal.get(r.sample_id) or {}).get("error_m")})
+                                           "nominal_m": getattr(ctx.nominal.get(r.sample_id), "error_m", None)})
         line[f"{r.method}_worst"] = r.worst_m
         line[f"{r.method}_verdict"] = r.verdict
         line[f"{r.method}_x"] = theta_text(r.worst_x)

@@ -9,23 +9,23 @@ approach the first run of at least ``sustain`` breached frames (a breach a filte
 
 from __future__ import annotations
 
-from typing import Any
-
+from ..campaigns.store import JobRow
+from ..campaigns.store.payloads import SequenceFacts, SequencePayload
 from ..constants import Verdict
 from ..sequences import plot_errors_along_approach
 from .html import esc, table
 from .rows import Context, Section, theta_text
 
 
-def worst_per_sequence(ctx: Context) -> list[Any]:
-    """Per sequence (in sample order), the main row whose worst θ sustains the largest error (rows with a
-    ``sequence`` payload only)."""
-    best: dict[str, Any] = {}
+def worst_per_sequence(ctx: Context) -> list[tuple[JobRow, SequencePayload]]:
+    """Per sequence (in sample order), the main row whose worst θ sustains the largest error, with its payload (rows
+    with a ``sequence`` payload only)."""
+    best: dict[str, tuple[JobRow, SequencePayload]] = {}
     for r in ctx.main:
-        if r.payload and "sequence" in r.payload and r.worst_m is not None:
-            if r.sample_id not in best or r.worst_m > best[r.sample_id].worst_m:
-                best[r.sample_id] = r
-    return sorted(best.values(), key=lambda r: r.sample_index)
+        if (p := SequencePayload.of(r)) is not None and r.worst_m is not None:
+            if r.sample_id not in best or r.worst_m > best[r.sample_id][0].worst_m:
+                best[r.sample_id] = (r, p)
+    return sorted(best.values(), key=lambda rp: rp[0].sample_index)
 
 
 def section_sequences(ctx: Context) -> Section | None:
@@ -34,24 +34,22 @@ def section_sequences(ctx: Context) -> Section | None:
         return None
     k = ctx.spec.sustain
     s = Section(f"Along the approach: errors sustained over {k} frame(s)")
-    curves = [{"sequence_id": r.sample_id, "distances_m": r.payload["sequence"]["frames"]["distance_m"],
-               "nominal_m": _errors(r.payload["sequence"]["nominal"]), "worst_m": _errors(r.payload["sequence"]["worst"])}
-              for r in rows]
+    curves = [{"sequence_id": r.sample_id, "distances_m": list(p.frames.distance_m), "nominal_m": _errors(p.nominal),
+               "worst_m": _errors(p.worst)} for r, p in rows]
     fig = plot_errors_along_approach(curves, eps_m=ctx.eps, penalty_m=ctx.spec.penalty_m,
                                      title=f"Error along the approach (sustain k = {k})")
     s.html.append(ctx.figure(fig, "sequence_errors", "Per-frame position error against the distance from the runway "
                              "threshold along each approach: the unperturbed θ (dashed) and the worst θ found over "
                              "all methods (solid)."))
     lines = []
-    for r in rows:
-        seq = r.payload["sequence"]
-        w, nom = seq["worst"], seq["nominal"]
-        lines.append({"sample_id": r.sample_id, "frames": w["frames"], "verdict": r.verdict,
+    for r, p in rows:
+        w, nom = p.worst, p.nominal
+        lines.append({"sample_id": r.sample_id, "frames": w.frames, "verdict": r.verdict,
                       "worst": r.worst_m, "method": r.method, "theta": theta_text(r.worst_x),
-                      "longest": w["longest_run_frames"], "longest_s": w["longest_run_s"],
-                      "breached": w["breached_frames"], "failed": w["failed_frames"],
-                      "start": w["breach_start_m"], "nominal": nom["sustained_m"],
-                      "nominal_breached": nom["breached_frames"]})
+                      "longest": w.longest_run_frames, "longest_s": w.longest_run_s,
+                      "breached": w.breached_frames, "failed": w.failed_frames,
+                      "start": w.breach_start_m, "nominal": nom.sustained_m,
+                      "nominal_breached": nom.breached_frames})
     s.html.append(table(lines, [
         ("sample_id", "sequence", None), ("frames", "frames", None), ("verdict", "verdict", None),
         ("worst", "worst sustained (m)", None), ("method", "method", None), ("theta", "at θ", esc),
@@ -64,6 +62,6 @@ def section_sequences(ctx: Context) -> Section | None:
     return s
 
 
-def _errors(facts: dict[str, Any]) -> list[float]:
+def _errors(facts: SequenceFacts) -> list[float]:
     """Per-frame errors of a payload (a None — a non-finite error — drawn at the failure penalty's place: NaN)."""
-    return [float("nan") if v is None else float(v) for v in facts["errors_m"]]
+    return [float("nan") if v is None else float(v) for v in facts.errors_m]

@@ -5,6 +5,8 @@ Modules, each importing only those above it:
 
 - :mod:`.rows` — the typed rows: :class:`StoredCampaign`, :class:`SampleRecord`, :class:`JobRow`, :class:`Points`,
   :class:`JobStatus`, :class:`RunRecord` (a :class:`RunProvenance` and how the run ended, :class:`RunStatus`);
+- :mod:`.payloads` — what a job row's payload holds, one class per kind (:class:`~.payloads.WorstPayload`,
+  :class:`~.payloads.SequencePayload`, :class:`~.payloads.RiskPayload`), each writing and reading its JSON;
 - :mod:`.schema` — the tables, each declared once as columns (DDL, migrations, row ↔ columns), :data:`SCHEMA_VERSION`;
 - :mod:`.identity` — what makes two runs parts of one campaign (spec, detector identity);
 - :mod:`.lock` — :class:`WriterLock`, one writer per store;

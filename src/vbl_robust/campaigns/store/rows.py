@@ -226,11 +226,12 @@ class JobRow:
     recorded); ``worst_reason`` = failure reason at the worst point (``""`` = a successful evaluation, None
     unknown); ``worst_corners`` = the four corners the detector's selected candidate gave at the worst point, in the
     sample's pixels of the perturbed view (TR, TL, BL, BR; main search jobs from schema 4 on, None when no candidate
-    was found, for other jobs and in older rows; its confidence is ``payload["worst"]["conf"]``);
+    was found, for other jobs and in older rows; its confidence is :class:`~.payloads.WorstPayload`'s);
     ``search_status``/``message`` = why the search stopped; ``search_s``/``job_s`` = seconds in the
     search / in the whole job; ``upper_bound`` (sound, metres; 1e300 for "unbounded"), ``bound_estimate``,
     ``lipschitz_estimate``; ``trace`` = the search's iterations (empty unless asked for); ``points`` = every
-    evaluated point (None unless asked for); ``payload`` = PnP comparison or details of the worst point;
+    evaluated point (None unless asked for); ``payload`` = the JSON as stored: a PnP comparison, or what
+    :mod:`~vbl_robust.campaigns.store.payloads` reads (the worst point, a sequence's facts, a risk estimate);
     ``finished_at`` (ISO time, UTC). ``read_from`` is set only on rows *derived* from a stored run at a smaller
     budget (:func:`vbl_robust.campaigns.metrics.read_off_rows`; never stored): the budget label of that run.
 
