@@ -149,3 +149,21 @@ def test_report_exits_1_when_a_row_contradicts_its_own_evaluations(run1d, tmp_pa
     res = runner.invoke(app, ["report", str(edited), "--format", "md"])
     assert res.exit_code == 1 and "inconsistent — not used" in res.output, res.output
     assert runner.invoke(app, ["report", str(run1d), "--format", "md"]).exit_code == 0
+
+
+def test_a_refusal_quoting_line_breaks_stays_one_line():
+    """A damaged model's exception can quote its bytes, line breaks included (a random-bytes .pt did): the
+    refusal shows them escaped."""
+    import typer
+
+    from vbl_robust.cli.common import fail
+
+    one = typer.Typer()
+
+    @one.command()
+    def refuse() -> None:
+        fail("invalid load key, '\n'\r\x0b\x1c\x85\u2028 end")
+
+    res = runner.invoke(one, [])
+    assert res.exit_code == 2 and len(res.output.splitlines()) == 1, repr(res.output)
+    assert res.output.startswith("error: invalid load key, '\\n'\\r") and res.output.rstrip().endswith("end")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 import signal
 import tempfile
 from collections.abc import Iterator
@@ -53,9 +54,15 @@ def set_verbosity(*, quiet: bool = False, verbose: bool = False, before_command:
     return _GLOBAL["quiet"]
 
 
+#: Every character :meth:`str.splitlines` breaks a line at.
+_LINE_BREAKS = re.compile("[\n\r\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029]")
+
+
 def fail(message: str, code: int = 2) -> None:
-    """Print a one-line error and exit (user mistakes never show a traceback)."""
-    typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
+    """Print a one-line error and exit (user mistakes never show a traceback). A line break inside ``message`` (an
+    exception's text quoting bytes of a damaged file) is shown escaped: the refusal stays one line."""
+    one = _LINE_BREAKS.sub(lambda m: repr(m.group())[1:-1], str(message))
+    typer.secho(f"error: {one}", fg=typer.colors.RED, err=True)
     raise typer.Exit(code)
 
 
