@@ -20,7 +20,9 @@ Only YAML's safe constructors run (no ``!!python`` tag is honoured).
 (keys as the options are spelt): ``vbl-robust audit --config runs/audit/config.yaml`` repeats the run (it resumes
 into the same ``--out``; give another ``--out`` to run it afresh). It is written when the run starts — once its
 store has accepted the campaign (:func:`record_configuration`) — never by a command that was refused, so a refused
-command leaves the run directory as it was.
+command leaves the run directory as it was. The run's provenance in its store (``config["user"]`` of each run) holds
+the same parameters (:func:`run_config`), with what the run resolved from them (the images counted, the methods
+parsed) in place of what was typed.
 """
 
 from __future__ import annotations
