@@ -58,7 +58,7 @@ def _survival(rows, eps):
 
 
 def test_every_claim_has_a_row_computed_on_every_image(claims):
-    assert [c.experiment for c in claims] == [" + ".join(names) for names, _, _ in C.CLAIMS]
+    assert [c.experiment for c in claims] == [" + ".join(rule.experiments) for rule in C.CLAIMS]
     assert len(claims) == 9 and claims[7].experiment == "spatial-1d + spatial-2d"
     for c in claims:
         assert c.verdict in C.VERDICTS and c.verdict != C.NOT_RUN, c
@@ -262,6 +262,25 @@ def test_survival_claims_are_judged_by_their_paired_tests():
     # no paired images: not measured
     [(none, text)] = C.survival_parts(rows, eps, [("georobust", "apgd")], ["±5°"])
     assert none == [None] and "±5° not measured" in text
+    # a name no method has is an error, not a method without rows
+    with pytest.raises(ValueError, match="unknown method 'georobst'"):
+        C.survival_parts(rows, eps, [("georobst", "random")], ["±5°"])
+
+
+def test_a_misspelt_method_fails_its_claim_and_says_so(root, monkeypatch):
+    labels, table = C._survival([_verdict_row("random", 5, "s0", 10.0)], 1000.0)
+    assert labels == ["±5°"] and table["random"] == [100.0] and "apgd" not in table
+    with pytest.raises(KeyError, match="no row of method 'apgd' \\(rows of random\\)"):
+        table["apgd"]
+    with pytest.raises(ValueError, match="unknown method 'randm'"):
+        table["randm"]
+    rule = C.CLAIMS[1]
+    misspelt = C.ClaimRule(rule.experiments, rule.claim,
+                           lambda e: C.ClaimResult(C._text(C._survival(e.ctx.main, e.eps)[1], [], "randm"), "",
+                                                   C.HOLDS, "", 1))
+    monkeypatch.setattr(C, "CLAIMS", (misspelt,))
+    [row] = C.claims_of(root)
+    assert row.verdict == C.NOT_RUN and "failed to compute (ValueError: claims: unknown method 'randm'" in row.reason
 
 
 def test_a_rate_against_a_threshold_is_judged_by_its_interval():

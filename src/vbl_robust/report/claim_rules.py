@@ -1,4 +1,5 @@
-"""The verdict rules of :mod:`.claims`: the verdicts, the thresholds, the :class:`Claim` row, and the pure
+"""The verdict rules of :mod:`.claims`: the verdicts, the thresholds, the records of a claim (:class:`ClaimRule`: what
+is checked and how, :class:`ClaimResult`: what its computation gives, :class:`Claim`: the table's row), and the pure
 functions that judge a claim's parts from numbers (None: not measurable). The rules themselves are stated in
 :mod:`.claims`'s docstring.
 
@@ -16,13 +17,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..campaigns import metrics as mx
 from ..campaigns.store import JobRow
+from ..search.api import METHODS as SEARCH_METHODS
 from ..stats import ALPHA, LEVEL, ClaimVerdict, Rate, claim_verdict, holm, paired
 from .html import fmt_num
 
@@ -64,6 +66,37 @@ class Claim:
     images: int
 
 
+@dataclass(frozen=True)
+class ClaimResult:
+    """What a claim's computation gives on its experiments' complete images: our numbers (``ours``), the dense
+    grid's (``truth``, ``""`` without one), the verdict (one of :data:`VERDICTS`), why, and the number of images."""
+
+    ours: str
+    truth: str
+    verdict: str
+    reason: str
+    images: int
+
+
+@dataclass(frozen=True)
+class ClaimRule:
+    """One claim of the paper as checked: the experiments it is computed on, its statement, and its computation
+    (one :class:`ClaimResult` from an opened experiment per name of ``experiments``, None where one is missing)."""
+
+    experiments: tuple[str, ...]
+    claim: str
+    compute: Callable[..., ClaimResult]
+
+
+def known_method(method: str) -> str:
+    """``method`` when it names a search method or the dense-grid reference; ``ValueError`` otherwise: a misspelt
+    name in a claim's computation must fail, not read as a method without rows."""
+    if method not in SEARCH_METHODS and method != mx.REFERENCE_METHOD:
+        raise ValueError(f"claims: unknown method {method!r}; methods are {', '.join(SEARCH_METHODS)} and "
+                         f"{mx.REFERENCE_METHOD!r}")
+    return method
+
+
 # -- verdict rules: pure functions of numbers (None = not measurable) ------------------------------------------
 def combine(parts: Sequence[Outcome]) -> str:
     """The verdict of a claim from its parts' outcomes (see the module docstring)."""
@@ -89,6 +122,7 @@ def survival_parts(rows: Sequence[JobRow], eps_safe_m: float, pairs: Sequence[tu
     ok = {(r.method, r.box_label, r.sample_id): mx.survived(r, eps_safe_m) for r in rows}
     tests = []
     for low, high in pairs:
+        known_method(low), known_method(high)
         for lab in labels:
             ids = [sid for (m, b, sid) in ok if m == low and b == lab and (high, lab, sid) in ok]
             tests.append((low, high, lab,

@@ -65,8 +65,8 @@ from __future__ import annotations
 import logging
 import math
 import sqlite3
-from collections import Counter, defaultdict
-from collections.abc import Callable, Mapping, Sequence
+from collections import Counter
+from collections.abc import Mapping, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
@@ -96,6 +96,8 @@ from .claim_rules import (
     TIE,
     VERDICTS,
     Claim,
+    ClaimResult,
+    ClaimRule,
     Outcome,
     combine,
     cross_part,
@@ -103,6 +105,7 @@ from .claim_rules import (
     first_breach_s,
     in_range,
     judge,
+    known_method,
     largest_jump,
     phi_interval,
     phi_text,
@@ -175,21 +178,37 @@ def _open(root: Path, name: str, stack: ExitStack) -> _Exp | str:
     return _Exp(Context(store, spec, root / name, main, samples), ids, len(samples))
 
 
-def _survival(rows: Sequence[JobRow], eps: float) -> tuple[list[str], dict[str, list[float]]]:
-    """(box labels by level, per method the survival % at each box, NaN where it has no row): the report's survival
-    table (:func:`~vbl_robust.campaigns.metrics.summarize` by method and box); absent methods read all NaN."""
+@dataclass(frozen=True)
+class _Survival:
+    """Per method of the rows, its survival % at each box (NaN at a box where it has no row). ``method in table``
+    and ``table[method]`` check the name first (:func:`~.claim_rules.known_method`: ``ValueError`` for a name no
+    method has); ``table[method]`` of a method without rows is a ``KeyError`` naming the methods there are."""
+
+    by_method: Mapping[str, list[float]]
+
+    def __contains__(self, method: object) -> bool:
+        return known_method(str(method)) in self.by_method
+
+    def __getitem__(self, method: str) -> list[float]:
+        if method not in self:
+            raise KeyError(f"survival: no row of method {method!r} (rows of {', '.join(self.by_method) or 'none'})")
+        return self.by_method[method]
+
+
+def _survival(rows: Sequence[JobRow], eps: float) -> tuple[list[str], _Survival]:
+    """(box labels by level, per method the survival % at each box): the report's survival table
+    (:func:`~vbl_robust.campaigns.metrics.summarize` by method and box)."""
     lines = mx.summarize(rows, eps, by=("method", "box_label"))
     labels = [lab for _, lab in sorted({(ln.box_level, ln.box_label) for ln in lines})]
     got = {(ln.method, ln.box_label): ln.survival for ln in lines}
-    return labels, defaultdict(lambda: [math.nan] * len(labels),
-                               {m: [got.get((m, b), math.nan) for b in labels] for m, _ in got})
+    return labels, _Survival({m: [got.get((m, b), math.nan) for b in labels] for m, _ in got})
 
 
 def _slash(values: Sequence[float]) -> str:
     return "/".join(fmt_num(v) for v in values)
 
 
-def _text(s: Mapping[str, Sequence[float]], labels: Sequence[str], *methods: str,
+def _text(s: _Survival, labels: Sequence[str], *methods: str,
           cis: Mapping[str, str] | None = None) -> str:
     """``"survival % at ±2° … ±30°: georobust 100/50 [31.4, 68.6]; random 100/100"`` (the ``methods`` present;
     ``cis``: a method's exact 95 % interval at the largest box, :func:`_last_ci`)."""
@@ -208,12 +227,10 @@ def _last_ci(rows: Sequence[JobRow], eps: float, label: str) -> dict[str, str]:
 
 
 
-# -- one function per claim, each returning a Row ------------------------------------------------------------
-#: What a claim's function returns: (ours, truth, verdict, reason, images it is computed on).
-Row = tuple[str, str, str, str, int]
+# -- one function per claim, each returning a ClaimResult -----------------------------------------------------
 
 
-def _pnp(e: _Exp) -> Row:
+def _pnp(e: _Exp) -> ClaimResult:
     jobs = e.jobs(kind="pnp", with_trace=False)
     summary = mx.pnp_summary(jobs)
     med = {(s["source"], s["solver"]): s["median_rel_pct"] for s in summary}
@@ -231,9 +248,9 @@ def _pnp(e: _Exp) -> Row:
 
         parts.append(pnp_part(rel("ippe_lm"), rel("iterative"), src))
     n = max((s["n"] for s in summary), default=0)
-    return ("; ".join(ours), "", *judge(parts), n)
+    return ClaimResult("; ".join(ours), "", *judge(parts), n)
 
-def _spatial_1d(e: _Exp) -> Row:
+def _spatial_1d(e: _Exp) -> ClaimResult:
     rows = [r for r in e.ctx.main if r.chain is None] + e.reference()
     labels, s = _survival(rows, e.eps)
     truth = _text(s, labels, mx.REFERENCE_METHOD) if mx.REFERENCE_METHOD in s else ""
@@ -246,10 +263,10 @@ def _spatial_1d(e: _Exp) -> Row:
     groups = survival_parts(rows, e.eps, (("georobust", "random"), ("georobust", "apgd"), ("random", "apgd")),
                             labels)
     cis = _last_ci(rows, e.eps, labels[-1]) if labels else {}
-    return (_text(s, labels, *PAPER_METHODS, cis=cis), truth, *judge([], groups), len(e.ids))
+    return ClaimResult(_text(s, labels, *PAPER_METHODS, cis=cis), truth, *judge([], groups), len(e.ids))
 
 
-def _runtime_1d(e: _Exp) -> Row:
+def _runtime_1d(e: _Exp) -> ClaimResult:
     timed = [r for r in e.ctx.runs if r.sample_id in e.ids and r.budget and r.budget.max_seconds is not None]
     per: dict[str, dict[str, float]] = {}
     ours = []
@@ -268,7 +285,7 @@ def _runtime_1d(e: _Exp) -> Row:
     ref = e.reference()
     truth = (f"grid: a breach on {sum(r.worst_m > e.eps for r in ref)} of {len(ref)} images" if ref else "")
     part = times_part({m: [t.get(s, math.nan) for s in ids] for m, t in per.items()})
-    return ("median time to first breach: " + "; ".join(ours), truth, *judge([part]), len(e.ids))
+    return ClaimResult("median time to first breach: " + "; ".join(ours), truth, *judge([part]), len(e.ids))
 
 def truth_2d(e: _Exp) -> str:
     """The dense grid's truth at the run's largest box (``vbl-robust truth``, :mod:`vbl_robust.campaigns.truth`),
@@ -288,16 +305,16 @@ def truth_2d(e: _Exp) -> str:
             "missed: " + ", ".join(f"{m} {k}" for m, k in t.missed.items()))
 
 
-def _spatial_2d(e: _Exp) -> Row:
+def _spatial_2d(e: _Exp) -> ClaimResult:
     rows = [r for r in e.ctx.main if r.chain is None]
     labels, s = _survival(rows, e.eps)
     geo = [r for r in rows if r.method == "georobust" and labels and r.box_label == labels[-1]]
     alive = sum(mx.survived(r, e.eps) for r in geo)
     ok, text = rate_part(alive, len(geo), NEAR_ZERO_PCT)
     cis = _last_ci(rows, e.eps, labels[-1]) if labels else {}
-    return (_text(s, labels, *PAPER_METHODS, cis=cis), truth_2d(e),
-            *judge([(ok, f"georobust at the largest box {text}")],
-                    survival_parts(rows, e.eps, (("random", "apgd"),), labels)), len(e.ids))
+    return ClaimResult(_text(s, labels, *PAPER_METHODS, cis=cis), truth_2d(e),
+                       *judge([(ok, f"georobust at the largest box {text}")],
+                              survival_parts(rows, e.eps, (("random", "apgd"),), labels)), len(e.ids))
 
 
 def _worst_by(rows: Sequence[JobRow]) -> dict[str, dict[float, dict[str, float]]]:
@@ -310,7 +327,7 @@ def _worst_by(rows: Sequence[JobRow]) -> dict[str, dict[float, dict[str, float]]
     return out
 
 
-def _runtime_2d(e: _Exp) -> Row:
+def _runtime_2d(e: _Exp) -> ClaimResult:
     rows = [r for r in e.ctx.main if r.budget is not None and r.budget.max_seconds is not None]
     by: dict[str, list[tuple[float, float]]] = {}
     for ln in mx.summarize(rows, e.eps, by=("method", "budget_label")):
@@ -328,14 +345,14 @@ def _runtime_2d(e: _Exp) -> Row:
                if len(last) == 2 else (None, "apgd's medians at two time budgets — not measured"))
     early = [t for t, w in curve.get("georobust", []) if t <= CROSS_BY_S and math.isfinite(w)]
     cross = cross_part([column("georobust", t) for t in early], [f"{t:g} s" for t in early], e.eps)
-    return ("median worst error: " + ours, truth_2d(e), *judge([plateau, cross]), len(e.ids))
+    return ClaimResult("median worst error: " + ours, truth_2d(e), *judge([plateau, cross]), len(e.ids))
 
 
 def _phi(v: float, limit: float) -> str:
     return f"≥ {limit:g}°" if not math.isfinite(v) else f"{v:g}°"
 
 
-def _distance(e: _Exp) -> Row:
+def _distance(e: _Exp) -> ClaimResult:
     rows = [r for r in e.ctx.main if r.chain is not None]
     budgets = sorted({r.box_level for r in rows})
     limit = max(budgets, default=math.nan)
@@ -345,7 +362,7 @@ def _distance(e: _Exp) -> Row:
     levels = mx.smallest_breach_levels(every)
 
     def of(m: str) -> list[dict]:
-        return [p for p in prof if p["method"] == m]
+        return [p for p in prof if p["method"] == known_method(m)]
 
     def text(m: str) -> str:
         return f"{m} " + ", ".join(f"Q{p['quartile']} {p['d_min_m']:.0f}–{p['d_max_m']:.0f} m: "
@@ -375,8 +392,8 @@ def _distance(e: _Exp) -> Row:
     groups = [group(near, 15.0, f"georobust's φ_crit within {PHI_TOL_DEG:g}° of 15° below {NEAR_M:g} m"),
               group(far, 30.0, f"within {PHI_TOL_DEG:g}° of 30° beyond"),
               group(of("apgd"), None, f"apgd's ≥ {limit:g}°")]
-    return ("φ_crit: " + "; ".join(text(m) for m in ("georobust", "apgd") if of(m)),
-            text(mx.REFERENCE_METHOD) if of(mx.REFERENCE_METHOD) else "", *judge([], groups), len(dist))
+    return ClaimResult("φ_crit: " + "; ".join(text(m) for m in ("georobust", "apgd") if of(m)),
+                       text(mx.REFERENCE_METHOD) if of(mx.REFERENCE_METHOD) else "", *judge([], groups), len(dist))
 
 
 def _per_run(rows: Sequence[JobRow], field: str, scale: float = 1.0) -> np.ndarray:
@@ -395,7 +412,7 @@ def _per_run(rows: Sequence[JobRow], field: str, scale: float = 1.0) -> np.ndarr
     return out
 
 
-def _convergence(e: _Exp) -> Row:
+def _convergence(e: _Exp) -> ClaimResult:
     runs = [r for r in e.ctx.main if r.method in direct_family()]
     ra, po = _per_run(runs, "remaining_area", 100.0), _per_run(runs, "po_count_before")
     ra_ok, ra_text = ra_part(ra)
@@ -409,9 +426,9 @@ def _convergence(e: _Exp) -> Row:
     tail = pos[len(pos) // 2:]
     pos_text = (f"mean |PO_k| {fmt_num(pos[0])} → max {fmt_num(max(pos))}, {fmt_num(min(tail))}–{fmt_num(max(tail))} "
                 f"over k = {len(pos) - len(tail) + 1}…{len(pos)}" if pos else "no |PO_k|")
-    return f"{low}; {pos_text}", "", *judge([(ra_ok, ra_text), (po_ok, po_text)]), len(e.ids)
+    return ClaimResult(f"{low}; {pos_text}", "", *judge([(ra_ok, ra_text), (po_ok, po_text)]), len(e.ids))
 
-def _av(s1: _Exp | None, s2: _Exp | None) -> Row:
+def _av(s1: _Exp | None, s2: _Exp | None) -> ClaimResult:
     parts: list[tuple[Outcome, str]] = []
     groups: list[tuple[list[Outcome], str]] = []
     ours, rows, ids = [], [], set()
@@ -434,10 +451,10 @@ def _av(s1: _Exp | None, s2: _Exp | None) -> Row:
     g, a = (float(np.mean([p[i] for p in both])) if both else math.nan for i in (0, 1))
     ours.append(f"mean evals to a breach: georobust {fmt_num(g)}, georobust-av {fmt_num(a)} ({len(both)} shared)")
     parts.append(fewer_evals([p[1] for p in both], [p[0] for p in both]))
-    return ("; ".join(ours), "", *judge(parts, groups), len(ids))
+    return ClaimResult("; ".join(ours), "", *judge(parts, groups), len(ids))
 
 
-def _rough(e: _Exp) -> Row:
+def _rough(e: _Exp) -> ClaimResult:
     grids = [r for r in e.jobs(kind="search", role="reference", with_points=True, with_trace=False)
              if r.status is JobStatus.DONE and r.points is not None and len(r.points) > 1 and mx.grid_complete(r)]
     got = [largest_jump(r.points.xs, r.points.fs, e.ctx.spec.penalty_m) for r in grids]
@@ -447,34 +464,44 @@ def _rough(e: _Exp) -> Row:
     med = (fmt_num(float(np.median(jumps))), fmt_num(float(np.median(slopes)))) if got else ("–", "–")
     ours = (f"median largest jump {med[0]} m (slope {med[1]} m/°); {fmt_num(share)} % of images jump > "
             f"{e.eps:g} m")
-    return ours, "", verdict, why + ".", len(grids)
+    return ClaimResult(ours, "", verdict, why + ".", len(grids))
 
-#: (experiments, the paper's claim, its computation), in table order.
-CLAIMS: tuple[tuple[tuple[str, ...], str, Callable[..., Row]], ...] = (
-    (("pnp-validation",), "The differentiable PnP (BPnP; ours: the ippe_lm forward pass) is about as accurate as "
-     "OpenCV's iterative PnP: median relative error 2.2 % vs 2.2 % on ground-truth corners, 6.8 % vs 5.9 % on the "
-     "detector's.", _pnp),
-    (("spatial-1d",), "GeoRobust has the lowest survival at every roll budget (±2…±30°); APGD is no better than "
-     "random search.", _spatial_1d),
-    (("runtime-1d",), "Time to failure differs by method (roll ±15°, 0.1–5 s per image).", _runtime_1d),
-    (("spatial-2d",), "APGD falls behind random search (higher survival); GeoRobust drives survival to ≈0 % at "
-     "the largest box (±30°, contrast [0.4, 2.5]).", _spatial_2d),
-    (("runtime-2d",), "APGD's median worst error plateaus around 500 m; GeoRobust's crosses 1000 m within 2 s "
-     "(±10°, contrast [0.7, 1.4]).", _runtime_2d),
-    (("distance-profile",), "φ_crit ≈ 15° for approaches closer than ≈2600 m and ≈30° beyond; APGD stays at the "
-     "45° limit.", _distance),
-    (("convergence",), "RA(k) < 20 % within 10 iterations (over 80 % of Θ pruned); |PO_k| rises, then "
-     "plateaus.", _convergence),
-    (("spatial-1d", "spatial-2d"), "(ours) georobust-av finds at least as many breaches as the paper's GeoRobust "
-     "(survival ≤ at every box, 1-D and 2-D) in no more evaluations to a breach.", _av),
-    (("runtime-1d",), "(ours) L(θ) is not Lipschitz-smooth (the paper's Property 1 assumes it is): on the ±15° "
-     "dense grid it jumps by more than ε_safe = 1000 m between neighbouring roll angles.", _rough),
+#: The paper's claims as checked, in table order.
+CLAIMS: tuple[ClaimRule, ...] = (
+    ClaimRule(("pnp-validation",),
+              "The differentiable PnP (BPnP; ours: the ippe_lm forward pass) is about as accurate as OpenCV's "
+              "iterative PnP: median relative error 2.2 % vs 2.2 % on ground-truth corners, 6.8 % vs 5.9 % on the "
+              "detector's.", _pnp),
+    ClaimRule(("spatial-1d",),
+              "GeoRobust has the lowest survival at every roll budget (±2…±30°); APGD is no better than "
+              "random search.", _spatial_1d),
+    ClaimRule(("runtime-1d",),
+              "Time to failure differs by method (roll ±15°, 0.1–5 s per image).", _runtime_1d),
+    ClaimRule(("spatial-2d",),
+              "APGD falls behind random search (higher survival); GeoRobust drives survival to ≈0 % at "
+              "the largest box (±30°, contrast [0.4, 2.5]).", _spatial_2d),
+    ClaimRule(("runtime-2d",),
+              "APGD's median worst error plateaus around 500 m; GeoRobust's crosses 1000 m within 2 s "
+              "(±10°, contrast [0.7, 1.4]).", _runtime_2d),
+    ClaimRule(("distance-profile",),
+              "φ_crit ≈ 15° for approaches closer than ≈2600 m and ≈30° beyond; APGD stays at the 45° "
+              "limit.", _distance),
+    ClaimRule(("convergence",),
+              "RA(k) < 20 % within 10 iterations (over 80 % of Θ pruned); |PO_k| rises, then plateaus.", _convergence),
+    ClaimRule(("spatial-1d", "spatial-2d"),
+              "(ours) georobust-av finds at least as many breaches as the paper's GeoRobust (survival ≤ at "
+              "every box, 1-D and 2-D) in no more evaluations to a breach.", _av),
+    ClaimRule(("runtime-1d",),
+              "(ours) L(θ) is not Lipschitz-smooth (the paper's Property 1 assumes it is): on the ±15° dense "
+              "grid it jumps by more than ε_safe = 1000 m between neighbouring roll angles.", _rough),
 )
 
 
-def _row(names: tuple[str, ...], text: str, fn: Callable[..., Row], exps: Mapping[str, _Exp | str]) -> Claim:
-    """The claim ``text`` on the experiments ``names`` (``exps``: :func:`_open` of each): ``fn``'s row on their
-    complete images, or "not run yet" (why) when none has one."""
+def _row(rule: ClaimRule, exps: Mapping[str, _Exp | str]) -> Claim:
+    """The claim of ``rule`` on its experiments (``exps``: :func:`_open` of each): its computation on their complete
+    images, or "not run yet" (why) when none has one; a computation that raises (e.g. a method name no method has)
+    gives a row that says so."""
+    names, text = rule.experiments, rule.claim
     got = [exps[n] for n in names]
     ready = [e if isinstance(e, _Exp) and e.ids else None for e in got]
     why = [e if isinstance(e, str) else f"partial: 0 of {e.total} images" for e, r in zip(got, ready, strict=True)
@@ -486,14 +513,13 @@ def _row(names: tuple[str, ...], text: str, fn: Callable[..., Row], exps: Mappin
         short = "not run yet" if all(isinstance(e, str) for e in got) else "; ".join(why)
         return Claim(exp, text, short, "", NOT_RUN, "; ".join(why) + ".", 0)
     try:
-        ours, truth, verdict, reason, n = fn(*ready)
+        res = rule.compute(*ready)
     except Exception as exc:  # one broken claim must not hide the others
         logger.exception("claim on %s failed", exp)
         return Claim(exp, text, "–", "", NOT_RUN, f"failed to compute ({type(exc).__name__}: {exc}); see the log.",
                      0)
-    if partial:
-        reason = "; ".join(partial) + f" (computed on those) — {reason}"
-    return Claim(exp, text, ours, truth, verdict, reason, n)
+    reason = "; ".join(partial) + f" (computed on those) — {res.reason}" if partial else res.reason
+    return Claim(exp, text, res.ours, res.truth, res.verdict, reason, res.images)
 
 
 def claims_of(root: str | Path) -> list[Claim]:
@@ -502,7 +528,7 @@ def claims_of(root: str | Path) -> list[Claim]:
     root = Path(root)
     with ExitStack() as stack:
         exps = {name: _open(root, name, stack) for name in PAPER}
-        return [_row(names, text, fn, exps) for names, text, fn in CLAIMS]
+        return [_row(rule, exps) for rule in CLAIMS]
 
 
 def write_claims(root: str | Path, out: str | Path | None = None) -> Path:
