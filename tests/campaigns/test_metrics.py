@@ -157,9 +157,10 @@ def test_convergence_aggregates_traces():
 
     rows = [row(trace=trace([1, 2, 4], [1.0, 0.5, 0.2])), row(trace=trace([1, 4, 2], [1.0, 0.3, 0.1]))]
     conv = mx.convergence(rows)
-    assert [c["iteration"] for c in conv] == [1, 2, 3]
-    assert conv[0]["ra_mean"] == 100.0 and conv[1]["po_mean"] == 3.0
-    assert conv[2]["ra_mean"] == pytest.approx(15.0) and conv[2]["ra_std"] == pytest.approx(5.0)
+    assert [c.iteration for c in conv] == [1, 2, 3]
+    assert conv[0].ra_mean == 100.0 and conv[1].po_mean == 3.0 and conv[1].po_max == 4.0 and conv[0].n == 2
+    assert conv[2].ra_mean == pytest.approx(15.0) and conv[2].ra_std == pytest.approx(5.0)
+    assert conv[2].ra_median == pytest.approx(15.0) and conv[2].po_after_mean == 3.0 and conv[2].nfev_mean == 5.0
     assert mx.convergence([row(trace=[TraceRow(1, 5, 0.0, 1.0, None, 5, 0)])]) == []
 
 
@@ -187,7 +188,7 @@ def test_pnp_summary():
 
     rows = [row(kind="pnp", method="pnp", payload=payload(v)) for v in (10.0, 30.0, None)]
     (s,) = mx.pnp_summary(rows)
-    assert s["n"] == 3 and s["failures"] == 1 and s["median_abs_m"] == 20.0 and s["mae_rel_pct"] == 2.0
+    assert s.n == 3 and s.failures == 1 and s.median_abs_m == 20.0 and s.mae_rel_pct == 2.0
 
 
 def test_reference_rows_from_a_grid_stopped_at_its_first_breach():

@@ -71,7 +71,7 @@ def test_pnp_row_is_pnp_summary_of_the_store(root, claims):
     store, _ = _open(root, "pnp-validation")
     with store:
         jobs = store.jobs(kind="pnp")
-        med = {(s["source"], s["solver"]): s["median_rel_pct"] for s in mx.pnp_summary(jobs)}
+        med = {(s.source, s.solver): s.median_rel_pct for s in mx.pnp_summary(jobs)}
     row = claims[0]
     parts = []
     for src in (TRUNCATED, "detector"):

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
+from vbl_robust.campaigns import metrics as mx
 from vbl_robust.campaigns.metrics import Summary
 from vbl_robust.report import figures as F
 
@@ -55,11 +56,16 @@ def test_distance_profile_marks_no_phi_crit_at_the_limit():
     assert fig.axes[1].get_ylabel() == "survival rate S_rate (%)"
 
 
+def _conv(iterations, n):
+    """Convergence lines: mean = median 10/k, quartiles and deciles around it, a 500 outlier as maximum."""
+    def spread(k):
+        return [10.0 / k, 1.0, 8.0 / k, 9.0 / k, 10.0 / k, 11.0 / k, 12.0 / k, 500.0]
+
+    return [mx.ConvergenceLine(k, n, *spread(k), *spread(k), 10.0 / k, 2.0 * k, 100.0) for k in range(1, iterations + 1)]
+
+
 def test_convergence_and_landscapes_and_pnp():
-    conv = [{"iteration": k, "n": 3, **{f"{n}_{s}": v for n in ("po", "ra") for s, v in
-             (("mean", 10.0 / k), ("std", 1.0), ("q10", 8.0 / k), ("q25", 9.0 / k), ("median", 10.0 / k),
-              ("q75", 11.0 / k), ("q90", 12.0 / k), ("max", 500.0))}} for k in range(1, 6)]
-    fig = F.convergence(conv)
+    fig = F.convergence(_conv(5, 3))
     assert len(fig.axes) == 2 and fig.axes[0].get_yscale() == "log"  # outliers: |PO_k| on a log axis
     r, c = np.meshgrid(np.linspace(-10, 10, 9), np.linspace(0.7, 1.4, 5), indexing="ij")
     xs = np.stack([r.ravel(), c.ravel()], axis=1)
@@ -70,8 +76,8 @@ def test_convergence_and_landscapes_and_pnp():
     assert "Random (4 points)" in [t.get_text() for t in fig.legends[0].get_texts()]
     fig = F.landscape_1d(xs[:9, :1], fs[:9], "roll_deg", {"apgd": (xs[:3, :1], fs[:3])}, eps_safe_m=1000.0, title="t")
     assert "APGD (3 points)" in labels(fig.axes[0])
-    pnp = [{"source": s, "solver": v, "n": 4, "failures": 0, "median_rel_pct": 1.0, "mae_rel_pct": 2.0,
-            "median_abs_m": 30.0, "mae_abs_m": 60.0} for s in ("ground truth", "detector") for v in ("ippe_lm", "iterative")]
+    pnp = [mx.PnpLine(s, v, 4, 0, 30.0, 60.0, 1.0, 2.0, 3.0) for s in ("ground truth", "detector")
+           for v in ("ippe_lm", "iterative")]
     fig = F.pnp_comparison(pnp)
     assert [a.get_title() for a in fig.axes] == ["ground truth keypoints", "detector keypoints"]
     assert fig.axes[0].get_xticklabels()[0].get_text() == "ippe_lm\n0/4 failed"
@@ -110,12 +116,8 @@ def every_figure():
     yield "landscape", F.landscape_2d(xs, fs, ["roll_deg", "contrast"], {"random": xs[:4]}, eps_safe_m=1000.0,
                                       worst={"random": xs[3]},
                                       title="L over ±30°, c∈[0.4, 2.5], image synth_s0_000000 (slant distance 5597 m)")
-    conv = [{"iteration": k, "n": 100, **{f"{n}_{s}": v for n in ("po", "ra") for s, v in
-             (("mean", 10.0 / k), ("std", 1.0), ("q10", 8.0 / k), ("q25", 9.0 / k), ("median", 10.0 / k),
-              ("q75", 11.0 / k), ("q90", 12.0 / k), ("max", 500.0))}} for k in range(1, 30)]
-    yield "convergence", F.convergence(conv, title="GeoRobust convergence")
-    pnp = [{"source": s, "solver": v, "n": 1000, "failures": 12, "median_rel_pct": 1.0, "mae_rel_pct": 2.0,
-            "median_abs_m": 30.0, "mae_abs_m": 60.0} for s in ("ground truth", "detector")
+    yield "convergence", F.convergence(_conv(29, 100), title="GeoRobust convergence")
+    pnp = [mx.PnpLine(s, v, 1000, 12, 30.0, 60.0, 1.0, 2.0, 3.0) for s in ("ground truth", "detector")
            for v in ("ippe_lm", "iterative", "sqpnp", "ippe")]
     yield "pnp", F.pnp_comparison(pnp)
     yield "risk", F.risk_per_image({"mc": [(i, 0.01, 0.0, 0.05) for i in range(40)]}, 40, 0.01)

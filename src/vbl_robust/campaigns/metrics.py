@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -65,7 +65,8 @@ from .store import JobRow, JobStatus
 from .summary import GROUP_BY, Summary, columns, summarize
 
 __all__ = [
-    "ANY_METHOD", "GROUP_BY", "RANK_THRESHOLDS", "REFERENCE_METHOD", "Summary", "against_reference", "breach_kind",
+    "ANY_METHOD", "GROUP_BY", "RANK_THRESHOLDS", "REFERENCE_METHOD", "ConvergenceLine", "PnpLine", "Summary",
+    "against_reference", "breach_kind",
     "breached_images", "budget_value", "columns", "convergence", "distance_profile", "empty_row", "failure_counts",
     "family_of", "family_profile", "first_level_below", "grid_complete", "lattice_covered", "main_rows",
     "measured_rows", "not_measured_lines",
@@ -79,9 +80,44 @@ def _or_nan(v: float | None) -> float:
     return math.nan if v is None else float(v)
 
 
-def convergence(rows: Iterable[JobRow], max_iter: int | None = None) -> list[dict[str, Any]]:
-    """Per iteration k (1-based) over the rows' DIRECT-family traces: |PO_k| (as selected, and after the budget
-    filter) and RA(k) in % — mean, standard deviation, 10/25/50/75/90th percentiles and maximum over images."""
+@dataclass(frozen=True)
+class ConvergenceLine:
+    """One iteration k (1-based) over ``n`` images' DIRECT-family traces: |PO_k| as selected (``po_*``) and RA(k) in %
+    (``ra_*``) — mean, standard deviation, 10/25/50/75/90th percentiles and maximum over images —, the mean |PO_k|
+    after the budget filter, the mean evaluations so far and the median best value (m; NaN: none finite)."""
+
+    iteration: int
+    n: int
+    po_mean: float
+    po_std: float
+    po_q10: float
+    po_q25: float
+    po_median: float
+    po_q75: float
+    po_q90: float
+    po_max: float
+    ra_mean: float
+    ra_std: float
+    ra_q10: float
+    ra_q25: float
+    ra_median: float
+    ra_q75: float
+    ra_q90: float
+    ra_max: float
+    po_after_mean: float
+    nfev_mean: float
+    best_median: float
+
+
+def _spread(v: list[float]) -> list[float]:
+    """Mean, standard deviation, 10/25/50/75/90th percentiles and maximum (NaN ignored)."""
+    a = np.asarray(v)
+    return [float(np.nanmean(a)), float(np.nanstd(a)), *map(float, np.nanpercentile(a, [10, 25, 50, 75, 90])),
+            float(np.nanmax(a))]
+
+
+def convergence(rows: Iterable[JobRow], max_iter: int | None = None) -> list[ConvergenceLine]:
+    """Per iteration k (1-based) over the rows' DIRECT-family traces, a :class:`ConvergenceLine`."""
     per_k: dict[int, dict[str, list[float]]] = {}
     for r in rows:
         for t in r.trace:
@@ -96,28 +132,31 @@ def convergence(rows: Iterable[JobRow], max_iter: int | None = None) -> list[dic
             d["ra"].append(100.0 * _or_nan(t.remaining_area))
             d["best"].append(_or_nan(t.best_value))
             d["nfev"].append(float(t.nfev))
-    out = []
-    for k in sorted(per_k):
-        d = per_k[k]
-        line: dict[str, Any] = {"iteration": k, "n": len(d["po"])}
-        for name in ("po", "ra"):
-            v = np.asarray(d[name])
-            line[f"{name}_mean"] = float(np.nanmean(v))
-            line[f"{name}_std"] = float(np.nanstd(v))
-            q = np.nanpercentile(v, [10, 25, 50, 75, 90])
-            for label, x in zip(("q10", "q25", "median", "q75", "q90"), q, strict=True):
-                line[f"{name}_{label}"] = float(x)
-            line[f"{name}_max"] = float(np.nanmax(v))
-        line["po_after_mean"] = float(np.nanmean(d["po_after"]))
-        line["nfev_mean"] = float(np.mean(d["nfev"]))
-        line["best_median"] = float(np.nanmedian(d["best"])) if np.isfinite(d["best"]).any() else math.nan
-        out.append(line)
-    return out
+    return [ConvergenceLine(k, len(d["po"]), *_spread(d["po"]), *_spread(d["ra"]), float(np.nanmean(d["po_after"])),
+                            float(np.mean(d["nfev"])),
+                            float(np.nanmedian(d["best"])) if np.isfinite(d["best"]).any() else math.nan)
+            for k, d in sorted(per_k.items())]
 
 
-def pnp_summary(rows: Iterable[JobRow]) -> list[dict[str, Any]]:
-    """Per (keypoint source, solver) over the PnP-comparison rows: n, failures, median and mean absolute error
-    (MAE) of the position (m) and of the relative error (% of slant distance), over successful solves."""
+@dataclass(frozen=True)
+class PnpLine:
+    """One (keypoint ``source``, ``solver``) over the PnP-comparison rows: ``n`` images, ``failures``, the median and
+    mean absolute error (MAE) of the position (m) and of the relative error (% of slant distance), and the 95th
+    percentile of the relative error, over successful solves (NaN: none)."""
+
+    source: str
+    solver: str
+    n: int
+    failures: int
+    median_abs_m: float
+    mae_abs_m: float
+    median_rel_pct: float
+    mae_rel_pct: float
+    p95_rel_pct: float
+
+
+def pnp_summary(rows: Iterable[JobRow]) -> list[PnpLine]:
+    """Per (keypoint source, solver) over the PnP-comparison rows, a :class:`PnpLine`."""
     acc: dict[tuple[str, str], dict[str, list[float]]] = {}
     for r in rows:
         if r.status is not JobStatus.DONE or not r.payload:
@@ -133,11 +172,9 @@ def pnp_summary(rows: Iterable[JobRow]) -> list[dict[str, Any]]:
     out = []
     for (src, solver), d in acc.items():
         a, rl = np.asarray(d["abs"]), np.asarray(d["rel"])
-        out.append({
-            "source": src, "solver": solver, "n": len(d["fail"]), "failures": int(sum(d["fail"])),
-            "median_abs_m": float(np.median(a)) if a.size else math.nan, "mae_abs_m": float(np.mean(a)) if a.size else math.nan,
-            "median_rel_pct": float(np.median(rl)) if rl.size else math.nan,
-            "mae_rel_pct": float(np.mean(rl)) if rl.size else math.nan,
-            "p95_rel_pct": float(np.percentile(rl, 95)) if rl.size else math.nan,
-        })
+        out.append(PnpLine(
+            src, solver, len(d["fail"]), int(sum(d["fail"])),
+            float(np.median(a)) if a.size else math.nan, float(np.mean(a)) if a.size else math.nan,
+            float(np.median(rl)) if rl.size else math.nan, float(np.mean(rl)) if rl.size else math.nan,
+            float(np.percentile(rl, 95)) if rl.size else math.nan))
     return out

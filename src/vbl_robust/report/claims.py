@@ -233,13 +233,13 @@ def _last_ci(rows: Sequence[JobRow], eps: float, label: str) -> dict[str, str]:
 def _pnp(e: _Exp) -> ClaimResult:
     jobs = e.jobs(kind="pnp", with_trace=False)
     summary = mx.pnp_summary(jobs)
-    med = {(s["source"], s["solver"]): s["median_rel_pct"] for s in summary}
+    med = {(s.source, s.solver): s.median_rel_pct for s in summary}
     done = [r.payload["errors"] for r in jobs if r.status is JobStatus.DONE and r.payload]
     parts, ours = [], []
     for src in (TRUNCATED, "detector"):
         a, b = med.get((src, "ippe_lm"), math.nan), med.get((src, "iterative"), math.nan)
         ours.append(f"{src}: ippe_lm {fmt_num(a)} % vs iterative {fmt_num(b)} %")
-        fail = {s["solver"]: s["failures"] for s in summary if s["source"] == src and s["failures"]}
+        fail = {s.solver: s.failures for s in summary if s.source == src and s.failures}
         ours[-1] += f" (failed solves: {', '.join(f'{k} {v}' for k, v in fail.items())})" if fail else ""
         both = [d[src] for d in done if "ippe_lm" in d.get(src, {}) and "iterative" in d.get(src, {})]
 
@@ -247,7 +247,7 @@ def _pnp(e: _Exp) -> ClaimResult:
             return [math.nan if s[solver]["abs_m"] is None else float(s[solver]["rel_pct"]) for s in errs]
 
         parts.append(pnp_part(rel("ippe_lm"), rel("iterative"), src))
-    n = max((s["n"] for s in summary), default=0)
+    n = max((s.n for s in summary), default=0)
     return ClaimResult("; ".join(ours), "", *judge(parts), n)
 
 def _spatial_1d(e: _Exp) -> ClaimResult:
@@ -418,11 +418,11 @@ def _convergence(e: _Exp) -> ClaimResult:
     ra_ok, ra_text = ra_part(ra)
     po_ok, po_text = po_part(po)
     conv = mx.convergence(runs)
-    mean_ra = {c["iteration"]: c["ra_mean"] for c in conv}
+    mean_ra = {c.iteration: c.ra_mean for c in conv}
     early = {k: v for k, v in mean_ra.items() if k <= RA_BY_ITER and math.isfinite(v)}
     k = min(early, key=early.__getitem__, default=None)
     low = f"lowest mean RA(k ≤ {RA_BY_ITER}) {fmt_num(early[k])} % at k = {k}" if k else "no RA(k)"
-    pos = [c["po_mean"] for c in conv]
+    pos = [c.po_mean for c in conv]
     tail = pos[len(pos) // 2:]
     pos_text = (f"mean |PO_k| {fmt_num(pos[0])} → max {fmt_num(max(pos))}, {fmt_num(min(tail))}–{fmt_num(max(tail))} "
                 f"over k = {len(pos) - len(tail) + 1}…{len(pos)}" if pos else "no |PO_k|")

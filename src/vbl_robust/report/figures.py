@@ -21,7 +21,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from ..campaigns.metrics import ANY_METHOD, Summary  # noqa: E402
+from ..campaigns.metrics import ANY_METHOD, ConvergenceLine, PnpLine, Summary  # noqa: E402
 from .figure_style import (  # noqa: E402
     AXIS_LABELS,
     EPS_STYLE,
@@ -162,19 +162,19 @@ def runtime(summary: Sequence[Summary], *, axis: str, title: str, eps_safe_m: fl
     return fig
 
 
-def pnp_comparison(summary: Sequence[Mapping[str, Any]]) -> Figure:
+def pnp_comparison(summary: Sequence[PnpLine]) -> Figure:
     """Median and mean (MAE) relative position error per PnP solver (over its successful solves), for the
     ground-truth and the detector keypoints; tick labels give each solver's failure count."""
-    sources = list(dict.fromkeys(r["source"] for r in summary))
+    sources = list(dict.fromkeys(r.source for r in summary))
     fig, axes = new_fig(1, len(sources), size=(3.8 * len(sources), 4.2), squeeze=False)
     for k, (ax, src) in enumerate(zip(axes[0], sources, strict=True)):
-        rs = [r for r in summary if r["source"] == src]
+        rs = [r for r in summary if r.source == src]
         x = np.arange(len(rs))
-        ax.bar(x - 0.2, [r["median_rel_pct"] for r in rs], 0.4, label="median", color="#1f77b4")
-        ax.bar(x + 0.2, [r["mae_rel_pct"] for r in rs], 0.4, label="mean (MAE)", color="#ff7f0e")
+        ax.bar(x - 0.2, [r.median_rel_pct for r in rs], 0.4, label="median", color="#1f77b4")
+        ax.bar(x + 0.2, [r.mae_rel_pct for r in rs], 0.4, label="mean (MAE)", color="#ff7f0e")
         ax.set_xticks(x)
-        ax.set_xticklabels([f"{r['solver']}\n{r['failures']}/{r['n']} failed" for r in rs], fontsize=8)
-        vals = np.asarray([r[k] for r in rs for k in ("median_rel_pct", "mae_rel_pct")], dtype=float)
+        ax.set_xticklabels([f"{r.solver}\n{r.failures}/{r.n} failed" for r in rs], fontsize=8)
+        vals = np.asarray([v for r in rs for v in (r.median_rel_pct, r.mae_rel_pct)], dtype=float)
         if np.any(np.isfinite(vals) & (vals > 0)):  # a log axis needs a positive value (every solve may fail)
             ax.set_yscale("log")
         else:
@@ -244,15 +244,15 @@ def distance_profile(profile: Sequence[Mapping[str, Any]], *, limit_deg: float, 
     return fig
 
 
-def convergence(conv: Sequence[Mapping[str, Any]], *, title: str = "GeoRobust convergence (roll ±15°)") -> Figure:
+def convergence(conv: Sequence[ConvergenceLine], *, title: str = "GeoRobust convergence (roll ±15°)") -> Figure:
     """Top: |PO_k| per iteration; bottom: RA(k) in %. Median (line), interquartile range and 10–90th percentile
     (bands), mean (dotted) over images — percentiles, because a few images with a flat region (every box ties)
     have PO sets orders of magnitude larger than the rest."""
     fig, (a1, a2) = new_fig(2, 1, size=(6.4, 6.2), sharex=True)
-    k = np.array([r["iteration"] for r in conv])
+    k = np.array([r.iteration for r in conv])
     for ax, name, ylabel in ((a1, "po", "|PO_k| (potentially optimal boxes)"), (a2, "ra", "RA(k): remaining area (%)")):
         def col(key: str, name: str = name) -> np.ndarray:
-            return np.array([r.get(f"{name}_{key}", np.nan) for r in conv], dtype=np.float64)
+            return np.array([getattr(r, f"{name}_{key}") for r in conv], dtype=np.float64)
 
         ax.fill_between(k, col("q10"), col("q90"), color="#1f77b4", alpha=0.12, label="10–90th percentile")
         ax.fill_between(k, col("q25"), col("q75"), color="#1f77b4", alpha=0.3, label="25–75th percentile")
@@ -260,7 +260,7 @@ def convergence(conv: Sequence[Mapping[str, Any]], *, title: str = "GeoRobust co
         ax.plot(k, col("mean"), color="#d62728", linestyle=":", linewidth=1.2, label="mean")
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
-    hi = np.nanmax([r.get("po_max", r["po_mean"]) for r in conv]) if conv else 1.0
+    hi = np.nanmax([r.po_max for r in conv]) if conv else 1.0
     if hi > 60:
         a1.set_yscale("log")
         a1.yaxis.set_major_formatter(PLAIN)
@@ -270,7 +270,7 @@ def convergence(conv: Sequence[Mapping[str, Any]], *, title: str = "GeoRobust co
     a2.set_xlabel("iteration k (k = 1: the whole box)")
     a1.legend(fontsize=8)
     a2.legend(fontsize=8)
-    n = max((r["n"] for r in conv), default=0)
+    n = max((r.n for r in conv), default=0)
     fig.suptitle(f"{title}, N = {n} images")
     return fig
 

@@ -337,15 +337,15 @@ def section_convergence(ctx: Context) -> Section | None:
     s.html.append(ctx.figure(F.convergence(conv, title="GeoRobust convergence"), "convergence",
                              "|PO_k|: potentially optimal boxes selected at iteration k. RA(k): their total volume "
                              "as % of the box, when selected (it need not decrease monotonically)."))
-    k10 = next((c for c in conv if c["iteration"] == 10), None)
+    k10 = next((c for c in conv if c.iteration == 10), None)
     if k10:
-        s.html.append(f"<p>At k = 10: RA mean {fmt_num(k10['ra_mean'])} % (median {fmt_num(k10['ra_median'])} %), "
-                      f"|PO| mean {fmt_num(k10['po_mean'])}.</p>")
+        s.html.append(f"<p>At k = 10: RA mean {fmt_num(k10.ra_mean)} % (median {fmt_num(k10.ra_median)} %), "
+                      f"|PO| mean {fmt_num(k10.po_mean)}.</p>")
     cols = [("iteration", "k", None), ("n", "images", None), ("po_mean", "|PO_k| mean", None), ("po_std", "std", None),
             ("po_median", "median", None), ("po_after_mean", "after budget filter", None), ("ra_mean", "RA(k) % mean", None),
             ("ra_std", "std", None), ("ra_q25", "25th", None), ("ra_median", "median", None), ("ra_q75", "75th", None),
             ("nfev_mean", "evals (mean)", None), ("best_median", "median best L (m)", None)]
-    s.html.append(table(conv, cols))
+    s.html.append(table([dataclasses.asdict(c) for c in conv], cols))
     return s
 
 
@@ -358,7 +358,7 @@ def section_pnp(ctx: Context) -> Section | None:
     s.html.append(ctx.figure(F.pnp_comparison(summary), "pnp_solvers",
                              "Median and mean absolute relative error of the camera position per solver, on the "
                              "ground-truth corners and on the detector's corners (unperturbed images)."))
-    s.html.append(table(summary, [("source", "keypoints", None), ("solver", "solver", None), ("n", "images", None),
+    s.html.append(table([dataclasses.asdict(p) for p in summary], [("source", "keypoints", None), ("solver", "solver", None), ("n", "images", None),
                                   ("failures", "failures", None), ("median_abs_m", "median (m)", None),
                                   ("mae_abs_m", "MAE (m)", None), ("median_rel_pct", "median (%)", None),
                                   ("mae_rel_pct", "MAE (%)", None), ("p95_rel_pct", "95th pct (%)", None)],
