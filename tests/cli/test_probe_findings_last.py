@@ -135,10 +135,10 @@ def test_the_markdown_of_a_partial_run_says_how_much_is_stored(run1d, tmp_path):
     part = _edited(run1d, tmp_path / "part", "UPDATE runs SET jobs_total = jobs_total + 5, status = 'running'")
     res = runner.invoke(app, ["report", str(part), "--format", "md"])
     assert res.exit_code == 0, res.output
-    assert "A run is writing this store now: 3 of 8 planned jobs stored so far" in res.stdout
+    assert "Run in progress: a run is still writing this store; 3 of 8 planned jobs stored so far" in res.stdout
     with sqlite3.connect(part / "results.sqlite") as con:
         con.execute("UPDATE runs SET status = 'killed'")
-    assert "3 of 8 planned jobs stored (the last run killed)" in runner.invoke(
+    assert "Incomplete: 3 of 8 planned jobs stored (the last run killed)" in runner.invoke(
         app, ["report", str(part), "--format", "md"]).stdout
     assert "planned jobs" not in runner.invoke(app, ["report", str(run1d), "--format", "md"]).stdout
 

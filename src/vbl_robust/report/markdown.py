@@ -90,10 +90,10 @@ def _progress(run: str | Path) -> list[str]:
     if not runs or stored >= planned:
         return []
     if runs[-1].status == RunStatus.RUNNING:
-        return [f"**A run is writing this store now: {stored} of {planned} planned jobs stored so far; the table "
-                "holds the images every method has completed.**", ""]
-    return [f"**{stored} of {planned} planned jobs stored (the last run {esc_md(runs[-1].status)}): the table holds "
-            "the images every method completed; rerun the command to resume.**", ""]
+        return [f"**Run in progress: a run is still writing this store; {stored} of {planned} planned jobs stored "
+                "so far, the table holds the images every method has completed.**", ""]
+    return [f"**Incomplete: {stored} of {planned} planned jobs stored (the last run {esc_md(runs[-1].status)}); the "
+            "table holds the images every method completed; rerun the command to resume.**", ""]
 
 
 def _read_alike(run: str | Path, spec: CampaignSpec, rows: Sequence, other: str | Path):
