@@ -29,8 +29,11 @@ RESULTS_MAX_BYTES = 10_000_000
 
 
 def paper_store(path: str) -> bool:
-    """Whether ``path`` is one of the paper's packed stores (``results/paper/<experiment>/results.sqlite.xz``)."""
+    """Whether ``path`` is one of the paper's packed stores: ``results/paper/<experiment>/results.sqlite.xz``, or
+    the same experiments run with another detector, ``results/paper/detectors/<label>/<experiment>/…``."""
     parts = PurePosixPath(path).parts
+    if parts[:3] == ("results", "paper", "detectors"):
+        parts = parts[:2] + parts[4:]
     return len(parts) == 4 and parts[:2] == ("results", "paper") and parts[3] == "results.sqlite.xz"
 
 
@@ -88,13 +91,16 @@ def test_the_checks_catch_what_they_are_for():
              "models/ov/model.xml": 100, "models/ov/model.bin": 5_000_000, "docs/layout.xml": 100,
              "results/paper/spatial-1d/results.sqlite.xz": 8_000_000, "results/harden/a/results.sqlite.xz": 700_000,
              "results/one-off/results.sqlite": 5_000_000, "results/paper/spatial-1d/report.html": 1_500_000,
-             "results/paper/index.html": 20_000, "results/paper/nested/x/results.sqlite.xz": 1}
+             "results/paper/index.html": 20_000, "results/paper/nested/x/results.sqlite.xz": 1,
+             "results/paper/detectors/u2/spatial-2d/results.sqlite.xz": 3_000_000,
+             "results/paper/detectors/u2/nested/x/results.sqlite.xz": 2}
     assert weights_outside_homes(paths) == ["models/ov/model.bin", "models/ov/model.xml",
                                             "results/detector_candidates/step_s.pt", "train_runs/x/best.PTH"]
     assert raw_stores(paths) == ["results/harden/a/results.sqlite.xz", "results/one-off/results.sqlite",
+                                 "results/paper/detectors/u2/nested/x/results.sqlite.xz",
                                  "results/paper/nested/x/results.sqlite.xz"]
     assert big_html(paths) == ["results/paper/spatial-1d/report.html (1.50 MB)"]
-    assert results_bytes(paths) == 700_000 + 5_000_000 + 1_500_000 + 20_000 + 1 + 6_000_000
+    assert results_bytes(paths) == 700_000 + 5_000_000 + 1_500_000 + 20_000 + 1 + 6_000_000 + 2
 
 
 def test_no_weights_are_tracked_outside_the_shipped_models_and_the_tests(tracked):
