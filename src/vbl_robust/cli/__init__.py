@@ -10,7 +10,6 @@ from __future__ import annotations
 import errno
 import sqlite3
 import warnings
-from importlib.metadata import version as installed_version
 from typing import Annotated
 
 import typer
@@ -82,7 +81,9 @@ app = typer.Typer(
 
 def _version(value: bool) -> None:
     if value:
-        typer.echo(f"vbl-robust {installed_version('vbl-robust')}")
+        from importlib.metadata import version  # 0.1 s: for --version only, not for ``--help``
+
+        typer.echo(f"vbl-robust {version('vbl-robust')}")
         raise typer.Exit()
 
 

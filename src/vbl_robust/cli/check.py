@@ -17,14 +17,8 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-from rich.table import Table
 
 from vbl_robust.atomic import atomic_write
-from vbl_robust.data.check import IMAGE_PROBLEMS, check_images, check_labels
-from vbl_robust.data.lard_read import read_lard
-from vbl_robust.data.sequence import group_sequences
 
 from . import options as o
 from .common import check_writable, fail, one_line, set_verbosity
@@ -85,7 +79,11 @@ def check(
     """Check a LARD V2 dataset before a run: each row's image (present, decodable, of the stated size), its labels
     against the reprojected runway corners, and whether an audit would use or skip it. Exit 0: every row usable;
     1: some row would not be measured; 2: DATA is not a dataset."""
-    from vbl_robust.campaigns.samples import find_lard_files  # torch behind it: not for ``--help``
+    # torch (the samples) and pymap3d (the data) behind these: not for ``--help``
+    from vbl_robust.campaigns.samples import find_lard_files
+    from vbl_robust.data.check import check_images
+    from vbl_robust.data.lard_read import read_lard
+    from vbl_robust.data.sequence import group_sequences
 
     quiet = set_verbosity(quiet=quiet, verbose=verbose)
     if not data.exists():
@@ -142,6 +140,8 @@ def _quiet_reader() -> Iterator[None]:
 
 
 def _with_progress(work: Any, total: int, quiet: bool) -> Any:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
     columns = (TextColumn("[bold]images"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
     with Progress(*columns, disable=quiet, transient=True) as bar:
         task = bar.add_task("images", total=total)
@@ -149,6 +149,8 @@ def _with_progress(work: Any, total: int, quiet: bool) -> Any:
 
 
 def _rows(every: list, used: list, image_checks: list, frames: dict[int, tuple[str, int]]) -> list[RowCheck]:
+    from vbl_robust.data.check import check_labels
+
     kept = {s.meta["row"]: s for s in used}
     by_image = {s.meta["image"].strip(): s for s in used}
     checks = dict(zip((s.meta["row"] for s in every), image_checks, strict=True))
@@ -192,6 +194,9 @@ def _first_shown(rows: list[RowCheck]) -> list[RowCheck]:
 
 
 def _print_table(rows: list[RowCheck], shown: list[RowCheck], sequences: bool) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
     table = Table(title="rows of the dataset" + ("" if len(shown) == len(rows) else
                                                  f" (the first {len(shown)} of {len(rows)}, problems first)"))
     table.add_column("row", justify="right")
@@ -224,6 +229,8 @@ def _print_table(rows: list[RowCheck], shown: list[RowCheck], sequences: bool) -
 
 
 def _summary(rows: list[RowCheck], seqs: list) -> dict[str, Any]:
+    from vbl_robust.data.check import IMAGE_PROBLEMS
+
     unmeasured = [r for r in rows if r.audit == "unmeasured"]
     kinds = Counter(r.image_kind for r in unmeasured if r.image_kind)
     out = {

@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import typer
-import yaml
 
 from vbl_robust.campaigns.spec import BoxSpec, box_label
 from vbl_robust.perturb.registry import PERTURBATIONS, known
@@ -210,6 +209,8 @@ def parse_methods(text: str) -> tuple[str, ...]:
 def parse_method_options(values: list[str] | None) -> dict[str, dict[str, Any]]:
     """``--method-option METHOD.OPTION=VALUE`` (repeatable) → ``{method: {option: value}}``; a one-line error
     naming the flag and the value for an unknown method or option or an unreadable value."""
+    import yaml  # not for ``--help``
+
     from vbl_robust.search.api import METHODS, method_options  # scipy behind it: not for ``--help``
 
     out: dict[str, dict[str, Any]] = {}

@@ -36,7 +36,6 @@ from pathlib import Path
 from typing import Annotated, Any, get_args, get_origin
 
 import typer
-import yaml
 from typer._click.globals import get_current_context  # typer's own click: where its commands run
 from typer.core import TyperCommand
 
@@ -84,6 +83,8 @@ def _keys(params: Iterable[Any]) -> dict[str, Any]:
 
 def _strict_loader() -> type:
     """A YAML safe loader (libyaml's when installed) that refuses a mapping's key given twice."""
+    import yaml  # not for ``--help``
+
     base = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
     class StrictLoader(base):  # type: ignore[misc, valid-type]
@@ -110,6 +111,8 @@ def expanded_size(root: Any, limit: int) -> int:
     """The size of the YAML node graph ``root`` with every alias expanded (a scalar counts its characters + 1, a
     collection 1 + its items; at most ``limit`` + 1: counting stops there), each node's size computed once — so an
     alias bomb is measured in the time it takes to read its few nodes. ``ConfigError`` for a recursive alias."""
+    import yaml  # not for ``--help``
+
     def items(node: Any) -> list[Any]:
         if isinstance(node, yaml.SequenceNode):
             return list(node.value)
@@ -140,6 +143,8 @@ def expanded_size(root: Any, limit: int) -> int:
 def load_yaml(path: Path) -> Any:
     """The YAML document of the configuration file ``path``, read within bounds (module docstring);
     ``ConfigError`` (one line, without the path) for anything refused, ``OSError`` when it cannot be read."""
+    import yaml  # not for ``--help``
+
     st = os.stat(path)
     if not stat.S_ISREG(st.st_mode):
         raise ConfigError("not a regular file")
@@ -288,6 +293,8 @@ def write_config(command: str, params: dict[str, Any], keys: dict[str, str] | No
         return None
     if not ((where / "results.sqlite").exists() or any(where.glob("*/results.sqlite"))):
         return None
+    import yaml  # not for ``--help``
+
     body = recorded(command, params, keys)
     return atomic_write(where / CONFIG_FILE, yaml.safe_dump(body, sort_keys=False, allow_unicode=True))
 

@@ -3,8 +3,9 @@
 table, the exports and the report; the images it runs on (used by audit, demo, risk, reproduce and truth, through
 :mod:`.requests`).
 
-The library modules behind the run (the runner, the store, the detector, the samples, the report) import torch:
-they are imported inside the functions that use them, so that ``vbl-robust --help`` stays instant."""
+The library modules behind the run (the runner, the store, the detector, the samples, the report) import torch, and
+rich takes 50 ms: they are imported inside the functions that use them, so that ``vbl-robust --help`` stays
+instant."""
 
 from __future__ import annotations
 
@@ -16,18 +17,6 @@ from pathlib import Path
 from typing import Any
 
 import typer
-from rich.console import Console
-from rich.progress import (
-    BarColumn,
-    MofNCompleteColumn,
-    Progress,
-    TextColumn,
-    TimeElapsedColumn,
-    TimeRemainingColumn,
-)
-from rich.table import Table
-
-from vbl_robust.data.check import first_problem
 
 from .common import check_names, check_writable, fail, one_line
 from .config import record_configuration
@@ -65,6 +54,15 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
     executor; ``wait``: wait for another run writing the same store instead of refusing; ``allow_unmeasured``: run
     past images that cannot be read, whose jobs are then not measured, instead of refusing the run); returns the
     run summary."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
     from vbl_robust.campaigns.precheck import check_run
     from vbl_robust.campaigns.runner import run_campaign
     from vbl_robust.campaigns.store import ResultStore
@@ -79,6 +77,8 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
     with one_line(ValueError):
         check_store(out, spec, samples, detector, wait=wait)  # the store there accepts this run, read only
     if allow_unmeasured:
+        from vbl_robust.data.check import first_problem  # pymap3d behind it: not for ``--help``
+
         if problem := first_problem(samples):
             typer.secho(f"warning: {problem}; their jobs will be not measured (--allow-unmeasured)",
                         fg=typer.colors.YELLOW, err=True)
@@ -268,6 +268,9 @@ def unmeasured_ok(rows: list, unit: str, allow_unmeasured: bool) -> bool:
 def print_summary(spec: Any, rows: list) -> None:
     """The survival table of a campaign's main rows (per method, and per box or budget where they vary) and its
     legend."""
+    from rich.console import Console
+    from rich.table import Table
+
     from vbl_robust.campaigns.summary import summarize
 
     lines = summarize(rows, spec.eps_safe_m)

@@ -13,7 +13,6 @@ from typing import Annotated
 import typer
 
 from ..constants import MAX_IMAGES
-from ..data.lard_read import read_lard
 from ..space import ParameterBox
 from . import options as o
 from .common import fail, one_line, parse_perturb
@@ -72,6 +71,7 @@ def train(
     samples = None
     if lard is not None:
         from vbl_robust.campaigns.samples import find_lard_files  # torch behind it: not for ``--help``
+        from vbl_robust.data.lard_read import read_lard
 
         with one_line():
             csv_path, db_path = find_lard_files(lard)

@@ -19,8 +19,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
-from rich.table import Table
 
 from ..atomic import atomic_write
 from ..campaigns.refine import refine_run
@@ -155,6 +153,9 @@ def refine_audit(out: Path, samples: list, detector: Any, budget: int, *,
     except ValueError as exc:
         fail(f"--refine-zones: {exc}")
     if not quiet:
+        from rich.console import Console
+        from rich.table import Table
+
         t = Table(title=f"zones refined with {budget} evaluations per job (volume %, before → after)")
         for c in ("image", "method", "evals", "breached", "undecided", "ruled out", "basis"):
             t.add_column(c, justify="left" if c in ("image", "method", "basis") else "right")
