@@ -126,9 +126,9 @@ def test_smallest_breach_levels_and_distance_profile():
     lv = mx.smallest_breach_levels(rows)
     assert lv[("near", "georobust")] == 5 and lv[("far", "georobust")] == math.inf
     prof = mx.distance_profile(rows, {"near": 600.0, "mid": 2000.0, "far": 5000.0, "far2": 6000.0}, [5, 15, 45])
-    assert [p["quartile"] for p in prof] == [1, 2, 3, 4]
-    assert [p["phi_crit"] for p in prof] == [5, 15, math.inf, 45]
-    assert prof[0]["d_min_m"] == 600.0 and prof[-1]["d_max_m"] == 6000.0
+    assert [p.quartile for p in prof] == [1, 2, 3, 4]
+    assert [p.phi_crit for p in prof] == [5, 15, math.inf, 45]
+    assert prof[0].d_min_m == 600.0 and prof[-1].d_max_m == 6000.0
 
 
 def test_reference_rows_restrict_a_dense_grid_to_nested_boxes():

@@ -7,6 +7,7 @@ import pytest
 from matplotlib.figure import Figure
 
 from vbl_robust.campaigns import metrics as mx
+from vbl_robust.campaigns.levels import DistanceLine
 from vbl_robust.campaigns.metrics import Summary
 from vbl_robust.report import figures as F
 
@@ -47,8 +48,8 @@ def test_runtime_has_survival_and_median_panels_with_eps():
 
 
 def test_distance_profile_marks_no_phi_crit_at_the_limit():
-    prof = [{"quartile": q, "d_min_m": 1000.0 * q, "d_max_m": 1000.0 * (q + 1), "method": "georobust", "n": 3,
-             "phi_crit": v, "survival": [50.0, 5.0, 0.0]} for q, v in ((1, 10.0), (2, math.inf))]
+    prof = [DistanceLine(q, 1000.0 * q, 1000.0 * (q + 1), "georobust", 3, v, 1, [50.0, 5.0, 0.0], v)
+            for q, v in ((1, 10.0), (2, math.inf))]
     fig = F.distance_profile(prof, limit_deg=45.0, budgets=[5, 10, 45])
     assert [t.get_text() for t in fig.axes[0].texts] == ["10°"]
     bars = [p for p in fig.axes[0].patches if p.get_width() < 1]
@@ -105,8 +106,8 @@ def every_figure():
                                           xlabel="perturbation box (roll half-width, contrast range)")
     yield "runtime", F.runtime(rows, axis="max_seconds", eps_safe_m=1000.0, reference={"survival": 5.0,
                                "median_worst_m": 3000.0}, title="Time budget per image, box ±10°, c∈[0.7, 1.4]")
-    prof = [{"quartile": q, "d_min_m": 1000.0 * q, "d_max_m": 1000.0 * (q + 1), "method": m, "n": 25,
-             "phi_crit": 10.0 * q, "survival": [50.0, 5.0, 0.0]} for q in (1, 2, 3, 4) for m in ("georobust", "apgd")]
+    prof = [DistanceLine(q, 1000.0 * q, 1000.0 * (q + 1), m, 25, 10.0 * q, 20, [50.0, 5.0, 0.0], 10.0 * q)
+            for q in (1, 2, 3, 4) for m in ("georobust", "apgd")]
     yield "distance", F.distance_profile(prof, limit_deg=45.0, budgets=[5, 10, 45])
     curves = {m: (np.arange(1, 201), np.linspace(100, 900, 200)) for m in ("georobust", "random", "apgd")}
     yield "progress", F.best_vs_evals(curves, eps_safe_m=1000.0, title="Search progress (median over images)")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -58,10 +59,27 @@ def quartile_of(distance: float, edges: np.ndarray) -> int:
     return int(min(np.searchsorted(edges, distance, side="right") - 1, len(edges) - 2))
 
 
+@dataclass(frozen=True)
+class DistanceLine:
+    """One slant-distance quartile (1 = closest) and method: its range ``d_min_m``–``d_max_m`` (m), ``n`` images, the
+    median smallest breaching level, how many breached within the budgets, the survival % per budget and φ_crit
+    (``inf`` = no drop below the threshold within the budgets; NaN without images)."""
+
+    quartile: int
+    d_min_m: float
+    d_max_m: float
+    method: str
+    n: int
+    median_level: float
+    n_breached: int
+    survival: list[float]
+    phi_crit: float
+
+
 def distance_profile(rows: Iterable[JobRow], distances: dict[str, float], budgets: Sequence[float],
-                     q: int = 4, threshold_pct: float = 10.0) -> list[dict[str, Any]]:
-    """Per distance quartile and method: n, slant-distance range, median smallest breaching level, survival per
-    budget and φ_crit (``inf`` = no drop below ``threshold_pct`` within the budgets)."""
+                     q: int = 4, threshold_pct: float = 10.0) -> list[DistanceLine]:
+    """Per distance quartile and method a :class:`DistanceLine` (φ_crit: the first budget at which survival drops
+    below ``threshold_pct``)."""
     lv = smallest_breach_levels(rows)
     ids = sorted({sid for sid, _ in lv if sid in distances}, key=lambda s: distances[s])
     if not ids:
@@ -74,12 +92,10 @@ def distance_profile(rows: Iterable[JobRow], distances: dict[str, float], budget
         for m in methods:
             levels = [lv[(s, m)] for s in members if (s, m) in lv]
             finite = [v for v in levels if math.isfinite(v)]
-            out.append({
-                "quartile": k + 1, "d_min_m": float(edges[k]), "d_max_m": float(edges[k + 1]), "method": m,
-                "n": len(levels), "median_level": float(np.median(levels)) if levels else math.nan,
-                "n_breached": len(finite), "survival": survival_curve(levels, budgets),
-                "phi_crit": phi_crit(levels, budgets, threshold_pct) if levels else math.nan,
-            })
+            out.append(DistanceLine(k + 1, float(edges[k]), float(edges[k + 1]), m, len(levels),
+                                    float(np.median(levels)) if levels else math.nan, len(finite),
+                                    survival_curve(levels, budgets),
+                                    phi_crit(levels, budgets, threshold_pct) if levels else math.nan))
     return out
 
 

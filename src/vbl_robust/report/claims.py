@@ -76,6 +76,7 @@ import numpy as np
 from ..atomic import atomic_write
 from ..campaigns import metrics as mx
 from ..campaigns.experiments import PAPER, PAPER_METHODS
+from ..campaigns.levels import DistanceLine
 from ..campaigns.pnpcheck import TRUNCATED
 from ..campaigns.store import PACKED, STORE, JobRow, JobStatus, ResultStore
 from ..constants import Verdict
@@ -358,35 +359,34 @@ def _distance(e: _Exp) -> ClaimResult:
     limit = max(budgets, default=math.nan)
     dist = {sid: s.slant_distance_m for sid, s in e.ctx.samples.items() if sid in e.ids}
     every = rows + e.reference()
-    prof = [p for p in mx.distance_profile(every, dist, budgets) if p["n"]]
+    prof = [p for p in mx.distance_profile(every, dist, budgets) if p.n]
     levels = mx.smallest_breach_levels(every)
 
-    def of(m: str) -> list[dict]:
-        return [p for p in prof if p["method"] == known_method(m)]
+    def of(m: str) -> list[DistanceLine]:
+        return [p for p in prof if p.method == known_method(m)]
 
     def text(m: str) -> str:
-        return f"{m} " + ", ".join(f"Q{p['quartile']} {p['d_min_m']:.0f}–{p['d_max_m']:.0f} m: "
-                                   f"{_phi(p['phi_crit'], limit)}" for p in of(m))
+        return f"{m} " + ", ".join(f"Q{p.quartile} {p.d_min_m:.0f}–{p.d_max_m:.0f} m: {_phi(p.phi_crit, limit)}"
+                                   for p in of(m))
 
     ids = sorted({s for s, _ in levels if s in dist}, key=dist.__getitem__)  # as distance_profile splits them
     edges = mx.quartile_edges([dist[s] for s in ids]) if ids else np.zeros(5)
 
-    def interval(p: dict) -> tuple[float, float, float]:
-        m = p["method"]
-        return phi_interval([levels[(s, m)] for s in ids
-                             if (s, m) in levels and mx.quartile_of(dist[s], edges) + 1 == p["quartile"]], budgets)
+    def interval(p: DistanceLine) -> tuple[float, float, float]:
+        return phi_interval([levels[(s, p.method)] for s in ids
+                             if (s, p.method) in levels and mx.quartile_of(dist[s], edges) + 1 == p.quartile], budgets)
 
-    def group(ps: list[dict], target: float | None, claim: str) -> tuple[list[Outcome], str]:
+    def group(ps: list[DistanceLine], target: float | None, claim: str) -> tuple[list[Outcome], str]:
         outs, texts = [], []
         for p in ps:
             phi, lo, hi = interval(p)
             v = (in_range(lo, hi, target - PHI_TOL_DEG, target + PHI_TOL_DEG) if target is not None
                  else in_range(lo, hi, low=limit))
             outs.append(v)
-            texts.append(f"Q{p['quartile']} {phi_text(phi, lo, hi, limit)} {v.value if v else 'not measured'}")
+            texts.append(f"Q{p.quartile} {phi_text(phi, lo, hi, limit)} {v.value if v else 'not measured'}")
         return outs, f"{claim}: " + (", ".join(texts) or "no quartile")
 
-    mid = {id(p): (p["d_min_m"] + p["d_max_m"]) / 2 for p in prof}
+    mid = {id(p): (p.d_min_m + p.d_max_m) / 2 for p in prof}
     near = [p for p in of("georobust") if mid[id(p)] < NEAR_M]
     far = [p for p in of("georobust") if mid[id(p)] >= NEAR_M]
     groups = [group(near, 15.0, f"georobust's φ_crit within {PHI_TOL_DEG:g}° of 15° below {NEAR_M:g} m"),

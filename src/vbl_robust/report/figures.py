@@ -21,6 +21,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
+from ..campaigns.levels import DistanceLine  # noqa: E402
 from ..campaigns.metrics import ANY_METHOD, ConvergenceLine, PnpLine, Summary  # noqa: E402
 from .figure_style import (  # noqa: E402
     AXIS_LABELS,
@@ -188,23 +189,23 @@ def pnp_comparison(summary: Sequence[PnpLine]) -> Figure:
     return fig
 
 
-def distance_profile(profile: Sequence[Mapping[str, Any]], *, limit_deg: float, budgets: Sequence[float],
+def distance_profile(profile: Sequence[DistanceLine], *, limit_deg: float, budgets: Sequence[float],
                      title: str = "Vulnerability profile by approach distance") -> Figure:
     """Left: φ_crit (roll budget dropping survival below 10 %) per slant-distance quartile, one bar per method;
     hatched bars in the red band ≥ ``limit_deg`` = no φ_crit within the limit. Right: survival rate against the
     roll budget per quartile for the first method (solid) and the dense-grid reference (dashed) if present."""
     fig, (ax, a2) = new_fig(1, 2, size=(11.5, 4.8), gridspec_kw={"width_ratios": [1.25, 1]})
-    quartiles = sorted({r["quartile"] for r in profile})
-    methods = method_order(p["method"] for p in profile)
+    quartiles = sorted({r.quartile for r in profile})
+    methods = method_order(p.method for p in profile)
     width = 0.8 / max(len(methods), 1)
     top = limit_deg * 1.12
     ax.axhspan(limit_deg, top, color="#d62728", alpha=0.15)
     handles = [Patch(facecolor="#d62728", alpha=0.15, label=f"≥ {limit_deg:g}° (hatched): no φ_crit within the limit")]
     for i, m in enumerate(methods):
         st = style(m)
-        rs = {r["quartile"]: r for r in profile if r["method"] == m}
+        rs = {r.quartile: r for r in profile if r.method == m}
         xs = [q + (i - (len(methods) - 1) / 2) * width for q in quartiles]
-        vals = [rs[q]["phi_crit"] if q in rs else math.nan for q in quartiles]
+        vals = [rs[q].phi_crit if q in rs else math.nan for q in quartiles]
         for x, v in zip(xs, vals, strict=True):
             beyond = not math.isfinite(v)
             ax.bar(x, limit_deg * 1.06 if beyond else v, width * 0.9, color=st["color"], alpha=0.85,
@@ -212,8 +213,8 @@ def distance_profile(profile: Sequence[Mapping[str, Any]], *, limit_deg: float, 
             if not beyond:
                 ax.annotate(f"{v:g}°", (x, v), ha="center", va="bottom", fontsize=7)
         handles.append(Patch(facecolor=st["color"], label=st["label"]))
-    first = [r for r in profile if r["method"] == methods[0]] if methods else []
-    lab = {r["quartile"]: f"Q{r['quartile']}\n{r['d_min_m'] / 1000:.1f}–{r['d_max_m'] / 1000:.1f} km\n(n={r['n']})" for r in first}
+    first = [r for r in profile if r.method == methods[0]] if methods else []
+    lab = {r.quartile: f"Q{r.quartile}\n{r.d_min_m / 1000:.1f}–{r.d_max_m / 1000:.1f} km\n(n={r.n})" for r in first}
     ax.set_xticks(quartiles)
     ax.set_xticklabels([lab.get(q, f"Q{q}") for q in quartiles], fontsize=8)
     ax.set_ylim(0, top)
@@ -227,9 +228,9 @@ def distance_profile(profile: Sequence[Mapping[str, Any]], *, limit_deg: float, 
     shown = [m for m in methods if m != REFERENCE][:1] + [m for m in methods if m == REFERENCE]
     for q, c in zip(quartiles, colors, strict=True):
         for m in shown:
-            r = next((r for r in profile if r["method"] == m and r["quartile"] == q), None)
+            r = next((r for r in profile if r.method == m and r.quartile == q), None)
             if r is not None:
-                a2.plot(budgets, r["survival"], color=c, linestyle="--" if m == REFERENCE else "-", marker="o",
+                a2.plot(budgets, r.survival, color=c, linestyle="--" if m == REFERENCE else "-", marker="o",
                         markersize=3, label=f"Q{q}" if m == shown[0] else None)
     a2.axhline(10, color="grey", linestyle=":", linewidth=1)
     a2.set_ylim(-3, 103)

@@ -255,9 +255,9 @@ def section_distance(ctx: Context) -> Section | None:
                              "φ_crit per slant-distance quartile: the smallest roll budget at which the quartile's "
                              f"survival drops below 10 %. Bars in the red band: survival never dropped below 10 % "
                              f"within ±{limit:g}°."))
-    lines = [{**p, "survival_str": " / ".join(fmt_num(v) for v in p["survival"]),
-              "phi": f"≥ {limit:g}°" if not math.isfinite(p["phi_crit"]) else f"{p['phi_crit']:g}°",
-              "range": f"{p['d_min_m']:.0f}–{p['d_max_m']:.0f}"} for p in profile]
+    lines = [{**dataclasses.asdict(p), "survival_str": " / ".join(fmt_num(v) for v in p.survival),
+              "phi": f"≥ {limit:g}°" if not math.isfinite(p.phi_crit) else f"{p.phi_crit:g}°",
+              "range": f"{p.d_min_m:.0f}–{p.d_max_m:.0f}"} for p in profile]
     s.html.append(table(lines, [("quartile", "quartile", None), ("range", "slant distance (m)", None),
                                 ("method", "method", None), ("n", "images", None), ("n_breached", "breached ≤ limit", None),
                                 ("median_level", "median smallest breaching budget (°)", None), ("phi", "φ_crit", None),
