@@ -27,8 +27,10 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
     again = runner.invoke(app, ["reproduce", "all", "--out", str(out), *SMALL])
     assert again.exit_code == 0 and "0 new jobs" in again.output
 
-    # the committable bundle: per experiment its job table, report and provenance; no store, no loose figures
+    # the committable bundle: per experiment its job table, report (figures beside it) and provenance; no store
     import json
+    import re
+    from urllib.parse import unquote
 
     import pyarrow.parquet as pq
 
@@ -57,8 +59,12 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
         assert pq.read_table(bundle / name / "jobs.parquet").num_rows >= n_jobs
         page = (bundle / name / "report.html").read_text()
         assert f"<title>vbl-robust {name}</title>" in page
-        assert name != "spatial-1d" or "data:image/png;base64," in page  # figures are embedded
-        assert not (bundle / name / "figures").exists() and not (bundle / name / "results.sqlite").exists()
+        # a bundle's report shows its figures from figures/ beside it (docs/conventions.md): no base64, every
+        # picture the page links is there
+        assert "data:image/png;base64," not in page and not (bundle / name / "results.sqlite").exists()
+        linked = re.findall(r'<img[^>]* src="(figures/[^"]+)"', page)
+        assert all((bundle / name / unquote(src)).is_file() for src in linked)
+        assert name != "spatial-1d" or linked
         assert (bundle / name / "results.sqlite.xz").stat().st_size > 0
         assert f"| {name} | {n_jobs} / {n_jobs} |" in status
         card = index.split(f'<a href="{name}/report.html">{name}</a>')[1].split('<div class="card">')[0]
