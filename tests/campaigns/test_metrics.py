@@ -102,9 +102,9 @@ def test_against_reference_counts_found_missed_and_beyond_the_grid():
                worst_m=3000.0 if i in (0, 1, 2, 4) else 10.0) for i in range(10)]
     other = [row(key="o", sample_id="s99", box=box, budget=Budget(max_evals=8), nfev=8, worst_m=3000.0)]  # no grid
     (line,) = mx.against_reference(geo + other, grid, eps)
-    assert (line["method"], line["box_label"], line["budget_label"]) == ("georobust", "±5°", "8 evals")
-    assert (line["n"], line["grid_breaches"], line["found"], line["missed"], line["beyond_grid"]) == (10, 4, 3, 1, 1)
-    assert line["found_pct"] == 75.0 and line["p_value"] == 1.0
+    assert (line.method, line.box_label, line.budget_label) == ("georobust", "±5°", "8 evals")
+    assert (line.n, line.grid_breaches, line.found, line.missed, line.beyond_grid) == (10, 4, 3, 1, 1)
+    assert line.found_pct == 75.0 and line.p_value == 1.0
     assert mx.against_reference(other, grid, eps) == []  # no image in common
 
 

@@ -108,11 +108,11 @@ def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
         assert f"{m} {'/'.join(fmt_num(v) for v in surv[m])}" in row.ours
     assert f"{mx.REFERENCE_METHOD} {'/'.join(fmt_num(v) for v in true)}" in row.truth
     last = max(boxes_of(main), key=lambda b: b.level).label
-    found = [ln for ln in mx.against_reference(main, ref, spec.eps_safe_m) if ln["box_label"] == last]
+    found = [ln for ln in mx.against_reference(main, ref, spec.eps_safe_m) if ln.box_label == last]
     assert found
     for ln in found:
-        if ln["grid_breaches"]:
-            assert f"{ln['method']} {ln['found']}/{ln['grid_breaches']}" in row.truth
+        if ln.grid_breaches:
+            assert f"{ln.method} {ln.found}/{ln.grid_breaches}" in row.truth
         else:
             assert "breaches at" not in row.truth
     # the verdict is the tests': recomputed from the rows, each box a part
@@ -126,8 +126,8 @@ def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
 def test_the_report_shows_each_method_against_the_grid(root):
     spec, main, ref = _spatial_1d_rows(root)
     lines = mx.against_reference(main, ref, spec.eps_safe_m)
-    assert {ln["method"] for ln in lines} == {"georobust", "georobust-av", "random", "apgd"}
-    assert all(ln["n"] == N_IMAGES and ln["found"] + ln["missed"] == ln["grid_breaches"] for ln in lines)
+    assert {ln.method for ln in lines} == {"georobust", "georobust-av", "random", "apgd"}
+    assert all(ln.n == N_IMAGES and ln.found + ln.missed == ln.grid_breaches for ln in lines)
     res = CliRunner().invoke(app, ["report", str(root / "spatial-1d")])
     assert res.exit_code == 0, res.output
     page = (root / "spatial-1d" / "report.html").read_text()

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -88,13 +88,29 @@ def reference_rows(ref_rows: Iterable[JobRow], boxes: Sequence[BoxSpec], eps_saf
     return out
 
 
-def against_reference(rows: Iterable[JobRow], ref_rows: Iterable[JobRow], eps_safe_m: float) -> list[dict[str, Any]]:
-    """Per method, box and budget of ``rows``: its verdicts against the dense grid's (``ref_rows``, the pseudo-rows
-    of :func:`reference_rows`) on the images both have — ``grid_breaches`` (images the grid breaks), ``found`` (of
-    those, the ones the method breaks too), ``missed`` (the method survives where the grid breaks),
-    ``beyond_grid`` (the method breaks an image the grid does not: a breach between grid nodes), ``found_pct`` and
-    the exact McNemar ``p_value`` of method vs grid (:func:`vbl_robust.stats.paired`). Is the worst case really
-    found?"""
+@dataclass(frozen=True)
+class AgainstGrid:
+    """A method's verdicts at one box and budget against the dense grid's, on the ``n`` images both have:
+    ``grid_breaches`` (images the grid breaks), ``found`` (of those, the ones the method breaks too), ``missed``
+    (the method survives where the grid breaks), ``beyond_grid`` (the method breaks an image the grid does not: a
+    breach between grid nodes), ``found_pct`` (NaN: the grid breaks none) and the exact McNemar ``p_value`` of
+    method vs grid (:func:`vbl_robust.stats.paired`)."""
+
+    method: str
+    box_label: str | None
+    budget_label: str | None
+    n: int
+    grid_breaches: int
+    found: int
+    missed: int
+    beyond_grid: int
+    found_pct: float
+    p_value: float
+
+
+def against_reference(rows: Iterable[JobRow], ref_rows: Iterable[JobRow], eps_safe_m: float) -> list[AgainstGrid]:
+    """Per method, box and budget of ``rows``: its :class:`AgainstGrid` verdicts against the dense grid's
+    (``ref_rows``, the pseudo-rows of :func:`reference_rows`). Is the worst case really found?"""
     rows = list(rows)
     truth = {(r.box_label, r.sample_id): survived(r, eps_safe_m) for r in ref_rows}
     ok = {(r.method, r.box_label, r.budget_label, r.sample_id): survived(r, eps_safe_m) for r in rows}
@@ -105,10 +121,8 @@ def against_reference(rows: Iterable[JobRow], ref_rows: Iterable[JobRow], eps_sa
             continue
         t = paired([truth[(b, i)] for i in ids], [ok[(m, b, budget, i)] for i in ids])
         breaches = t.neither + t.only_b
-        out.append({"method": m, "box_label": b, "budget_label": budget, "n": t.n, "grid_breaches": breaches,
-                    "found": t.neither, "missed": t.only_b, "beyond_grid": t.only_a,
-                    "found_pct": 100.0 * t.neither / breaches if breaches else math.nan,
-                    "p_value": t.p_value})
+        out.append(AgainstGrid(m, b, budget, t.n, breaches, t.neither, t.only_b, t.only_a,
+                               100.0 * t.neither / breaches if breaches else math.nan, t.p_value))
     return out
 
 

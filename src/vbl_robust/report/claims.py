@@ -257,10 +257,10 @@ def _spatial_1d(e: _Exp) -> ClaimResult:
     truth = _text(s, labels, mx.REFERENCE_METHOD) if mx.REFERENCE_METHOD in s else ""
     found = [ln for ln in mx.against_reference([r for r in rows if r.method in PAPER_METHODS],
                                                [r for r in rows if r.method == mx.REFERENCE_METHOD], e.eps)
-             if ln["box_label"] == labels[-1] and ln["grid_breaches"]]
+             if ln.box_label == labels[-1] and ln.grid_breaches]
     if found:
         truth += (f"; of the grid's breaches at {labels[-1]} found: "
-                  + ", ".join(f"{ln['method']} {ln['found']}/{ln['grid_breaches']}" for ln in found))
+                  + ", ".join(f"{ln.method} {ln.found}/{ln.grid_breaches}" for ln in found))
     groups = survival_parts(rows, e.eps, (("georobust", "random"), ("georobust", "apgd"), ("random", "apgd")),
                             labels)
     cis = _last_ci(rows, e.eps, labels[-1]) if labels else {}

@@ -13,6 +13,8 @@ import numpy as np
 
 from ..campaigns import metrics as mx
 from ..campaigns.experiments import range_text
+from ..campaigns.kinds import JobKind, Role
+from ..campaigns.reference import AgainstGrid
 from ..campaigns.store import JobRow, JobStatus, RunProvenance
 from ..constants import FAILURE_REASONS, Verdict
 from ..search import NON_FINITE
@@ -127,7 +129,7 @@ def section_methods(ctx: Context) -> Section | None:
     if not ctx.main:
         return None
     s = Section(METHODS_TITLE)
-    summary = mx.summarize([*ctx.main, *(r for r in ctx.unmeasured if r.kind == "search" and r.role == "main")],
+    summary = mx.summarize([*ctx.main, *(r for r in ctx.unmeasured if r.kind is JobKind.SEARCH and r.role is Role.MAIN)],
                            ctx.eps)
     s.html.append(_summary_table(summary, ctx.spec.unit))
     failures = _failures_table(summary, ctx.spec.penalty_m)
@@ -181,7 +183,7 @@ def section_survival_level(ctx: Context) -> Section | None:
     return s
 
 
-def _against_grid_table(lines: Sequence[Mapping[str, Any]], unit: str = "image") -> str:
+def _against_grid_table(lines: Sequence[AgainstGrid], unit: str = "image") -> str:
     """Each method's verdicts against the dense grid's on the same images (:func:`~vbl_robust.campaigns.metrics.
     against_reference`); "" without a grid."""
     if not lines:
@@ -194,7 +196,7 @@ def _against_grid_table(lines: Sequence[Mapping[str, Any]], unit: str = "image")
             f"{unit}s the grid breaks, how many the method breaks too (found) or not (missed); beyond the grid: "
             f"{unit}s the method breaks and the grid does not (a breach between its nodes); exact McNemar p of "
             "method vs grid (small: the difference is not chance).</p>"
-            + table(lines, cols, left=("method", "box_label", "budget_label")))
+            + table([dataclasses.asdict(ln) for ln in lines], cols, left=("method", "box_label", "budget_label")))
 
 
 def section_runtime(ctx: Context) -> Section | None:
