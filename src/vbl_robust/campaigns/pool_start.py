@@ -14,9 +14,19 @@ from __future__ import annotations
 
 import os
 import sys
+from enum import StrEnum
 from typing import Any
 
-__all__ = ["die_with_parent", "pool_worker", "start_worker"]
+__all__ = ["Message", "die_with_parent", "pool_worker", "start_worker"]
+
+
+class Message(StrEnum):
+    """What a worker puts on the result queue, as ``(message, value)``: a job's rows to commit, a sample done, or
+    the one line of a worker that could not start."""
+
+    ROWS = "rows"
+    DONE = "done"
+    ERROR = "error"
 
 #: ``prctl`` option: the signal this process gets when its parent thread ends (Linux).
 PR_SET_PDEATHSIG = 1
@@ -62,9 +72,9 @@ def pool_worker(tasks: Any, results: Any, detector: Any, settings: Any, run_id: 
     try:
         det = detector_for(detector)
     except Exception as exc:  # noqa: BLE001 - reported to the parent as one line, not a traceback
-        results.put(("error", f"{type(exc).__name__}: {exc}"))
+        results.put((Message.ERROR, f"{type(exc).__name__}: {exc}"))
         return
     while (task := tasks.get()) is not None:
         for rows in run_sample_task(task, det, settings, run_id):
-            results.put(("rows", rows))
-        results.put(("done", None))
+            results.put((Message.ROWS, rows))
+        results.put((Message.DONE, None))

@@ -44,6 +44,7 @@ import numpy as np
 
 from ..space import ParameterBox
 from ..stats import SequentialTest, Stratum, binomial_bounds, risk_verdict, stratified_interval
+from .kinds import JobKind, JobStatus
 from .store.payloads import RiskPayload, RiskStratum
 
 __all__ = ["RISK_METHODS", "Marginal", "PooledRisk", "RiskResult", "ThetaDistribution", "estimate_risk", "parse_dist",
@@ -399,7 +400,7 @@ def pooled_risk(rows: Sequence[Any]) -> list[PooledRisk]:
 
     by: dict[str, list[tuple[Any, RiskPayload]]] = {}
     for r in rows:  # (the store's package is not imported: spec imports this module)
-        if r.kind == "risk" and r.status == "done" and (p := RiskPayload.of(r)) is not None:
+        if r.kind == JobKind.RISK and r.status == JobStatus.DONE and (p := RiskPayload.of(r)) is not None:
             by.setdefault(r.method, []).append((r, p))
     out = []
     for method, got in by.items():

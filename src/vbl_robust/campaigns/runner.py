@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..constants import Verdict
+from .kinds import Role
 from .precheck import check_run
 from .provenance import (
     DetectorSpec,
@@ -348,7 +349,7 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
         store.commit(rows)
         state["new"] += len(rows)
         state["not_measured"] += sum(not r.measured for r in rows)
-        state["breaches"] += sum(r.verdict is Verdict.BREACH and r.role == "main" for r in rows)
+        state["breaches"] += sum(r.verdict is Verdict.BREACH and r.role is Role.MAIN for r in rows)
         if progress is not None:
             progress(Progress(skipped + state["new"], len(jobs), skipped, state["breaches"], state["not_measured"],
                               time.perf_counter() - t0, rows[0]))
@@ -393,7 +394,7 @@ def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Se
     import pickle
     import queue
 
-    from .pool_start import start_worker
+    from .pool_start import Message, start_worker
 
     ctx = mp.get_context("spawn")
     task_q, result_q = ctx.Queue(), ctx.Queue()
@@ -413,7 +414,7 @@ def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Se
     try:
         while left:
             try:
-                kind, rows = result_q.get(timeout=1.0)
+                message, rows = result_q.get(timeout=1.0)
             except queue.Empty:
                 if not any(p.is_alive() for p in procs):
                     why = f" (a worker could not start: {errors[0]})" if errors else ""
@@ -421,9 +422,9 @@ def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Se
                                  "pending (rerun to resume)", left, why)
                     return
                 continue
-            if kind == "done":
+            if message is Message.DONE:
                 left -= 1
-            elif kind == "error":
+            elif message is Message.ERROR:
                 errors.append(rows)
             else:
                 yield rows

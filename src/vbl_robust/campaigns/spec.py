@@ -24,16 +24,16 @@ from ..constants import CONF_THRESHOLD, EPS_SAFE_M, PENALTY_M
 from ..digest import canonical_json, digest
 from ..space import ParameterBox
 from .budget import Budget
+from .kinds import JobKind, Role
 
 __all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FIGURES", "JOB_KINDS", "PENALTY_M", "ROLES", "Block", "BoxSpec", "Budget",
            "CampaignSpec", "Job", "box_label", "canonical_json", "default_figures", "derive_seed", "digest", "roll_box",
            "roll_contrast_box"]
 
-#: Job kinds: a worst-case search, the PnP-solver comparison of one image, or a failure-probability estimate
-#: (:mod:`vbl_robust.campaigns.risk`; methods ``mc`` / ``guided``, options the distribution, τ and δ).
-JOB_KINDS = ("search", "pnp", "risk")
-#: Roles of a block: the compared searches, a dense-grid reference, a landscape grid for one image.
-ROLES = ("main", "reference", "landscape")
+
+#: The values of :class:`JobKind` and :class:`Role`, in order.
+JOB_KINDS = tuple(k.value for k in JobKind)
+ROLES = tuple(r.value for r in Role)
 #: Figures (report sections) a campaign can declare, with the rows each one draws:
 #: ``pnp`` — the PnP-solver comparison (``kind="pnp"`` blocks); ``survival`` — survival against the box level
 #: (main, unchained blocks with several boxes; plus the reference grid); ``runtime`` — survival and median worst
@@ -118,8 +118,8 @@ class Block:
     boxes: tuple[BoxSpec, ...] = ()
     methods: tuple[str, ...] = ()
     budgets: tuple[Budget, ...] = ()
-    role: str = "main"
-    kind: str = "search"
+    role: Role = Role.MAIN
+    kind: JobKind = JobKind.SEARCH
     max_samples: int | None = None
     chain: bool = False
     options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
@@ -129,9 +129,11 @@ class Block:
             raise ValueError(f"Block: role must be one of {ROLES}, got {self.role!r}")
         if self.kind not in JOB_KINDS:
             raise ValueError(f"Block: kind must be one of {JOB_KINDS}, got {self.kind!r}")
-        if self.kind in ("search", "risk") and not (self.boxes and self.methods and self.budgets):
+        object.__setattr__(self, "role", Role(self.role))
+        object.__setattr__(self, "kind", JobKind(self.kind))
+        if self.kind in (JobKind.SEARCH, JobKind.RISK) and not (self.boxes and self.methods and self.budgets):
             raise ValueError(f"Block: a {self.kind} block needs at least one box, one method and one budget")
-        if self.kind == "risk" and (self.chain or self.role != "main"):
+        if self.kind is JobKind.RISK and (self.chain or self.role is not Role.MAIN):
             raise ValueError("Block: a risk block is a main block without a chain")
         if self.chain:
             levels = [b.level for b in self.boxes]
@@ -150,8 +152,8 @@ class Job:
     sample_id: str
     sample_fp: str
     sample_index: int
-    kind: str
-    role: str
+    kind: JobKind
+    role: Role
     method: str
     box: BoxSpec | None
     budget: Budget | None
@@ -160,14 +162,18 @@ class Job:
     context: str
     chain: str | None = None
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", JobKind(self.kind))
+        object.__setattr__(self, "role", Role(self.role))
+
     def identity(self) -> dict[str, Any]:
         """Everything that determines the job's result (the key is its digest)."""
         return {
             "experiment": self.experiment,
             "sample_id": self.sample_id,
             "sample_fp": self.sample_fp,
-            "kind": self.kind,
-            "role": self.role,
+            "kind": self.kind.value,
+            "role": self.role.value,
             "method": self.method,
             "box": None if self.box is None else self.box.to_dict(),
             "budget": None if self.budget is None else self.budget.to_dict(),
@@ -202,9 +208,9 @@ def default_figures(blocks: Sequence[Block]) -> tuple[str, ...]:
     from what its blocks hold (see :data:`FIGURES`)."""
     out: set[str] = set()
     for b in blocks:
-        if b.kind in ("pnp", "risk"):
-            out.add(b.kind)
-        elif b.role in ("reference", "landscape"):
+        if b.kind in (JobKind.PNP, JobKind.RISK):
+            out.add(b.kind.value)
+        elif b.role in (Role.REFERENCE, Role.LANDSCAPE):
             out.add("landscape")
         elif b.chain:
             out.add("distance")
@@ -273,7 +279,7 @@ class CampaignSpec:
         if self.sustain is not None and (isinstance(self.sustain, bool) or not isinstance(self.sustain, int)
                                          or self.sustain < 1):
             raise ValueError(f"sustain: need an integer >= 1 (frames), got {self.sustain!r}")
-        if self.sustain is not None and any(b.kind != "search" for b in self.blocks):
+        if self.sustain is not None and any(b.kind is not JobKind.SEARCH for b in self.blocks):
             raise ValueError("CampaignSpec: a sequence campaign (sustain set) holds search blocks only")
         if self.monitor_px is not None and not (math.isfinite(self.monitor_px) and self.monitor_px > 0):
             raise ValueError(f"--monitor-residual must be a finite number of pixels > 0, got {self.monitor_px}")
@@ -300,16 +306,16 @@ class CampaignSpec:
         from .risk import RISK_METHODS
 
         for blk in self.blocks:
-            if blk.kind == "pnp":
+            if blk.kind is JobKind.PNP:
                 continue
-            known = RISK_METHODS if blk.kind == "risk" else METHODS
+            known = RISK_METHODS if blk.kind is JobKind.RISK else METHODS
             unknown = [m for m in blk.methods if m not in known]
             if unknown:
                 raise ValueError(f"methods: unknown method(s) {unknown}; methods are {', '.join(known)}")
             twice = sorted({m for m in blk.methods if blk.methods.count(m) > 1})
             if twice:
                 raise ValueError(f"methods: {', '.join(twice)} given more than once")
-            graded = [m for m in blk.methods if blk.kind != "risk" and METHODS[m].needs_gradient]
+            graded = [m for m in blk.methods if blk.kind is not JobKind.RISK and METHODS[m].needs_gradient]
             if self.monitor_sigma_m is not None and graded:  # the σ monitor reads the black-box path only
                 raise ValueError(f"--monitor-sigma: a gradient search ({', '.join(graded)}) cannot run under the σ "
                                  "monitor; leave it out of --methods")
@@ -377,7 +383,7 @@ class CampaignSpec:
             "name": self.name, "seed": self.seed, **self.settings(), "notes": self.notes, "figures": list(self.figures),
             "blocks": [
                 {"boxes": [b.to_dict() for b in blk.boxes], "methods": list(blk.methods),
-                 "budgets": [b.to_dict() for b in blk.budgets], "role": blk.role, "kind": blk.kind,
+                 "budgets": [b.to_dict() for b in blk.budgets], "role": blk.role.value, "kind": blk.kind.value,
                  "max_samples": blk.max_samples, "chain": blk.chain, "options": {k: dict(v) for k, v in blk.options.items()}}
                 for blk in self.blocks
             ],
@@ -404,7 +410,7 @@ class CampaignSpec:
 
     def search_methods(self) -> set[str]:
         """The methods its search blocks run."""
-        return {m for b in self.blocks if b.kind == "search" for m in b.methods}
+        return {m for b in self.blocks if b.kind is JobKind.SEARCH for m in b.methods}
 
     def with_method_options(self, options: Mapping[str, Mapping[str, Any]], *, strict: bool = True) -> CampaignSpec:
         """This campaign with ``options[method]`` merged into the options of every search block that runs
@@ -417,7 +423,7 @@ class CampaignSpec:
 
         blocks, used = [], set()
         for blk in self.blocks:
-            touched = [m for m in blk.methods if m in options] if blk.kind == "search" else []
+            touched = [m for m in blk.methods if m in options] if blk.kind is JobKind.SEARCH else []
             if not touched:
                 blocks.append(blk)
                 continue
@@ -453,15 +459,15 @@ class CampaignSpec:
             for blk in self.blocks:
                 if blk.max_samples is not None and i >= blk.max_samples:
                     continue
-                if blk.kind == "pnp":
-                    jobs.append(Job(self.name, sid, fp, i, "pnp", blk.role, "pnp", None, None,
+                if blk.kind is JobKind.PNP:
+                    jobs.append(Job(self.name, sid, fp, i, JobKind.PNP, blk.role, "pnp", None, None,
                                     derive_seed(self.seed, sid, "pnp"), {}, ctx))
                     continue
                 for method in blk.methods:
                     opts = dict(blk.options.get(method, {}))
                     for budget in blk.budgets:
                         # the boxes' labels keep the chains of two blocks apart (e.g. one per perturbation family)
-                        chain = (digest([sid, blk.role, method, budget.to_dict(), [b.label for b in blk.boxes]], 16)
+                        chain = (digest([sid, blk.role.value, method, budget.to_dict(), [b.label for b in blk.boxes]], 16)
                                  if blk.chain else None)
                         for box in blk.boxes:
                             seed = derive_seed(self.seed, sid, method, box.label, budget.label)

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from ..constants import Verdict
+from .kinds import JobKind
 from .store import JobRow, JobStatus, ResultStore
 from .store.digest import BEFORE, STORED, Finding, FindingKind, check_row, read_chains
 from .store.schema import DIGESTS_SINCE, job_row
@@ -163,7 +164,7 @@ def row_findings(row: JobRow, *, eps_safe_m: float, penalty_m: float, committed:
             found.append(Finding(row.key, FindingKind.SUMMARY, f"an implied breach of {_show(row.worst_m)} with verdict "
                                  f"{_show(row.verdict)} at ε_safe = {eps_safe_m:g} m", ("worst_m", "verdict")))
         return found
-    if row.kind not in ("search", "risk"):
+    if row.kind not in (JobKind.SEARCH, JobKind.RISK):
         return found
     if row.points is None and committed:
         return found
@@ -172,7 +173,7 @@ def row_findings(row: JobRow, *, eps_safe_m: float, penalty_m: float, committed:
                              ("points",)))
         return found
     try:
-        if row.kind == "risk":
+        if row.kind is JobKind.RISK:
             expected = _risk_fields(row, penalty_m, eps_safe_m)
         else:
             from .rebuild import row_result

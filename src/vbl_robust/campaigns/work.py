@@ -24,13 +24,14 @@ import time
 import traceback
 from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..constants import NotMeasured, NotMeasuredError, Verdict
 from ..search.result import verdict_for
+from .kinds import JobKind, Role
 from .provenance import DetectorSpec
 from .spec import Job
 from .store import Corners, JobRow, JobStatus, Points, now_iso
@@ -322,44 +323,84 @@ def _warm_up(f: Callable[[Any], Any], box: Any, needs_gradient: bool) -> None:
         f(centre)
 
 
+@dataclass
+class _SampleRun:
+    """What the jobs of one sample share: the sample, the detector, the settings, and the objectives built so far
+    (one per box) with their nominal L(0)."""
+
+    task: SampleTask
+    detector: Detector
+    settings: Settings
+    run_id: int | None
+    objectives: dict[str, SearchObjective] = field(default_factory=dict)
+    nominals: dict[str, Nominal] = field(default_factory=dict)
+
+    def objective(self, job: Job) -> SearchObjective:
+        label = job.box.label
+        if label not in self.objectives:
+            self.objectives[label] = build_objective(self.task.sample, self.detector, job.box.box, self.settings)
+        return self.objectives[label]
+
+    def unreadable(self, job: Job, objective: SearchObjective, t0: float) -> JobRow | None:
+        """The row of a job whose input the tool cannot read (not measured, never a breach), else None."""
+        image_error = objective.image_error
+        if not image_error:
+            return None
+        named = image_error if job.sample_id in image_error else f"sample {job.sample_id}: {image_error}"
+        return unmeasured_row(job, NotMeasured.INPUT_UNAVAILABLE, named, self.run_id, time.perf_counter() - t0)
+
+
+def _pnp_job(job: Job, run: _SampleRun, t0: float) -> JobRow:
+    from .pnpcheck import pnp_comparison
+
+    payload = pnp_comparison(run.task.sample, run.detector, run.settings)
+    return _row(job, run.run_id, JobStatus.DONE, payload=payload, nfev=1, nit=1, job_s=time.perf_counter() - t0)
+
+
+def _risk_job(job: Job, run: _SampleRun, t0: float) -> JobRow:
+    objective = run.objective(job)
+    if (unread := run.unreadable(job, objective, t0)) is not None:
+        return unread
+    return risk_row(job, objective, run.settings, run.run_id, t0)
+
+
+def _search_job(job: Job, run: _SampleRun, t0: float) -> JobRow:
+    objective = run.objective(job)
+    if (unread := run.unreadable(job, objective, t0)) is not None:
+        return unread
+    settings = run.settings
+    result = run_search_job(job, objective, settings)
+    row = search_row(job, result, settings, run.run_id, time.perf_counter() - t0)
+    if job.role is not Role.MAIN or result.x is None:
+        return row
+    if settings.sustain is not None:
+        return row.replace(payload=sequence_details(objective, result.x, settings.eps_safe_m).to_json())
+    details, corners = worst_details(objective, result.x)
+    label = job.box.label
+    if label not in run.nominals:  # L(0): one evaluation per image and box, shared by its jobs
+        run.nominals[label] = nominal_details(objective)
+    return row.replace(payload=WorstPayload(details, run.nominals[label]).to_json(), worst_corners=corners)
+
+
+#: How the worker runs a job of each kind: ``JOB_RUNNERS[job.kind](job, run, t0)`` gives its row.
+JOB_RUNNERS: dict[JobKind, Callable[[Job, _SampleRun, float], JobRow]] = {
+    JobKind.SEARCH: _search_job,
+    JobKind.PNP: _pnp_job,
+    JobKind.RISK: _risk_job,
+}
+
+
 def run_sample_task(task: SampleTask, detector: Detector, settings: Settings, run_id: int | None = None,
                     ) -> Iterator[list[JobRow]]:
     """Run a sample's jobs in order; yield the rows to commit after each job."""
-    objectives: dict[str, SearchObjective] = {}
-    nominals: dict[str, Nominal] = {}
+    run = _SampleRun(task, detector, settings, run_id)
     breached: dict[str, JobRow] = {}  # chain -> breaching row
     for job in task.jobs:
         if job.chain is not None and job.chain in breached:
             continue  # recorded together with the breach
         t0 = time.perf_counter()
         try:
-            if job.kind == "pnp":
-                from .pnpcheck import pnp_comparison
-
-                payload = pnp_comparison(task.sample, detector, settings)
-                yield [_row(job, run_id, JobStatus.DONE, payload=payload, nfev=1, nit=1, job_s=time.perf_counter() - t0)]
-                continue
-            label = job.box.label
-            if label not in objectives:
-                objectives[label] = build_objective(task.sample, detector, job.box.box, settings)
-            objective = objectives[label]
-            image_error = objective.image_error
-            if image_error:  # the tool cannot read the input: not measured, never a breach
-                named = image_error if job.sample_id in image_error else f"sample {job.sample_id}: {image_error}"
-                yield [unmeasured_row(job, NotMeasured.INPUT_UNAVAILABLE, named, run_id, time.perf_counter() - t0)]
-                continue
-            if job.kind == "risk":
-                yield [risk_row(job, objective, settings, run_id, t0)]
-                continue
-            result = run_search_job(job, objective, settings)
-            row = search_row(job, result, settings, run_id, time.perf_counter() - t0)
-            if job.role == "main" and result.x is not None and settings.sustain is not None:
-                row = row.replace(payload=sequence_details(objective, result.x, settings.eps_safe_m).to_json())
-            elif job.role == "main" and result.x is not None:
-                details, corners = worst_details(objective, result.x)
-                if label not in nominals:  # L(0): one evaluation per image and box, shared by its jobs
-                    nominals[label] = nominal_details(objective)
-                row = row.replace(payload=WorstPayload(details, nominals[label]).to_json(), worst_corners=corners)
+            row = JOB_RUNNERS[job.kind](job, run, t0)
         except Exception as exc:  # the tool could not complete the job: not measured, recorded, the campaign goes on
             kind, detail = not_measured_reason(exc)
             logger.warning("sample %s, job %s/%s not measured (%s): %s", job.sample_id, job.method,

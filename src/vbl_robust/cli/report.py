@@ -12,6 +12,7 @@ from typing import Annotated
 
 import typer
 
+from ..campaigns.kinds import JobKind
 from . import options as o
 from .common import check_writable, fail, one_line
 from .run import unmeasured_ok
@@ -218,7 +219,7 @@ def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:
             return compare_markdown(run, compare)
         with ResultStore.open_existing(run) as store:
             spec = store.spec()
-        if any(b.kind == "risk" for b in spec.blocks):
+        if any(b.kind is JobKind.RISK for b in spec.blocks):
             if others:
                 fail("--with: a risk run's table has no other runs beside it")
             return risk_markdown(run)

@@ -18,6 +18,7 @@ from typing import Any
 
 import typer
 
+from ..campaigns.kinds import RunStatus
 from .common import check_names, check_writable, fail, one_line
 from .config import record_configuration
 from .options import DEFAULT_IMAGES
@@ -244,11 +245,11 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
     status = (f"{summary.done} new jobs, {summary.skipped} already done, {summary.not_measured} not measured, "
               f"{summary.seconds:.0f} s")
     typer.echo(f"{spec.name}: {status}; results in {out / 'results.sqlite'}")
-    if summary.status != "finished":
+    if summary.status != RunStatus.FINISHED:
         typer.secho(f"run {summary.status}: rerun the same command to resume", fg=typer.colors.YELLOW, err=True)
     if report:
         typer.echo(f"report: {build_report(out)}")
-    return summary.status == "finished" and unmeasured_ok(every, spec.unit, allow_unmeasured)
+    return summary.status == RunStatus.FINISHED and unmeasured_ok(every, spec.unit, allow_unmeasured)
 
 
 def unmeasured_ok(rows: list, unit: str, allow_unmeasured: bool) -> bool:

@@ -21,11 +21,14 @@ from typing import Annotated, Any
 import typer
 
 from ..atomic import atomic_write
+from ..campaigns.kinds import Role
 from ..campaigns.refine import refine_run
 from . import options as o
 from .common import check_writable, fail, parse_lipschitz
 
 FORMATS = ("json", "csv", "md")
+#: ``--role``: the roles whose jobs are zoned (None: every role).
+ROLE_CHOICES: dict[str, tuple[Role, ...] | None] = {"all": None, **{r.value: (r,) for r in Role}}
 
 Lipschitz = o.variant(o.Lipschitz, help="A Lipschitz constant of the error (m per unit; one number with --norm, or one "
                       "per parameter): sound zones under that assumption. Default: the run's own --lipschitz, if any.")
@@ -51,7 +54,7 @@ def zones(
 
     if fmt not in FORMATS:
         fail(f"--format {fmt}: choose json, csv or md")
-    if role not in ("all", "main", "reference", "landscape"):
+    if role not in ROLE_CHOICES:
         fail(f"--role {role}: choose main, reference, landscape or all")
     if lipschitz is not None and estimate:
         fail("--lipschitz and --estimate are exclusive (a sound constant, or the searches' own estimate)")
@@ -67,7 +70,7 @@ def zones(
     try:
         with ResultStore.open_existing(run) as store:  # a 0-byte store, or one nothing ran into: nothing to zone
             store.require_campaign()
-        jobs = zones_of_run(run, roles=None if role == "all" else (role,), threshold=threshold, lipschitz=lip,
+        jobs = zones_of_run(run, roles=ROLE_CHOICES[role], threshold=threshold, lipschitz=lip,
                             norm=norm, estimate=estimate)
     except ReplayError as exc:
         fail(f"replay failed: {exc}")

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..campaigns import metrics as mx
 from ..campaigns.experiments import range_text
+from ..campaigns.kinds import JobKind, Role
 from ..campaigns.reference import AgainstGrid
 from ..campaigns.store import JobRow, JobStatus, RunProvenance
 from ..constants import FAILURE_REASONS, Verdict
@@ -128,7 +129,7 @@ def section_methods(ctx: Context) -> Section | None:
     if not ctx.main:
         return None
     s = Section(METHODS_TITLE)
-    summary = mx.summarize([*ctx.main, *(r for r in ctx.unmeasured if r.kind == "search" and r.role == "main")],
+    summary = mx.summarize([*ctx.main, *(r for r in ctx.unmeasured if r.kind is JobKind.SEARCH and r.role is Role.MAIN)],
                            ctx.eps)
     s.html.append(_summary_table(summary, ctx.spec.unit))
     failures = _failures_table(summary, ctx.spec.penalty_m)

@@ -13,7 +13,6 @@ import math
 import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from enum import StrEnum
 from functools import cached_property
 from typing import Any
 
@@ -21,6 +20,7 @@ import numpy as np
 
 from ...constants import MAX_BLOB_BYTES, NotMeasured, Verdict
 from ...search.result import TraceRow
+from ..kinds import JobKind, JobStatus, Role, RunStatus
 from ..spec import BoxSpec, Budget, CampaignSpec
 
 
@@ -89,31 +89,6 @@ class SampleRecord:
     def columns(self) -> dict[str, Any]:
         """``{column: value}`` as stored (what a digest of the row reads)."""
         return dataclasses.asdict(self)
-
-
-class JobStatus(StrEnum):
-    """How a job ended: searched (``DONE``), not measured (``NOT_MEASURED``: the tool could not complete it, the
-    row's ``reason`` says why, :class:`~vbl_robust.constants.NotMeasured`), or implied by a breach in a chain.
-    Stores written before the name read their ``"failed"`` as ``NOT_MEASURED``."""
-
-    DONE = "done"
-    NOT_MEASURED = "not measured"
-    IMPLIED = "implied"
-
-    @classmethod
-    def _missing_(cls, value: object) -> JobStatus | None:
-        return cls.NOT_MEASURED if value == "failed" else None
-
-
-class RunStatus(StrEnum):
-    """Where a run stands (the stored strings are the values)."""
-
-    RUNNING = "running"  #: begun, not ended (or ended without recording it: closed as KILLED by the next writer)
-    FINISHED = "finished"  #: every planned job is stored
-    INCOMPLETE = "incomplete"  #: ended normally with planned jobs left (e.g. a chain stopped early)
-    INTERRUPTED = "interrupted"  #: ended by an exception or Ctrl-C
-    KILLED = "killed"  #: found still "running" by a later writer: SIGKILL, a machine's or session's end
-    UNKNOWN = "unknown"  #: a merged run whose source held its jobs but not its run row
 
 
 #: Four predicted runway corners ``((u, v), …)`` in the sample's pixels, keypoint order TR, TL, BL, BR.
@@ -240,8 +215,8 @@ class JobRow:
 
     key: str
     experiment: str
-    kind: str
-    role: str
+    kind: JobKind
+    role: Role
     method: str
     sample_id: str
     sample_index: int
@@ -276,6 +251,8 @@ class JobRow:
     read_from: str | None = None
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", JobKind(self.kind))
+        object.__setattr__(self, "role", Role(self.role))
         object.__setattr__(self, "status", JobStatus(self.status))
         if self.verdict is not None:
             object.__setattr__(self, "verdict", Verdict(self.verdict))
