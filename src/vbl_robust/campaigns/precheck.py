@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from ..constants import NotMeasured
+from ..detect.shipped import DetectorKind
 from .provenance import DetectorSpec
 from .spec import CampaignSpec
 
@@ -71,7 +72,7 @@ def check_run(spec: CampaignSpec, samples: Sequence[Any], detector: DetectorSpec
     needs = gradient_methods(spec)
     if needs:
         check_methods(needs, detector_for(detector), detector.name, monitor_sigma=spec.monitor_sigma_m is not None)
-    if detector.kind == "plugin" and samples:
+    if detector.kind is DetectorKind.PLUGIN and samples:
         check_plugin(spec, samples[0], detector)
 
 

@@ -250,7 +250,8 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
     """:meth:`DetectorSpec.from_choice <vbl_robust.detect.shipped.DetectorSpec.from_choice>` of the detector
     options, or one line; notes on standard error when the oracle stands in for the shipped model (and why) or
     when the shipped model has open accuracy goals."""
-    from vbl_robust.detect.shipped import DetectorSpec, default_model_status  # torch: not for ``--help``
+    # torch behind it: not for ``--help``
+    from vbl_robust.detect.shipped import DetectorKind, DetectorSpec, default_model_status
 
     # consent to run code (a .pt pickle, a plug-in) is the user's typing, never a value read from a --config file:
     # a plug-in named on the command line is consent to import it; one from a file needs --trust-model typed
@@ -265,9 +266,9 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
                                         device=device, trust=trust_model if plugin is None else consent,
                                         noise_needs_oracle=noise_needs_oracle, plugin=plugin,
                                         plugin_digest=plugin_digest)
-    if spec.kind == "default":
+    if spec.kind is DetectorKind.DEFAULT:
         _note_open_goals(spec.shipped_name)
-    elif spec.kind == "oracle" and not oracle:
+    elif spec.kind is DetectorKind.ORACLE and not oracle:
         noise = f", {oracle_noise:g} px fixed corner noise" if oracle_noise else ""
         typer.secho(f"note: {default_model_status()}; using the oracle detector (ground-truth corners{noise}). "
                     "Pass --model PATH for your model, or --model default to audit the shipped one anyway.",

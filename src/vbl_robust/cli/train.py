@@ -92,11 +92,11 @@ def train(
 def _weights(model: str | Path, trust: bool, option: str) -> Path:
     """The weights a training starts from: a shipped model's name or a user's ``.pt`` (refused unless trusted), read
     as every command reads a model (:meth:`~vbl_robust.detect.shipped.DetectorSpec.from_choice`)."""
-    from vbl_robust.detect.shipped import DetectorSpec, default_model_status
+    from vbl_robust.detect.shipped import DetectorKind, DetectorSpec, default_model_status
 
     with one_line():
         spec = DetectorSpec.from_choice(model, trust=trust, option=option)
-    if spec.kind != "default" and spec.kind != "ultralytics":
+    if spec.kind not in (DetectorKind.DEFAULT, DetectorKind.ULTRALYTICS):
         fail(f"{option} {model}: training starts from a .pt file")
     if spec.model_file is None:
         fail(f"{option} {model}: {default_model_status(spec.shipped_name)}")

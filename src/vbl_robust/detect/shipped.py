@@ -19,8 +19,9 @@ import importlib
 import json
 import logging
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +31,7 @@ from .pose import PoseDetector
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_MODEL", "DESIGNS", "DETECTOR_KINDS", "MODELS_DIR", "SHIPPED_MODELS", "DetectorSpec",
+__all__ = ["DEFAULT_MODEL", "DESIGNS", "DETECTOR_KINDS", "MODELS_DIR", "SHIPPED_MODELS", "DetectorKind", "DetectorSpec",
            "CODE_KINDS", "consent_needed", "default_detector", "default_model_caveats", "default_model_info",
            "default_model_path", "default_model_status", "refuse_untrusted", "refuse_without_consent",
            "shipped_model_dir", "with_design"]
@@ -47,11 +48,49 @@ DEFAULT_MODEL = MODELS_DIR / "runway_yolov8n_pose.pt"
 SHIPPED_MODELS = {"default": "", "hardened": "hardened", "yolo26": "yolo26"}  # name -> its directory under MODELS_DIR
 #: Designs of a pose-model detector: one pass on the letterboxed image, or a pass on it and one on a crop.
 DESIGNS = ("single", "twostage")
-DETECTOR_KINDS = ("oracle", "default", "ultralytics", "onnx", "factory", "plugin")
-#: Kinds whose spec names code, ``"module:callable"``: building the detector imports the module and calls the
-#: callable with the spec's options (a factory: tests and the Python API; a plug-in: ``--detector-plugin``). Only
-#: with the user's consent when the spec comes from data (:func:`consent_needed`).
-CODE_KINDS = ("factory", "plugin")
+
+
+class DetectorKind(StrEnum):
+    """What a :class:`DetectorSpec` builds; the value is the ``kind`` its identity records (a store's bytes).
+
+    ``ORACLE`` projects the ground truth; ``DEFAULT`` is a shipped model; ``ULTRALYTICS`` / ``ONNX`` a user's
+    ``.pt`` / ``.onnx`` file; ``FACTORY`` / ``PLUGIN`` name code, ``"module:callable"``.
+    """
+
+    ORACLE = "oracle"
+    DEFAULT = "default"
+    ULTRALYTICS = "ultralytics"
+    ONNX = "onnx"
+    FACTORY = "factory"
+    PLUGIN = "plugin"
+
+    @property
+    def runs_code(self) -> bool:
+        """The spec names code: building the detector imports the module and calls the callable with the spec's
+        options (a factory: tests and the Python API; a plug-in: ``--detector-plugin``). Only with the user's
+        consent when the spec comes from data (:func:`consent_needed`)."""
+        return self in (DetectorKind.FACTORY, DetectorKind.PLUGIN)
+
+    @property
+    def model_file(self) -> bool:
+        """The spec's ``path`` is a user's model file (it must exist)."""
+        return self in (DetectorKind.ULTRALYTICS, DetectorKind.ONNX)
+
+    @property
+    def pose_model(self) -> bool:
+        """A pose model of ours or a user's: run by an engine on a device, both recorded in its identity."""
+        return self in (DetectorKind.DEFAULT, DetectorKind.ULTRALYTICS, DetectorKind.ONNX)
+
+    @property
+    def default_engine(self) -> str:
+        """What runs a model of this kind's black-box forwards unless told otherwise (:mod:`.engines`)."""
+        return "onnxruntime" if self is DetectorKind.ONNX else "torch"
+
+
+#: The values of :class:`DetectorKind`, in order.
+DETECTOR_KINDS = tuple(k.value for k in DetectorKind)
+#: Kinds whose spec names code (:attr:`DetectorKind.runs_code`).
+CODE_KINDS = tuple(k for k in DetectorKind if k.runs_code)
 #: What a ``.pt`` outside the package is (the reason every refusal of one gives).
 _PICKLE = "a .pt file is a pickle that runs code when loaded"
 _PACKAGE_DIR = Path(__file__).resolve().parent.parent
@@ -197,7 +236,7 @@ def consent_needed(detector: DetectorSpec | Mapping[str, Any]) -> str | None:
         module, _, attr = str(path).partition(":")
         return (f"detector {kind} {path!r} is code: building it imports module {module!r} and calls {attr!r} "
                 "with the stored options")
-    if kind == "ultralytics" and (not path or not _packaged(path)):
+    if kind == DetectorKind.ULTRALYTICS and (not path or not _packaged(path)):
         return f"{path}: {_PICKLE}"
     return None
 
@@ -263,7 +302,7 @@ class DetectorSpec:
     not keyed (a GPU's convolutions differ from the CPU's by ~1e-3 px, far below any error that matters here).
     """
 
-    kind: str
+    kind: DetectorKind
     path: str | None = None
     trust: bool = False
     options: dict[str, Any] = field(default_factory=dict)
@@ -271,9 +310,10 @@ class DetectorSpec:
     def __post_init__(self) -> None:
         if self.kind not in DETECTOR_KINDS:
             raise ValueError(f"detector kind must be one of {DETECTOR_KINDS}, got {self.kind!r}")
-        if self.kind in ("ultralytics", "onnx", "factory") and not self.path:
-            raise ValueError(f"detector kind {self.kind!r} needs a path")
-        if self.kind in ("ultralytics", "onnx") and not Path(self.path).is_file():
+        object.__setattr__(self, "kind", DetectorKind(self.kind))
+        if (self.kind.model_file or self.kind is DetectorKind.FACTORY) and not self.path:
+            raise ValueError(f"detector kind {self.kind.value!r} needs a path")
+        if self.kind.model_file and not Path(self.path).is_file():
             raise FileNotFoundError(f"{self.path}: model file not found")
 
     @classmethod
@@ -287,7 +327,7 @@ class DetectorSpec:
         """
         why = default_model_status()
         if why == "":
-            return cls("default", options=dict(options or {})), ""
+            return cls(DetectorKind.DEFAULT, options=dict(options or {})), ""
         return cls.oracle(oracle_noise_px), why
 
     @classmethod
@@ -302,7 +342,7 @@ class DetectorSpec:
     @classmethod
     def oracle(cls, noise_px: float = 0.0) -> DetectorSpec:
         """The oracle detector, with ``noise_px`` of fixed per-image corner noise (0: exact corners)."""
-        return cls("oracle", options={"noise_px": noise_px} if noise_px else {})
+        return cls(DetectorKind.ORACLE, options={"noise_px": noise_px} if noise_px else {})
 
     @classmethod
     def from_path(cls, path: str | Path, *, trust: bool = False, option: str = "--model") -> DetectorSpec:
@@ -310,9 +350,9 @@ class DetectorSpec:
         in the messages."""
         p = Path(path)
         if p.suffix.lower() == ".onnx":
-            return cls("onnx", str(p))
+            return cls(DetectorKind.ONNX, str(p))
         if p.suffix.lower() == ".pt":
-            return cls("ultralytics", str(p), trust=trust)
+            return cls(DetectorKind.ULTRALYTICS, str(p), trust=trust)
         raise ValueError(f"{option} {path}: expected a .pt (ultralytics) or .onnx file")
 
     @classmethod
@@ -372,7 +412,7 @@ class DetectorSpec:
         parse_plugin(target)
         if digest is not None and not re.fullmatch(r"[0-9a-fA-F]{64}", digest):
             raise ValueError(f"--plugin-digest {digest}: expected the SHA-256 of the weights, 64 hex digits")
-        spec = cls("plugin", target, trust=trust, options={} if digest is None else {"weights_sha256": digest.lower()})
+        spec = cls(DetectorKind.PLUGIN, target, trust=trust, options={} if digest is None else {"weights_sha256": digest.lower()})
         refuse_without_consent(spec, trust, where="--detector-plugin ")
         return spec
 
@@ -390,7 +430,8 @@ class DetectorSpec:
         options = ident.get("options") or {}
         if not isinstance(options, Mapping):
             raise ValueError(f"{where}the stored detector's options are not a mapping ({type(options).__name__})")
-        return cls(kind, path if kind in ("ultralytics", "onnx", *CODE_KINDS) else None, trust=trust,
+        return cls(kind, path if kind in (DetectorKind.ULTRALYTICS, DetectorKind.ONNX, *CODE_KINDS) else None,
+                   trust=trust,
                    options=dict(options))
 
     @classmethod
@@ -398,21 +439,21 @@ class DetectorSpec:
         """A model shipped with the package (:data:`SHIPPED_MODELS`; the default model's spec names none, so its
         runs' keys stay as they were)."""
         shipped_model_dir(name)
-        return cls("default", options={**dict(options or {}), **({} if name == "default" else {"model": name})})
+        return cls(DetectorKind.DEFAULT, options={**dict(options or {}), **({} if name == "default" else {"model": name})})
 
     @property
     def shipped_name(self) -> str | None:
         """Which shipped model (``kind == "default"``), else None."""
-        return self.options.get("model", "default") if self.kind == "default" else None
+        return self.options.get("model", "default") if self.kind is DetectorKind.DEFAULT else None
 
     @property
     def model_file(self) -> Path | None:
         """The file whose SHA-256 identifies the detector: the weights, or a plug-in's source file."""
-        if self.kind == "default":
+        if self.kind is DetectorKind.DEFAULT:
             return default_model_path(self.shipped_name)
-        if self.kind in ("ultralytics", "onnx"):
+        if self.kind.model_file:
             return Path(self.path)
-        if self.kind == "plugin":
+        if self.kind is DetectorKind.PLUGIN:
             from .plugin import plugin_source
 
             return plugin_source(self.path)
@@ -420,31 +461,30 @@ class DetectorSpec:
 
     @property
     def name(self) -> str:
-        if self.kind == "oracle":
+        if self.kind is DetectorKind.ORACLE:
             return "oracle (ground-truth keypoints)"
-        if self.kind == "default":
+        if self.kind is DetectorKind.DEFAULT:
             which = "" if self.shipped_name == "default" else f"{self.shipped_name} "
             return f"shipped {which}model ({self.model_file.name if self.model_file else 'missing'})"
-        return f"{self.kind}: {self.path}"
+        return f"{self.kind.value}: {self.path}"
 
     def identity(self) -> dict[str, Any]:
         """JSON identity: kind, name, model file SHA-256 (None for the oracle), options; for the shipped model
         also the SHA-256 of its ``default.json`` (single or two-stage, input size)."""
         f = self.model_file
-        ident = {"kind": self.kind, "name": self.name, "path": None if f is None else str(f),
+        ident = {"kind": self.kind.value, "name": self.name, "path": None if f is None else str(f),
                  "sha256": None if f is None else file_sha256(f), "options": dict(self.options)}
-        if self.kind in CODE_KINDS:
+        if self.kind.runs_code:
             ident["factory"] = self.path
-        if self.kind in ("default", "ultralytics", "onnx"):
+        if self.kind.pose_model:
             from .device import resolve_device
             from .engines import resolve_engine
 
-            default = "onnxruntime" if self.kind == "onnx" else "torch"
             ident["device"] = resolve_device(self.options.get("device", "cpu"))
-            ident["engine"] = resolve_engine(self.options.get("engine", default), ident["device"])
+            ident["engine"] = resolve_engine(self.options.get("engine", self.kind.default_engine), ident["device"])
             ident["precision"] = "fp32"
         ident["design"], ident["input_size"] = self.design()
-        if self.kind == "default" and f is not None and (f.parent / "default.json").is_file():
+        if self.kind is DetectorKind.DEFAULT and f is not None and (f.parent / "default.json").is_file():
             ident["config_sha256"] = file_sha256(f.parent / "default.json")
             info = default_model_info(self.shipped_name)
             if info.get("first") in SHIPPED_MODELS and (one := default_model_path(str(info["first"]))) is not None:
@@ -459,11 +499,11 @@ class DetectorSpec:
         """The pipeline this detector runs as a report names it: ``("single pass" | "two-stage" | "oracle", input
         size in px)``; the input size is None where the model file states it (a user's model at its own size), the
         design None for a factory's detector (its own)."""
-        if self.kind == "oracle":
+        if self.kind is DetectorKind.ORACLE:
             return "oracle", None
-        if self.kind in CODE_KINDS:
+        if self.kind.runs_code:
             return None, None
-        info = default_model_info(self.shipped_name) if self.kind == "default" else {}
+        info = default_model_info(self.shipped_name) if self.kind is DetectorKind.DEFAULT else {}
         design = self.options.get("design") or info.get("detector", "single")
         size = self.options.get("imgsz") or info.get("imgsz")
         return {"single": "single pass", "twostage": "two-stage"}.get(design, design), (int(size) if size else None)
@@ -477,43 +517,76 @@ class DetectorSpec:
         return digest({k: v for k, v in ident.items() if k not in skip}, 24)
 
     def build(self) -> Any:
-        """Construct the detector (call once per process; models are heavy)."""
-        if self.kind == "oracle":
-            from .oracle import OracleDetector
-
-            return OracleDetector(**self.options)
-        if self.kind == "default":
-            return default_detector(**self.options)
-        if self.kind in ("ultralytics", "onnx"):
-            opts = dict(self.options)
-            design = opts.pop("design", "single")
-            window = {k: opts.pop(k) for k in CROP_WINDOW_KEYS if k in opts}
-            engine = opts.pop("engine", "onnxruntime" if self.kind == "onnx" else "torch")
-            if self.kind == "onnx":
-                from .engines import resolve_engine
-                from .onnx_twin import with_twin
-
-                resolved = resolve_engine(engine)
-                if resolved == "openvino":
-                    from .openvino import OpenVinoDetector
-
-                    return with_design(with_twin(OpenVinoDetector(self.path, **opts), resolved), design, **window)
-                if resolved == "torch":
-                    raise ValueError(f"{self.path}: an ONNX model runs on onnxruntime or openvino, not torch")
-                from .onnx import OnnxDetector
-
-                return with_design(with_twin(OnnxDetector(self.path, **opts), resolved), design, **window)
-            from .engines import with_engine
-            from .ultralytics import UltralyticsDetector
-
-            model = UltralyticsDetector(self.path, trust=self.trust, **opts)
-            return with_design(with_engine(model, engine, trust=self.trust), design, **window)
-        if self.kind == "plugin":
-            from .plugin import build_plugin
-
-            return build_plugin(self.path)
-        module, _, attr = self.path.partition(":")
-        return getattr(importlib.import_module(module), attr)(**self.options)
+        """Construct the detector (call once per process; models are heavy): :data:`BUILDERS` of its kind."""
+        return BUILDERS[self.kind](self)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "path": self.path, "trust": self.trust, "options": dict(self.options)}
+        return {"kind": self.kind.value, "path": self.path, "trust": self.trust, "options": dict(self.options)}
+
+
+def _build_oracle(spec: DetectorSpec) -> Any:
+    from .oracle import OracleDetector
+
+    return OracleDetector(**spec.options)
+
+
+def _build_default(spec: DetectorSpec) -> Any:
+    return default_detector(**spec.options)
+
+
+def _model_file_options(spec: DetectorSpec) -> tuple[dict[str, Any], str, dict[str, Any], str]:
+    """A user's model file's options split: ``(model options, design, crop window, engine)``."""
+    opts = dict(spec.options)
+    design = opts.pop("design", "single")
+    window = {k: opts.pop(k) for k in CROP_WINDOW_KEYS if k in opts}
+    engine = opts.pop("engine", spec.kind.default_engine)
+    return opts, design, window, engine
+
+
+def _build_onnx(spec: DetectorSpec) -> Any:
+    from .engines import resolve_engine
+    from .onnx_twin import with_twin
+
+    opts, design, window, engine = _model_file_options(spec)
+    resolved = resolve_engine(engine)
+    if resolved == "openvino":
+        from .openvino import OpenVinoDetector
+
+        return with_design(with_twin(OpenVinoDetector(spec.path, **opts), resolved), design, **window)
+    if resolved == "torch":
+        raise ValueError(f"{spec.path}: an ONNX model runs on onnxruntime or openvino, not torch")
+    from .onnx import OnnxDetector
+
+    return with_design(with_twin(OnnxDetector(spec.path, **opts), resolved), design, **window)
+
+
+def _build_ultralytics(spec: DetectorSpec) -> Any:
+    from .engines import with_engine
+    from .ultralytics import UltralyticsDetector
+
+    opts, design, window, engine = _model_file_options(spec)
+    model = UltralyticsDetector(spec.path, trust=spec.trust, **opts)
+    return with_design(with_engine(model, engine, trust=spec.trust), design, **window)
+
+
+def _build_plugin(spec: DetectorSpec) -> Any:
+    from .plugin import build_plugin
+
+    return build_plugin(spec.path)
+
+
+def _build_factory(spec: DetectorSpec) -> Any:
+    module, _, attr = spec.path.partition(":")
+    return getattr(importlib.import_module(module), attr)(**spec.options)
+
+
+#: How :meth:`DetectorSpec.build` makes a detector of each kind (the perturbation registry's pattern: one entry
+#: per kind, looked up, never switched on).
+BUILDERS: dict[DetectorKind, Callable[[DetectorSpec], Any]] = {
+    DetectorKind.ORACLE: _build_oracle,
+    DetectorKind.DEFAULT: _build_default,
+    DetectorKind.ULTRALYTICS: _build_ultralytics,
+    DetectorKind.ONNX: _build_onnx,
+    DetectorKind.FACTORY: _build_factory,
+    DetectorKind.PLUGIN: _build_plugin,
+}
