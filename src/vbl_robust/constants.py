@@ -3,11 +3,11 @@
 - ``EPS_SAFE_M``: the safety threshold ε_safe (metres): a box is safe iff ``max_Θ L ≤ EPS_SAFE_M``.
 - ``CONF_THRESHOLD``: the operational confidence threshold τ_conf of the selection σ_select.
 - ``PENALTY_M``: the error ``L`` assigned to any failed evaluation (metres; the paper's detection-breakdown value).
-- ``FAILURE_REASONS``: why one evaluation of the pipeline under test failed (a *flagged* failure of the pipeline,
-  penalised with ``PENALTY_M``).
+- :class:`FailureReason` (``FAILURE_REASONS``: its codes with their meaning): why one evaluation of the pipeline
+  under test failed (a *flagged* failure of the pipeline, penalised with ``PENALTY_M``).
 - :class:`NotMeasured`: why the *tool* could not complete a job (an input missing, a method that cannot run on this
   model, an exception in our code or in the detector) — not a finding about the pipeline; :class:`NotMeasuredError`
-  carries it. The line between the two kinds of failure is drawn here, once: a reason of ``FAILURE_REASONS`` is
+  carries it. The line between the two kinds of failure is drawn here, once: a :class:`FailureReason` is
   the pipeline's and counts against it, a :class:`NotMeasured` reason is the tool's and enters no rate.
 - :class:`Verdict`: the answer for one image and box, used by search, campaigns and report alike.
 - :class:`BreachKind`: what kind of failure a breach is — flagged (the system knows it has no fix) or hazardously
@@ -20,8 +20,8 @@ from __future__ import annotations
 
 from enum import StrEnum
 
-__all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FAILURE_REASONS", "PENALTY_M", "TARGETS", "BreachKind", "NotMeasured",
-           "NotMeasuredError", "Verdict"]
+__all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FAILURE_REASONS", "PENALTY_M", "TARGETS", "BreachKind", "FailureReason",
+           "NotMeasured", "NotMeasuredError", "Verdict"]
 
 #: ε_safe: the largest acceptable camera-position error, metres (the paper's threshold).
 EPS_SAFE_M = 1000.0
@@ -48,19 +48,51 @@ MAX_BLOB_BYTES = 512 * 1024 * 1024
 #: Largest seed (the store keeps seeds as SQLite's 64-bit integers).
 MAX_SEED = 2**63 - 1
 
-#: Why an evaluation of the pipeline under test failed, with what each code means (``""`` is a success). Each is
-#: a *flagged* failure of the pipeline: it counts against it. A failure of the tool (the pixels cannot be loaded, a
-#: method that cannot run on the detector) is none of these: it is :class:`NotMeasured`.
-FAILURE_REASONS: dict[str, str] = {
-    "no_detection": "the detector returned no candidate",
-    "low_confidence": "the best candidate's confidence is below τ_conf",
-    "non_finite_keypoints": "the selected keypoints are not finite",
-    "pnp_failed": "the PnP solver found no pose",
-    "non_finite_position": "the PnP position is not finite",
-    "out_of_view": "the perturbation turned the runway out of the camera's view (a corner behind the camera)",
-    "monitor_rejected": "a runtime monitor rejected the pose (its PnP reprojection residual, or its corners' σ propagated "
-                        "to the position, above the monitor's limit)",
+class FailureReason(StrEnum):
+    """Why an evaluation of the pipeline under test failed; the value is the code stored with each evaluation
+    (``""`` is a success), :attr:`meaning` says what it means. Each is a *flagged* failure of the pipeline: the
+    system knows it has no fix, and it counts against the pipeline. A failure of the tool (the pixels cannot be
+    loaded, a method that cannot run on the detector) is none of these: it is :class:`NotMeasured`. Both answer
+    :attr:`flagged` and :attr:`not_measured`: the line between the two kinds of failure, drawn here once."""
+
+    NO_DETECTION = "no_detection"
+    LOW_CONFIDENCE = "low_confidence"
+    NON_FINITE_KEYPOINTS = "non_finite_keypoints"
+    PNP_FAILED = "pnp_failed"
+    NON_FINITE_POSITION = "non_finite_position"
+    OUT_OF_VIEW = "out_of_view"
+    MONITOR_REJECTED = "monitor_rejected"
+
+    @property
+    def meaning(self) -> str:
+        """What the code means, in one line (the report's legend)."""
+        return _MEANINGS[self]
+
+    @property
+    def flagged(self) -> bool:
+        """A failure of the pipeline under test that it knows of (availability lost): always, for these."""
+        return True
+
+    @property
+    def not_measured(self) -> bool:
+        """A failure of the tool, entering no rate: never, for these (see :class:`NotMeasured`)."""
+        return False
+
+
+_MEANINGS = {
+    FailureReason.NO_DETECTION: "the detector returned no candidate",
+    FailureReason.LOW_CONFIDENCE: "the best candidate's confidence is below τ_conf",
+    FailureReason.NON_FINITE_KEYPOINTS: "the selected keypoints are not finite",
+    FailureReason.PNP_FAILED: "the PnP solver found no pose",
+    FailureReason.NON_FINITE_POSITION: "the PnP position is not finite",
+    FailureReason.OUT_OF_VIEW: "the perturbation turned the runway out of the camera's view (a corner behind the "
+                               "camera)",
+    FailureReason.MONITOR_REJECTED: "a runtime monitor rejected the pose (its PnP reprojection residual, or its "
+                                    "corners' σ propagated to the position, above the monitor's limit)",
 }
+
+#: Each :class:`FailureReason`'s code with what it means.
+FAILURE_REASONS: dict[str, str] = {r.value: r.meaning for r in FailureReason}
 
 
 class Verdict(StrEnum):
@@ -113,6 +145,16 @@ class NotMeasured(StrEnum):
             return cls(head)
         except ValueError:
             return cls.TOOL_ERROR
+
+    @property
+    def flagged(self) -> bool:
+        """A failure of the pipeline under test: never, for these (see :class:`FailureReason`)."""
+        return False
+
+    @property
+    def not_measured(self) -> bool:
+        """A failure of the tool, entering no rate: always, for these."""
+        return True
 
 
 class NotMeasuredError(ValueError):

@@ -38,8 +38,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 import torch
 
-from vbl_robust.constants import CONF_THRESHOLD, PENALTY_M, NotMeasured, NotMeasuredError
-from vbl_robust.constants import FAILURE_REASONS as _REASONS
+from vbl_robust.constants import CONF_THRESHOLD, PENALTY_M, FailureReason, NotMeasured, NotMeasuredError
 from vbl_robust.data.sample import Sample
 from vbl_robust.detect.base import DetectContext, Detector, Selection, select
 from vbl_robust.perturb import Perturbation, PixelScale, ViewSampler, resize_image
@@ -52,7 +51,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["FAILURE_REASONS", "EvalRecord", "Objective", "SearchObjective"]
 
 #: The failure codes of :attr:`EvalRecord.reason` (see :data:`vbl_robust.constants.FAILURE_REASONS`).
-FAILURE_REASONS = tuple(_REASONS)
+FAILURE_REASONS = tuple(r.value for r in FailureReason)
 
 
 @dataclass(frozen=True, eq=False)
@@ -395,7 +394,7 @@ class Objective:
             conf = conf_t.detach().reshape(-1).cpu().numpy().astype(np.float64)
             ok = conf >= self.conf_threshold
             return Selection(kp_t.detach().cpu().numpy(), conf, ok,
-                             tuple("" if good else "low_confidence" for good in ok), kp_t)
+                             tuple("" if good else FailureReason.LOW_CONFIDENCE for good in ok), kp_t)
         dets = list(raw)
         if len(dets) != n:
             raise ValueError(f"Objective: detector {detector_name(self.detector)} returned {len(dets)} results for {n} "
@@ -412,7 +411,7 @@ class Objective:
         kp, conf, reason = sel.keypoints, sel.conf, list(sel.reason)
         finite_kp = np.isfinite(kp).all(axis=(1, 2))
         for i in np.nonzero((np.array(reason) == "") & ~finite_kp)[0]:
-            reason[i] = "non_finite_keypoints"
+            reason[i] = FailureReason.NON_FINITE_KEYPOINTS
         rows = np.nonzero(np.array([r == "" for r in reason]))[0]
         position, reproj = np.full((n, 3), np.nan), np.full(n, np.nan)
         error, detail = np.full(n, np.nan), [""] * n
@@ -441,13 +440,13 @@ class Objective:
                              f"(a YOLO26-pose network); {detector_name(self.detector)} gives none")
         for j, i in enumerate(rows):
             if not success[j]:
-                reason[i] = "pnp_failed"
+                reason[i] = FailureReason.PNP_FAILED
             elif not np.isfinite(err[j]):
-                reason[i] = "non_finite_position"
+                reason[i] = FailureReason.NON_FINITE_POSITION
             elif self.max_reproj_px is not None and not reproj[i] <= self.max_reproj_px:
-                reason[i] = "monitor_rejected"  # the monitor flags the pose: the system knows it has no fix
+                reason[i] = FailureReason.MONITOR_REJECTED  # the monitor flags the pose: the system knows it has no fix
             elif self.max_sigma_m is not None and not pos_sigma[i] <= self.max_sigma_m:
-                reason[i] = "monitor_rejected"
+                reason[i] = FailureReason.MONITOR_REJECTED
             else:
                 error[i] = err[j]
         failed = np.array([r != "" for r in reason])

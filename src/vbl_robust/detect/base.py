@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 import numpy as np
 import torch
 
-from vbl_robust.constants import CONF_THRESHOLD
+from vbl_robust.constants import CONF_THRESHOLD, FailureReason
 from vbl_robust.perturb import Perturbation, PixelScale, ViewSampler
 from vbl_robust.perturb.views import to_tensor
 
@@ -330,14 +330,14 @@ def select(detections: Sequence[Detections] | Detections, conf_threshold: float 
     reason = []
     for i, d in enumerate(detections):
         if len(d) == 0:
-            reason.append(getattr(d, "reason", "") or "no_detection")
+            reason.append(getattr(d, "reason", "") or FailureReason.NO_DETECTION)
             continue
         dc = _np(d.conf).reshape(-1)  # tolerate tensors from detectors with their own containers
         c = np.where(np.isfinite(dc), dc, -np.inf)
         m = int(np.argmax(c))
         conf[i] = dc[m]
         if not conf[i] >= conf_threshold:
-            reason.append("low_confidence")
+            reason.append(FailureReason.LOW_CONFIDENCE)
             continue
         kp[i] = _np(d.keypoints)[m]
         if getattr(d, "keypoint_sigma", None) is not None:

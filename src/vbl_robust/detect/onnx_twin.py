@@ -64,7 +64,7 @@ class TwinCheck:
 
     @property
     def ok(self) -> bool:
-        return self.reason == ""
+        return not self.reason
 
 
 def compare_raw(engine: torch.Tensor, twin: torch.Tensor, nc: int, *, conf_min: float = 0.01,

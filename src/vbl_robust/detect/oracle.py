@@ -19,6 +19,7 @@ import zlib
 import numpy as np
 import torch
 
+from vbl_robust.constants import FailureReason
 from vbl_robust.geometry.camera import project
 
 from .base import DetectContext, Detections
@@ -127,7 +128,7 @@ class OracleDetector:
         dets = []
         for k in range(n):
             if behind[k]:
-                dets.append(Detections.empty("out_of_view"))
+                dets.append(Detections.empty(FailureReason.OUT_OF_VIEW))
                 continue
             if out_of_image[k]:
                 dets.append(Detections.empty())

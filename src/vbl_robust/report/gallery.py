@@ -32,7 +32,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..campaigns.truth import load_run_samples
-from ..constants import BreachKind
+from ..constants import BreachKind, FailureReason
 from . import figures as F
 from .evidence import Evidence, WorstCase
 from .html import esc, fmt_num
@@ -46,8 +46,8 @@ __all__ = ["NO_CANDIDATE", "case_figure", "geometry_text", "metres_per_pixel", "
 GALLERY_COLORS = 256
 
 #: Failure reasons after which the detector selected no candidate (so no corners were predicted).
-NO_CANDIDATE = frozenset({"no_detection", "low_confidence", "non_finite_keypoints",
-                          "out_of_view"})
+NO_CANDIDATE = frozenset({FailureReason.NO_DETECTION, FailureReason.LOW_CONFIDENCE,
+                          FailureReason.NON_FINITE_KEYPOINTS, FailureReason.OUT_OF_VIEW})
 
 
 def _samples(ctx: Context, ids: Sequence[str]) -> tuple[dict[str, Any], str]:
@@ -168,7 +168,7 @@ def _kind_text(case: WorstCase) -> str:
 def _facts(ctx: Context, rank: int, case: WorstCase, picture: str, sample: Any = None) -> str:
     """The text of one entry: what, where, how bad; with the rebuilt ``sample``, each corner's shift in pixels
     and what a pixel is worth."""
-    outcome = ("a confident pose" if case.reason == "" else "unknown" if case.reason is None
+    outcome = ("unknown" if case.reason is None else "a confident pose" if not case.reason
                else f"no pose: <code>{esc(case.reason)}</code> (counted as the {ctx.spec.penalty_m:g} m penalty)")
     conf = "–" if case.conf is None else f"{case.conf:.2f} (τ_conf = {ctx.spec.conf_threshold:g})"
     if case.corners is not None:
