@@ -158,16 +158,24 @@ def paired(a: Sequence[bool] | np.ndarray, b: Sequence[bool] | np.ndarray) -> Pa
 
 
 class ClaimVerdict(StrEnum):
-    """What a paired test says of a directional claim ("A survives more than B", "A finds more breaches").
+    """The verdict on a claim; the first three are what a paired test says of a directional claim ("A survives
+    more than B", "A finds more breaches"), the others what a claim made of several parts can add (the paper's
+    claims page, in this order).
 
-    - ``HOLDS``: significant (p < ``ALPHA``) in the claimed direction.
+    - ``HOLDS``: significant (p < ``ALPHA``) in the claimed direction; every part of a claim holds.
+    - ``PARTLY``: some parts of a claim hold, none is contradicted.
     - ``TIE``: no significant difference either way — the data cannot tell A from B.
     - ``CONTRADICTED``: significant the other way.
+    - ``FAILS``: the claim does not hold (no part holds, none is a tie).
+    - ``NOT_RUN``: nothing to judge it on yet (its experiment was not run, or cannot be computed).
     """
 
     HOLDS = "holds"
+    PARTLY = "partly"
     TIE = "tie"
     CONTRADICTED = "contradicted"
+    FAILS = "does not hold"
+    NOT_RUN = "not run yet"
 
 
 def claim_verdict(test: Paired, *, a_better: bool = True, alpha: float = ALPHA) -> ClaimVerdict:

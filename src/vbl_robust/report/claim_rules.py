@@ -28,7 +28,8 @@ from ..search.api import METHODS as SEARCH_METHODS
 from ..stats import ALPHA, LEVEL, ClaimVerdict, Rate, claim_verdict, holm, paired
 from .html import fmt_num
 
-VERDICTS = ("holds", "partly", "tie", "contradicted", "does not hold", "not run yet")
+#: The verdicts of a claim, in the order the claims page counts them (:class:`~vbl_robust.stats.ClaimVerdict`).
+VERDICTS = tuple(ClaimVerdict)
 HOLDS, PARTLY, TIE, CONTRADICTED, FAILS, NOT_RUN = VERDICTS
 #: A part's outcome: a rule's True / False, a test's verdict, or None (not measurable).
 Outcome = bool | ClaimVerdict | None
@@ -61,7 +62,7 @@ class Claim:
     claim: str
     ours: str
     truth: str
-    verdict: str
+    verdict: ClaimVerdict
     reason: str
     images: int
 
@@ -73,7 +74,7 @@ class ClaimResult:
 
     ours: str
     truth: str
-    verdict: str
+    verdict: ClaimVerdict
     reason: str
     images: int
 
@@ -98,7 +99,7 @@ def known_method(method: str) -> str:
 
 
 # -- verdict rules: pure functions of numbers (None = not measurable) ------------------------------------------
-def combine(parts: Sequence[Outcome]) -> str:
+def combine(parts: Sequence[Outcome]) -> ClaimVerdict:
     """The verdict of a claim from its parts' outcomes (see the module docstring)."""
     known = [p for p in parts if p is not None]
     if not known:
