@@ -4,14 +4,15 @@ stored bytes and job keys do not depend on whether a reader holds the enum or th
 
 - :class:`JobKind`: what a job computes (a block's and a row's ``kind``);
 - :class:`Role`: what a block is for (a block's and a row's ``role``);
-- :class:`JobStatus`: how a job ended; :class:`RunStatus`: where a run stands.
+- :class:`JobStatus`: how a job ended; :class:`RunStatus`: where a run stands;
+- :class:`SourceKind`: where a run's samples came from.
 """
 
 from __future__ import annotations
 
 from enum import StrEnum
 
-__all__ = ["JobKind", "JobStatus", "Role", "RunStatus"]
+__all__ = ["JobKind", "JobStatus", "Role", "RunStatus", "SourceKind"]
 
 
 class JobKind(StrEnum):
@@ -64,3 +65,13 @@ class RunStatus(StrEnum):
     INTERRUPTED = "interrupted"  #: ended by an exception or Ctrl-C
     KILLED = "killed"  #: found still "running" by a later writer: SIGKILL, a machine's or session's end
     UNKNOWN = "unknown"  #: a merged run whose source held its jobs but not its run row
+
+
+class SourceKind(StrEnum):
+    """Where a run's samples came from: the ``kind`` of its dataset source (provenance)."""
+
+    SYNTHETIC = "synthetic"
+    LARD = "lard"
+    SYNTHETIC_SEQUENCES = "synthetic sequences"
+    LARD_SEQUENCES = "lard sequences"
+    TRUTH = "truth"  #: the samples of another run, checked against their dense grid (``vbl-robust truth``)

@@ -38,6 +38,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -47,7 +48,7 @@ from ..stats import SequentialTest, Stratum, binomial_bounds, risk_verdict, stra
 from .kinds import JobKind, JobStatus
 from .store.payloads import RiskPayload, RiskStratum
 
-__all__ = ["RISK_METHODS", "Marginal", "PooledRisk", "RiskResult", "ThetaDistribution", "estimate_risk", "parse_dist",
+__all__ = ["LAWS", "RISK_METHODS", "Law", "Marginal", "PooledRisk", "RiskResult", "ThetaDistribution", "estimate_risk", "parse_dist",
            "pooled_risk"]
 
 #: The estimators (the job methods of a risk campaign).
@@ -65,25 +66,37 @@ BATCH = 32
 MAX_EVALS = 1_000_000
 
 
+class Law(StrEnum):
+    """The shape of one parameter's distribution (the value is the ``kind`` a risk payload records)."""
+
+    UNIFORM = "uniform"
+    NORMAL = "normal"
+
+
+#: The values of :class:`Law` (what ``--dist NAME=…`` accepts).
+LAWS = tuple(law.value for law in Law)
+
+
 @dataclass(frozen=True)
 class Marginal:
     """One parameter's distribution over ``[lo, hi]``: ``uniform``, or ``normal`` (mean ``mu``, sd ``sigma``)
     truncated to the range."""
 
-    kind: str
+    kind: Law
     lo: float
     hi: float
     mu: float = 0.0
     sigma: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.kind not in ("uniform", "normal"):
+        if self.kind not in LAWS:
             raise ValueError(f"distribution kind must be uniform or normal, got {self.kind!r}")
+        object.__setattr__(self, "kind", Law(self.kind))
         if not (math.isfinite(self.lo) and math.isfinite(self.hi) and self.lo < self.hi):
             raise ValueError(f"distribution range must be finite with lo < hi, got [{self.lo}, {self.hi}]")
-        if self.kind == "normal" and not (math.isfinite(self.mu) and math.isfinite(self.sigma) and self.sigma > 0):
+        if self.kind is Law.NORMAL and not (math.isfinite(self.mu) and math.isfinite(self.sigma) and self.sigma > 0):
             raise ValueError(f"normal: need a finite mean and sigma > 0, got {self.mu}, {self.sigma}")
-        if self.kind == "normal":
+        if self.kind is Law.NORMAL:
             from scipy.stats import norm
 
             z = norm(self.mu, self.sigma)
@@ -94,7 +107,7 @@ class Marginal:
     def _frozen(self) -> Any:
         from scipy.stats import truncnorm, uniform
 
-        if self.kind == "uniform":
+        if self.kind is Law.UNIFORM:
             return uniform(self.lo, self.hi - self.lo)
         a, b = (self.lo - self.mu) / self.sigma, (self.hi - self.mu) / self.sigma
         return truncnorm(a, b, loc=self.mu, scale=self.sigma)
@@ -106,7 +119,7 @@ class Marginal:
         return np.clip(self._frozen().ppf(np.asarray(q, dtype=np.float64)), self.lo, self.hi)
 
     def text(self) -> str:
-        return "uniform" if self.kind == "uniform" else f"normal({self.mu:g}, {self.sigma:g}) truncated"
+        return "uniform" if self.kind is Law.UNIFORM else f"normal({self.mu:g}, {self.sigma:g}) truncated"
 
 
 @dataclass(frozen=True)
@@ -126,7 +139,7 @@ class ThetaDistribution:
             raise ValueError(f"--dist {unknown[0]}: not a parameter of the box ({', '.join(box.names)})")
         margs = []
         for name, lo, hi in zip(box.names, box.lower, box.upper, strict=True):
-            kind, mu, sigma = specs.get(name, ("uniform", 0.0, 1.0))
+            kind, mu, sigma = specs.get(name, (Law.UNIFORM, 0.0, 1.0))
             margs.append(Marginal(kind, float(lo), float(hi), float(mu), float(sigma)))
         return cls(box, tuple(margs))
 
@@ -152,7 +165,7 @@ class ThetaDistribution:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        return {n: {"kind": m.kind, "mu": m.mu, "sigma": m.sigma} for n, m in zip(self.box.names, self.marginals,
+        return {n: {"kind": m.kind.value, "mu": m.mu, "sigma": m.sigma} for n, m in zip(self.box.names, self.marginals,
                                                                                  strict=True)}
 
     def text(self) -> str:
@@ -171,7 +184,7 @@ def parse_dist(items: Sequence[str] | None, names: Sequence[str] | None = None,
         name, _, rest = item.partition("=")
         kind, _, args = rest.partition(":")
         name, kind = name.strip(), kind.strip().lower()
-        if not name or kind not in ("uniform", "normal"):
+        if not name or kind not in LAWS:
             raise ValueError(f"--dist {item}: expected NAME=uniform or NAME=normal:MEAN,SD")
         if name in seen:
             raise ValueError(f"--dist {item}: {name} is given twice (also --dist {seen[name]}); give one "
@@ -179,7 +192,7 @@ def parse_dist(items: Sequence[str] | None, names: Sequence[str] | None = None,
         seen[name] = item
         if names is not None and name not in names:
             raise ValueError(f"--dist {item}: {name} is not a parameter of the box ({', '.join(names)})")
-        if kind == "uniform":
+        if kind == Law.UNIFORM:
             if args.strip():
                 raise ValueError(f"--dist {item}: uniform takes no arguments (its range is the box's)")
             continue
@@ -189,7 +202,7 @@ def parse_dist(items: Sequence[str] | None, names: Sequence[str] | None = None,
             raise ValueError(f"--dist {item}: expected NAME=normal:MEAN,SD") from None
         if not (math.isfinite(mu) and math.isfinite(sigma) and sigma > 0):
             raise ValueError(f"--dist {item}: the mean must be finite and SD > 0")
-        out[name] = ("normal", mu, sigma)
+        out[name] = (Law.NORMAL.value, mu, sigma)
     return out
 
 

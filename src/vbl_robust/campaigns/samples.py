@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from .kinds import SourceKind
 from .provenance import file_sha256
 
 logger = logging.getLogger(__name__)
@@ -52,7 +53,7 @@ def load_samples(n: int, seed: int, *, lard: str | Path | None = None, width: in
         from ..scenes import generate
 
         samples = list(generate(n, seed=seed, width=width, height=height))
-        return samples, {"kind": "synthetic", "n": n, "seed": seed, "width": width, "height": height}
+        return samples, {"kind": SourceKind.SYNTHETIC.value, "n": n, "seed": seed, "width": width, "height": height}
     from ..data import read_lard
 
     csv_path, db_path = find_lard_files(lard)
@@ -68,7 +69,7 @@ def load_samples(n: int, seed: int, *, lard: str | Path | None = None, width: in
                          f"{len(allrows)} or fewer)")
     idx = np.sort(np.random.default_rng(seed).choice(len(allrows), size=n, replace=False))
     samples = [allrows[i] for i in idx]
-    return samples, {"kind": "lard", "csv": str(csv_path), "csv_sha256": file_sha256(csv_path), "db": str(db_path),
+    return samples, {"kind": SourceKind.LARD.value, "csv": str(csv_path), "csv_sha256": file_sha256(csv_path), "db": str(db_path),
                      "db_sha256": file_sha256(db_path), "rows": len(allrows), "n": len(samples), "seed": seed,
                      "options": {k: str(v) for k, v in read_options.items()}}
 
@@ -88,7 +89,7 @@ def load_sequences(source: str | Path, *, frames: int, rate_hz: float, seed: int
         if n < 1:
             raise ValueError(f"--sequences {source}: need at least 1 sequence")
         seqs = generate_sequences(n, frames, rate_hz, seed, width=width, height=height)
-        return seqs, {"kind": "synthetic sequences", "n": n, "frames": frames, "rate_hz": rate_hz, "seed": seed,
+        return seqs, {"kind": SourceKind.SYNTHETIC_SEQUENCES.value, "n": n, "frames": frames, "rate_hz": rate_hz, "seed": seed,
                       "width": width, "height": height}
     if not Path(text).is_dir():
         raise ValueError(f"--sequences {source}: expected a number of sequences or a LARD V2 dataset directory")
@@ -98,5 +99,5 @@ def load_sequences(source: str | Path, *, frames: int, rate_hz: float, seed: int
     seqs = read_lard_sequences(csv_path, db_path, rate_hz=rate_hz)
     if not seqs:
         raise ValueError(f"--sequences {source}: the dataset has no usable rows")
-    return seqs, {"kind": "lard sequences", "csv": str(csv_path), "csv_sha256": file_sha256(csv_path),
+    return seqs, {"kind": SourceKind.LARD_SEQUENCES.value, "csv": str(csv_path), "csv_sha256": file_sha256(csv_path),
                   "db": str(db_path), "db_sha256": file_sha256(db_path), "sequences": len(seqs), "rate_hz": rate_hz}

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .kinds import SourceKind
 from .metrics import budget_value, main_rows, survived
 from .spec import Block, BoxSpec, Budget, CampaignSpec
 from .store import JobRow, JobStatus, ResultStore
@@ -128,10 +129,10 @@ def load_run_samples(store: ResultStore, ids: Sequence[str]) -> list[Any]:
 
     runs = store.runs()
     source = ((runs[-1].provenance.dataset if runs else None) or {}).get("source") or {}
-    if source.get("kind") == "synthetic":
+    if source.get("kind") == SourceKind.SYNTHETIC:
         samples, _ = load_samples(int(source["n"]), int(source["seed"]), width=int(source["width"]),
                                   height=int(source["height"]))
-    elif source.get("kind") == "lard":
+    elif source.get("kind") == SourceKind.LARD:
         samples, _ = load_samples(int(source["n"]), int(source["seed"]), lard=Path(source["csv"]).parent)
     else:
         raise ValueError(f"{store.path}: its dataset source {source!r} cannot be rebuilt")

@@ -32,6 +32,7 @@ import os
 import stat
 from collections.abc import Iterable
 from contextvars import ContextVar
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any, get_args, get_origin
 
@@ -177,21 +178,30 @@ def load_yaml(path: Path) -> Any:
         loader.dispose()
 
 
-def _kind(param: Any) -> str:
-    """What a value of ``param`` is: "flag", "integer", "number" or "text" (a path, a choice, a string)."""
+class ValueKind(StrEnum):
+    """What a value of an option is (a text: a path, a choice, a string); its value words the error message."""
+
+    FLAG = "flag"
+    INTEGER = "an integer"
+    NUMBER = "a number"
+    TEXT = "a value"
+
+
+def _kind(param: Any) -> ValueKind:
+    """What a value of ``param`` is."""
     if getattr(param, "is_flag", False):
-        return "flag"
+        return ValueKind.FLAG
     annotation = getattr(getattr(param, "type_descriptor", None), "annotation", None)  # typer's parameters
     if get_origin(annotation) is list:
         annotation = (get_args(annotation) or (str,))[0]
     name = getattr(getattr(param, "type", None), "name", None)  # click's
     if annotation is bool or name == "boolean":
-        return "flag"
+        return ValueKind.FLAG
     if annotation is int or name == "integer":
-        return "integer"
+        return ValueKind.INTEGER
     if annotation is float or name == "float":
-        return "number"
-    return "text"
+        return ValueKind.NUMBER
+    return ValueKind.TEXT
 
 
 def _value(key: str, value: Any, param: Any) -> Any:
@@ -212,17 +222,16 @@ def _value(key: str, value: Any, param: Any) -> Any:
     return _scalar(key, value, kind)
 
 
-def _scalar(key: str, value: Any, kind: str) -> Any:
+def _scalar(key: str, value: Any, kind: ValueKind) -> Any:
     if isinstance(value, list | dict):
         raise ConfigError(f"'{key}': expected one value per item, got {type(value).__name__}")
-    if kind == "flag":
+    if kind is ValueKind.FLAG:
         if not isinstance(value, bool):
             raise ConfigError(f"'{key}': a flag takes true or false, got {value!r}")
         return value
     if isinstance(value, bool):
-        what = {"integer": "an integer", "number": "a number"}.get(kind, "a value")
-        raise ConfigError(f"'{key}': expected {what}, got the boolean {str(value).lower()}")
-    if kind == "integer" and isinstance(value, float) and not value.is_integer():
+        raise ConfigError(f"'{key}': expected {kind.value}, got the boolean {str(value).lower()}")
+    if kind is ValueKind.INTEGER and isinstance(value, float) and not value.is_integer():
         raise ConfigError(f"'{key}': expected an integer, got {value!r}")
     return value
 

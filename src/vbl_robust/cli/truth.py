@@ -8,6 +8,7 @@ from typing import Annotated
 
 import typer
 
+from ..campaigns.kinds import SourceKind
 from . import options as o
 from .common import fail, from_config, one_line, set_verbosity
 from .config import parameters, run_config
@@ -64,7 +65,7 @@ def truth(
     spec, n_workers = running.settings(spec, str(det.options.get("device", "cpu")))
     typer.echo(f"{len(samples)} images every method ({', '.join(methods)}) left surviving at {box.label}; "
                f"grid {' × '.join(map(str, grid))}")
-    summary = running.run(spec, samples, out, det, source={"kind": "truth", "run": str(run), "samples": keep},
+    summary = running.run(spec, samples, out, det, source={"kind": SourceKind.TRUTH.value, "run": str(run), "samples": keep},
                           config=run_config("truth", counts=list(grid)), quiet=quiet, workers=n_workers)
     complete = ExportRequest.of(params).finish(out, summary, quiet=True, allow_unmeasured=False)
     t = true_survival(run, out)

@@ -27,7 +27,7 @@ from vbl_robust.space import ParameterBox
 
 from .family import Family, FrameContext
 from .photometric import gray_mean
-from .registry import PERTURBATIONS, family_of, known
+from .registry import PERTURBATIONS, FamilyKind, family_of, known
 from .resample import PixelScale
 from .warp import empty_output
 
@@ -108,7 +108,7 @@ class Perturbation:
     @property
     def is_geometric(self) -> bool:
         """True when some parameter moves pixels (keypoints must then be moved too)."""
-        return "geometric" in self._kinds()
+        return FamilyKind.GEOMETRIC in self._kinds()
 
     @property
     def needs_K(self) -> tuple[str, ...]:
@@ -120,7 +120,7 @@ class Perturbation:
         """True when some family acts on whole perturbed frames (``optical`` convolutions, the ``noise`` pattern
         of the sensor grid): views must then be cut from rendered frames (see
         :class:`~vbl_robust.perturb.ViewSampler`)."""
-        return bool(self._kinds() & {"optical", "noise"})
+        return bool(self._kinds() & {FamilyKind.OPTICAL, FamilyKind.NOISE})
 
     # -- θ handling --------------------------------------------------------------------------------------
     def check_theta(self, theta):
@@ -207,7 +207,7 @@ class Perturbation:
         sc = self._scale(scale)
         base = image.astype(np.float32) / 255.0 if image.dtype == np.uint8 else image.astype(np.float32, copy=False)
         ctx = FrameContext(center=center, K=K, scale=sc)
-        steps = [(fam, kind == "geometric", params, self._values(t, params),
+        steps = [(fam, kind == FamilyKind.GEOMETRIC, params, self._values(t, params),
                   tuple(PERTURBATIONS[n].identity for n in params)) for fam, kind, params in self._groups]
         n, (_, _, c) = t.shape[0], base.shape
         out = empty_output(n, c, h, w).numpy() if channels_first else empty_output(n, h, w, c).numpy()
@@ -259,19 +259,19 @@ class Perturbation:
     @property
     def has_photometric(self) -> bool:
         """True when some parameter changes pixel values pointwise (after the geometry)."""
-        return "photometric" in self._kinds()
+        return FamilyKind.PHOTOMETRIC in self._kinds()
 
     @property
     def needs_stats(self) -> bool:
         """True when a photometric family needs statistics of the whole frame (the contrast's grey mean)."""
-        return any(fam.needs_stats for fam, _ in self._of_kind("photometric"))
+        return any(fam.needs_stats for fam, _ in self._of_kind(FamilyKind.PHOTOMETRIC))
 
     def source_coords(self, qu: torch.Tensor, qv: torch.Tensor, theta, center: torch.Tensor, K=None):
         """Inverse geometric map: perturbed-image OpenCV coordinates ``(B, …)`` → source coordinates (unreflected),
         for θ rows ``(B, d)``; the identity when no parameter is geometric. ``K`` (3, 3): required by the attitude
         homography (``pitch_deg``/``yaw_deg``)."""
         ctx = FrameContext(center=center, K=K)
-        for fam, params in reversed(self._of_kind("geometric")):  # the inverse: last map first
+        for fam, params in reversed(self._of_kind(FamilyKind.GEOMETRIC)):  # the inverse: last map first
             qu, qv = fam.source_coords(qu, qv, self._values(theta, params, qu), ctx)
         return qu, qv
 
@@ -282,7 +282,7 @@ class Perturbation:
         identity when no parameter is geometric."""
         m = np.broadcast_to(np.eye(3), (theta.shape[0], 3, 3))
         ctx = FrameContext(center=center, K=K)
-        for fam, params in reversed(self._of_kind("geometric")):  # the inverse: last map first
+        for fam, params in reversed(self._of_kind(FamilyKind.GEOMETRIC)):  # the inverse: last map first
             h = fam.source_matrix(self._values(theta, params), ctx)
             if h is None:
                 return None
@@ -299,7 +299,7 @@ class Perturbation:
         """The pointwise photometric families (haze, contrast, brightness, gamma) on pixel values ``(B, 3, …)`` of
         the geometrically perturbed frames; ``stats`` from :meth:`photometric_stats` (needed by the contrast).
         ``inplace``: overwrite ``values`` (no gradient; the same values)."""
-        for fam, params in self._of_kind("photometric"):
+        for fam, params in self._of_kind(FamilyKind.PHOTOMETRIC):
             v = self._values(theta, params, values)
             if fam.needs_stats and stats is None:
                 raise ValueError(f"Perturbation.photometric_torch: {fam!r} needs the frames' grey means (stats), "
@@ -321,7 +321,7 @@ class Perturbation:
         if self.is_geometric:
             center, K = self._camera(center, K)
             ctx = FrameContext(center=center, K=K)
-            for fam, params in self._of_kind("geometric"):
+            for fam, params in self._of_kind(FamilyKind.GEOMETRIC):
                 points = fam.points(points, self._values(t, params), ctx)
             return points
         n = t.shape[0]

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -33,11 +34,20 @@ import numpy as np
 if TYPE_CHECKING:
     from .family import Family
 
-__all__ = ["KINDS", "PERTURBATIONS", "PerturbationSpec", "family_of", "known"]
+__all__ = ["KINDS", "PERTURBATIONS", "FamilyKind", "PerturbationSpec", "family_of", "known"]
 
-#: What a family does: ``geometric`` moves pixels (and points); ``optical`` convolves the frame; ``photometric``
-#: maps each pixel value; ``noise`` adds the fixed pattern on the frame's pixel grid.
-KINDS = ("geometric", "optical", "photometric", "noise")
+class FamilyKind(StrEnum):
+    """What a family does: ``GEOMETRIC`` moves pixels (and points); ``OPTICAL`` convolves the frame;
+    ``PHOTOMETRIC`` maps each pixel value; ``NOISE`` adds the fixed pattern on the frame's pixel grid."""
+
+    GEOMETRIC = "geometric"
+    OPTICAL = "optical"
+    PHOTOMETRIC = "photometric"
+    NOISE = "noise"
+
+
+#: The values of :class:`FamilyKind`, in order.
+KINDS = tuple(k.value for k in FamilyKind)
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..atomic import atomic_write
 from ..campaigns import metrics as mx
+from ..campaigns.kinds import SourceKind
 from ..campaigns.store import JobRow
 from ..campaigns.store.payloads import Nominal, WorstPayload, WorstPoint
 from ..constants import BreachKind, Verdict
@@ -317,15 +318,15 @@ def _data_text(ctx: Context, dataset: Mapping[str, Any]) -> str:
     src = dataset.get("source") or {}
     kind, unit = src.get("kind"), ctx.spec.unit
     n = dataset.get("n") or src.get("n") or len(ctx.samples)
-    if kind == "synthetic":
+    if kind == SourceKind.SYNTHETIC:
         return f"{n} synthetic LARD-V2-format approach scenes (not LARD's real images)"
-    if kind == "lard":
+    if kind == SourceKind.LARD:
         return f"{n} LARD images ({esc(Path(str(src.get('csv', ''))).name)})"
-    if kind == "synthetic sequences":
+    if kind == SourceKind.SYNTHETIC_SEQUENCES:
         return f"{n} synthetic approach sequences"
-    if kind == "lard sequences":
+    if kind == SourceKind.LARD_SEQUENCES:
         return f"{n} LARD approach sequences ({esc(Path(str(src.get('csv', ''))).name)})"
-    if kind == "truth":
+    if kind == SourceKind.TRUTH:
         return f"{len(ctx.samples)} {unit}s of the run it checks ({esc(Path(str(src.get('run', ''))).name)})"
     return f"{n} {unit}s" + (f" ({esc(kind)})" if kind else "")
 

@@ -31,6 +31,7 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ..campaigns.kinds import SourceKind
 from ..campaigns.truth import load_run_samples
 from ..constants import BreachKind, FailureReason
 from . import figures as F
@@ -56,7 +57,7 @@ def _samples(ctx: Context, ids: Sequence[str]) -> tuple[dict[str, Any], str]:
         return {}, "a sequence campaign: each case is an approach sequence (its frames: the sequence section)"
     runs = ctx.store.runs()
     source = ((runs[-1].provenance.dataset if runs else None) or {}).get("source") or {}
-    if source.get("kind") == "truth":  # vbl-robust truth: the images of the run it checks, named, not recorded
+    if source.get("kind") == SourceKind.TRUTH:  # vbl-robust truth: the images of the run it checks, named, not recorded
         return {}, (f"a truth run grids {ctx.spec.unit}s of the run it checks ({source.get('run')}); their pictures "
                     "are in that run's gallery")
     try:

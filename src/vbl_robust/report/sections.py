@@ -17,6 +17,7 @@ from ..campaigns.kinds import JobKind, Role
 from ..campaigns.reference import AgainstGrid
 from ..campaigns.store import JobRow, JobStatus, RunProvenance
 from ..constants import FAILURE_REASONS, Verdict
+from ..detect.shipped import DetectorKind
 from ..search import NON_FINITE
 from . import figures as F
 from .html import esc, fmt_num, folded, table
@@ -100,7 +101,7 @@ def section_overview(ctx: Context, title: str) -> Section:
         s.html.append(f'<p class="note">{esc(ctx.spec.notes)}</p>')
     for goal in det.get("open_goals") or []:
         s.html.append(f'<p class="warn">Open accuracy goal of this detector (its model card): {esc(goal)}.</p>')
-    if det.get("kind") == "oracle":
+    if det.get("kind") == DetectorKind.ORACLE:
         s.html.append('<p class="warn">The oracle detector returns the exact projected runway corners: these results '
                       "describe a perfect detector (roll about the optical axis does not move the camera), not a "
                       "trained model.</p>")
