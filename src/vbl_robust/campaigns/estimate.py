@@ -127,7 +127,7 @@ def planned_work(spec: CampaignSpec, n_images: int) -> tuple[int, float]:
     cut it)."""
     evals, seconds = 0, 0.0
     for j in _jobs(spec, n_images):
-        if j.kind is JobKind.PNP:
+        if j.kind == JobKind.PNP:
             evals += 1
             continue
         n = _grid_points(j) or j.budget.max_evals
@@ -180,7 +180,7 @@ def stored_pace(rows: Sequence[Any]) -> dict[bool, tuple[int, int, float]]:
 
     out: dict[bool, tuple[int, int, float]] = {}
     for r in rows:
-        if r.kind is not JobKind.SEARCH or r.method not in METHODS or not r.nfev or not (r.search_s and r.search_s > 0):
+        if r.kind != JobKind.SEARCH or r.method not in METHODS or not r.nfev or not (r.search_s and r.search_s > 0):
             continue
         g = METHODS[r.method].needs_gradient
         jobs, evals, secs = out.get(g, (0, 0, 0.0))
@@ -239,7 +239,7 @@ def stopping_boxes(specs: Sequence[CampaignSpec]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for spec in specs:
         for blk in spec.blocks:
-            if blk.kind is JobKind.SEARCH and any(b.stop_at_breach for b in blk.budgets):
+            if blk.kind == JobKind.SEARCH and any(b.stop_at_breach for b in blk.budgets):
                 out.update({box.label: box for box in blk.boxes})
     return out
 
