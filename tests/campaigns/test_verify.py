@@ -235,8 +235,9 @@ def test_the_report_leaves_the_edited_row_out_says_so_and_prints_the_head(pristi
     assert f"vbl-robust verify RUN --head {head}" in page and "finding(s)" in page
     clean = build_report(pristine, tmp_path / "clean").read_text()
     assert "inconsistent — not used" not in clean and head in clean and "every row matches" in clean
-    res = runner.invoke(app, ["report", str(run), "--format", "csv"])  # the summary rows say it too
-    assert res.exit_code == 0 and "1 job row(s) inconsistent — not used" in res.output, res.output
+    res = runner.invoke(app, ["report", str(run), "--format", "csv"])  # the summary rows say it, and exit 1
+    assert res.exit_code == 1 and "1 job row(s) inconsistent — not used" in res.output, res.output
+    assert runner.invoke(app, ["report", str(pristine), "--format", "csv"]).exit_code == 0
 
 
 def test_a_deleted_sample_an_orphan_row_and_a_deleted_row_are_found(pristine, tmp_path):
