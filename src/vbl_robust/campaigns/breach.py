@@ -46,7 +46,7 @@ def _require_measured(row: JobRow) -> None:
 def empty_row(row: JobRow) -> bool:
     """A search that completed no evaluation within its time budget: it found nothing (:func:`survived`) and has no
     worst error to count in the statistics."""
-    return row.status is JobStatus.DONE and row.nfev == 0 and row.worst_m is None
+    return row.status == JobStatus.DONE and row.nfev == 0 and row.worst_m is None
 
 
 def survived(row: JobRow, eps_safe_m: float) -> bool:
@@ -71,7 +71,7 @@ def breach_kind(row: JobRow, eps_safe_m: float) -> BreachKind | None:
     (unknown: a misleading pose may hide below a flagged worst)."""
     if survived(row, eps_safe_m):
         return BreachKind.SAFE
-    if row.status is not JobStatus.DONE:
+    if row.status != JobStatus.DONE:
         return BreachKind.FLAGGED
     if row.points is None:
         silent_worst = not row.worst_reason and row.worst_m is not None and math.isfinite(row.worst_m)
@@ -94,7 +94,7 @@ def breached_images(rows: Iterable[JobRow], eps_safe_m: float) -> tuple[set[str]
         breached.add(r.sample_id)
         kind = breach_kind(r, eps_safe_m)
         unknown |= kind is None
-        if kind is BreachKind.MISLEADING:
+        if kind == BreachKind.MISLEADING:
             misleading.add(r.sample_id)
     return breached, misleading, unknown
 
@@ -107,7 +107,7 @@ def residual_bound(row: JobRow, eps_safe_m: float) -> float | None:
     from ..search.api import METHODS
 
     cls = METHODS.get(row.method)
-    if cls is None or not cls.iid_uniform or row.status is not JobStatus.DONE or not survived(row, eps_safe_m):
+    if cls is None or not cls.iid_uniform or row.status != JobStatus.DONE or not survived(row, eps_safe_m):
         return None
     return breach_fraction_bound(int(row.nfev))
 

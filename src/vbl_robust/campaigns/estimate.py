@@ -287,7 +287,7 @@ def expected_seconds(spec: CampaignSpec, n_images: int, pr: Probe, workers: int 
     total = 0.0
     by_chain: dict[str, list[Job]] = {}
     for j in _jobs(spec, n_images):
-        if j.kind is JobKind.PNP:
+        if j.kind == JobKind.PNP:
             total += 1 / pr.rate
             continue
         rate = pr.grad_rate if METHODS[j.method].needs_gradient else pr.rate

@@ -26,7 +26,7 @@ def smallest_breach_levels(rows: Iterable[JobRow]) -> dict[tuple[str, str], floa
             continue
         key = (r.sample_id, r.method)
         cur = out.setdefault(key, math.inf)
-        if r.verdict is Verdict.BREACH:
+        if r.verdict == Verdict.BREACH:
             out[key] = min(cur, float(r.box_level))
     return out
 

@@ -159,7 +159,7 @@ def pnp_summary(rows: Iterable[JobRow]) -> list[PnpLine]:
     """Per (keypoint source, solver) over the PnP-comparison rows, a :class:`PnpLine`."""
     acc: dict[tuple[str, str], dict[str, list[float]]] = {}
     for r in rows:
-        if r.status is not JobStatus.DONE or not r.payload:
+        if r.status != JobStatus.DONE or not r.payload:
             continue
         for src, solvers in r.payload["errors"].items():
             for solver, e in solvers.items():

@@ -72,7 +72,7 @@ def check_run(spec: CampaignSpec, samples: Sequence[Any], detector: DetectorSpec
     needs = gradient_methods(spec)
     if needs:
         check_methods(needs, detector_for(detector), detector.name, monitor_sigma=spec.monitor_sigma_m is not None)
-    if detector.kind is DetectorKind.PLUGIN and samples:
+    if detector.kind == DetectorKind.PLUGIN and samples:
         check_plugin(spec, samples[0], detector)
 
 

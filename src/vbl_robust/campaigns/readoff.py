@@ -25,7 +25,7 @@ def read_off(row: JobRow, budget: Budget, eps_safe_m: float, penalty_m: float) -
     from .work import result_fields
 
     base = row.replace(budget=budget, key=f"{row.key}@{budget.label}", read_from=row.budget_label, payload=None)
-    if row.status is not JobStatus.DONE:
+    if row.status != JobStatus.DONE:
         return base
     r = at_budget(row_result(row), seconds=budget.max_seconds, evals=budget.max_evals)
     fields = result_fields(r, eps_safe_m, penalty_m)

@@ -63,7 +63,7 @@ def reference_rows(ref_rows: Iterable[JobRow], boxes: Sequence[BoxSpec], eps_saf
     """
     out = []
     for r in ref_rows:
-        if r.status is not JobStatus.DONE or r.points is None or r.box is None:
+        if r.status != JobStatus.DONE or r.points is None or r.box is None:
             continue
         grid = r.box.box
         for b in boxes:

@@ -60,7 +60,7 @@ def replay(row: JobRow, spec: CampaignSpec | None = None, *, eps_safe_m: float |
     from ..search import Evaluations, make_optimizer
     from .work import search_kwargs
 
-    if row.kind is not JobKind.SEARCH or row.box is None or row.budget is None:
+    if row.kind != JobKind.SEARCH or row.box is None or row.budget is None:
         raise ValueError(f"job {row.key}: not a search job ({row.kind})")
     pts = row.points
     if pts is None:
@@ -150,7 +150,7 @@ def job_zones(row: JobRow, spec: CampaignSpec | None = None, *, threshold: float
     eps = threshold if threshold is not None else (spec.eps_safe_m if spec is not None else EPS_SAFE_M)
     base = dict(key=row.key, sample_id=row.sample_id, sample_index=row.sample_index, method=row.method, role=row.role,
                 box_label=row.box_label, box=None if row.box is None else row.box.box)
-    if row.kind is not JobKind.SEARCH:
+    if row.kind != JobKind.SEARCH:
         return JobZones(**base, zones=None, note=f"a {row.kind} job: no search")
     if str(row.status) != "done":
         return JobZones(**base, zones=None, note=f"job {row.status}: {row.reason or 'no search ran'}")

@@ -94,9 +94,9 @@ class Marginal:
         object.__setattr__(self, "kind", Law(self.kind))
         if not (math.isfinite(self.lo) and math.isfinite(self.hi) and self.lo < self.hi):
             raise ValueError(f"distribution range must be finite with lo < hi, got [{self.lo}, {self.hi}]")
-        if self.kind is Law.NORMAL and not (math.isfinite(self.mu) and math.isfinite(self.sigma) and self.sigma > 0):
+        if self.kind == Law.NORMAL and not (math.isfinite(self.mu) and math.isfinite(self.sigma) and self.sigma > 0):
             raise ValueError(f"normal: need a finite mean and sigma > 0, got {self.mu}, {self.sigma}")
-        if self.kind is Law.NORMAL:
+        if self.kind == Law.NORMAL:
             from scipy.stats import norm
 
             z = norm(self.mu, self.sigma)
@@ -107,7 +107,7 @@ class Marginal:
     def _frozen(self) -> Any:
         from scipy.stats import truncnorm, uniform
 
-        if self.kind is Law.UNIFORM:
+        if self.kind == Law.UNIFORM:
             return uniform(self.lo, self.hi - self.lo)
         a, b = (self.lo - self.mu) / self.sigma, (self.hi - self.mu) / self.sigma
         return truncnorm(a, b, loc=self.mu, scale=self.sigma)
@@ -119,7 +119,7 @@ class Marginal:
         return np.clip(self._frozen().ppf(np.asarray(q, dtype=np.float64)), self.lo, self.hi)
 
     def text(self) -> str:
-        return "uniform" if self.kind is Law.UNIFORM else f"normal({self.mu:g}, {self.sigma:g}) truncated"
+        return "uniform" if self.kind == Law.UNIFORM else f"normal({self.mu:g}, {self.sigma:g}) truncated"
 
 
 @dataclass(frozen=True)

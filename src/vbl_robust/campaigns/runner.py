@@ -349,7 +349,7 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
         store.commit(rows)
         state["new"] += len(rows)
         state["not_measured"] += sum(not r.measured for r in rows)
-        state["breaches"] += sum(r.verdict is Verdict.BREACH and r.role is Role.MAIN for r in rows)
+        state["breaches"] += sum(r.verdict == Verdict.BREACH and r.role == Role.MAIN for r in rows)
         if progress is not None:
             progress(Progress(skipped + state["new"], len(jobs), skipped, state["breaches"], state["not_measured"],
                               time.perf_counter() - t0, rows[0]))
@@ -374,7 +374,7 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
         raise
     finally:
         seconds = time.perf_counter() - t0
-        if status is RunStatus.FINISHED and skipped + state["new"] < len(jobs):
+        if status == RunStatus.FINISHED and skipped + state["new"] < len(jobs):
             status = RunStatus.INCOMPLETE
         store.end_run(run_id, status, state["new"], seconds)
     return RunSummary(run_id, len(jobs), skipped, state["new"], state["not_measured"], state["breaches"], seconds,
@@ -382,7 +382,7 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
 
 
 def _stored_breaches(store: ResultStore) -> int:
-    return sum(r.verdict is Verdict.BREACH for r in store.jobs(role="main", with_trace=False))
+    return sum(r.verdict == Verdict.BREACH for r in store.jobs(role="main", with_trace=False))
 
 
 # -- worker processes ---------------------------------------------------------------------------------------------

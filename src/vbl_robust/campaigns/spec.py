@@ -133,7 +133,7 @@ class Block:
         object.__setattr__(self, "kind", JobKind(self.kind))
         if self.kind in (JobKind.SEARCH, JobKind.RISK) and not (self.boxes and self.methods and self.budgets):
             raise ValueError(f"Block: a {self.kind} block needs at least one box, one method and one budget")
-        if self.kind is JobKind.RISK and (self.chain or self.role is not Role.MAIN):
+        if self.kind == JobKind.RISK and (self.chain or self.role != Role.MAIN):
             raise ValueError("Block: a risk block is a main block without a chain")
         if self.chain:
             levels = [b.level for b in self.boxes]
@@ -279,7 +279,7 @@ class CampaignSpec:
         if self.sustain is not None and (isinstance(self.sustain, bool) or not isinstance(self.sustain, int)
                                          or self.sustain < 1):
             raise ValueError(f"sustain: need an integer >= 1 (frames), got {self.sustain!r}")
-        if self.sustain is not None and any(b.kind is not JobKind.SEARCH for b in self.blocks):
+        if self.sustain is not None and any(b.kind != JobKind.SEARCH for b in self.blocks):
             raise ValueError("CampaignSpec: a sequence campaign (sustain set) holds search blocks only")
         if self.monitor_px is not None and not (math.isfinite(self.monitor_px) and self.monitor_px > 0):
             raise ValueError(f"--monitor-residual must be a finite number of pixels > 0, got {self.monitor_px}")
@@ -306,16 +306,16 @@ class CampaignSpec:
         from .risk import RISK_METHODS
 
         for blk in self.blocks:
-            if blk.kind is JobKind.PNP:
+            if blk.kind == JobKind.PNP:
                 continue
-            known = RISK_METHODS if blk.kind is JobKind.RISK else METHODS
+            known = RISK_METHODS if blk.kind == JobKind.RISK else METHODS
             unknown = [m for m in blk.methods if m not in known]
             if unknown:
                 raise ValueError(f"methods: unknown method(s) {unknown}; methods are {', '.join(known)}")
             twice = sorted({m for m in blk.methods if blk.methods.count(m) > 1})
             if twice:
                 raise ValueError(f"methods: {', '.join(twice)} given more than once")
-            graded = [m for m in blk.methods if blk.kind is not JobKind.RISK and METHODS[m].needs_gradient]
+            graded = [m for m in blk.methods if blk.kind != JobKind.RISK and METHODS[m].needs_gradient]
             if self.monitor_sigma_m is not None and graded:  # the σ monitor reads the black-box path only
                 raise ValueError(f"--monitor-sigma: a gradient search ({', '.join(graded)}) cannot run under the σ "
                                  "monitor; leave it out of --methods")
@@ -410,7 +410,7 @@ class CampaignSpec:
 
     def search_methods(self) -> set[str]:
         """The methods its search blocks run."""
-        return {m for b in self.blocks if b.kind is JobKind.SEARCH for m in b.methods}
+        return {m for b in self.blocks if b.kind == JobKind.SEARCH for m in b.methods}
 
     def with_method_options(self, options: Mapping[str, Mapping[str, Any]], *, strict: bool = True) -> CampaignSpec:
         """This campaign with ``options[method]`` merged into the options of every search block that runs
@@ -423,7 +423,7 @@ class CampaignSpec:
 
         blocks, used = [], set()
         for blk in self.blocks:
-            touched = [m for m in blk.methods if m in options] if blk.kind is JobKind.SEARCH else []
+            touched = [m for m in blk.methods if m in options] if blk.kind == JobKind.SEARCH else []
             if not touched:
                 blocks.append(blk)
                 continue
@@ -459,7 +459,7 @@ class CampaignSpec:
             for blk in self.blocks:
                 if blk.max_samples is not None and i >= blk.max_samples:
                     continue
-                if blk.kind is JobKind.PNP:
+                if blk.kind == JobKind.PNP:
                     jobs.append(Job(self.name, sid, fp, i, JobKind.PNP, blk.role, "pnp", None, None,
                                     derive_seed(self.seed, sid, "pnp"), {}, ctx))
                     continue

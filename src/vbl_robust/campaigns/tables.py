@@ -92,11 +92,11 @@ def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
         d.update(slant_distance_m=None if s is None else s.slant_distance_m, envelope=None if s is None else s.envelope,
                  max_evals=b.get("max_evals"), max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"),
                  stop_at_breach=b.get("stop_at_breach"))
-        risk = RiskPayload.of(r) if r.kind is JobKind.RISK else None
+        risk = RiskPayload.of(r) if r.kind == JobKind.RISK else None
         if risk is not None:
             has_risk = True
             d.update({c: getattr(risk, c) for c in RISK_COLUMNS if c != "risk_verdict"}, risk_verdict=risk.verdict)
-        if r.kind is JobKind.SEARCH and r.measured:
+        if r.kind == JobKind.SEARCH and r.measured:
             kind = breach_kind(r, eps_kind)
             d.update(breach_kind=None if kind is None else kind.value, residual_bound=residual_bound(r, eps_kind))
         for name, v in (r.worst_x or {}).items():
@@ -171,7 +171,7 @@ def risk_records(store: ResultStore) -> list[dict[str, Any]]:
 def summary_table(store: ResultStore) -> tuple[list[dict[str, Any]], tuple[str, ...]]:
     """What ``report --format csv|json`` prints: the records and their columns — a risk run's per-estimator
     failure probability (:func:`risk_records`), any other run's survival table (:func:`summary_records`)."""
-    if any(blk.kind is JobKind.RISK for blk in store.spec().blocks):
+    if any(blk.kind == JobKind.RISK for blk in store.spec().blocks):
         return risk_records(store), RISK_SUMMARY_COLUMNS
     return summary_records(store), SUMMARY_COLUMNS
 

@@ -109,7 +109,7 @@ def true_survival(run: str | Path, truth: str | Path | None = None) -> TrueSurvi
         _, rows = _at_largest([r for r in main_rows(store, spec, with_trace=False) if r.chain is None])
     with ResultStore.open_existing(truth) as tstore:
         grids = {r.sample_id: r for r in tstore.jobs(role="reference", with_trace=False)
-                 if r.status is JobStatus.DONE}
+                 if r.status == JobStatus.DONE}
         counts = tuple(tstore.spec().blocks[0].options["grid"]["counts"])
     eps = spec.eps_safe_m
     done = [sid for sid in keep if sid in grids]

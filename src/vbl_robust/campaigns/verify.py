@@ -153,14 +153,14 @@ def row_findings(row: JobRow, *, eps_safe_m: float, penalty_m: float, committed:
     (its digest shows it is the row committed: rows a caller commits without points, as tests do). Implied rows
     are checked against their chain by :func:`check_store`."""
     found = [f for f in (_outside_box(row),) if f is not None]
-    if row.status is JobStatus.NOT_MEASURED:
+    if row.status == JobStatus.NOT_MEASURED:
         if row.worst_m is not None or (row.points is not None and len(row.points)) or row.verdict not in (
                 None, Verdict.NOT_MEASURED):
             found.append(Finding(row.key, FindingKind.SUMMARY, "a job not measured that holds a result (worst "
                                  f"{_show(row.worst_m)}, verdict {_show(row.verdict)})", ("status",)))
         return found
-    if row.status is JobStatus.IMPLIED:
-        if row.verdict is not Verdict.BREACH or row.worst_m is None or not row.worst_m > eps_safe_m:
+    if row.status == JobStatus.IMPLIED:
+        if row.verdict != Verdict.BREACH or row.worst_m is None or not row.worst_m > eps_safe_m:
             found.append(Finding(row.key, FindingKind.SUMMARY, f"an implied breach of {_show(row.worst_m)} with verdict "
                                  f"{_show(row.verdict)} at ε_safe = {eps_safe_m:g} m", ("worst_m", "verdict")))
         return found
@@ -173,7 +173,7 @@ def row_findings(row: JobRow, *, eps_safe_m: float, penalty_m: float, committed:
                              ("points",)))
         return found
     try:
-        if row.kind is JobKind.RISK:
+        if row.kind == JobKind.RISK:
             expected = _risk_fields(row, penalty_m, eps_safe_m)
         else:
             from .rebuild import row_result
@@ -250,15 +250,15 @@ def _check(store: ResultStore, spec: Any) -> StoreCheck:
         if row is not None and settings is not None:
             committed = entry is not None and entry["event"] == STORED and not row_f
             row_f += row_findings(row, eps_safe_m=settings[0], penalty_m=settings[1], committed=committed)
-            if row.status is JobStatus.IMPLIED:
+            if row.status == JobStatus.IMPLIED:
                 implied.append(row.replace(points=None, trace=()))
-            elif row.chain is not None and row.verdict is Verdict.BREACH:
+            elif row.chain is not None and row.verdict == Verdict.BREACH:
                 breaches[row.chain].append(row.replace(points=None, trace=()))
         findings += row_f
         if row_f:
             bad.add(key)
     for row in implied:  # an implied breach needs its searched breach: the same chain, a smaller box, the same θ*
-        src = [b for b in breaches.get(row.chain or "", ()) if b.status is JobStatus.DONE and b.key not in bad
+        src = [b for b in breaches.get(row.chain or "", ()) if b.status == JobStatus.DONE and b.key not in bad
                and (b.box_level or 0.0) < (row.box_level or 0.0) and _close(b.worst_m, row.worst_m)
                and _same_point(b.worst_x, row.worst_x)]
         if not src:

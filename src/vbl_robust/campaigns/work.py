@@ -371,7 +371,7 @@ def _search_job(job: Job, run: _SampleRun, t0: float) -> JobRow:
     settings = run.settings
     result = run_search_job(job, objective, settings)
     row = search_row(job, result, settings, run.run_id, time.perf_counter() - t0)
-    if job.role is not Role.MAIN or result.x is None:
+    if job.role != Role.MAIN or result.x is None:
         return row
     if settings.sustain is not None:
         return row.replace(payload=sequence_details(objective, result.x, settings.eps_safe_m).to_json())
@@ -409,7 +409,7 @@ def run_sample_task(task: SampleTask, detector: Detector, settings: Settings, ru
             yield [unmeasured_row(job, kind, detail, run_id, time.perf_counter() - t0)]
             continue
         rows = [row]
-        if job.chain is not None and row.verdict is Verdict.BREACH:
+        if job.chain is not None and row.verdict == Verdict.BREACH:
             breached[job.chain] = row
             rows += [implied_row(j, row, settings, run_id) for j in task.jobs
                      if j.chain == job.chain and j.box.level > job.box.level]

@@ -266,9 +266,9 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
                                         device=device, trust=trust_model if plugin is None else consent,
                                         noise_needs_oracle=noise_needs_oracle, plugin=plugin,
                                         plugin_digest=plugin_digest)
-    if spec.kind is DetectorKind.DEFAULT:
+    if spec.kind == DetectorKind.DEFAULT:
         _note_open_goals(spec.shipped_name)
-    elif spec.kind is DetectorKind.ORACLE and not oracle:
+    elif spec.kind == DetectorKind.ORACLE and not oracle:
         noise = f", {oracle_noise:g} px fixed corner noise" if oracle_noise else ""
         typer.secho(f"note: {default_model_status()}; using the oracle detector (ground-truth corners{noise}). "
                     "Pass --model PATH for your model, or --model default to audit the shipped one anyway.",

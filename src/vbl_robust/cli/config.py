@@ -225,13 +225,13 @@ def _value(key: str, value: Any, param: Any) -> Any:
 def _scalar(key: str, value: Any, kind: ValueKind) -> Any:
     if isinstance(value, list | dict):
         raise ConfigError(f"'{key}': expected one value per item, got {type(value).__name__}")
-    if kind is ValueKind.FLAG:
+    if kind == ValueKind.FLAG:
         if not isinstance(value, bool):
             raise ConfigError(f"'{key}': a flag takes true or false, got {value!r}")
         return value
     if isinstance(value, bool):
         raise ConfigError(f"'{key}': expected {kind.value}, got the boolean {str(value).lower()}")
-    if kind is ValueKind.INTEGER and isinstance(value, float) and not value.is_integer():
+    if kind == ValueKind.INTEGER and isinstance(value, float) and not value.is_integer():
         raise ConfigError(f"'{key}': expected an integer, got {value!r}")
     return value
 

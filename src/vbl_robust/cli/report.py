@@ -219,7 +219,7 @@ def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:
             return compare_markdown(run, compare)
         with ResultStore.open_existing(run) as store:
             spec = store.spec()
-        if any(b.kind is JobKind.RISK for b in spec.blocks):
+        if any(b.kind == JobKind.RISK for b in spec.blocks):
             if others:
                 fail("--with: a risk run's table has no other runs beside it")
             return risk_markdown(run)

@@ -84,7 +84,7 @@ class DetectorKind(StrEnum):
     @property
     def default_engine(self) -> str:
         """What runs a model of this kind's black-box forwards unless told otherwise (:mod:`.engines`)."""
-        return "onnxruntime" if self is DetectorKind.ONNX else "torch"
+        return "onnxruntime" if self == DetectorKind.ONNX else "torch"
 
 
 #: The values of :class:`DetectorKind`, in order.
@@ -311,7 +311,7 @@ class DetectorSpec:
         if self.kind not in DETECTOR_KINDS:
             raise ValueError(f"detector kind must be one of {DETECTOR_KINDS}, got {self.kind!r}")
         object.__setattr__(self, "kind", DetectorKind(self.kind))
-        if (self.kind.model_file or self.kind is DetectorKind.FACTORY) and not self.path:
+        if (self.kind.model_file or self.kind == DetectorKind.FACTORY) and not self.path:
             raise ValueError(f"detector kind {self.kind.value!r} needs a path")
         if self.kind.model_file and not Path(self.path).is_file():
             raise FileNotFoundError(f"{self.path}: model file not found")
@@ -444,16 +444,16 @@ class DetectorSpec:
     @property
     def shipped_name(self) -> str | None:
         """Which shipped model (``kind == "default"``), else None."""
-        return self.options.get("model", "default") if self.kind is DetectorKind.DEFAULT else None
+        return self.options.get("model", "default") if self.kind == DetectorKind.DEFAULT else None
 
     @property
     def model_file(self) -> Path | None:
         """The file whose SHA-256 identifies the detector: the weights, or a plug-in's source file."""
-        if self.kind is DetectorKind.DEFAULT:
+        if self.kind == DetectorKind.DEFAULT:
             return default_model_path(self.shipped_name)
         if self.kind.model_file:
             return Path(self.path)
-        if self.kind is DetectorKind.PLUGIN:
+        if self.kind == DetectorKind.PLUGIN:
             from .plugin import plugin_source
 
             return plugin_source(self.path)
@@ -461,9 +461,9 @@ class DetectorSpec:
 
     @property
     def name(self) -> str:
-        if self.kind is DetectorKind.ORACLE:
+        if self.kind == DetectorKind.ORACLE:
             return "oracle (ground-truth keypoints)"
-        if self.kind is DetectorKind.DEFAULT:
+        if self.kind == DetectorKind.DEFAULT:
             which = "" if self.shipped_name == "default" else f"{self.shipped_name} "
             return f"shipped {which}model ({self.model_file.name if self.model_file else 'missing'})"
         return f"{self.kind.value}: {self.path}"
@@ -484,7 +484,7 @@ class DetectorSpec:
             ident["engine"] = resolve_engine(self.options.get("engine", self.kind.default_engine), ident["device"])
             ident["precision"] = "fp32"
         ident["design"], ident["input_size"] = self.design()
-        if self.kind is DetectorKind.DEFAULT and f is not None and (f.parent / "default.json").is_file():
+        if self.kind == DetectorKind.DEFAULT and f is not None and (f.parent / "default.json").is_file():
             ident["config_sha256"] = file_sha256(f.parent / "default.json")
             info = default_model_info(self.shipped_name)
             if info.get("first") in SHIPPED_MODELS and (one := default_model_path(str(info["first"]))) is not None:
@@ -499,11 +499,11 @@ class DetectorSpec:
         """The pipeline this detector runs as a report names it: ``("single pass" | "two-stage" | "oracle", input
         size in px)``; the input size is None where the model file states it (a user's model at its own size), the
         design None for a factory's detector (its own)."""
-        if self.kind is DetectorKind.ORACLE:
+        if self.kind == DetectorKind.ORACLE:
             return "oracle", None
         if self.kind.runs_code:
             return None, None
-        info = default_model_info(self.shipped_name) if self.kind is DetectorKind.DEFAULT else {}
+        info = default_model_info(self.shipped_name) if self.kind == DetectorKind.DEFAULT else {}
         design = self.options.get("design") or info.get("detector", "single")
         size = self.options.get("imgsz") or info.get("imgsz")
         return {"single": "single pass", "twostage": "two-stage"}.get(design, design), (int(size) if size else None)

@@ -104,14 +104,14 @@ def combine(parts: Sequence[Outcome]) -> ClaimVerdict:
     known = [p for p in parts if p is not None]
     if not known:
         return NOT_RUN
-    if any(p is ClaimVerdict.CONTRADICTED for p in known):
+    if any(p == ClaimVerdict.CONTRADICTED for p in known):
         return CONTRADICTED
-    held = [p is True or p is ClaimVerdict.HOLDS for p in known]
+    held = [p is True or p == ClaimVerdict.HOLDS for p in known]
     if len(known) == len(parts) and all(held):
         return HOLDS
     if any(held):
         return PARTLY
-    return TIE if any(p is ClaimVerdict.TIE for p in known) else FAILS
+    return TIE if any(p == ClaimVerdict.TIE for p in known) else FAILS
 
 
 def survival_parts(rows: Sequence[JobRow], eps_safe_m: float, pairs: Sequence[tuple[str, str]],
@@ -233,7 +233,7 @@ def _said(v: Outcome, threshold: str) -> str:
     """A part's verdict in words; a tie says which ``threshold`` its interval straddles (given one)."""
     if v is None:
         return "not measured"
-    if v is ClaimVerdict.TIE:
+    if v == ClaimVerdict.TIE:
         return f"tie (the interval straddles {threshold})" if threshold else "tie"
     return v.value if isinstance(v, ClaimVerdict) else {True: "yes", False: "no"}[v]
 
@@ -244,7 +244,7 @@ def _all(parts: Sequence[ClaimVerdict | None]) -> ClaimVerdict | None:
         return None
     if ClaimVerdict.CONTRADICTED in parts:
         return ClaimVerdict.CONTRADICTED
-    return ClaimVerdict.HOLDS if all(p is ClaimVerdict.HOLDS for p in parts) else ClaimVerdict.TIE
+    return ClaimVerdict.HOLDS if all(p == ClaimVerdict.HOLDS for p in parts) else ClaimVerdict.TIE
 
 
 def _finite_median(x: np.ndarray) -> np.ndarray:
@@ -388,7 +388,7 @@ def ra_part(ra: np.ndarray, by: int = RA_BY_ITER, pct: float = RA_PCT) -> tuple[
     boot = _quiet(np.nanmin, _quiet(np.nanmean, early[resamples(ra.shape[0])], axis=1))
     lo, hi = percentile_ci(boot)
     v = in_range(lo, hi, high=math.nextafter(pct, -math.inf))
-    if v is not ClaimVerdict.HOLDS and ra.shape[1] < by:
+    if v != ClaimVerdict.HOLDS and ra.shape[1] < by:
         v = None
     return v, (f"lowest mean RA(k ≤ {by}) {_ci(float(mean[k]), lo, hi, ' %', (pct,))} at k = {k + 1} < {pct:g} % "
                f"({ra.shape[1]} iterations ran): {_said(v, f'{pct:g} %')}")
@@ -445,7 +445,7 @@ def judge(parts: Sequence[tuple[Outcome, str]], groups: Sequence[tuple[list[Outc
     several outcomes, one text each)."""
     mark = {True: "yes", False: "no", None: "not measured"}
     outcomes = [ok for ok, _ in parts] + [o for out, _ in groups for o in out]
-    held = sum(o is True or o is ClaimVerdict.HOLDS for o in outcomes)
+    held = sum(o is True or o == ClaimVerdict.HOLDS for o in outcomes)
     texts = [t if isinstance(ok, ClaimVerdict) else f"{t} — {mark[ok]}" for ok, t in parts]
     texts += [f"{t} — {combine(out)}" for out, t in groups]
     return combine(outcomes), f"{held} of {len(outcomes)} parts hold: " + "; ".join(texts) + "."

@@ -235,7 +235,7 @@ def _pnp(e: _Exp) -> ClaimResult:
     jobs = e.jobs(kind="pnp", with_trace=False)
     summary = mx.pnp_summary(jobs)
     med = {(s.source, s.solver): s.median_rel_pct for s in summary}
-    done = [r.payload["errors"] for r in jobs if r.status is JobStatus.DONE and r.payload]
+    done = [r.payload["errors"] for r in jobs if r.status == JobStatus.DONE and r.payload]
     parts, ours = [], []
     for src in (TRUNCATED, "detector"):
         a, b = med.get((src, "ippe_lm"), math.nan), med.get((src, "iterative"), math.nan)
@@ -445,7 +445,7 @@ def _av(s1: _Exp | None, s2: _Exp | None) -> ClaimResult:
         rows += main
         ids |= e.ids
     hit = {(r.sample_id, r.box_label, r.method): r.nfev for r in rows
-           if r.verdict is Verdict.BREACH and r.status is JobStatus.DONE}
+           if r.verdict == Verdict.BREACH and r.status == JobStatus.DONE}
     both = [(v, hit[(s, b, "georobust-av")]) for (s, b, m), v in hit.items()
             if m == "georobust" and (s, b, "georobust-av") in hit]
     g, a = (float(np.mean([p[i] for p in both])) if both else math.nan for i in (0, 1))
@@ -456,7 +456,7 @@ def _av(s1: _Exp | None, s2: _Exp | None) -> ClaimResult:
 
 def _rough(e: _Exp) -> ClaimResult:
     grids = [r for r in e.jobs(kind="search", role="reference", with_points=True, with_trace=False)
-             if r.status is JobStatus.DONE and r.points is not None and len(r.points) > 1 and mx.grid_complete(r)]
+             if r.status == JobStatus.DONE and r.points is not None and len(r.points) > 1 and mx.grid_complete(r)]
     got = [largest_jump(r.points.xs, r.points.fs, e.ctx.spec.penalty_m) for r in grids]
     jumps, slopes = [j for j, _ in got], [s for _, s in got]
     verdict, why = rough_part(jumps, e.eps)

@@ -157,7 +157,7 @@ def _box_evidence(label: str, rows: Sequence[JobRow], eps: float) -> BoxEvidence
     for r in rows:
         key = r.search_status or r.status.value
         status[key] = status.get(key, 0) + 1
-    certified = len({r.sample_id for r in rows if r.verdict is Verdict.CERTIFIED} - breached)
+    certified = len({r.sample_id for r in rows if r.verdict == Verdict.CERTIFIED} - breached)
     return BoxEvidence(
         label=label, certified=certified, ranges={} if box is None else {n: (float(lo), float(hi)) for n, lo, hi in
                                                    zip(box.names, box.lower, box.upper, strict=True)},
@@ -197,7 +197,7 @@ def worst_cases(rows: Sequence[JobRow], eps: float, penalty_m: float, cap: int =
             continue
         kind = mx.breach_kind(r, eps)
         conf_m = confident_m(r)
-        err = conf_m if kind is BreachKind.MISLEADING and conf_m is not None else (
+        err = conf_m if kind == BreachKind.MISLEADING and conf_m is not None else (
             r.worst_m if r.worst_m is not None else penalty_m)
         key = (_KIND_ORDER[kind], -err, r.box_level or 0.0)
         if r.sample_id not in best or key < best[r.sample_id][0]:

@@ -12,7 +12,7 @@ from .rows import Context, Section, sample_cols
 
 
 def section_risk(ctx: Context) -> Section | None:
-    rows = [r for r in ctx.risk if r.status is JobStatus.DONE and RiskPayload.of(r) is not None]
+    rows = [r for r in ctx.risk if r.status == JobStatus.DONE and RiskPayload.of(r) is not None]
     if not rows:
         return None
     info = {r.key: RiskPayload.of(r) for r in rows}

@@ -109,7 +109,7 @@ def main_boxes(ctx: Context) -> list[BoxSpec]:
 
 
 def evaluated(r: JobRow) -> bool:
-    return r.status is JobStatus.DONE and r.points is not None and len(r.points) > 0
+    return r.status == JobStatus.DONE and r.points is not None and len(r.points) > 0
 
 
 def landscape_grids(ctx: Context) -> list[JobRow]:

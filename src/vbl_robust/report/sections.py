@@ -130,7 +130,7 @@ def section_methods(ctx: Context) -> Section | None:
     if not ctx.main:
         return None
     s = Section(METHODS_TITLE)
-    summary = mx.summarize([*ctx.main, *(r for r in ctx.unmeasured if r.kind is JobKind.SEARCH and r.role is Role.MAIN)],
+    summary = mx.summarize([*ctx.main, *(r for r in ctx.unmeasured if r.kind == JobKind.SEARCH and r.role == Role.MAIN)],
                            ctx.eps)
     s.html.append(_summary_table(summary, ctx.spec.unit))
     failures = _failures_table(summary, ctx.spec.penalty_m)
@@ -438,7 +438,7 @@ def progress_curves(rows: Sequence[JobRow], points: int = 200) -> dict[str, tupl
 def section_best_vs_evals(ctx: Context) -> Section | None:
     """The worst error found against evaluations (:func:`progress_curves`): one search per image and method — on
     the largest box, at the largest budget — so that the median is over images."""
-    rows = [r for r in ctx.main if r.status is JobStatus.DONE and r.trace]
+    rows = [r for r in ctx.main if r.status == JobStatus.DONE and r.trace]
     if not rows:
         return None
     top = max(r.box_level or 0.0 for r in rows)
@@ -472,7 +472,7 @@ def section_per_image(ctx: Context) -> Section | None:
     for line in lines:
         line["worst"] = max(-math.inf if line.get(f"{m}_worst") is None else line[f"{m}_worst"] for m in methods)
         line["verdict"] = (Verdict.BREACH if line["worst"] > ctx.eps else
-                           Verdict.CERTIFIED if any(line.get(f"{m}_verdict") is Verdict.CERTIFIED for m in methods)
+                           Verdict.CERTIFIED if any(line.get(f"{m}_verdict") == Verdict.CERTIFIED for m in methods)
                            else Verdict.NO_BREACH_FOUND)
     cols = [("sample_id", ctx.spec.unit, None), ("slant_distance_m", "slant dist. (m)", None),
             ("envelope", "envelope", None), ("nominal_m", "unperturbed L(0) (m)", None)]
@@ -483,7 +483,7 @@ def section_per_image(ctx: Context) -> Section | None:
     s.html.append(f"<p>L(0): the error of the {ctx.spec.unit} unperturbed (θ at its identity: roll 0, contrast 1, …; "
                   f"the {ctx.spec.penalty_m:g} m penalty where the pipeline gives no pose; – in a run stored before "
                   "it was). An L(0) near ε_safe means the perturbation had little to break.</p>")
-    s.html.append(table(lines, cols, row_class=lambda r: "breach" if r["verdict"] is Verdict.BREACH else "",
+    s.html.append(table(lines, cols, row_class=lambda r: "breach" if r["verdict"] == Verdict.BREACH else "",
                         left=("sample_id", "envelope", "verdict", *[f"{m}_x" for m in methods]),
                         fold=f"Each {ctx.spec.unit}'s worst case per method (breaches in red)"))
     return s

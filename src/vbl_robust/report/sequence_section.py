@@ -57,7 +57,7 @@ def section_sequences(ctx: Context) -> Section | None:
         ("breached", "breached frames", None), ("failed", "failed frames", None),
         ("start", "lasting breach from (m)", None), ("nominal", "nominal sustained (m)", None),
         ("nominal_breached", "nominal breached frames", None)],
-        row_class=lambda ln: "breach" if ln["verdict"] is Verdict.BREACH else "",
+        row_class=lambda ln: "breach" if ln["verdict"] == Verdict.BREACH else "",
         left=("sample_id", "verdict", "method", "theta")))
     return s
 

@@ -273,7 +273,7 @@ class JobRow:
     @property
     def measured(self) -> bool:
         """Whether the tool completed this job (any status but ``NOT_MEASURED``): only measured rows enter a rate."""
-        return self.status is not JobStatus.NOT_MEASURED
+        return self.status != JobStatus.NOT_MEASURED
 
     @property
     def not_measured(self) -> NotMeasured | None:
