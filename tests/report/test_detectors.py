@@ -57,6 +57,12 @@ def test_bundle_compares_the_detectors_and_refuses_a_malformed_item(roots, tmp_p
     assert res.exit_code == 0, res.output
     assert (out / "detectors.md").read_text() == detectors_markdown(roots)
     assert 'id="detectors"' in (out / "index.html").read_text()
+    inside = tmp_path / "inside"  # a detector's bundle under the page's directory is linked, by a relative path
+    (inside / "noisy run").mkdir(parents=True)
+    (inside / "noisy run" / "index.html").write_text("<p>x</p>")
+    page = detectors_html({"exact": roots["exact"], LABEL: inside / "noisy run"}, inside)
+    assert '<a href="noisy%20run/index.html">noisy &lt;b&gt;|</a>' in page
+    assert "<a href" not in detectors_html(roots, inside)  # roots outside the page's directory: no link
     for item, words in ((str(roots[LABEL]), "expected LABEL=DIR"), (f"x={tmp_path / 'none'}", "not a directory"),
                         (f"exact={roots[LABEL]}", "given twice")):
         res = runner.invoke(app, ["bundle", str(roots["exact"]), "--out", str(tmp_path / "b2"), "--detector", item,

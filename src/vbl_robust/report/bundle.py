@@ -247,7 +247,7 @@ def _write_top(out: Path, totals: dict[str, dict[str, Any]], root: Path,
     if detectors:
         compared = detectors_markdown(detectors)
         atomic_write(out / "detectors.md", compared)
-        extra = detectors_html(detectors)
+        extra = detectors_html(detectors, out)
     write_index(out, list(totals), claims_html(checked, str(root)) + extra,
                 {n: f"{t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} of {t['images']} "
                     f"images" for n, t in totals.items()}, claims=checked)

@@ -27,6 +27,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import quote
 
 import numpy as np
 
@@ -220,10 +221,21 @@ def detectors_markdown(roots: Mapping[str, str | Path]) -> str:
     return "\n".join(lines)
 
 
-def detectors_html(roots: Mapping[str, str | Path]) -> str:
-    """:func:`detectors_tables` as an HTML ``<section>`` (every text escaped)."""
+def detectors_html(roots: Mapping[str, str | Path], page_dir: str | Path | None = None) -> str:
+    """:func:`detectors_tables` as an HTML ``<section>`` (every text escaped) for a page in ``page_dir``: it links
+    each other detector's own index (``ROOT/index.html``, a bundle's) that lies under ``page_dir``."""
     detectors, claims, details = detectors_tables(roots)
     parts = [f'<section id="detectors"><h2>The claims on {len(roots)} detectors</h2>']
+    links = []
+    if page_dir is not None:
+        base = Path(page_dir).resolve()
+        for label, root in roots.items():
+            index = (Path(root) / "index.html").resolve()
+            if index.is_file() and index.parent != base and index.is_relative_to(base):
+                href = "/".join(quote(part) for part in index.relative_to(base).parts)
+                links.append(f'<a href="{esc(href)}">{esc(label)}</a>')
+    if links:
+        parts.append(f"<p>Each detector's own runs, reports and claims: {', '.join(links)}.</p>")
     for t in (detectors, claims):  # class l: left-aligned cells that wrap (the report's table style)
         parts += [f"<h3>{esc(t.title)}</h3><p>{esc(t.lead)}</p><table><tr>",
                   *(f'<th class="l">{esc(h)}</th>' for h in t.head), "</tr>",
