@@ -198,12 +198,8 @@ def zones_of_run(run: str | Path, *, roles: Sequence[str] | None = None, thresho
         rows = store.jobs(kind="search", with_points=True, with_trace=False)
     rows = [r for r in rows if roles is None or r.role in roles]
     for r in rows:  # a constant that fits no box of the run is refused, even where no job keeps cells to zone
-        box = None if r.box is None else r.box.box
-        if box is not None and isinstance(lipschitz, Sequence) and len(lipschitz) != box.dim:
-            raise ValueError(f"lipschitz: {len(lipschitz)} numbers, but the run's box {r.box_label} has {box.dim} "
-                             f"parameter(s) ({', '.join(box.names)}): give one number, or one per parameter")
-        if box is not None:
-            check_lipschitz(lipschitz, norm, box.dim)
+        if r.box is not None:
+            check_lipschitz(lipschitz, norm, r.box.box.dim, names=r.box.box.names, where=f"the run's box {r.box_label}")
     return [job_zones(r, spec, threshold=threshold, lipschitz=lipschitz, norm=norm, estimate=estimate)
             for r in rows]
 

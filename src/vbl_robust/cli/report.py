@@ -172,7 +172,7 @@ def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None
     """Copy into one run the jobs that other runs of the same campaign and detector computed (another machine,
     a GPU, a cluster without a shared disk): rows it lacks, their samples and runs; rows it holds stay. Refused
     while a run writes it, and for a detector that names code unless --trust-model."""
-    from vbl_robust.campaigns.store import MergeReport, merge_runs
+    from vbl_robust.campaigns.store import MergeReport, merge_runs, store_file
     from vbl_robust.campaigns.verify import screen
 
     def merged(report: MergeReport) -> None:
@@ -181,10 +181,7 @@ def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None
                    + (f"; {part.inconsistent} inconsistent — not merged (vbl-robust verify {part.source} names them)"
                       if part.inconsistent else ""))
 
-    def store_of(p: Path) -> Path:
-        return (p / "results.sqlite" if p.is_dir() or not p.suffix else p).resolve()
-
-    same = [s for s in sources if store_of(s) == store_of(into)]
+    same = [s for s in sources if store_file(s).resolve() == store_file(into).resolve()]
     if same:  # merging a run into itself copies nothing and would open it for writing
         fail(f"merge {same[0]} --into {into}: a run cannot be merged into itself")
     with one_line(ValueError, OSError):

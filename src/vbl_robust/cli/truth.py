@@ -27,7 +27,7 @@ def truth(
 ) -> None:
     """Dense grid on the images every method of RUN left surviving at its largest box: is "no breach found"
     true? Prints the true survival there and the true breaches each method missed."""
-    from vbl_robust.campaigns.store import ResultStore  # torch behind these: not for ``--help``
+    from vbl_robust.campaigns.store import ResultStore, store_file  # torch behind these: not for ``--help``
     from vbl_robust.campaigns.truth import (
         TRUTH_SUFFIX,
         load_run_samples,
@@ -46,7 +46,7 @@ def truth(
     except ValueError:
         fail(f"--counts {counts}: expected comma-separated integers")
     out = out if out is not None else run.with_name(run.name + TRUTH_SUFFIX)
-    if _same_run(out, run):
+    if store_file(out).resolve() == store_file(run).resolve():
         fail(f"--out {out}: is the run itself; the truth run goes beside it (default {run.name}{TRUTH_SUFFIX})")
     with one_line():
         with ResultStore.open_existing(run) as store:
@@ -76,9 +76,3 @@ def truth(
     if not complete:
         raise typer.Exit(1)
 
-
-def _same_run(out: Path, run: Path) -> bool:
-    """``out`` names ``run``'s directory or its store file."""
-    def directory(p: Path) -> Path:
-        return (p.parent if p.suffix == ".sqlite" or p.is_file() else p).resolve()
-    return directory(out) == directory(run)

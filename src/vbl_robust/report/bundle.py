@@ -236,7 +236,7 @@ def _write_top(out: Path, totals: dict[str, dict[str, Any]], root: Path,
     ``out/detectors.md``, and ``out/index.html`` (the experiments ``totals`` names, in the paper's order); returns
     the claims' Markdown and the detectors' ("" without)."""
     from .claims import claims_html, claims_markdown, claims_of, write_index
-    from .detectors import detectors_html, detectors_markdown
+    from .detectors import detectors_html, detectors_markdown, detectors_tables
 
     totals = _ordered(totals)
     checked = claims_of(root)
@@ -245,9 +245,10 @@ def _write_top(out: Path, totals: dict[str, dict[str, Any]], root: Path,
     atomic_write(out / "claims.md", claims)
     compared, extra = "", ""
     if detectors:
-        compared = detectors_markdown(detectors)
+        tables = detectors_tables(detectors)  # every store read once, both forms written from it
+        compared = detectors_markdown(detectors, tables)
         atomic_write(out / "detectors.md", compared)
-        extra = detectors_html(detectors, out)
+        extra = detectors_html(detectors, out, tables)
     write_index(out, list(totals), claims_html(checked, str(root)) + extra,
                 {n: f"{t['jobs_done']} of {t['jobs_planned']} jobs, {t['images_with_jobs']} of {t['images']} "
                     f"images" for n, t in totals.items()}, claims=checked)

@@ -41,7 +41,7 @@ from .claims import claims_of
 from .html import esc
 from .markdown import esc_md
 
-__all__ = ["CLAIMS_BY_DETECTOR", "FAR_M", "DetectorProfile", "Table", "detector_profile", "detectors_html",
+__all__ = ["CLAIMS_BY_DETECTOR", "FAR_M", "DetectorProfile", "Table", "Tables", "detector_profile", "detectors_html",
            "detectors_markdown", "detectors_tables", "largest_box_survivors"]
 
 #: The claims compared across detectors: the two the paper's authors could not tell apart from their detector
@@ -209,9 +209,12 @@ def detectors_tables(roots: Mapping[str, str | Path]) -> tuple[Table, Table, tup
     return detectors, table, tuple(details)
 
 
-def detectors_markdown(roots: Mapping[str, str | Path]) -> str:
-    """:func:`detectors_tables` as Markdown (every cell escaped)."""
-    detectors, claims, details = detectors_tables(roots)
+Tables = tuple[Table, Table, tuple[str, ...]]  #: what :func:`detectors_tables` returns
+
+
+def detectors_markdown(roots: Mapping[str, str | Path], tables: Tables | None = None) -> str:
+    """:func:`detectors_tables` of ``roots`` (or ``tables``, computed already) as Markdown (every cell escaped)."""
+    detectors, claims, details = tables or detectors_tables(roots)
     lines: list[str] = []
     for t in (detectors, claims):
         lines += [f"### {esc_md(t.title)}", "", esc_md(t.lead), "",
@@ -221,10 +224,12 @@ def detectors_markdown(roots: Mapping[str, str | Path]) -> str:
     return "\n".join(lines)
 
 
-def detectors_html(roots: Mapping[str, str | Path], page_dir: str | Path | None = None) -> str:
-    """:func:`detectors_tables` as an HTML ``<section>`` (every text escaped) for a page in ``page_dir``: it links
-    each other detector's own index (``ROOT/index.html``, a bundle's) that lies under ``page_dir``."""
-    detectors, claims, details = detectors_tables(roots)
+def detectors_html(roots: Mapping[str, str | Path], page_dir: str | Path | None = None,
+                   tables: Tables | None = None) -> str:
+    """:func:`detectors_tables` of ``roots`` (or ``tables``, computed already) as an HTML ``<section>`` (every text
+    escaped) for a page in ``page_dir``: it links each other detector's own index (``ROOT/index.html``, a bundle's)
+    that lies under ``page_dir``."""
+    detectors, claims, details = tables or detectors_tables(roots)
     parts = [f'<section id="detectors"><h2>The claims on {len(roots)} detectors</h2>']
     links = []
     if page_dir is not None:

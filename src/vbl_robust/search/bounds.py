@@ -27,8 +27,10 @@ NORMS = ("2", "inf", "1")
 ROUNDING = 1e-12
 
 
-def check_lipschitz(lipschitz: float | Sequence[float] | None, norm: str, dim: int) -> float | tuple[float, ...] | None:
-    """Validate a user Lipschitz constant; returns a float, a tuple of ``dim`` floats, or None."""
+def check_lipschitz(lipschitz: float | Sequence[float] | None, norm: str, dim: int, *, names: Sequence[str] = (),
+                    where: str = "the box") -> float | tuple[float, ...] | None:
+    """Validate a user Lipschitz constant; returns a float, a tuple of ``dim`` floats, or None. ``names`` (the box's
+    parameters) and ``where`` (e.g. a box's label) make a count that does not fit say what it should fit."""
     if lipschitz is None:
         return None
     if norm not in NORMS:
@@ -40,7 +42,10 @@ def check_lipschitz(lipschitz: float | Sequence[float] | None, norm: str, dim: i
             raise ValueError(f"lipschitz must be a finite number >= 0, got {lipschitz!r}")
         return value
     if arr.shape != (dim,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
-        raise ValueError(f"lipschitz must be a number or {dim} finite numbers >= 0 (one per parameter), got {lipschitz!r}")
+        fit = (f": {arr.size} numbers, but {where} has {dim} parameter(s) ({', '.join(names)})"
+               if names and arr.shape != (dim,) else "")
+        raise ValueError(f"lipschitz must be a number or {dim} finite numbers >= 0 (one per parameter), got "
+                         f"{lipschitz!r}{fit}")
     return tuple(float(v) for v in arr)
 
 

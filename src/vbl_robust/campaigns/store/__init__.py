@@ -18,7 +18,7 @@ Modules, each importing only those above it:
 from .core import STORE, ResultStore
 from .identity import PRESENTATION_KEYS
 from .lock import WriterLock
-from .merge import MergedSource, MergeReport, check_mergeable, merge_runs, merge_store
+from .merge import MergedSource, MergeReport, check_mergeable, merge_runs, merge_store, store_file
 from .pack import PACKED, pack_store, restore_store
 from .rows import (
     Corners,
@@ -63,4 +63,5 @@ __all__ = [
     "now_iso",
     "pack_store",
     "restore_store",
+    "store_file",
 ]

@@ -118,9 +118,11 @@ def merge_store(store: ResultStore, other: ResultStore, *, source: str = "", tru
     return MergedSource(label, len(rows), len(stored) - len(rows), len(skipped))
 
 
-def _store_path(into: Path) -> Path:
-    """The store file a merge writes: ``into`` itself when it names a file, else ``into/results.sqlite``."""
-    return into / STORE if into.is_dir() or not into.suffix else into
+def store_file(run: str | Path) -> Path:
+    """The store file a run names: ``run`` itself when it names a file, else ``run/results.sqlite`` (a run directory,
+    existing or to be made) — what a merge writes, and how two names of one run are compared."""
+    run = Path(run)
+    return run / STORE if run.is_dir() or not run.suffix else run
 
 
 def _unpacked(source: Path, scratch: Path) -> Path:
@@ -156,7 +158,7 @@ def merge_runs(sources: Sequence[str | Path], into: str | Path, *, trust: bool =
     it (:class:`~vbl_robust.campaigns.store.lock.WriterLock`: ``ValueError``); a missing packed store is a
     ``FileNotFoundError``, a damaged one a ``ValueError``. ``progress`` is called with the report so far after each
     source is merged (its last entry: that source); ``left_out``: as :func:`merge_store`'s."""
-    dst = _store_path(Path(into))
+    dst = store_file(into)
     report = MergeReport(dst)
     with tempfile.TemporaryDirectory() as tmp:
         paths = [_unpacked(Path(src), Path(tmp) / str(i)) for i, src in enumerate(sources)]
