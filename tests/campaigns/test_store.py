@@ -291,3 +291,39 @@ def test_the_schema_declares_each_table_once_and_its_ddl_is_what_stores_hold(tmp
                         "    path TEXT, size INTEGER, mtime_ns INTEGER,\n"
                         "    sha256 TEXT                     -- of the file's bytes; recomputed only when size or mtime "
                         "changed\n)")
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(job_rows, max_size=4, unique_by=lambda r: r.key))
+def test_points_on_demand_read_the_same_rows(rows):
+    """What the report reads with (points left in the store until read) gives the rows the store was given."""
+    with tempfile.TemporaryDirectory() as d:
+        with ResultStore(Path(d) / "results.sqlite") as store:
+            store.commit(rows)
+        with ResultStore.open_existing(d, points_on_demand=True) as store:
+            back = store.jobs(with_points=True, with_trace=True)
+            assert back == sorted(rows, key=lambda r: r.sample_index)
+            assert [r.points is None for r in back] == [r.points is None for r in sorted(rows, key=lambda r: r.sample_index)]
+
+
+def test_points_on_demand_hold_a_bounded_cache_and_the_stored_bytes(tmp_path, monkeypatch):
+    rng = np.random.default_rng(0)
+    made = [row(f"k{i}", sample_index=i, points=Points(rng.uniform(-5, 5, (1000, 2)), rng.uniform(0, 5000, 1000)))
+            for i in range(40)]
+    with ResultStore(tmp_path / "results.sqlite") as store:
+        store.commit(made)
+    one = made[0].points.xs.nbytes + made[0].points.fs.nbytes
+    monkeypatch.setattr(store_module.core, "POINTS_CACHE_BYTES", 5 * one)
+    with ResultStore.open_existing(tmp_path, points_on_demand=True) as store:
+        rows = store.jobs(with_points=True)
+        assert all(type(r.points).__name__ == "StoredPoints" and r.trace == () for r in rows)
+        for r, m in zip(rows, made, strict=True):
+            assert np.array_equal(r.points.xs, m.points.xs) and np.array_equal(r.points.fs, m.points.fs)
+            assert r.points.to_blob() == m.points.to_blob()  # the stored bytes themselves
+            assert len(store._cache) <= 5  # the rows read last, not every row read
+        blob = store._con.execute("SELECT points FROM jobs WHERE key = 'k3'").fetchone()[0]
+        assert rows[3].points.to_blob() == blob
+    with pytest.raises(sqlite3.ProgrammingError):  # read while the store is open, never from a closed one
+        rows[0].points.xs  # noqa: B018
+    with ResultStore.open_existing(tmp_path) as store:  # the default still decodes every row's points at once
+        assert all(type(r.points) is Points for r in store.jobs(with_points=True))

@@ -131,11 +131,12 @@ def build_report(run: str | Path, out: str | Path | None = None, *, embed: bool 
     of tens of kB, and a figure that did not change is the same file in git, not another megabyte of base64 in its
     history each time the page is regenerated."""
     run = Path(run)
-    with ResultStore.open_existing(run) as store:
+    with ResultStore.open_existing(run, points_on_demand=True) as store:
         spec = store.spec()
         out_dir = Path(out) if out is not None else (run if run.is_dir() else run.parent)
         out_dir.mkdir(parents=True, exist_ok=True)
-        ctx = Context(store, spec, out_dir, mx.main_rows(store, spec), store.samples(), embed=embed)
+        ctx = Context(store, spec, out_dir, mx.main_rows(store, spec), store.samples(), embed=embed,
+                      main_is_runs=not mx.reads_trace(spec))
         exp = EXPERIMENTS.get(spec.name)
         title = exp.title if exp else TITLES.get(spec.name, "Robustness audit")
         if spec.name.endswith("-truth"):  # vbl-robust truth RUN: the dense grid behind "no breach found"

@@ -162,7 +162,7 @@ def _open(root: Path, name: str, stack: ExitStack) -> _Exp | str:
     if path is None:
         return f"no results store at {root / name / STORE}"
     try:
-        store = stack.enter_context(ResultStore.open_existing(path))
+        store = stack.enter_context(ResultStore.open_existing(path, points_on_demand=True))
     except (ValueError, sqlite3.Error) as exc:  # e.g. a store of a newer vbl-robust: say so, read the others
         return f"{path}: {exc}"
     if not store.holds_campaign():

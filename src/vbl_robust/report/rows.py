@@ -41,6 +41,10 @@ class Context:
     samples: dict[str, SampleRecord]
     figures: list[Path] = field(default_factory=list)
     embed: bool = True
+    #: ``main`` is every stored main search row the tool measured, none read off a trace (:func:`~vbl_robust.
+    #: campaigns.metrics.main_rows` of a spec that reads no trace): :attr:`runs` is ``main`` itself, not a second
+    #: copy of every row.
+    main_is_runs: bool = False
 
     @property
     def eps(self) -> float:
@@ -55,6 +59,8 @@ class Context:
     @cached_property
     def runs(self) -> list[JobRow]:
         """The stored main search jobs the tool measured, with their points (as run: no rows read off a trace)."""
+        if self.main_is_runs:
+            return self.main
         return [r for r in self.store.jobs(kind="search", role="main", with_points=True, with_trace=False)
                 if r.measured]
 

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import json
 import sqlite3
+from collections import OrderedDict
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 from stat import S_ISREG
 from typing import TYPE_CHECKING, Any
@@ -21,11 +23,14 @@ from .identity import check_same
 from .rows import (
     JobRow,
     JobStatus,
+    Points,
     RunProvenance,
     RunRecord,
     RunStatus,
     SampleRecord,
     StoredCampaign,
+    StoredPoints,
+    StoredTrace,
     now_iso,
 )
 from .schema import (
@@ -53,6 +58,9 @@ STORE = "results.sqlite"
 PACKED = STORE + ".xz"
 #: Bytes read at a time when a packed store is unpacked (bounded memory, whatever the store's size).
 _UNPACK_CHUNK = 1 << 20
+#: Bytes of decoded points and traces a store read on demand keeps for the rows read last
+#: (:attr:`ResultStore.points_on_demand`): what bounds a report's memory whatever the store's size.
+POINTS_CACHE_BYTES = 64 << 20
 
 
 def unpack(packed: Path, target: Path) -> Path:
@@ -74,6 +82,14 @@ def unpack(packed: Path, target: Path) -> Path:
     return Path(target)
 
 
+def _nbytes(v: Any, raw: Any = None) -> int:
+    """About what a decoded column holds: points their arrays and a reason string per point; a trace ten times
+    its JSON text (``raw``), which its objects take about."""
+    if isinstance(v, Points):
+        return v.xs.nbytes + v.fs.nbytes + (0 if v.times is None else v.times.nbytes) + 64 * len(v.reasons)
+    return 10 * len(raw or "")
+
+
 class ResultStore:
     """A campaign's results in one SQLite file (see :mod:`~vbl_robust.campaigns.store.schema` for the layout).
 
@@ -83,10 +99,18 @@ class ResultStore:
     0
     """
 
-    def __init__(self, path: str | Path, *, readonly: bool = False):
+    def __init__(self, path: str | Path, *, readonly: bool = False, points_on_demand: bool = False):
         self.path = Path(path)
         self.readonly = readonly
+        #: :meth:`jobs` leaves each row's points and trace in the store until they are read
+        #: (:class:`~.rows.StoredPoints`, :class:`~.rows.StoredTrace`, through a cache bounded by
+        #: :data:`POINTS_CACHE_BYTES`): a reader of a store of any size holds no row's evaluations. Read-only stores
+        #: only, and the rows' points read while the store is open.
+        self.points_on_demand = points_on_demand and readonly
         self._unpacked_dir: Path | None = None  # a packed store read through a temporary copy (removed at close)
+        # decoded columns on demand by (column, rowid), least recent first (points_on_demand)
+        self._cache: OrderedDict[tuple[str, int], tuple[Any, int]] = OrderedDict()  # (value, bytes)
+        self._cache_bytes = 0
         try:
             if readonly:
                 self._con = self._open_readonly()
@@ -132,25 +156,26 @@ class ResultStore:
         return con
 
     @classmethod
-    def open_existing(cls, path: str | Path, *, readonly: bool = True) -> ResultStore:
+    def open_existing(cls, path: str | Path, *, readonly: bool = True, points_on_demand: bool = False) -> ResultStore:
         """Open a store that must exist (a run directory or the ``.sqlite`` file itself) — read-only unless told
         otherwise: reading a run (report, zones, tables, bundles) never writes it, and works where it cannot.
         Read-only, a packed store (``results.sqlite.xz`` of a bundle, named or found in the run directory instead of
-        ``results.sqlite``) is read through a temporary unpacked copy, removed when the store is closed."""
+        ``results.sqlite``) is read through a temporary unpacked copy, removed when the store is closed.
+        ``points_on_demand``: see :attr:`points_on_demand` (what the report and the bundle read with)."""
         p = Path(path)
         if p.is_dir():
             p = p / STORE
         packed = p if p.name.endswith(".xz") else p.with_name(p.name + ".xz")
         if not p.is_file() or p.name.endswith(".xz"):
             if packed.is_file() and readonly:
-                return cls._unpacked(packed)
+                return cls._unpacked(packed, points_on_demand)
             hint = (f"; {packed.name} beside it is packed: `vbl-robust merge {packed} --into DIR` unpacks it into a "
                     "run directory") if packed.is_file() else " (run `vbl-robust audit` or `reproduce` with --out first)"
             raise FileNotFoundError(f"{p}: no results store{hint}")
-        return cls(p, readonly=readonly)
+        return cls(p, readonly=readonly, points_on_demand=points_on_demand)
 
     @classmethod
-    def _unpacked(cls, packed: Path) -> ResultStore:
+    def _unpacked(cls, packed: Path, points_on_demand: bool = False) -> ResultStore:
         """A packed store opened read-only through a temporary copy (streamed: bounded memory)."""
         import shutil
         import tempfile
@@ -158,7 +183,7 @@ class ResultStore:
         tmp = Path(tempfile.mkdtemp(prefix="vbl-robust-store-"))
         try:
             unpack(packed, tmp / STORE)
-            store = cls(tmp / STORE, readonly=True)
+            store = cls(tmp / STORE, readonly=True, points_on_demand=points_on_demand)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
@@ -396,11 +421,48 @@ class ResultStore:
         if role is not None:
             where.append("role = ?")
             args.append(role)
-        cols = [c for c in JOBS.names if (with_points or c != "points") and (with_trace or c != "trace_json")]
-        sql = f"SELECT {', '.join(cols)} FROM jobs" + (f" WHERE {' AND '.join(where)}" if where else "")
+        # on demand: points and trace stay in the store until read (StoredPoints, StoredTrace); only whether a row
+        # has any is read now
+        lazy = self.points_on_demand
+        cols = [c for c in JOBS.names if (with_points and not lazy or c != "points")
+                and (with_trace and not lazy or c != "trace_json")]
+        lead = ["rowid", "points IS NOT NULL AND length(points) > 0", "trace_json IS NOT NULL AND trace_json != '[]'"]
+        lead = lead if lazy else []
+        sql = f"SELECT {', '.join(lead + cols)} FROM jobs" + (f" WHERE {' AND '.join(where)}" if where else "")
         sql += " ORDER BY sample_index, rowid"
-        rows = (dict(zip(cols, r, strict=True)) for r in self._con.execute(sql, args))
-        return [job_row(d) for d in rows if d["key"] not in self._left_out]
+        out = []
+        for r in self._con.execute(sql, args):
+            d = dict(zip(cols, r[len(lead):], strict=True))
+            if d["key"] in self._left_out:
+                continue
+            if lazy and with_points and r[1]:
+                d["points"] = StoredPoints(partial(self._on_demand, "points", r[0]))
+            if lazy and with_trace and r[2]:
+                d["trace_json"] = StoredTrace(partial(self._on_demand, "trace_json", r[0]))
+            out.append(job_row(d))
+        return out
+
+    def _column_at(self, column: str, rowid: int) -> Any:
+        return self._con.execute(f"SELECT {column} FROM jobs WHERE rowid = ?", (rowid,)).fetchone()[0]
+
+    def _on_demand(self, column: str, rowid: int, raw: bool = False) -> Any:
+        """The decoded ``points`` or ``trace_json`` of the job row ``rowid`` (:class:`~.rows.StoredPoints`,
+        :class:`~.rows.StoredTrace`), through a cache of the last ones read, bounded by
+        :data:`POINTS_CACHE_BYTES`; ``raw``: the stored value itself."""
+        if raw:
+            return self._column_at(column, rowid)
+        key = (column, rowid)
+        hit = self._cache.get(key)
+        if hit is not None:
+            self._cache.move_to_end(key)
+            return hit[0]
+        raw = self._column_at(column, rowid)
+        v = JOBS.column(column).load(raw)
+        self._cache[key] = (v, _nbytes(v, raw))
+        self._cache_bytes += self._cache[key][1]
+        while self._cache_bytes > POINTS_CACHE_BYTES and len(self._cache) > 1:
+            self._cache_bytes -= self._cache.popitem(last=False)[1][1]
+        return v
 
     # -- verification (:mod:`~vbl_robust.campaigns.verify`) --------------------------------------------------------
     #: Keys of rows found inconsistent (:meth:`leave_out`): :meth:`jobs` leaves them out.

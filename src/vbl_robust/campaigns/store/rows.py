@@ -11,7 +11,7 @@ import datetime as dt
 import json
 import math
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -163,6 +163,54 @@ class Points:
         return cls(xs, fs, tuple(d.get("reasons", ())), times)
 
 
+class StoredPoints(Points):
+    """A job's points left in its read-only store until they are read (what :meth:`ResultStore.jobs` gives for
+    ``with_points`` on a store read with ``points_on_demand``): ``xs``, ``fs``, ``reasons`` and ``times`` are
+    decoded on each access through ``load()`` (the store's cache, bounded in bytes), so a reader holding every row
+    of a large store holds none of their arrays; :meth:`to_blob` gives the stored bytes themselves
+    (``load(raw=True)``). Valid while the store is open."""
+
+    def __init__(self, load: Callable[..., Any]):  # no field of its own: nothing held
+        object.__setattr__(self, "_load", load)
+
+    xs = property(lambda self: self._load().xs)  # type: ignore[assignment]
+    fs = property(lambda self: self._load().fs)  # type: ignore[assignment]
+    reasons = property(lambda self: self._load().reasons)  # type: ignore[assignment]
+    times = property(lambda self: self._load().times)  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"StoredPoints({len(self)} points)"
+
+    def to_blob(self) -> bytes:
+        return self._load(raw=True)
+
+
+class StoredTrace(Sequence[TraceRow]):
+    """A job's trace left in its store until it is read (:class:`StoredPoints`' twin for ``trace``): a sequence of
+    :class:`~vbl_robust.search.result.TraceRow` decoded on each access through ``load``, equal to the tuple it
+    stands for. Valid while the store is open."""
+
+    def __init__(self, load: Callable[[], tuple[TraceRow, ...]]):
+        self._load = load
+
+    def __len__(self) -> int:
+        return len(self._load())
+
+    def __getitem__(self, i: Any) -> Any:
+        return self._load()[i]
+
+    def __iter__(self) -> Any:
+        return iter(self._load())
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Sequence) and tuple(self._load()) == tuple(other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"StoredTrace({len(self)} iterations)"
+
+
 def encode_points(xs: np.ndarray, fs: np.ndarray, reasons: Sequence[str] = ()) -> bytes:
     """Compress evaluated points ``(n, d)``, values ``(n,)`` and reasons (see :meth:`Points.to_blob`)."""
     return Points(xs, fs, tuple(reasons)).to_blob()
@@ -256,7 +304,8 @@ class JobRow:
         object.__setattr__(self, "status", JobStatus(self.status))
         if self.verdict is not None:
             object.__setattr__(self, "verdict", Verdict(self.verdict))
-        object.__setattr__(self, "trace", tuple(self.trace))
+        if not isinstance(self.trace, StoredTrace):
+            object.__setattr__(self, "trace", tuple(self.trace))
 
     @property
     def box_label(self) -> str | None:

@@ -44,7 +44,7 @@ from typing import Any
 
 from ...search.result import TraceRow
 from ..spec import BoxSpec, Budget
-from .rows import Corners, JobRow, Points, RunProvenance, RunRecord
+from .rows import Corners, JobRow, Points, RunProvenance, RunRecord, StoredPoints, StoredTrace
 
 #: Version of the layout below (``PRAGMA user_version``).
 SCHEMA_VERSION = 5
@@ -106,6 +106,10 @@ class Table:
     @property
     def names(self) -> tuple[str, ...]:
         return tuple(c.name for c in self.columns)
+
+    def column(self, name: str) -> Column:
+        """The column ``name`` (``KeyError`` for none)."""
+        return next(c for c in self.columns if c.name == name) if name in self.names else {}[name]
 
     def ddl(self) -> str:
         """``CREATE TABLE IF NOT EXISTS`` (and what follows it), one column a line with its comment."""
@@ -257,8 +261,10 @@ def to_columns(table: Table, row: Any, names: Iterable[str] | None = None) -> tu
 
 
 def job_row(d: Mapping[str, Any]) -> JobRow:
-    """A job row from the columns read (``points`` / ``trace_json`` may be left out: None / empty)."""
-    return JobRow(**{c.field: c.load(d[c.name]) for c in JOBS.columns if c.load is not None and c.name in d})
+    """A job row from the columns read (``points`` / ``trace_json`` may be left out: None / empty; either may be
+    given already read: :class:`~.rows.StoredPoints`, :class:`~.rows.StoredTrace`)."""
+    return JobRow(**{c.field: v if isinstance(v := d[c.name], StoredPoints | StoredTrace) else c.load(v)
+                     for c in JOBS.columns if c.load is not None and c.name in d})
 
 
 def run_record(d: Mapping[str, Any]) -> RunRecord:
