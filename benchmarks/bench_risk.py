@@ -42,8 +42,8 @@ BOXES = (15.0, 7.5)
 
 def _grids() -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], float]:
     """The paper's complete runtime-1d dense grids (sample id → sorted roll nodes and their L) and ε_safe."""
+    from vbl_robust.analysis import metrics as mx
     from vbl_robust.campaigns import ResultStore
-    from vbl_robust.campaigns import metrics as mx
 
     WORK.mkdir(parents=True, exist_ok=True)
     store = WORK / "runtime-1d.sqlite"

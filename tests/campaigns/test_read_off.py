@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import vbl_robust.search.base as base_module
+from vbl_robust.analysis import metrics as mx
 from vbl_robust.campaigns import BoxSpec, Budget, ResultStore
-from vbl_robust.campaigns import metrics as mx
 from vbl_robust.campaigns import store as store_module
 from vbl_robust.campaigns.spec import CampaignSpec, Job, roll_box
 from vbl_robust.campaigns.store import JobStatus, Points, schema
@@ -138,7 +138,7 @@ def test_rows_without_reads_pass_through(tmp_path, monkeypatch):
 
 
 def test_export_and_main_rows_add_the_read_off_rows(tmp_path, monkeypatch):
-    from vbl_robust.campaigns.tables import flat_rows
+    from vbl_robust.analysis.tables import flat_rows
 
     _, stored, _ = _stored_run(tmp_path, monkeypatch)
     spec = CampaignSpec("t", ())

@@ -4,9 +4,9 @@ true; the counts are recomputed here from both stores."""
 import pytest
 from typer.testing import CliRunner
 
+from vbl_robust.analysis import metrics as mx
+from vbl_robust.analysis.truth import survivors_of_every_method, true_survival
 from vbl_robust.campaigns import ResultStore
-from vbl_robust.campaigns import metrics as mx
-from vbl_robust.campaigns.truth import survivors_of_every_method, true_survival
 from vbl_robust.cli import app
 
 runner = CliRunner()

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from vbl_robust.analysis.metrics import main_rows
 from vbl_robust.campaigns import Block, Budget, CampaignSpec, ResultStore, roll_box, run_campaign
-from vbl_robust.campaigns.metrics import main_rows
 from vbl_robust.campaigns.store import JOB_COLUMNS, JobRow, JobStatus, merge_runs
 from vbl_robust.campaigns.store.digest import FindingKind, reseal
 from vbl_robust.campaigns.verify import banner_lines, check_store, screen

@@ -12,7 +12,7 @@ import pytest
 from scipy.stats import binomtest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import metrics as mx
+from vbl_robust.analysis import metrics as mx
 from vbl_robust.campaigns.pnpcheck import TRUNCATED
 from vbl_robust.campaigns.spec import roll_box
 from vbl_robust.campaigns.store import JobRow, JobStatus, Points, ResultStore

@@ -7,7 +7,7 @@ import math
 import matplotlib.pyplot as plt
 import pytest
 
-from vbl_robust.campaigns import metrics as mx
+from vbl_robust.analysis import metrics as mx
 from vbl_robust.campaigns.experiments import family_boxes
 from vbl_robust.campaigns.spec import Budget
 from vbl_robust.campaigns.store import JobRow

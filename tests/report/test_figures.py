@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from vbl_robust.campaigns import metrics as mx
-from vbl_robust.campaigns.levels import DistanceLine
-from vbl_robust.campaigns.metrics import Summary
+from vbl_robust.analysis import metrics as mx
+from vbl_robust.analysis.levels import DistanceLine
+from vbl_robust.analysis.metrics import Summary
 from vbl_robust.report import figures as F
 
 

@@ -82,7 +82,7 @@ def test_the_predicted_corners_are_stored_where_the_detector_put_them(run, sampl
 def test_the_csv_carries_each_images_nominal_error(run, tmp_path):
     import csv
 
-    from vbl_robust.campaigns.tables import export
+    from vbl_robust.analysis.tables import export
 
     with ResultStore.open_existing(run) as st:
         stored = {r.sample_id: r.payload["nominal"]["error_m"] for r in st.jobs(role="main")}

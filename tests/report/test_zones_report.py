@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import torch
 
+from vbl_robust.analysis import metrics as mx
 from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, ResultStore, run_campaign
-from vbl_robust.campaigns import metrics as mx
 from vbl_robust.campaigns.replay import zones_of_run
 from vbl_robust.campaigns.spec import roll_box, roll_contrast_box
 from vbl_robust.campaigns.store.digest import reseal

@@ -7,7 +7,7 @@ A job row is *inconsistent* when
 - its summary (worst value and θ*, verdict, evaluation and failure counts, failure reason at θ*) is not what its
   stored evaluations give under the campaign's settings (ε_safe, the failure penalty) — recomputed with the function
   that made it (:func:`~vbl_robust.campaigns.work.result_fields` on the result its points stand for,
-  :func:`~vbl_robust.campaigns.readoff.row_result`); an implied row without the breach that implies it; a job not
+  :func:`~vbl_robust.analysis.readoff.row_result`); an implied row without the breach that implies it; a job not
   measured that holds a result;
 - θ* lies outside its box;
 - its sample is not in the samples table (an orphan row, or its sample row deleted: in a store that records

@@ -64,8 +64,8 @@ def _unmeasured_exit(run: Path, allow_unmeasured: bool) -> None:
 
 def _report(run: Path, out: Path | None, csv: Path | None, parquet: Path | None, fmt: str, others: list[Path] | None,
             compare: Path | None) -> None:
+    from vbl_robust.analysis.tables import export
     from vbl_robust.campaigns.store import ResultStore
-    from vbl_robust.campaigns.tables import export
     from vbl_robust.report.build import build_report
 
     if fmt not in ("html", "md", "csv", "json"):
@@ -192,10 +192,10 @@ def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None
 
 
 def _summary(run: Path, fmt: str) -> None:
-    """The run's summary table (:func:`vbl_robust.campaigns.tables.summary_table`: survival, or a risk run's
+    """The run's summary table (:func:`vbl_robust.analysis.tables.summary_table`: survival, or a risk run's
     failure probability per estimator) on standard output."""
+    from vbl_robust.analysis.tables import summary_table, write_records
     from vbl_robust.campaigns.store import ResultStore
-    from vbl_robust.campaigns.tables import summary_table, write_records
 
     with one_line(), ResultStore.open_existing(run) as store:
         records, columns = summary_table(store)

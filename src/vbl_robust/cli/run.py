@@ -225,9 +225,9 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
     """Print the summary table, export, and write the HTML report; False when the run is incomplete or some job
     could not be measured (unless ``allow_unmeasured``): its caller ends with exit code 1 once it has done what else
     it can — a run that did not finish, or did not measure what it was asked to, never exits 0."""
-    from vbl_robust.campaigns.readoff import main_rows
+    from vbl_robust.analysis.readoff import main_rows
+    from vbl_robust.analysis.tables import export
     from vbl_robust.campaigns.store import ResultStore
-    from vbl_robust.campaigns.tables import export
     from vbl_robust.report.build import build_report
 
     with ResultStore.open_existing(out) as store:
@@ -255,7 +255,7 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
 def unmeasured_ok(rows: list, unit: str, allow_unmeasured: bool) -> bool:
     """Tell the user what could not be measured (stderr, one line per reason) and whether the command may exit 0:
     yes when every job was measured, or ``--allow-unmeasured`` was given."""
-    from vbl_robust.campaigns.breach import not_measured_lines
+    from vbl_robust.analysis.breach import not_measured_lines
 
     lines = not_measured_lines(rows, len(rows), unit)
     for line in lines:
@@ -272,7 +272,7 @@ def print_summary(spec: Any, rows: list) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from vbl_robust.campaigns.summary import summarize
+    from vbl_robust.analysis.summary import summarize
 
     lines = summarize(rows, spec.eps_safe_m)
     cols = ["method"] + [c for c in ("box_label", "budget_label") if len({getattr(ln, c) for ln in lines}) > 1]

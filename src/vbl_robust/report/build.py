@@ -44,8 +44,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from ..analysis import metrics as mx
 from ..atomic import atomic_write
-from ..campaigns import metrics as mx
 from ..campaigns.experiments import EXPERIMENTS
 from ..campaigns.spec import FIGURES
 from ..campaigns.store import ResultStore

@@ -4,7 +4,7 @@
 or ``all`` writes them; a run still in progress is read as it stands) and writes, per experiment, into
 ``out/<experiment>/``:
 
-- ``jobs.parquet``: the job table (:func:`~vbl_robust.campaigns.tables.export`: one line per job and per read-off
+- ``jobs.parquet``: the job table (:func:`~vbl_robust.analysis.tables.export`: one line per job and per read-off
   budget; traces and evaluated points stay in the store);
 - ``report.html`` and ``figures/``: the report, showing its figures from that folder by relative path
   (``build_report(embed=False)``: the folder opens offline; a page of tens of kB instead of megabytes of base64,
@@ -109,7 +109,7 @@ def write_experiment(run: Path, out: Path, stores: bool = False, keep: Path | No
     """Bundle one run directory into ``out`` (created; with its packed store when ``stores``, else the packed store
     of the bundle ``keep`` — the experiment's previous bundle directory — when it has one); returns its provenance
     totals."""
-    from ..campaigns.tables import export
+    from ..analysis.tables import export
     from . import build_report
 
     out.mkdir(parents=True, exist_ok=True)
@@ -301,10 +301,10 @@ def refresh_bundle(out: Path, reproduction: Path | None = None, *, reports: bool
 
 
 def _table_rows(source: Path) -> dict[tuple[str, str], dict[str, Any]]:
-    """The flat job rows (:func:`~vbl_robust.campaigns.tables.flat_rows`) of a run directory or store, or of a
+    """The flat job rows (:func:`~vbl_robust.analysis.tables.flat_rows`) of a run directory or store, or of a
     bundle's job table (an experiment directory of the bundle holding ``jobs.parquet``, or that file), by
     ``(key, budget_label)`` (a read-off budget shares its run's key)."""
-    from ..campaigns.tables import flat_rows
+    from ..analysis.tables import flat_rows
 
     source = Path(source)
     table = source / "jobs.parquet" if source.is_dir() and not (source / STORE).is_file() else source

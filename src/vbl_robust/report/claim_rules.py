@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..campaigns import metrics as mx
+from ..analysis import metrics as mx
 from ..campaigns.store import JobRow
 from ..search.api import METHODS as SEARCH_METHODS
 from ..stats import ALPHA, LEVEL, ClaimVerdict, Rate, claim_verdict, holm, paired
@@ -350,7 +350,7 @@ def cross_part(worst: Sequence[Sequence[float]], budgets: Sequence[str], thresho
 def phi_interval(levels: Sequence[float], budgets: Sequence[float],
                  pct: float = PHI_PCT) -> tuple[float, float, float]:
     """(φ_crit, low, high) of images whose smallest breaching budgets are ``levels`` (∞: none within ``budgets``):
-    φ_crit is the smallest budget at which survival drops below ``pct`` % (:func:`~vbl_robust.campaigns.metrics.
+    φ_crit is the smallest budget at which survival drops below ``pct`` % (:func:`~vbl_robust.analysis.metrics.
     phi_crit`); low the smallest at which the exact 95 % interval of survival reaches below ``pct`` (it may have
     dropped there), high the smallest at which the whole interval is below (it surely has); ∞ for "not within
     the budgets". Pointwise intervals, so [low, high] is as wide as each budget's noise."""

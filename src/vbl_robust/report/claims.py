@@ -2,7 +2,7 @@
 
 Every number comes from ``ROOT/<experiment>/results.sqlite`` (or a bundle's packed ``results.sqlite.xz``, read
 through a temporary copy: the claims of ``results/paper`` regenerate from the bundle itself) through the report's
-own metrics (:mod:`vbl_robust.campaigns.metrics`; :mod:`.build`'s ``Context``, ``reference``, ``main_boxes``):
+own metrics (:mod:`vbl_robust.analysis.metrics`; :mod:`.build`'s ``Context``, ``reference``, ``main_boxes``):
 nothing is typed by hand. A missing store gives "not run yet"; a store where only some images have every planned job is
 used on those ("partial: n of N images").
 
@@ -73,10 +73,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..analysis import metrics as mx
+from ..analysis.levels import DistanceLine
 from ..atomic import atomic_write
-from ..campaigns import metrics as mx
 from ..campaigns.experiments import PAPER, PAPER_METHODS
-from ..campaigns.levels import DistanceLine
 from ..campaigns.pnpcheck import TRUNCATED
 from ..campaigns.store import PACKED, STORE, JobRow, JobStatus, ResultStore
 from ..constants import Verdict
@@ -198,7 +198,7 @@ class _Survival:
 
 def _survival(rows: Sequence[JobRow], eps: float) -> tuple[list[str], _Survival]:
     """(box labels by level, per method the survival % at each box): the report's survival table
-    (:func:`~vbl_robust.campaigns.metrics.summarize` by method and box)."""
+    (:func:`~vbl_robust.analysis.metrics.summarize` by method and box)."""
     lines = mx.summarize(rows, eps, by=("method", "box_label"))
     labels = [lab for _, lab in sorted({(ln.box_level, ln.box_label) for ln in lines})]
     got = {(ln.method, ln.box_label): ln.survival for ln in lines}
@@ -289,9 +289,9 @@ def _runtime_1d(e: _Exp) -> ClaimResult:
     return ClaimResult("median time to first breach: " + "; ".join(ours), truth, *judge([part]), len(e.ids))
 
 def truth_2d(e: _Exp) -> str:
-    """The dense grid's truth at the run's largest box (``vbl-robust truth``, :mod:`vbl_robust.campaigns.truth`),
+    """The dense grid's truth at the run's largest box (``vbl-robust truth``, :mod:`vbl_robust.analysis.truth`),
     when its run ``<experiment>-truth`` sits beside the experiment; "" otherwise."""
-    from ..campaigns.truth import TRUTH_SUFFIX, true_survival
+    from ..analysis.truth import TRUTH_SUFFIX, true_survival
 
     run = e.ctx.out_dir
     truth = run.with_name(run.name + TRUTH_SUFFIX)
@@ -320,7 +320,7 @@ def _spatial_2d(e: _Exp) -> ClaimResult:
 
 def _worst_by(rows: Sequence[JobRow]) -> dict[str, dict[float, dict[str, float]]]:
     """Per method and time budget (s) each measured image's worst error (NaN: no evaluation within the budget),
-    as :func:`~vbl_robust.campaigns.metrics.summarize` counts it in the median."""
+    as :func:`~vbl_robust.analysis.metrics.summarize` counts it in the median."""
     out: dict[str, dict[float, dict[str, float]]] = {}
     for r in mx.measured_rows(rows)[0]:
         out.setdefault(r.method, {}).setdefault(r.budget.max_seconds, {})[r.sample_id] = (
@@ -398,7 +398,7 @@ def _distance(e: _Exp) -> ClaimResult:
 
 def _per_run(rows: Sequence[JobRow], field: str, scale: float = 1.0) -> np.ndarray:
     """(runs, iterations) of a DIRECT-family trace field (NaN after a run's last iteration), as
-    :func:`~vbl_robust.campaigns.metrics.convergence` reads it."""
+    :func:`~vbl_robust.analysis.metrics.convergence` reads it."""
     per = []
     for r in rows:
         d = {int(t.iteration): getattr(t, field) for t in r.trace if t.po_count_before is not None}

@@ -98,8 +98,8 @@ def paper_order(names: Sequence[str]) -> list[str]:
     """``names`` in the paper's order (pnp-validation, spatial-1d, runtime-1d, spatial-2d, runtime-2d,
     distance-profile, convergence, then ours), then the dense-grid truth runs in the same order, then any other
     run by name."""
+    from ..analysis.truth import TRUTH_SUFFIX
     from ..campaigns.experiments import EXPERIMENTS
-    from ..campaigns.truth import TRUTH_SUFFIX
 
     known = list(EXPERIMENTS)
 
@@ -135,7 +135,7 @@ def about(out: Path, names: Sequence[str]) -> list[tuple[str, str]]:
     """(label, text) lines saying what the runs ``out/<name>`` measured: the data (synthetic approach scenes or
     LARD, images per experiment), the model (name, short SHA-256), the code version and when they ran, from their
     provenance."""
-    from ..campaigns.truth import TRUTH_SUFFIX
+    from ..analysis.truth import TRUTH_SUFFIX
 
     kinds, sizes, images, models, codes, dates = set(), set(), {}, {}, set(), []
     for name in names:

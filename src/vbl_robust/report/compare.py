@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from ..analysis import metrics as mx
 from ..atomic import atomic_write
-from ..campaigns import metrics as mx
 from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import JobRow, ResultStore
 from ..stats import Paired, Rate, paired

@@ -31,8 +31,8 @@ from urllib.parse import quote
 
 import numpy as np
 
-from ..campaigns import metrics as mx
-from ..campaigns.breach import survived
+from ..analysis import metrics as mx
+from ..analysis.breach import survived
 from ..campaigns.store import ResultStore
 from ..constants import EPS_SAFE_M
 from ..stats import Paired, Rate, paired

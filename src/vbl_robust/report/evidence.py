@@ -9,7 +9,7 @@ draws its worst cases, and ``evidence.json`` beside ``report.html`` holds the sa
 Per box, the images are counted over **every method together** (an image is breached when any method found a
 breach): survival, misleading and flagged-only images each with their exact 95 % interval
 (:class:`vbl_robust.stats.Rate`); for random search, the largest bound over its surviving images on the breached
-fraction of the box (:func:`vbl_robust.campaigns.metrics.residual_bound`); for a risk run, each estimator's pooled
+fraction of the box (:func:`vbl_robust.analysis.metrics.residual_bound`); for a risk run, each estimator's pooled
 failure probability with its interval (:func:`vbl_robust.campaigns.risk.pooled_risk`); for the DIRECT family, the
 mean remaining area RA of the last iteration (the share of Θ not yet pruned as below the best value found).
 
@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from ..analysis import metrics as mx
 from ..atomic import atomic_write
-from ..campaigns import metrics as mx
 from ..campaigns.kinds import SourceKind
 from ..campaigns.store import JobRow
 from ..campaigns.store.payloads import Nominal, WorstPayload, WorstPoint
@@ -352,7 +352,7 @@ def audited_line(ctx: Context) -> str:
 
 
 def not_measured_banner(rows: Sequence[JobRow], total: int, unit: str) -> str:
-    """The first-screen warning of the jobs the tool could not measure (:func:`~vbl_robust.campaigns.metrics.
+    """The first-screen warning of the jobs the tool could not measure (:func:`~vbl_robust.analysis.metrics.
     not_measured_lines`), or ``""`` when it measured every job."""
     lines = mx.not_measured_lines(rows, total, unit)
     if not lines:

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..campaigns import metrics as mx
+from ..analysis import metrics as mx
 from ..campaigns.spec import CampaignSpec
 from ..campaigns.store import ResultStore
 from ..stats import Rate
@@ -107,9 +107,9 @@ def _read_alike(run: str | Path, spec: CampaignSpec, rows: Sequence, other: str 
 
 def risk_markdown(run: str | Path) -> str:
     """A risk run's failure probability per estimator and box as a Markdown table
-    (:func:`~vbl_robust.campaigns.tables.risk_records`, what ``--format csv|json`` print), each estimate with its
+    (:func:`~vbl_robust.analysis.tables.risk_records`, what ``--format csv|json`` print), each estimate with its
     interval, and the run's jobs not measured."""
-    from ..campaigns.tables import risk_records
+    from ..analysis.tables import risk_records
 
     with ResultStore.open_existing(run) as store:
         records = risk_records(store)

@@ -13,8 +13,8 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ..analysis import metrics as mx
 from ..atomic import atomic_write
-from ..campaigns import metrics as mx
 from ..campaigns.spec import BoxSpec, CampaignSpec
 from ..campaigns.store import JobRow, JobStatus, ResultStore, SampleRecord
 from ..campaigns.store.payloads import Nominal, WorstPayload

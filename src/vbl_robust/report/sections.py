@@ -11,10 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from ..campaigns import metrics as mx
+from ..analysis import metrics as mx
+from ..analysis.reference import AgainstGrid
 from ..campaigns.experiments import range_text
 from ..campaigns.kinds import JobKind, Role
-from ..campaigns.reference import AgainstGrid
 from ..campaigns.store import JobRow, JobStatus, RunProvenance
 from ..constants import FAILURE_REASONS, Verdict
 from ..detect.shipped import DetectorKind

@@ -2,7 +2,7 @@
 experiments' anytime methods) stands for one result per read budget; :func:`read_off_rows` derives those rows
 (``JobRow.read_from`` = the run's budget label) from the run's stamped evaluations
 (:func:`vbl_robust.search.at_budget`): at a time budget t only the evaluations completed by t count.
-Re-exported by :mod:`vbl_robust.campaigns.metrics`.
+Re-exported by :mod:`vbl_robust.analysis.metrics`.
 """
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from .rebuild import row_result
-from .spec import Budget
-from .store import JobRow, JobStatus, Points
+from ..campaigns.rebuild import row_result
+from ..campaigns.spec import Budget
+from ..campaigns.store import JobRow, JobStatus, Points
 
 __all__ = ["main_rows", "read_off", "read_off_rows", "reads_trace", "row_result"]
 
@@ -21,8 +21,8 @@ def read_off(row: JobRow, budget: Budget, eps_safe_m: float, penalty_m: float) -
     """The row of ``budget`` (a time or an evaluation budget) read off the stored run ``row`` (with points): the
     best value and point, counts and trace of the evaluations within the budget; ``read_from`` = the run's
     budget label. A run not measured gives a row not measured for the budget."""
+    from ..campaigns.work import result_fields
     from ..search import at_budget
-    from .work import result_fields
 
     base = row.replace(budget=budget, key=f"{row.key}@{budget.label}", read_from=row.budget_label, payload=None)
     if row.status != JobStatus.DONE:
@@ -58,7 +58,7 @@ def main_rows(store: Any, spec: Any, *, with_trace: bool = True, measured_only: 
     unless ``measured_only`` is False (a summary table that counts them apart, :func:`summarize`). Rows inconsistent
     with their own evaluations or their digests are never used (:func:`vbl_robust.campaigns.verify.screen`: the store
     leaves them out from then on, the report counts them apart)."""
-    from .verify import screen
+    from ..campaigns.verify import screen
 
     screen(store, spec)
     reads = reads_trace(spec)

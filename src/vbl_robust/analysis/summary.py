@@ -1,5 +1,5 @@
 """Survival tables over store rows: :class:`Summary` per group of rows (:func:`summarize`) and the table column
-rule of several budgets (:func:`columns`). Re-exported by :mod:`vbl_robust.campaigns.metrics`.
+rule of several budgets (:func:`columns`). Re-exported by :mod:`vbl_robust.analysis.metrics`.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from ..campaigns.store import JobRow
 from ..constants import BreachKind, Verdict
 from ..stats import Rate
 from .breach import (
@@ -22,7 +23,6 @@ from .breach import (
     residual_bound,
     survived,
 )
-from .store import JobRow
 
 
 def _stats(values: Sequence[float]) -> dict[str, float]:

@@ -19,10 +19,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .kinds import SourceKind
+from ..campaigns.kinds import SourceKind
+from ..campaigns.spec import Block, BoxSpec, Budget, CampaignSpec
+from ..campaigns.store import JobRow, JobStatus, ResultStore
 from .metrics import budget_value, main_rows, survived
-from .spec import Block, BoxSpec, Budget, CampaignSpec
-from .store import JobRow, JobStatus, ResultStore
 
 __all__ = ["TRUTH_SUFFIX", "TrueSurvival", "survivors_of_every_method", "true_survival", "truth_spec"]
 
@@ -125,7 +125,7 @@ def true_survival(run: str | Path, truth: str | Path | None = None) -> TrueSurvi
 def load_run_samples(store: ResultStore, ids: Sequence[str]) -> list[Any]:
     """The samples ``ids`` of a run, rebuilt from its recorded dataset source (synthetic: regenerated with the same
     count, seed and size; LARD: read again from its CSV), in the order of ``ids``."""
-    from .samples import load_samples
+    from ..campaigns.samples import load_samples
 
     runs = store.runs()
     source = ((runs[-1].provenance.dataset if runs else None) or {}).get("source") or {}

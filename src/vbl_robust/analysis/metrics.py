@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..campaigns.store import JobRow, JobStatus
 from .breach import (
     breach_kind,
     breached_images,
@@ -61,7 +62,6 @@ from .reference import (
     reference_rows,
     worst_within,
 )
-from .store import JobRow, JobStatus
 from .summary import GROUP_BY, Summary, columns, summarize
 
 __all__ = [

@@ -1,6 +1,6 @@
 """The dense grid as the reference: its worst value restricted to each nested box (:func:`reference_rows`) and
 every method's verdicts against it (:func:`against_reference`). Re-exported by
-:mod:`vbl_robust.campaigns.metrics`.
+:mod:`vbl_robust.analysis.metrics`.
 """
 
 from __future__ import annotations
@@ -11,11 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..campaigns.spec import BoxSpec
+from ..campaigns.store import JobRow, JobStatus, Points
 from ..constants import Verdict
 from ..stats import paired
 from .breach import survived
-from .spec import BoxSpec
-from .store import JobRow, JobStatus, Points
 
 #: ``method`` of the pseudo-rows of :func:`reference_rows`.
 REFERENCE_METHOD = "grid (reference)"

@@ -1,6 +1,6 @@
 """Breach levels over nested boxes: the smallest level at which each image breaches, survival curves and φ_crit,
 the profile per slant-distance quartile, and the perturbation families' survival per level and their ranking.
-Re-exported by :mod:`vbl_robust.campaigns.metrics`.
+Re-exported by :mod:`vbl_robust.analysis.metrics`.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from ..campaigns.store import JobRow
 from ..constants import Verdict
-from .store import JobRow
 from .summary import summarize
 
 

@@ -7,7 +7,7 @@ breach found" is worth for a uniform random search (``residual_bound``), the ima
 (``nominal_m``, from main jobs stored with it; empty in older stores), counts and timings (a sequence campaign's main jobs also their breach facts along the approach,
 :data:`SEQUENCE_COLUMNS`); traces, evaluated points and per-frame errors stay in the store. A run that reads smaller
 budgets off its trace (runtime experiments) is followed by one line per read budget, derived from it
-(:func:`~vbl_robust.campaigns.metrics.read_off_rows`; column ``read_from`` = the run's budget label).
+(:func:`~vbl_robust.analysis.metrics.read_off_rows`; column ``read_from`` = the run's budget label).
 
 :func:`summary_records` gives the summary table (``vbl-robust report RUN --format csv|json``): one record per
 method, box and budget with the survival rate and its exact 95 % interval (:data:`SUMMARY_COLUMNS`).
@@ -21,9 +21,9 @@ from enum import Enum
 from pathlib import Path
 from typing import Any
 
-from .kinds import JobKind
-from .store import ResultStore
-from .store.payloads import RiskPayload, SequencePayload, WorstPayload
+from ..campaigns.kinds import JobKind
+from ..campaigns.store import ResultStore
+from ..campaigns.store.payloads import RiskPayload, SequencePayload, WorstPayload
 
 COLUMNS = (
     "experiment", "kind", "role", "method", "sample_id", "sample_index", "slant_distance_m", "envelope", "box_label",
@@ -49,7 +49,7 @@ SUMMARY_COLUMNS = (
 
 
 #: Columns of a sequence campaign's main jobs (after the parameters): the breach facts of the worst θ and the
-#: unperturbed θ's sustained error, from the job's ``sequence`` payload (:func:`.work.sequence_details`).
+#: unperturbed θ's sustained error, from the job's ``sequence`` payload (:func:`vbl_robust.campaigns.work.sequence_details`).
 SEQUENCE_COLUMNS = ("longest_run_frames", "longest_run_s", "breached_frames", "failed_frames", "breach_start_m",
                     "breach_start_frame", "first_breach_m", "nominal_sustained_m", "nominal_breached_frames")
 
@@ -151,7 +151,7 @@ RISK_SUMMARY_COLUMNS = (
 def risk_records(store: ResultStore) -> list[dict[str, Any]]:
     """A risk run's summary (:func:`vbl_robust.campaigns.risk.pooled_risk` per estimator), one record of
     :data:`RISK_SUMMARY_COLUMNS` per estimator; none for a run without risk rows."""
-    from .risk import pooled_risk
+    from ..campaigns.risk import pooled_risk
 
     camp = store.require_campaign()
     rows = store.jobs(kind="risk", with_points=True, with_trace=False)
