@@ -99,8 +99,8 @@ def durations(detector, bundle: Path, quick: bool) -> str:
     from dataclasses import replace
 
     from vbl_robust.campaigns import EXPERIMENTS, Options, load_samples
-    from vbl_robust.campaigns.estimate import PROBE_IMAGES, Probe, expected_seconds, probe
     from vbl_robust.campaigns.experiments import PAPER
+    from vbl_robust.paper.estimate import PROBE_IMAGES, Probe, expected_seconds, probe
 
     specs = {name: replace(EXPERIMENTS[name].build(0, Options()), clock="process") for name in PAPER}
     pr = probe(detector, list(specs.values()), load_samples(PROBE_IMAGES, 0)[0], seconds=1.0 if quick else 5.0,

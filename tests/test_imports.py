@@ -93,7 +93,7 @@ def test_the_checker_sees_a_cycle():
 #: images, detectors or PnP. Top-level helper modules (``atomic``, ``digest``, ``lazy``) are the ground floor.
 FLOORS = ("constants", "stats", "space", "atomic", "digest", "lazy", "search", "geometry", "data", "scenes",
           "perturb", "pnp", "detect", "pipeline", "sequences", "campaigns", "analysis", "report",
-          "cli")
+          "paper", "cli")
 #: Arrows up that are still there, each to be removed (issue 46); an arrow up not listed here fails the test, and
 #: so does a listed one that is gone (the list shrinks with the code).
 KNOWN_UP: set[str] = set()

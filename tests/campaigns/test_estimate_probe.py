@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from vbl_robust.campaigns.estimate import (
+from vbl_robust.paper.estimate import (
     Probe,
     RateProbe,
     best_of_probes,

@@ -100,8 +100,8 @@ def test_grid_count_and_level_texts():
 
 
 def test_estimate_and_planned_work():
-    from vbl_robust.campaigns.estimate import planned_work
     from vbl_robust.cli import app
+    from vbl_robust.paper.estimate import planned_work
 
     spec = experiment("families").build(0, Options(max_evals=10, family_grid=0))
     assert planned_work(spec, 3) == (3 * len(PERTURBATIONS) * 5 * 3 * 10, 0.0)  # georobust, georobust-av, random

@@ -22,7 +22,7 @@ from vbl_robust.campaigns.store import (
     pack_store,
 )
 from vbl_robust.cli import app
-from vbl_robust.report.bundle import compare_runs
+from vbl_robust.paper.bundle import compare_runs
 from vbl_robust.scenes import generate
 
 DET = DetectorSpec.oracle(1.0)

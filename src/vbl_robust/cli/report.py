@@ -1,7 +1,7 @@
 """``vbl-robust report RUN``: rebuild the HTML report (and exports) of a run directory from its results store, or
 print its tables as Markdown (``--format md``, :mod:`vbl_robust.report.markdown`);
 ``vbl-robust bundle ROOT --out DIR``: the committable bundle of a set of experiment runs
-(:mod:`vbl_robust.report.bundle`); ``vbl-robust merge SRC… --into RUN``: jobs computed elsewhere joined into one
+(:mod:`vbl_robust.paper.bundle`); ``vbl-robust merge SRC… --into RUN``: jobs computed elsewhere joined into one
 run (:func:`vbl_robust.campaigns.store.merge_runs`)."""
 
 from __future__ import annotations
@@ -128,7 +128,7 @@ def bundle(root: Root, out: BundleOut, reproduction: Reproduction = None, stores
            detector: Detector = None, detector_label: DetectorLabel = "this bundle's detector") -> None:
     """Write a results bundle: per experiment the job table (Parquet), the report and the provenance, and a
     status table; runs still in progress are bundled as they stand (rerun to refresh)."""
-    from vbl_robust.report.bundle import write_bundle
+    from vbl_robust.paper.bundle import write_bundle
 
     if out.exists() and not out.is_dir():
         fail(f"--out {out}: is a file; a bundle is a directory")

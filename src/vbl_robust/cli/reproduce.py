@@ -1,7 +1,7 @@
 """``vbl-robust reproduce EXPERIMENT|paper|all``: run one of the paper's experiments, the paper's seven, or all of
 them with ours (defaults are the paper's). ``paper`` and ``all`` give each experiment its own run directory under
 ``--out`` (each resumable on its own) and an ``index.html`` linking their reports; ``--estimate`` prints
-(:mod:`vbl_robust.campaigns.estimate`), from a short measured probe of the detector on this
+(:mod:`vbl_robust.paper.estimate`), from a short measured probe of the detector on this
 machine and the breach rates of its first images, each experiment's expected duration and an upper bound (every
 evaluation budget spent, no early stop), and exits.
 """
@@ -14,16 +14,9 @@ from typing import Annotated, Any
 
 import typer
 
-from ..campaigns.estimate import (
-    PROBE_IMAGES,
-    Probe,
-    expected_seconds,
-    measured_remaining,
-    planned_work,
-    probe,
-)
 from ..campaigns.experiments import EXPERIMENTS, PAPER, Options, experiment, with_options
 from ..constants import MAX_IMAGES
+from ..paper.estimate import PROBE_IMAGES, Probe, expected_seconds, measured_remaining, planned_work, probe
 from . import options as o
 from .common import (
     fail,
@@ -138,7 +131,7 @@ def reproduce(
         if references:
             differ |= _check(exp.name, out_dir, references[exp.name])
     if group:
-        from vbl_robust.report.claims import claims_html, claims_of, write_claims, write_index
+        from vbl_robust.paper.claims import claims_html, claims_of, write_claims, write_index
 
         typer.echo(f"claims: {write_claims(root)}")
         typer.echo(f"index: {write_index(root, [e.name for e in exps], claims_html(claims_of(root), str(root)))}")
@@ -203,7 +196,7 @@ def _floats(text: str | None, name: str) -> tuple[float, ...] | None:
 
 def _estimate(exps: list, opts: Any, seed: int, images: int | None, det: Any, probe_samples: list, workers: int,
               group: str, probe_seconds: float, clock: str = "wall", root: Path | None = None) -> None:
-    """Print each experiment's expected duration and its upper bound (:mod:`vbl_robust.campaigns.estimate`), the
+    """Print each experiment's expected duration and its upper bound (:mod:`vbl_robust.paper.estimate`), the
     probe's rates measured on the run's ``clock`` (process: CPU seconds, the durations of an idle machine)."""
     from vbl_robust.campaigns.store import ResultStore  # torch behind it: not for ``--help``
 
@@ -250,10 +243,10 @@ def _reference(root: Path, name: str) -> Path:
 
 
 def _check(name: str, run: Path, reference: Path) -> bool:
-    """Print how the rows of ``run`` compare with ``reference``'s (:func:`~vbl_robust.report.bundle.compare_runs`):
+    """Print how the rows of ``run`` compare with ``reference``'s (:func:`~vbl_robust.paper.bundle.compare_runs`):
     findings changed (status, verdict, a row missing) apart from numeric drift (same findings, other counts or
     worst errors); True only when a finding changed."""
-    from vbl_robust.report.bundle import compare_runs
+    from vbl_robust.paper.bundle import compare_runs
 
     c = compare_runs(run, reference)
     first = f" (first: {', '.join(c['differ'][:3])})" if c["differ"] else ""

@@ -35,11 +35,11 @@ from ..analysis import metrics as mx
 from ..analysis.breach import survived
 from ..campaigns.store import ResultStore
 from ..constants import EPS_SAFE_M
+from ..report.html import esc
+from ..report.markdown import esc_md
 from ..stats import Paired, Rate, paired
 from .claim_rules import Claim
 from .claims import claims_of
-from .html import esc
-from .markdown import esc_md
 
 __all__ = ["CLAIMS_BY_DETECTOR", "FAR_M", "DetectorProfile", "Table", "Tables", "detector_profile", "detectors_html",
            "detectors_markdown", "detectors_tables", "largest_box_survivors"]

@@ -17,7 +17,7 @@ from vbl_robust.campaigns.pnpcheck import TRUNCATED
 from vbl_robust.campaigns.spec import roll_box
 from vbl_robust.campaigns.store import JobRow, JobStatus, Points, ResultStore
 from vbl_robust.cli import app
-from vbl_robust.report import claims as C
+from vbl_robust.paper import claims as C
 from vbl_robust.report.html import fmt_num
 from vbl_robust.stats import ClaimVerdict
 
@@ -150,7 +150,7 @@ def test_roughness_row_reads_the_complete_runtime_grid(root, claims):
 
 def test_every_row_states_a_test_or_an_interval(claims):
     """Issue 57: 9 of 9 claim rows say in their reason the test or the interval behind the verdict (the committed
-    bundle's: tests/report/test_claims_noise.py)."""
+    bundle's: tests/paper/test_claims_noise.py)."""
     said = ("p = ", "[", "exact 95 %", "no method breaches")  # these 2 images: runtime-1d may breach nowhere
     missing = [c.reason for c in claims if not any(s in c.reason for s in said)]
     assert not missing, missing

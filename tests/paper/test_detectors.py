@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from vbl_robust.cli import app
-from vbl_robust.report.detectors import detector_profile, detectors_html, detectors_markdown
+from vbl_robust.paper.detectors import detector_profile, detectors_html, detectors_markdown
 
 runner = CliRunner()
 LABEL = "noisy <b>|"

@@ -14,7 +14,7 @@ from vbl_robust.campaigns import (
     roll_box,
     run_campaign,
 )
-from vbl_robust.report.bundle import provenance
+from vbl_robust.paper.bundle import provenance
 from vbl_robust.scenes import generate
 
 
@@ -49,7 +49,7 @@ def test_a_check_tells_a_changed_finding_from_numeric_drift(tmp_path):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from vbl_robust.report.bundle import compare_runs
+    from vbl_robust.paper.bundle import compare_runs
 
     base = {"key": ["a", "b", "c"], "budget_label": ["x", "x", "x"], "max_seconds": [None, None, None],
             "status": ["done"] * 3, "verdict": ["breach", "no breach found", "no breach found"],
@@ -67,8 +67,8 @@ def test_a_check_tells_a_changed_finding_from_numeric_drift(tmp_path):
 
 def test_bundle_index_links_stay_relative_and_a_bundle_never_overwrites_its_runs(tmp_path):
     from vbl_robust.campaigns.store import restore_store
-    from vbl_robust.report.bundle import write_bundle
-    from vbl_robust.report.claims import write_index
+    from vbl_robust.paper.bundle import write_bundle
+    from vbl_robust.paper.claims import write_index
 
     name = "javascript:alert(1)"
     (tmp_path / name).mkdir()
@@ -91,7 +91,7 @@ def test_a_bundle_killed_midway_leaves_the_previous_bundle_whole(tmp_path, monke
     written into a staging directory and published only when complete; a packed store is kept without --stores."""
     import vbl_robust.report as report
     from vbl_robust.campaigns.store import PACKED
-    from vbl_robust.report.bundle import write_bundle
+    from vbl_robust.paper.bundle import write_bundle
 
     spec = CampaignSpec("bundle-kill", (Block(boxes=(roll_box(5),), methods=("random",),
                                               budgets=(Budget(max_evals=4),)),), seed=1)
@@ -133,7 +133,7 @@ def test_a_bundles_report_shows_its_figures_as_files_and_is_rebuilt_from_its_pac
     import re
 
     from vbl_robust.campaigns.store import PACKED
-    from vbl_robust.report.bundle import refresh_bundle, write_bundle
+    from vbl_robust.paper.bundle import refresh_bundle, write_bundle
 
     spec = CampaignSpec("bundle-files", (Block(boxes=(roll_box(5),), methods=("random",),
                                                budgets=(Budget(max_evals=4),)),), seed=1)

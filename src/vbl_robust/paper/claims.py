@@ -2,7 +2,7 @@
 
 Every number comes from ``ROOT/<experiment>/results.sqlite`` (or a bundle's packed ``results.sqlite.xz``, read
 through a temporary copy: the claims of ``results/paper`` regenerate from the bundle itself) through the report's
-own metrics (:mod:`vbl_robust.analysis.metrics`; :mod:`.build`'s ``Context``, ``reference``, ``main_boxes``):
+own metrics (:mod:`vbl_robust.analysis.metrics`; :mod:`vbl_robust.report.build`'s ``Context``, ``reference``, ``main_boxes``):
 nothing is typed by hand. A missing store gives "not run yet"; a store where only some images have every planned job is
 used on those ("partial: n of N images").
 
@@ -80,6 +80,8 @@ from ..campaigns.experiments import PAPER, PAPER_METHODS
 from ..campaigns.pnpcheck import TRUNCATED
 from ..campaigns.store import PACKED, STORE, JobRow, JobStatus, ResultStore
 from ..constants import Verdict
+from ..report.html import fmt_num
+from ..report.rows import Context, main_boxes, reference
 from ..search import direct_family
 from ..stats import Rate
 from .claim_rules import (
@@ -120,8 +122,6 @@ from .claim_rules import (
     times_part,
 )
 from .claims_page import claims_html, claims_markdown, write_index
-from .html import fmt_num
-from .rows import Context, main_boxes, reference
 
 __all__ = ["ABOUT_AS_ACCURATE", "CLAIMS", "CONTRADICTED", "FAILS", "HOLDS", "NOT_RUN", "PARTLY", "TIE", "VERDICTS",
            "Claim", "claims_html", "claims_markdown", "claims_of", "combine", "cross_part", "fewer_evals",

@@ -36,8 +36,8 @@ from typing import Any
 
 import numpy as np
 
-from .kinds import JobKind
-from .spec import CampaignSpec, Job
+from ..campaigns.kinds import JobKind
+from ..campaigns.spec import CampaignSpec, Job
 
 #: Random points per box and probe image (:func:`probe`).
 PROBE_POINTS = 8
@@ -101,7 +101,7 @@ def _one_thread() -> Iterator[None]:
     import cv2
     import torch
 
-    from .work import one_core
+    from ..campaigns.work import one_core
 
     threads, cv_threads = torch.get_num_threads(), cv2.getNumThreads()
     one_core()
@@ -147,11 +147,11 @@ def probe_rate(det: Any, seconds: float = 5.0, *, gradient: bool = False, clock:
     work holds does not lower the rate. One thread, as a campaign's workers run (module docstring)."""
     import torch
 
+    from ..campaigns.work import detector_for
     from ..pipeline import Objective
     from ..scenes import generate
     from ..search import CLOCKS
     from ..space import ParameterBox
-    from .work import detector_for
 
     box = ParameterBox({"roll_deg": (-15, 15), "contrast": (0.7, 1.4)})
     rng = np.random.default_rng(0)
@@ -249,8 +249,8 @@ def probe(det: Any, specs: Sequence[CampaignSpec], samples: Sequence[Any], *, po
     """Measure both evaluation rates (per second of ``clock``, :func:`probe_rate`: the best of short probes, one
     thread), and the share of ``points`` random points of each early-stopping box of ``specs`` that breach (error
     above the campaign's ε_safe) on each of ``samples``."""
+    from ..campaigns.work import detector_for
     from ..pipeline import Objective
-    from .work import detector_for
 
     with _one_thread():  # the detector is built as the workers build theirs (an engine keeps its thread count)
         detector = detector_for(det)

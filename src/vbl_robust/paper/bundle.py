@@ -18,10 +18,10 @@ and, with ``stores=True``, ``results.sqlite.xz``: a compact copy of the store (`
 :func:`restore_store` lets a fresh checkout resume an unfinished run (``reproduce --resume-from``);
 
 and ``out/status.md``: one line per experiment (jobs done / planned, images, wall and worker hours),
-``out/claims.md``: the paper's claims checked on those stores (:mod:`vbl_robust.report.claims`), and
+``out/claims.md``: the paper's claims checked on those stores (:mod:`vbl_robust.paper.claims`), and
 ``out/index.html``: the overall verdict and what was measured (data, model), the claims section, then one card
 per experiment in the paper's order (a link to its report, its jobs done, the verdicts of the claims on it and its
-headline figure). Names from the runs are escaped in every file (Markdown: :func:`~.markdown.esc_md`). With
+headline figure). Names from the runs are escaped in every file (Markdown: :func:`~vbl_robust.report.markdown.esc_md`). With
 ``reproduction=PATH`` the part of that Markdown file between :data:`BEGIN` and :data:`END` is replaced by the
 claims and status tables (the rest of it is prose kept as written). Without ``stores``
 the SQLite stores are not copied (tens of MB; a packed store already in ``out`` is kept); rerunning the command that
@@ -49,7 +49,7 @@ from typing import Any
 
 from ..atomic import atomic_write
 from ..campaigns.store import PACKED, STORE, ResultStore, RunRecord, pack_store
-from .markdown import esc_md
+from ..report.markdown import esc_md
 
 #: Markers of the generated part of a REPRODUCTION.md (:func:`write_bundle`).
 BEGIN, END = "<!-- bundle:begin -->", "<!-- bundle:end -->"
@@ -110,7 +110,7 @@ def write_experiment(run: Path, out: Path, stores: bool = False, keep: Path | No
     of the bundle ``keep`` — the experiment's previous bundle directory — when it has one); returns its provenance
     totals."""
     from ..analysis.tables import export
-    from . import build_report
+    from ..report import build_report
 
     out.mkdir(parents=True, exist_ok=True)
     with ResultStore.open_existing(run) as store:
@@ -129,7 +129,7 @@ def rebuild_report(experiment: Path) -> Path:
     """Rebuild a bundled experiment's report (:data:`REPORT_FILES`) from its own packed store, in place: built
     beside it first, then each file replaced (``figures/`` by two renames), a file the new report does not write
     removed; killed before that, the old report stays whole. Returns the report's path."""
-    from . import build_report
+    from ..report import build_report
 
     experiment = Path(experiment)
     stage = experiment.parent / f".{experiment.name}.report"
@@ -277,7 +277,7 @@ def refresh_bundle(out: Path, reproduction: Path | None = None, *, reports: bool
                    detectors: Mapping[str, Path] | None = None) -> dict[str, dict[str, Any]]:
     """Rewrite a bundle's ``status.md``, ``claims.md`` and ``index.html`` (and the generated part of
     ``reproduction``) from what the bundle itself holds — each experiment's ``provenance.json`` totals and its
-    packed store (:func:`~vbl_robust.report.claims.claims_of` reads ``results.sqlite.xz``) — without rerunning
+    packed store (:func:`~vbl_robust.paper.claims.claims_of` reads ``results.sqlite.xz``) — without rerunning
     anything: after a change of the claims' rules or of the index. With ``reports``, each experiment's report is
     first rebuilt from its packed store (:func:`rebuild_report`; an experiment without one keeps its report);
     ``detectors``: as :func:`write_bundle`'s (the first root is then ``out`` itself).

@@ -18,9 +18,9 @@ from vbl_robust.campaigns import (
     roll_box,
     run_campaign,
 )
-from vbl_robust.report import claims as C
-from vbl_robust.report.bundle import BEGIN, END, refresh_bundle, write_bundle
-from vbl_robust.report.claims_page import FIGURE_PX, SYNTHETIC, paper_order, verdict_sentence
+from vbl_robust.paper import claims as C
+from vbl_robust.paper.bundle import BEGIN, END, refresh_bundle, write_bundle
+from vbl_robust.paper.claims_page import FIGURE_PX, SYNTHETIC, paper_order, verdict_sentence
 from vbl_robust.scenes import generate
 
 PAPER_ORDER = ["pnp-validation", "spatial-1d", "runtime-1d", "spatial-2d", "runtime-2d", "distance-profile",
@@ -76,7 +76,7 @@ def test_the_index_says_the_verdict_and_the_data_first_then_the_claims_then_the_
     assert widths == [704, FIGURE_PX]
     assert ".card .fig { overflow-x: auto;" in page and "max-width: none" in page
     # the footer's Markdown rendered: code spans, no raw backticks
-    assert "<code>vbl_robust.report.claims.write_claims</code>" in page and "<code>results/paper</code>" in page
+    assert "<code>vbl_robust.paper.claims.write_claims</code>" in page and "<code>results/paper</code>" in page
     assert "`" not in re.sub(r"<script>.*?</script>", "", page, flags=re.S)
     assert "bootstrap" in page
 

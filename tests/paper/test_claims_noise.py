@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vbl_robust.report import claim_rules as R
+from vbl_robust.paper import claim_rules as R
 from vbl_robust.stats import ClaimVerdict, Rate
 
 HOLDS, TIE, CONTRA = ClaimVerdict.HOLDS, ClaimVerdict.TIE, ClaimVerdict.CONTRADICTED
