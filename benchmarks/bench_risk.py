@@ -79,10 +79,10 @@ def run_case(case: dict) -> dict:
     import torch
 
     torch.set_num_threads(1)
-    from vbl_robust.campaigns.risk import ThetaDistribution, estimate_risk
     from vbl_robust.campaigns.spec import derive_seed
     from vbl_robust.campaigns.work import Settings, build_objective
     from vbl_robust.detect.shipped import DetectorSpec
+    from vbl_robust.risk import ThetaDistribution, estimate_risk
     from vbl_robust.scenes import generate
     from vbl_robust.space import ParameterBox
     from vbl_robust.stats import clopper_pearson
@@ -239,7 +239,7 @@ def surrogate(results: dict, seeds: int) -> str:
     """Coverage and half-width over many seeds on the dense-grid surrogate: θ → the L of the nearest grid node
     (what the pipeline computed there), so p_fail is known exactly (the failing nodes' Voronoi cells) and an
     estimator run costs no detector call."""
-    from vbl_robust.campaigns.risk import ThetaDistribution, estimate_risk
+    from vbl_robust.risk import ThetaDistribution, estimate_risk
     from vbl_robust.space import ParameterBox
     from vbl_robust.stats import clopper_pearson
 

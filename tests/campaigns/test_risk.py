@@ -9,8 +9,10 @@ import pytest
 from scipy.stats import norm
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns.risk import Marginal, ThetaDistribution, estimate_risk, parse_dist, pooled_risk
+from vbl_robust.analysis.risk import pooled_risk
+from vbl_robust.campaigns.work import risk_payload
 from vbl_robust.cli import app
+from vbl_robust.risk import Marginal, ThetaDistribution, estimate_risk, parse_dist
 from vbl_robust.space import ParameterBox
 
 EPS = 1000.0
@@ -121,11 +123,11 @@ def test_pooled_rates_and_the_command_end_to_end(tmp_path):
 def test_the_guided_draws_are_split_by_the_expected_width_and_the_split_is_stored():
     """The allocation puts few draws in a hot stratum of tiny mass and many in one that is large and uncertain; the
     δ split travels with the result (payload) and the pooled interval reads it back."""
-    from vbl_robust.campaigns.risk import _allocate
+    from vbl_robust.risk import _allocate
 
     few, many = _allocate(0.01, 0.5, 400, 0.05), _allocate(0.6, 0.5, 400, 0.05)
     assert 1 <= few < 100 < many < 400
     r = estimate_risk(band, ThetaDistribution.over(BOX), "guided", eps_safe_m=EPS, max_evals=256, seed=3)
-    strata = r.payload(0.01, 0.05, ThetaDistribution.over(BOX))["risk"]["strata"]
+    strata = risk_payload(r, 0.01, 0.05, ThetaDistribution.over(BOX))["risk"]["strata"]
     assert [(s["share_low"], s["share_high"]) for s in strata] == [(0.25, 0.25), (0.05, 0.45)]
     assert 256 - 64 <= sum(s["n"] for s in strata) < r.evaluations <= 256  # the guide spent at most 64

@@ -288,8 +288,8 @@ def test_a_row_read_off_a_longer_run_takes_its_corners_only_where_its_worst_poin
 
 
 def test_a_risk_runs_first_screen_gives_its_pooled_failure_probability(tmp_path, samples):
+    from vbl_robust.analysis.risk import pooled_risk
     from vbl_robust.campaigns.experiments import risk_spec
-    from vbl_robust.campaigns.risk import pooled_risk
     from vbl_robust.campaigns.spec import roll_box
 
     spec = risk_spec(roll_box(20), methods=("mc",), max_evals=16, guide_evals=4)

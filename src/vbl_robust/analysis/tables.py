@@ -149,9 +149,9 @@ RISK_SUMMARY_COLUMNS = (
 
 
 def risk_records(store: ResultStore) -> list[dict[str, Any]]:
-    """A risk run's summary (:func:`vbl_robust.campaigns.risk.pooled_risk` per estimator), one record of
+    """A risk run's summary (:func:`vbl_robust.risk.pooled_risk` per estimator), one record of
     :data:`RISK_SUMMARY_COLUMNS` per estimator; none for a run without risk rows."""
-    from ..campaigns.risk import pooled_risk
+    from .risk import pooled_risk
 
     camp = store.require_campaign()
     rows = store.jobs(kind="risk", with_points=True, with_trace=False)

@@ -414,10 +414,10 @@ def audit_spec(box: BoxSpec, *, methods: Sequence[str] = AUDIT_METHODS, budget: 
 def risk_spec(box: BoxSpec, *, methods: Sequence[str] = ("mc", "guided"), max_evals: int = 1024, seed: int = 0,
               dist: dict[str, tuple[str, float, float]] | None = None, tau: float = 0.01, delta: float = 0.05,
               guide_evals: int = 64, pnp: str = "ippe_lm") -> CampaignSpec:
-    """The ``risk`` job (:mod:`vbl_robust.campaigns.risk`): per image, the failure probability under ``dist``
+    """The ``risk`` job (:mod:`vbl_robust.risk`): per image, the failure probability under ``dist``
     (parameter → ``("normal", mean, sd)``; uniform elsewhere) over ``box`` by each estimator of ``methods``, at
     most ``max_evals`` evaluations each, and the verdict on "p_fail ≤ ``tau``" at confidence 1 − ``delta``."""
-    from .risk import MAX_EVALS, ThetaDistribution
+    from ..risk import MAX_EVALS, ThetaDistribution
 
     if not 0.0 <= tau < 1.0:
         raise ValueError(f"--tau must be in [0, 1), got {tau}")

@@ -20,7 +20,7 @@ class JobKind(StrEnum):
 
     - ``SEARCH``: a worst-case search over one box;
     - ``PNP``: the PnP-solver comparison of one image;
-    - ``RISK``: a failure-probability estimate (:mod:`vbl_robust.campaigns.risk`; methods ``mc`` / ``guided``,
+    - ``RISK``: a failure-probability estimate (:mod:`vbl_robust.risk`; methods ``mc`` / ``guided``,
       options the distribution, τ and δ).
     """
 

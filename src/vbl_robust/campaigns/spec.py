@@ -303,7 +303,7 @@ class CampaignSpec:
 
         if self.pnp not in SOLVERS:
             raise ValueError(f"pnp: unknown solver {self.pnp!r}; solvers are {', '.join(SOLVERS)}")
-        from .risk import RISK_METHODS
+        from ..risk import RISK_METHODS
 
         for blk in self.blocks:
             if blk.kind == JobKind.PNP:

@@ -3,7 +3,7 @@ with its interval and the verdict counts, a figure of each image's p_fail with i
 
 from __future__ import annotations
 
-from ..campaigns.risk import pooled_risk
+from ..analysis.risk import pooled_risk
 from ..campaigns.store import JobStatus
 from ..campaigns.store.payloads import RiskPayload
 from . import figures as F

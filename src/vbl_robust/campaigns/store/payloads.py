@@ -10,8 +10,8 @@ later: it reads as None.
   θ and of the unperturbed θ (:class:`SequenceFacts`); payload ``{"sequence"}``;
 - :class:`RiskPayload` — a failure-probability estimate (its strata: :class:`RiskStratum`); payload ``{"risk"}``.
 
-Imports nothing of the package: the modules that write payloads (``campaigns.work``, ``campaigns.risk``) sit beside
-or below the store's other modules.
+Imports nothing of the package: the module that writes payloads (``campaigns.work``) and those that read them
+(``analysis``, ``report``) import this one.
 """
 
 from __future__ import annotations
@@ -223,7 +223,7 @@ class RiskStratum:
 
 @dataclass(frozen=True)
 class RiskPayload:
-    """A failure-probability job's payload (:mod:`vbl_robust.campaigns.risk`): the estimator, ``p_fail`` and its
+    """A failure-probability job's payload (:mod:`vbl_robust.risk`): the estimator, ``p_fail`` and its
     interval (``ci_low``, ``ci_high`` at ``ci_level``, by ``ci_method``), the ε_safe it counts failures above, the
     verdict on p_fail ≤ ``tau`` at confidence 1 − ``delta``, the evaluations, the θ distribution (``{name: {"kind",
     "mu", "sigma"}}``) and the strata of a guided estimate (empty for mc)."""

@@ -31,6 +31,10 @@ Failed evaluations (no detection, low confidence, …) count as failures (L = th
 
 The distribution (:class:`ThetaDistribution`) is a product of independent marginals, each uniform over its range
 (the default) or a normal truncated to the range (``--dist roll_deg=normal:0,5``).
+
+The estimators here are pure functions of a batched objective; a risk job and its row are
+:func:`vbl_robust.campaigns.work.risk_row`, the pooled rate over a run's rows
+:func:`vbl_robust.analysis.risk.pooled_risk`.
 """
 
 from __future__ import annotations
@@ -43,13 +47,11 @@ from typing import Any
 
 import numpy as np
 
-from ..space import ParameterBox
-from ..stats import SequentialTest, Stratum, binomial_bounds, risk_verdict, stratified_interval
-from .kinds import JobKind, JobStatus
-from .store.payloads import RiskPayload, RiskStratum
+from .space import ParameterBox
+from .stats import SequentialTest, Stratum, binomial_bounds, risk_verdict, stratified_interval
 
-__all__ = ["LAWS", "RISK_METHODS", "Law", "Marginal", "PooledRisk", "RiskResult", "ThetaDistribution", "estimate_risk", "parse_dist",
-           "pooled_risk"]
+__all__ = ["LAWS", "RISK_METHODS", "Law", "Marginal", "RiskResult", "ThetaDistribution", "estimate_risk", "failed",
+           "parse_dist"]
 
 #: The estimators (the job methods of a risk campaign).
 RISK_METHODS = ("mc", "guided")
@@ -223,23 +225,17 @@ class RiskResult:
     strata: tuple[Stratum, ...] = ()
     split: tuple[tuple[float, float], ...] = ()  # the shares of δ of each stratum's (lower, upper) bound
 
-    def payload(self, tau: float, delta: float, dist: ThetaDistribution) -> dict[str, Any]:
-        """The job row's payload (:class:`~vbl_robust.campaigns.store.payloads.RiskPayload`)."""
-        return RiskPayload(self.method, self.p_fail, self.eps_safe_m, self.ci.low, self.ci.high, self.ci.level,
-                           self.ci.method, self.verdict, tau, delta, self.evaluations, dist.to_dict(),
-                           tuple(RiskStratum(s.mass, s.k, s.n, a, b)
-                                 for s, (a, b) in zip(self.strata, self.split, strict=True))).to_json()
-
 
 def _evaluate(f: Callable[[np.ndarray], Any], x: np.ndarray) -> tuple[np.ndarray, tuple[str, ...]]:
-    from ..search.evaluations import split
+    from .search.evaluations import split
 
     values, reasons = split(f(x))
     v = np.asarray(values, dtype=np.float64).reshape(-1)
     return v, tuple(reasons) if reasons else ("",) * len(v)
 
 
-def _failed(values: np.ndarray, eps: float) -> np.ndarray:
+def failed(values: np.ndarray, eps: float) -> np.ndarray:
+    """Which of ``values`` (metres) count as failures: above ``eps`` or not finite (a failed evaluation)."""
     return ~np.isfinite(values) | (values > eps)
 
 
@@ -255,7 +251,7 @@ def _mc(f: Callable, dist: ThetaDistribution, eps: float, tau: float, delta: flo
             v, r = _evaluate(f, x)
             xs.append(x), fs.append(v), reasons.extend(r)
             n += len(v)
-            k += int(_failed(v, eps).sum())
+            k += int(failed(v, eps).sum())
         verdict = test.decide(k, n)
         if verdict is not None:
             break
@@ -266,7 +262,7 @@ def _mc(f: Callable, dist: ThetaDistribution, eps: float, tau: float, delta: flo
 def _guided(f: Callable, dist: ThetaDistribution, eps: float, tau: float, delta: float, max_evals: int,
             rng: np.random.Generator, seed: int, guide_evals: int, guide_fraction: float,
             share: float | None) -> RiskResult:
-    from ..search import make_optimizer
+    from .search import make_optimizer
 
     guide = make_optimizer("georobust-av", dist.box, max_evals=min(guide_evals, max_evals - 2), seed=seed)
     xs, fs, reasons = [], [], []
@@ -321,7 +317,7 @@ def _guided(f: Callable, dist: ThetaDistribution, eps: float, tau: float, delta:
         for i in range(0, len(x), BATCH):
             v, r = _evaluate(f, x[i:i + BATCH])
             xs.append(x[i:i + BATCH]), fs.append(v), reasons.extend(r)
-            k += int(_failed(v, eps).sum())
+            k += int(failed(v, eps).sum())
         strata.append(Stratum(mass, k, len(x)))
     total = sum(map(sum, split))  # one stratum left: its shares scaled to the whole δ
     split = [(a / total, b / total) for a, b in split]
@@ -339,7 +335,7 @@ def _hot_rate(x: np.ndarray, f: np.ndarray, lo: np.ndarray, hi: np.ndarray, eps:
     """The guide's failure rate inside the hot cells (Laplace-smoothed, kept in [0.05, 0.95]): an estimate used only
     to split the draws, never in the interval (the guide's points are not a sample of the distribution)."""
     inside = _in_cells(x, lo, hi)
-    k, n = int(_failed(f[inside], eps).sum()), int(inside.sum())
+    k, n = int(failed(f[inside], eps).sum()), int(inside.sum())
     return float(np.clip((k + 1) / (n + 2), 0.05, 0.95))
 
 
@@ -371,67 +367,3 @@ def estimate_risk(f: Callable[[np.ndarray], Any], dist: ThetaDistribution, metho
     if method == "mc":
         return _mc(f, dist, eps_safe_m, tau, delta, max_evals, rng)
     return _guided(f, dist, eps_safe_m, tau, delta, max_evals, rng, seed, guide_evals, guide_fraction, share)
-
-
-
-def _stored_split(strata: Sequence[RiskStratum]) -> list[tuple[float, float]] | None:
-    """The δ split a stored guided result used (None: an older row, written with the even split)."""
-    if all(s.share_low is not None for s in strata):
-        return [(float(s.share_low), float(s.share_high)) for s in strata]
-    return None
-
-
-@dataclass(frozen=True)
-class PooledRisk:
-    """One estimator's failure rate over the images of a risk run: the mean of the images' p_fail (θ drawn from
-    the distribution, the image uniformly among those audited), its interval ``ci`` at confidence 1 − δ, the
-    verdict counts per image, and the evaluations spent."""
-
-    method: str
-    images: int
-    p_fail: float
-    ci: Any
-    tau: float
-    holds: int
-    violated: int
-    undecided: int
-    evaluations: int
-
-
-def pooled_risk(rows: Sequence[Any]) -> list[PooledRisk]:
-    """Per estimator over the risk rows (``store.jobs(kind="risk", with_points=True)``; rows of other kinds and
-    failed jobs are left out) — the operational failure rate over these images, with a valid interval:
-
-    - ``mc``: the first n_min draws of every image (n_min = the fewest any image took; every image takes at least
-      the first look's, before any stop, so these draws are not chosen by the stopping rule), pooled: k failures
-      of m·n_min independent draws with mean the images' mean p_fail. Their sum is Poisson-binomial, less spread
-      than the binomial of the same mean (Hoeffding 1956), so the exact binomial interval is conservative.
-    - ``guided``: the mean of the images' stratified estimates; the interval is the mean of their intervals at
-      confidence 1 − δ/m each (Bonferroni over the m images).
-    """
-    from ..stats import Interval, clopper_pearson
-
-    by: dict[str, list[tuple[Any, RiskPayload]]] = {}
-    for r in rows:  # (the store's package is not imported: spec imports this module)
-        if r.kind == JobKind.RISK and r.status == JobStatus.DONE and (p := RiskPayload.of(r)) is not None:
-            by.setdefault(r.method, []).append((r, p))
-    out = []
-    for method, got in by.items():
-        rs, info = [r for r, _ in got], [p for _, p in got]
-        m, delta, tau = len(rs), float(info[0].delta), float(info[0].tau)
-        verdicts = [i.verdict for i in info]
-        if method == "mc":
-            if any(r.points is None for r in rs):
-                raise ValueError("pooled_risk: the mc rows need their points (store.jobs(with_points=True))")
-            n_min = min(len(r.points) for r in rs)
-            k = sum(int(_failed(r.points.fs[:n_min], float(i.eps_safe_m)).sum()) for r, i in got)
-            est, ci = k / (m * n_min), clopper_pearson(k, m * n_min, 1.0 - delta)
-        else:
-            parts = [stratified_interval([Stratum(s.mass, s.k, s.n) for s in i.strata], 1.0 - delta / m,
-                                         _stored_split(i.strata)) for i in info]
-            est = float(np.mean([p[0] for p in parts]))
-            ci = Interval(float(np.mean([p[1].low for p in parts])), float(np.mean([p[1].high for p in parts])),
-                          1.0 - delta, "mean of per-image intervals, Bonferroni over the images")
-        out.append(PooledRisk(method, m, est, ci, tau, verdicts.count("holds"), verdicts.count("violated"),
-                              verdicts.count("undecided"), sum(int(r.nfev) for r in rs)))
-    return out
