@@ -6,10 +6,10 @@ import pytest
 from scipy.stats import binomtest
 
 from vbl_robust.analysis import metrics as mx
-from vbl_robust.campaigns import Budget, roll_box
-from vbl_robust.campaigns.store import JobRow, Points
 from vbl_robust.constants import BreachKind
 from vbl_robust.search import TraceRow
+from vbl_robust.specs.campaign import Budget, roll_box
+from vbl_robust.store import JobRow, Points
 
 
 def row(**kw):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import DetectorSpec, ResultStore, experiment, run_campaign
+from vbl_robust.campaigns import DetectorSpec, experiment, run_campaign
 from vbl_robust.campaigns.experiments import (
     EXPERIMENTS,
     FAMILY_GRID_POINTS,
@@ -17,12 +17,13 @@ from vbl_robust.campaigns.experiments import (
     levels_text,
     range_text,
 )
-from vbl_robust.campaigns.spec import Block, Budget, roll_box
 from vbl_robust.constants import EPS_SAFE_M, Verdict
 from vbl_robust.perturb import PERTURBATIONS
 from vbl_robust.report import build_report
 from vbl_robust.report.evidence import SAFETY_FIGURE
 from vbl_robust.report.html import fmt_num
+from vbl_robust.specs.campaign import Block, Budget, roll_box
+from vbl_robust.store import ResultStore
 
 TINY = Options(methods=("georobust", "random"), max_evals=6, family_grid=21)
 

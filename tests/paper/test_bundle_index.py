@@ -9,19 +9,13 @@ import re
 import struct
 from pathlib import Path
 
-from vbl_robust.campaigns import (
-    Block,
-    Budget,
-    CampaignSpec,
-    DetectorSpec,
-    ResultStore,
-    roll_box,
-    run_campaign,
-)
+from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.paper import claims as C
 from vbl_robust.paper.bundle import BEGIN, END, refresh_bundle, write_bundle
 from vbl_robust.paper.claims_page import FIGURE_PX, SYNTHETIC, paper_order, verdict_sentence
 from vbl_robust.scenes import generate
+from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+from vbl_robust.store import ResultStore
 
 PAPER_ORDER = ["pnp-validation", "spatial-1d", "runtime-1d", "spatial-2d", "runtime-2d", "distance-profile",
                "convergence"]

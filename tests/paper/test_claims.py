@@ -14,12 +14,12 @@ from typer.testing import CliRunner
 
 from vbl_robust.analysis import metrics as mx
 from vbl_robust.campaigns.pnpcheck import TRUNCATED
-from vbl_robust.campaigns.spec import roll_box
-from vbl_robust.campaigns.store import JobRow, JobStatus, Points, ResultStore
 from vbl_robust.cli import app
 from vbl_robust.paper import claims as C
 from vbl_robust.report.html import fmt_num
+from vbl_robust.specs.campaign import roll_box
 from vbl_robust.stats import ClaimVerdict
+from vbl_robust.store import JobRow, JobStatus, Points, ResultStore
 
 # 512 px, not 128: at 128 px the integer-truncated and detected corners of these far runways are degenerate and every
 # PnP solve fails, which would leave the PnP row nothing to compare. Oracle detector, 2 images, 4 evaluations, a 5°

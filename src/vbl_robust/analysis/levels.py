@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from ..campaigns.store import JobRow
 from ..constants import Verdict
+from ..store import JobRow
 from .summary import summarize
 
 

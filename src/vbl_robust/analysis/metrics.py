@@ -1,4 +1,4 @@
-"""The paper's metrics over store rows (:class:`~vbl_robust.campaigns.store.JobRow`): survival rate, median worst
+"""The paper's metrics over store rows (:class:`~vbl_robust.store.JobRow`): survival rate, median worst
 error, φ_crit, |PO_k| and RA(k), failed evaluations per reason, PnP errors, the perturbation families' survival
 per budget level and their ranking.
 
@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..campaigns.store import JobRow, JobStatus
+from ..store import JobRow, JobStatus
 from .breach import (
     breach_kind,
     breached_images,

@@ -11,8 +11,8 @@ from collections.abc import Iterable
 from typing import Any
 
 from ..campaigns.rebuild import row_result
-from ..campaigns.spec import Budget
-from ..campaigns.store import JobRow, JobStatus, Points
+from ..specs.campaign import Budget
+from ..store import JobRow, JobStatus, Points
 
 __all__ = ["main_rows", "read_off", "read_off_rows", "reads_trace", "row_result"]
 

@@ -11,10 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..campaigns.spec import BoxSpec
-from ..campaigns.store import JobRow, JobStatus, Points
 from ..constants import Verdict
+from ..specs.campaign import BoxSpec
 from ..stats import paired
+from ..store import JobRow, JobStatus, Points
 from .breach import survived
 
 #: ``method`` of the pseudo-rows of :func:`reference_rows`.

@@ -11,10 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from ..campaigns.kinds import JobKind, JobStatus
-from ..campaigns.store.payloads import RiskPayload, RiskStratum
 from ..risk import failed
+from ..specs.kinds import JobKind, JobStatus
 from ..stats import Stratum, stratified_interval
+from ..store.payloads import RiskPayload, RiskStratum
 
 __all__ = ["PooledRisk", "pooled_risk"]
 

@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from ..campaigns.store import JobRow
 from ..constants import BreachKind, Verdict
 from ..stats import Rate
+from ..store import JobRow
 from .breach import (
     breach_kind,
     budget_value,

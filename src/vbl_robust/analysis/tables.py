@@ -21,9 +21,9 @@ from enum import Enum
 from pathlib import Path
 from typing import Any
 
-from ..campaigns.kinds import JobKind
-from ..campaigns.store import ResultStore
-from ..campaigns.store.payloads import RiskPayload, SequencePayload, WorstPayload
+from ..specs.kinds import JobKind
+from ..store import ResultStore
+from ..store.payloads import RiskPayload, SequencePayload, WorstPayload
 
 COLUMNS = (
     "experiment", "kind", "role", "method", "sample_id", "sample_index", "slant_distance_m", "envelope", "box_label",

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..campaigns.kinds import SourceKind
-from ..campaigns.spec import Block, BoxSpec, Budget, CampaignSpec
-from ..campaigns.store import JobRow, JobStatus, ResultStore
+from ..specs.campaign import Block, BoxSpec, Budget, CampaignSpec
+from ..specs.kinds import SourceKind
+from ..store import JobRow, JobStatus, ResultStore
 from .metrics import budget_value, main_rows, survived
 
 __all__ = ["TRUTH_SUFFIX", "TrueSurvival", "survivors_of_every_method", "true_survival", "truth_spec"]

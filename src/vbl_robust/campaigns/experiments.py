@@ -21,7 +21,7 @@ images, 1000 for the PnP validation), with georobust-av run beside the paper's G
   the heat map.
 
 Each spec declares the report's figures it needs (``CampaignSpec.figures``, names from
-:data:`~vbl_robust.campaigns.spec.FIGURES`): a new experiment gets its figures by declaring them.
+:data:`~vbl_robust.specs.campaign.FIGURES`): a new experiment gets its figures by declaring them.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 from fractions import Fraction
 
 from ..constants import TARGETS
-from .spec import Block, BoxSpec, Budget, CampaignSpec, roll_box, roll_contrast_box
+from ..specs.campaign import Block, BoxSpec, Budget, CampaignSpec, roll_box, roll_contrast_box
 
 #: The paper's experiments compare the paper's GeoRobust and georobust-av (labelled apart) with random and APGD.
 PAPER_METHODS = ("georobust", "georobust-av", "random", "apgd")

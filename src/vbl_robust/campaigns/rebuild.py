@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from .store import JobRow
+from ..store import JobRow
 
 __all__ = ["row_result"]
 

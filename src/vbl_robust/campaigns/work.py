@@ -5,7 +5,7 @@ The unit of work is a :class:`SampleTask` (one sample + its pending jobs): the o
 yields, job after job, the rows to commit together (usually one; a breach in a chain brings the implied rows
 of the larger boxes with it, so a chain is never half-recorded).
 
-Rows are :class:`~vbl_robust.campaigns.store.JobRow` s. Every search evaluation carries its failure reason (no
+Rows are :class:`~vbl_robust.store.JobRow` s. Every search evaluation carries its failure reason (no
 detection, PnP failure, …) from the objective into the search result and the row (``n_failed``, ``failures``,
 ``worst_reason``, the reason of every stored point); the search itself sees the penalty value, as before.
 
@@ -31,11 +31,10 @@ import numpy as np
 
 from ..constants import NotMeasured, NotMeasuredError, Verdict
 from ..search.result import verdict_for
-from .kinds import JobKind, Role
-from .provenance import DetectorSpec
-from .spec import Job
-from .store import Corners, JobRow, JobStatus, Points, now_iso
-from .store.payloads import (
+from ..specs.campaign import Job
+from ..specs.kinds import JobKind, Role
+from ..store import Corners, JobRow, JobStatus, Points, now_iso
+from ..store.payloads import (
     Nominal,
     RiskPayload,
     RiskStratum,
@@ -45,6 +44,7 @@ from .store.payloads import (
     WorstPayload,
     WorstPoint,
 )
+from .provenance import DetectorSpec
 
 if TYPE_CHECKING:  # typing only: the pipeline (torch) is imported where an objective is built
     from ..data import Sample
@@ -86,7 +86,7 @@ def detector_for(spec: DetectorSpec) -> Detector:
 
 @dataclass
 class Settings:
-    """Pipeline settings shared by all jobs of a campaign (see :class:`~vbl_robust.campaigns.spec.CampaignSpec`)."""
+    """Pipeline settings shared by all jobs of a campaign (see :class:`~vbl_robust.specs.campaign.CampaignSpec`)."""
 
     eps_safe_m: float
     penalty_m: float
@@ -300,7 +300,7 @@ def risk_row(job: Job, objective: SearchObjective, settings: Settings, run_id: i
 
 
 def risk_payload(r: RiskResult, tau: float, delta: float, dist: ThetaDistribution) -> dict[str, Any]:
-    """A risk job row's payload (:class:`~vbl_robust.campaigns.store.payloads.RiskPayload`) of the estimate ``r``."""
+    """A risk job row's payload (:class:`~vbl_robust.store.payloads.RiskPayload`) of the estimate ``r``."""
     return RiskPayload(r.method, r.p_fail, r.eps_safe_m, r.ci.low, r.ci.high, r.ci.level, r.ci.method, r.verdict,
                        tau, delta, r.evaluations, dist.to_dict(),
                        tuple(RiskStratum(s.mass, s.k, s.n, a, b)

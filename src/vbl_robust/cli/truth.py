@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from ..campaigns.kinds import SourceKind
+from ..specs.kinds import SourceKind
 from . import options as o
 from .common import fail, from_config, one_line, set_verbosity
 from .config import parameters, run_config
@@ -34,8 +34,8 @@ def truth(
         true_survival,
         truth_spec,
     )
-    from vbl_robust.campaigns.store import ResultStore, store_file  # torch behind these: not for ``--help``
     from vbl_robust.detect.shipped import DetectorSpec
+    from vbl_robust.store import ResultStore, store_file
 
     params = parameters()
     quiet = set_verbosity(quiet=quiet, verbose=verbose)

@@ -48,8 +48,8 @@ from pathlib import Path
 from typing import Any
 
 from ..atomic import atomic_write
-from ..campaigns.store import PACKED, STORE, ResultStore, RunRecord, pack_store
 from ..report.markdown import esc_md
+from ..store import PACKED, STORE, ResultStore, RunRecord, pack_store
 
 #: Markers of the generated part of a REPRODUCTION.md (:func:`write_bundle`).
 BEGIN, END = "<!-- bundle:begin -->", "<!-- bundle:end -->"

@@ -23,10 +23,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..analysis import metrics as mx
-from ..campaigns.store import JobRow
 from ..report.html import fmt_num
 from ..search.api import METHODS as SEARCH_METHODS
 from ..stats import ALPHA, LEVEL, ClaimVerdict, Rate, claim_verdict, holm, paired
+from ..store import JobRow
 
 #: The verdicts of a claim, in the order the claims page counts them (:class:`~vbl_robust.stats.ClaimVerdict`).
 VERDICTS = tuple(ClaimVerdict)

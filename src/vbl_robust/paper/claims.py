@@ -78,12 +78,12 @@ from ..analysis.levels import DistanceLine
 from ..atomic import atomic_write
 from ..campaigns.experiments import PAPER, PAPER_METHODS
 from ..campaigns.pnpcheck import TRUNCATED
-from ..campaigns.store import PACKED, STORE, JobRow, JobStatus, ResultStore
 from ..constants import Verdict
 from ..report.html import fmt_num
 from ..report.rows import Context, main_boxes, reference
 from ..search import direct_family
 from ..stats import Rate
+from ..store import PACKED, STORE, JobRow, JobStatus, ResultStore
 from .claim_rules import (
     ABOUT_AS_ACCURATE,
     CONTRADICTED,

@@ -33,11 +33,11 @@ import numpy as np
 
 from ..analysis import metrics as mx
 from ..analysis.breach import survived
-from ..campaigns.store import ResultStore
 from ..constants import EPS_SAFE_M
 from ..report.html import esc
 from ..report.markdown import esc_md
 from ..stats import Paired, Rate, paired
+from ..store import ResultStore
 from .claim_rules import Claim
 from .claims import claims_of
 

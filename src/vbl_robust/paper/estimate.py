@@ -36,8 +36,8 @@ from typing import Any
 
 import numpy as np
 
-from ..campaigns.kinds import JobKind
-from ..campaigns.spec import CampaignSpec, Job
+from ..specs.campaign import CampaignSpec, Job
+from ..specs.kinds import JobKind
 
 #: Random points per box and probe image (:func:`probe`).
 PROBE_POINTS = 8

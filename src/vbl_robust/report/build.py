@@ -47,8 +47,8 @@ from typing import Any
 from ..analysis import metrics as mx
 from ..atomic import atomic_write
 from ..campaigns.experiments import EXPERIMENTS
-from ..campaigns.spec import FIGURES
-from ..campaigns.store import ResultStore
+from ..specs.campaign import FIGURES
+from ..store import ResultStore
 from .evidence import SAFETY_FIGURE, Evidence, evidence_of, section_evidence
 from .gallery import section_gallery
 from .html import esc, page

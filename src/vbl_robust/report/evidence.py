@@ -29,12 +29,12 @@ import numpy as np
 
 from ..analysis import metrics as mx
 from ..atomic import atomic_write
-from ..campaigns.kinds import SourceKind
-from ..campaigns.store import JobRow
-from ..campaigns.store.payloads import Nominal, WorstPayload, WorstPoint
 from ..constants import BreachKind, Verdict
 from ..search import direct_family
+from ..specs.kinds import SourceKind
 from ..stats import LEVEL, Rate
+from ..store import JobRow
+from ..store.payloads import Nominal, WorstPayload, WorstPoint
 from . import figures as F
 from .figure_style import param_name
 from .html import esc, fmt_num, folded, table

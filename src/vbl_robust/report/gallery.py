@@ -32,8 +32,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..analysis.truth import load_run_samples
-from ..campaigns.kinds import SourceKind
 from ..constants import BreachKind, FailureReason
+from ..specs.kinds import SourceKind
 from . import figures as F
 from .evidence import Evidence, WorstCase
 from .html import esc, fmt_num

@@ -28,9 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis import metrics as mx
-from ..campaigns.spec import CampaignSpec
-from ..campaigns.store import ResultStore
+from ..specs.campaign import CampaignSpec
 from ..stats import Rate
+from ..store import ResultStore
 
 __all__ = ["compare_markdown", "families_markdown", "risk_markdown", "survival_markdown", "zones_markdown"]
 
@@ -81,7 +81,7 @@ def _unmeasured(run: str | Path, unit: str) -> list[str]:
 def _progress(run: str | Path) -> list[str]:
     """A line when the store holds fewer jobs than its last run planned — a run writing it now, or one stopped
     before its end — so a partial table is never read as the whole run; none otherwise."""
-    from ..campaigns.store import RunStatus
+    from ..store import RunStatus
 
     with ResultStore.open_existing(run) as store:
         runs = store.runs()

@@ -15,9 +15,9 @@ import numpy as np
 
 from ..analysis import metrics as mx
 from ..atomic import atomic_write
-from ..campaigns.spec import BoxSpec, CampaignSpec
-from ..campaigns.store import JobRow, JobStatus, ResultStore, SampleRecord
-from ..campaigns.store.payloads import Nominal, WorstPayload
+from ..specs.campaign import BoxSpec, CampaignSpec
+from ..store import JobRow, JobStatus, ResultStore, SampleRecord
+from ..store.payloads import Nominal, WorstPayload
 from . import figures as F
 from .html import figure_png, img, img_file
 

@@ -14,11 +14,11 @@ import numpy as np
 from ..analysis import metrics as mx
 from ..analysis.reference import AgainstGrid
 from ..campaigns.experiments import range_text
-from ..campaigns.kinds import JobKind, Role
-from ..campaigns.store import JobRow, JobStatus, RunProvenance
 from ..constants import FAILURE_REASONS, Verdict
 from ..detect.shipped import DetectorKind
 from ..search import NON_FINITE
+from ..specs.kinds import JobKind, Role
+from ..store import JobRow, JobStatus, RunProvenance
 from . import figures as F
 from .html import esc, fmt_num, folded, table
 from .integrity import provenance_html

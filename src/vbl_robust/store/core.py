@@ -45,7 +45,7 @@ from .schema import (
 )
 
 if TYPE_CHECKING:
-    from ..spec import CampaignSpec
+    from ..specs.campaign import CampaignSpec
 
 #: File name of the store in a run directory.
 STORE = "results.sqlite"
@@ -302,7 +302,7 @@ class ResultStore:
                          ) -> list[tuple[Any, ...]]:
         """What :meth:`check_contents` checks, without writing: ``ValueError`` for samples whose file's bytes
         differ from those their stored jobs were computed on, else the ``contents`` rows of this run's files."""
-        from ...digest import file_sha256
+        from ..digest import file_sha256
 
         stored = {r[0]: r[1:] for r in self.contents()}
         with_jobs = {r[0] for r in self._con.execute("SELECT DISTINCT sample_id FROM jobs")}

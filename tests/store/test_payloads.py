@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from vbl_robust.campaigns.store.payloads import (
+from vbl_robust.store.payloads import (
     Nominal,
     RiskPayload,
     RiskStratum,

@@ -1,5 +1,5 @@
 """The per-image search budget of a campaign block (:class:`Budget`): evaluations, seconds or iterations, early stop
-at a breach, and the smaller budgets read off a run's trace. Re-exported by :mod:`vbl_robust.campaigns.spec`.
+at a breach, and the smaller budgets read off a run's trace. Re-exported by :mod:`vbl_robust.specs.campaign`.
 """
 
 from __future__ import annotations

@@ -10,13 +10,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from vbl_robust.campaigns import BoxSpec, Budget, ResultStore
-from vbl_robust.campaigns import store as store_module
-from vbl_robust.campaigns.spec import JOB_KINDS, ROLES
-from vbl_robust.campaigns.store import (
+from vbl_robust import store as store_module
+from vbl_robust.constants import Verdict
+from vbl_robust.search import TraceRow
+from vbl_robust.space import ParameterBox
+from vbl_robust.specs.campaign import JOB_KINDS, ROLES, BoxSpec, Budget
+from vbl_robust.store import (
     JobRow,
     JobStatus,
     Points,
+    ResultStore,
     RunProvenance,
     RunStatus,
     SampleRecord,
@@ -24,9 +27,6 @@ from vbl_robust.campaigns.store import (
     encode_points,
     schema,
 )
-from vbl_robust.constants import Verdict
-from vbl_robust.search import TraceRow
-from vbl_robust.space import ParameterBox
 
 
 def row(key, **kw):
@@ -89,7 +89,7 @@ def test_campaign_binding_refuses_other_settings_once_a_job_is_stored(tmp_path):
 
 
 def test_the_stored_campaign_is_a_record_with_its_spec_and_one_error_when_there_is_none(tmp_path):
-    from vbl_robust.campaigns import Block, CampaignSpec, roll_box
+    from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
 
     spec = CampaignSpec("t", (Block(boxes=(roll_box(5),), methods=("random",), budgets=(Budget(max_evals=3),)),),
                         seed=4)

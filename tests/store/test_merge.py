@@ -3,27 +3,21 @@
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import (
-    Block,
-    Budget,
-    CampaignSpec,
-    DetectorSpec,
-    ResultStore,
-    roll_box,
-    run_campaign,
-)
-from vbl_robust.campaigns.store import (
+from vbl_robust.campaigns import DetectorSpec, run_campaign
+from vbl_robust.cli import app
+from vbl_robust.paper.bundle import compare_runs
+from vbl_robust.scenes import generate
+from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+from vbl_robust.store import (
     MergedSource,
     MergeReport,
+    ResultStore,
     RunStatus,
     WriterLock,
     merge_runs,
     merge_store,
     pack_store,
 )
-from vbl_robust.cli import app
-from vbl_robust.paper.bundle import compare_runs
-from vbl_robust.scenes import generate
 
 DET = DetectorSpec.oracle(1.0)
 

@@ -9,14 +9,13 @@ import numpy as np
 import pytest
 
 import vbl_robust.search.base as base_module
+from vbl_robust import store as store_module
 from vbl_robust.analysis import metrics as mx
-from vbl_robust.campaigns import BoxSpec, Budget, ResultStore
-from vbl_robust.campaigns import store as store_module
-from vbl_robust.campaigns.spec import CampaignSpec, Job, roll_box
-from vbl_robust.campaigns.store import JobStatus, Points, schema
 from vbl_robust.campaigns.work import Settings, search_row
 from vbl_robust.constants import Verdict
 from vbl_robust.search import at_budget, maximize
+from vbl_robust.specs.campaign import BoxSpec, Budget, CampaignSpec, Job, roll_box
+from vbl_robust.store import JobStatus, Points, ResultStore, schema
 
 
 def test_a_budget_without_reads_keeps_its_dict_and_label():

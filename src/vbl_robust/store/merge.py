@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ...detect.shipped import refuse_without_consent
+from ..detect.shipped import refuse_without_consent
 from .core import STORE, ResultStore
 from .identity import check_same
 from .lock import WriterLock
@@ -155,7 +155,7 @@ def merge_runs(sources: Sequence[str | Path], into: str | Path, *, trust: bool =
     A source whose detector names code (:func:`~vbl_robust.detect.shipped.consent_needed`) is refused unless
     ``trust`` (``--trust-model``), before ``into`` is created or touched. Every source is checked against the
     first and against ``into`` before anything is written (``ValueError``); ``into`` is refused while a run writes
-    it (:class:`~vbl_robust.campaigns.store.lock.WriterLock`: ``ValueError``); a missing packed store is a
+    it (:class:`~vbl_robust.store.lock.WriterLock`: ``ValueError``); a missing packed store is a
     ``FileNotFoundError``, a damaged one a ``ValueError``. ``progress`` is called with the report so far after each
     source is merged (its last entry: that source); ``left_out``: as :func:`merge_store`'s."""
     dst = store_file(into)

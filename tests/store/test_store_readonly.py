@@ -9,9 +9,9 @@ import sqlite3
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import store as store_module
-from vbl_robust.campaigns.store import ResultStore
+from vbl_robust import store as store_module
 from vbl_robust.cli import app
+from vbl_robust.store import ResultStore
 
 runner = CliRunner()
 

@@ -6,8 +6,8 @@ from typer.testing import CliRunner
 
 from vbl_robust.analysis import metrics as mx
 from vbl_robust.analysis.truth import survivors_of_every_method, true_survival
-from vbl_robust.campaigns import ResultStore
 from vbl_robust.cli import app
+from vbl_robust.store import ResultStore
 
 runner = CliRunner()
 

@@ -4,13 +4,13 @@ Schema version :data:`SCHEMA_VERSION` in ``PRAGMA user_version``.
 
 - ``campaign`` — the one campaign this store holds (spec JSON, detector identity); once a job row is stored, a
   run with different settings or another detector is refused, so a store never mixes incomparable results.
-- ``runs`` — one row per invocation (:class:`~vbl_robust.campaigns.store.rows.RunRecord`): code version, model
+- ``runs`` — one row per invocation (:class:`~vbl_robust.store.rows.RunRecord`): code version, model
   file SHA-256, dataset identity, full config JSON, seed, executor, host, start/finish times, jobs done.
 - ``samples`` — id, index, slant distance, envelope, size and a geometry fingerprint of each sample.
 - ``contents`` — for a sample read from an image file: the file's SHA-256 (with its size and mtime, so it is
   recomputed only when they change): a rerun on changed pixels is refused instead of reusing results computed on
   the old ones.
-- ``jobs`` — one row per finished job (:class:`~vbl_robust.campaigns.store.rows.JobRow`), ``key`` UNIQUE: worst
+- ``jobs`` — one row per finished job (:class:`~vbl_robust.store.rows.JobRow`), ``key`` UNIQUE: worst
   value and point, verdict, counts (failed evaluations per reason included), timings, the search trace (JSON) and
   every evaluated point with its failure reason and completion time (JSON, zlib-compressed), or a PnP payload
   (JSON).
@@ -21,7 +21,7 @@ carries its completion time on the search's clock (``ts`` in the points blob, so
 before read ``Points.times`` as None, and no time budget can be read off them); 4 = now: a main search job stores
 the corners its detector predicted at the worst point (``worst_corners_json``, added on open; rows written before
 read ``JobRow.worst_corners`` as None); 5 = now: every job row committed has a content digest in ``digests``
-(:mod:`~vbl_robust.campaigns.store.digest`), chained per run — no byte of the other tables changes; a store brought
+(:mod:`~vbl_robust.store.digest`), chained per run — no byte of the other tables changes; a store brought
 to 5 records its rows stored before as ``before`` (written before digests, not covered). A column's ``since`` says
 which version added it: :func:`migrate` adds the missing ones to an older store. A store written by a newer version
 is refused with a one-line error.
@@ -42,8 +42,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ...search.result import TraceRow
-from ..spec import BoxSpec, Budget
+from ..search.result import TraceRow
+from ..specs.campaign import BoxSpec, Budget
 from .rows import Corners, JobRow, Points, RunProvenance, RunRecord
 
 #: Version of the layout below (``PRAGMA user_version``).
@@ -218,7 +218,7 @@ JOBS = Table("jobs", (
            comment="[[u, v] x 4] corners predicted at the worst point, sample's pixels (schema 4)"),
 ), after=("CREATE INDEX IF NOT EXISTS jobs_by_sample ON jobs (sample_id);",))
 
-#: The digests of the job rows as committed (schema 5; :mod:`~vbl_robust.campaigns.store.digest`): a table of its
+#: The digests of the job rows as committed (schema 5; :mod:`~vbl_robust.store.digest`): a table of its
 #: own, so that no byte of the jobs table changes.
 DIGESTS = Table("digests", (
     Column("seq", "INTEGER PRIMARY KEY AUTOINCREMENT", comment="order of writing"),
@@ -296,7 +296,7 @@ def migrate(con: sqlite3.Connection, path: str | Path,
             before_digests: Callable[[sqlite3.Connection], None] | None = None) -> None:
     """Create the tables of a new store; bring an older one to :data:`SCHEMA_VERSION` (adds the columns of the
     versions since; ``ValueError`` for a newer one). ``before_digests`` records the rows of a store older than
-    :data:`DIGESTS_SINCE` as written before digests (:func:`~vbl_robust.campaigns.store.digest.mark_before`, passed
+    :data:`DIGESTS_SINCE` as written before digests (:func:`~vbl_robust.store.digest.mark_before`, passed
     in by the store: the digests' module builds on this one)."""
     version = schema_version(con, path)
     con.executescript(DDL)

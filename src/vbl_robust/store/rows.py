@@ -1,6 +1,6 @@
 """What a results store holds, as typed rows: the campaign it is bound to (:class:`StoredCampaign`), its samples
 (:class:`SampleRecord`), a finished job (:class:`JobRow`, its evaluated :class:`Points`) and a run (:class:`RunRecord`: its :class:`RunProvenance` and how it
-ended, :class:`RunStatus`). No SQL here: how each field is stored is :mod:`~vbl_robust.campaigns.store.schema`'s
+ended, :class:`RunStatus`). No SQL here: how each field is stored is :mod:`~vbl_robust.store.schema`'s
 business.
 """
 
@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from ...constants import MAX_BLOB_BYTES, NotMeasured, Verdict
-from ...search.result import TraceRow
-from ..kinds import JobKind, JobStatus, Role, RunStatus
-from ..spec import BoxSpec, Budget, CampaignSpec
+from ..constants import MAX_BLOB_BYTES, NotMeasured, Verdict
+from ..search.result import TraceRow
+from ..specs.campaign import BoxSpec, Budget, CampaignSpec
+from ..specs.kinds import JobKind, JobStatus, Role, RunStatus
 
 
 def now_iso() -> str:
@@ -31,13 +31,13 @@ def now_iso() -> str:
 
 @dataclass(frozen=True)
 class StoredCampaign:
-    """The campaign a store is bound to (:meth:`~vbl_robust.campaigns.store.ResultStore.campaign`).
+    """The campaign a store is bound to (:meth:`~vbl_robust.store.ResultStore.campaign`).
 
     Attributes:
         name: the campaign's name (its spec's ``name``).
         stored_spec: the spec as stored (decoded JSON), kept as written: a store compares it and a merge binds
-            another store to it (:mod:`~vbl_robust.campaigns.store.identity`) without a round trip that could
-            change a byte. :attr:`spec` is the same as a :class:`~vbl_robust.campaigns.spec.CampaignSpec`.
+            another store to it (:mod:`~vbl_robust.store.identity`) without a round trip that could
+            change a byte. :attr:`spec` is the same as a :class:`~vbl_robust.specs.campaign.CampaignSpec`.
         detector: the detector's identity (:meth:`~vbl_robust.campaigns.DetectorSpec.identity`).
         created_at: when the store was bound (ISO time, UTC).
     """
@@ -61,7 +61,7 @@ class StoredCampaign:
 @dataclass(frozen=True)
 class SampleRecord:
     """One sample as a store records it (a row of the ``samples`` table; the field names are its columns, the values
-    as stored: what a sample's digest covers, :func:`~vbl_robust.campaigns.store.digest.sample_digest`).
+    as stored: what a sample's digest covers, :func:`~vbl_robust.store.digest.sample_digest`).
 
     Attributes:
         sample_id: the sample's id; ``sample_index``: its place in the run's sample list.
@@ -190,7 +190,7 @@ def decode_points(blob: bytes | None) -> tuple[np.ndarray, np.ndarray]:
 class JobRow:
     """One finished job as the store holds it (what a worker produces and ``ResultStore.jobs`` returns).
 
-    Identity (from the :class:`~vbl_robust.campaigns.spec.Job`): ``key``, ``experiment``, ``kind`` ("search" |
+    Identity (from the :class:`~vbl_robust.specs.campaign.Job`): ``key``, ``experiment``, ``kind`` ("search" |
     "pnp"), ``role`` ("main" | "reference" | "landscape"), ``method``, ``sample_id``, ``sample_index``, ``box``,
     ``budget``, ``seed``, ``options``, ``chain``; ``run_id`` = the run that computed it.
 
@@ -206,7 +206,7 @@ class JobRow:
     search / in the whole job; ``upper_bound`` (sound, metres; 1e300 for "unbounded"), ``bound_estimate``,
     ``lipschitz_estimate``; ``trace`` = the search's iterations (empty unless asked for); ``points`` = every
     evaluated point (None unless asked for); ``payload`` = the JSON as stored: a PnP comparison, or what
-    :mod:`~vbl_robust.campaigns.store.payloads` reads (the worst point, a sequence's facts, a risk estimate);
+    :mod:`~vbl_robust.store.payloads` reads (the worst point, a sequence's facts, a risk estimate);
     ``finished_at`` (ISO time, UTC). ``read_from`` is set only on rows *derived* from a stored run at a smaller
     budget (:func:`vbl_robust.analysis.metrics.read_off_rows`; never stored): the budget label of that run.
 
