@@ -868,8 +868,8 @@ def probes(fx: Fx) -> list[Probe]:
         r = fx.T / "runs" / "packed"
         r.mkdir(parents=True, exist_ok=True)
         subprocess.run([sys.executable, "-c", "import sys; from pathlib import Path; "
-                        "from vbl_robust.campaigns import ResultStore; "
-                        "from vbl_robust.campaigns.store import pack_store; "
+                        "from vbl_robust.store import ResultStore; "
+                        "from vbl_robust.store import pack_store; "
                         "s = ResultStore.open_existing(Path(sys.argv[1])); pack_store(s, Path(sys.argv[2]))",
                         str(run_), str(r / "results.sqlite.xz")], env=ENV, check=True, capture_output=True)
         return r

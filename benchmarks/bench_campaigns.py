@@ -41,11 +41,13 @@ def overhead(detector, n_images: int, max_evals: int) -> tuple[str, list[dict]]:
     """Same jobs twice: bare ``maximize`` on a prebuilt objective, and through ``run_campaign`` into a store."""
     import numpy as np
 
-    from vbl_robust.campaigns import Block, Budget, CampaignSpec, ResultStore, roll_box, run_campaign
+    from vbl_robust.campaigns import run_campaign
     from vbl_robust.campaigns.work import detector_for
     from vbl_robust.pipeline import Objective
     from vbl_robust.scenes import generate
     from vbl_robust.search import maximize
+    from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+    from vbl_robust.store import ResultStore
 
     samples = generate(n_images, seed=11)
     methods = ("georobust", "random")
@@ -99,8 +101,8 @@ def durations(detector, bundle: Path, quick: bool) -> str:
     from dataclasses import replace
 
     from vbl_robust.campaigns import EXPERIMENTS, Options, load_samples
-    from vbl_robust.campaigns.estimate import PROBE_IMAGES, Probe, expected_seconds, probe
     from vbl_robust.campaigns.experiments import PAPER
+    from vbl_robust.paper.estimate import PROBE_IMAGES, Probe, expected_seconds, probe
 
     specs = {name: replace(EXPERIMENTS[name].build(0, Options()), clock="process") for name in PAPER}
     pr = probe(detector, list(specs.values()), load_samples(PROBE_IMAGES, 0)[0], seconds=1.0 if quick else 5.0,

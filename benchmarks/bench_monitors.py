@@ -52,9 +52,9 @@ NOMINAL_QUANTILE = 0.98
 
 def misleading_points(limit: int | None) -> list[tuple[str, object, np.ndarray]]:
     """(sample id, box, θ) of each misleading job's worst silent point, one per image and θ."""
-    from vbl_robust.campaigns import ResultStore
-    from vbl_robust.campaigns import metrics as mx
+    from vbl_robust.analysis import metrics as mx
     from vbl_robust.constants import BreachKind
+    from vbl_robust.store import ResultStore
 
     WORK.mkdir(parents=True, exist_ok=True)
     store = WORK / "spatial-2d.sqlite"

@@ -42,8 +42,8 @@ BOXES = (15.0, 7.5)
 
 def _grids() -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], float]:
     """The paper's complete runtime-1d dense grids (sample id → sorted roll nodes and their L) and ε_safe."""
-    from vbl_robust.campaigns import ResultStore
-    from vbl_robust.campaigns import metrics as mx
+    from vbl_robust.analysis import metrics as mx
+    from vbl_robust.store import ResultStore
 
     WORK.mkdir(parents=True, exist_ok=True)
     store = WORK / "runtime-1d.sqlite"
@@ -79,12 +79,12 @@ def run_case(case: dict) -> dict:
     import torch
 
     torch.set_num_threads(1)
-    from vbl_robust.campaigns.risk import ThetaDistribution, estimate_risk
-    from vbl_robust.campaigns.spec import derive_seed
     from vbl_robust.campaigns.work import Settings, build_objective
     from vbl_robust.detect.shipped import DetectorSpec
+    from vbl_robust.risk import ThetaDistribution, estimate_risk
     from vbl_robust.scenes import generate
     from vbl_robust.space import ParameterBox
+    from vbl_robust.specs.campaign import derive_seed
     from vbl_robust.stats import clopper_pearson
 
     global _DET
@@ -239,7 +239,7 @@ def surrogate(results: dict, seeds: int) -> str:
     """Coverage and half-width over many seeds on the dense-grid surrogate: θ → the L of the nearest grid node
     (what the pipeline computed there), so p_fail is known exactly (the failing nodes' Voronoi cells) and an
     estimator run costs no detector call."""
-    from vbl_robust.campaigns.risk import ThetaDistribution, estimate_risk
+    from vbl_robust.risk import ThetaDistribution, estimate_risk
     from vbl_robust.space import ParameterBox
     from vbl_robust.stats import clopper_pearson
 

@@ -13,8 +13,8 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from vbl_robust.campaigns.store import PACKED, STORE, restore_store
 from vbl_robust.report.markdown import survival_markdown
+from vbl_robust.store import PACKED, STORE, restore_store
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLE = ROOT / "results" / "paper" / "spatial-2d"

@@ -11,7 +11,7 @@
 #       cuda, the largest keypoint and error differences between them; (2) the same small audit (2 images, roll
 #       ±10° × contrast [0.7, 1.4], georobust / random / apgd, 40 evaluations each, no early stop) on cuda and on
 #       the CPU (torch engine, one worker, wall clock), and whether their rows agree
-#       (vbl_robust.report.bundle.compare_runs). Logs and both stores come back in $OUT.
+#       (vbl_robust.paper.bundle.compare_runs). Logs and both stores come back in $OUT.
 #   there, once the check passed:  device run: command "bash benchmarks/device_check.sh --paper 480", carry [".whl"]
 #       resumes the paper run's experiments without time budgets (spatial-2d, distance-profile, convergence, then
 #       spatial-1d: the ones the CPU run reaches last first) from the committed bundle on cuda, 12 workers, for
@@ -47,8 +47,8 @@ if [ "${1:-}" = "--paper" ]; then
       --device cuda --clock process --workers "${WORKERS:-12}" --no-report -q 2>&1 | tail -3 | tee -a "$OUT/paper.txt"
     [ -f "/tmp/paper/$e/results.sqlite" ] && python3 -c "
 import sys; from pathlib import Path
-from vbl_robust.campaigns.store import pack_store
-from vbl_robust.campaigns.store import ResultStore
+from vbl_robust.store import pack_store
+from vbl_robust.store import ResultStore
 with ResultStore.open_existing(sys.argv[1]) as st: print(pack_store(st, Path(sys.argv[2])), st.count(), 'jobs')
 " "/tmp/paper/$e" "$OUT/$e.sqlite.xz" | tee -a "$OUT/paper.txt"
   done
@@ -60,6 +60,6 @@ AUDIT=(audit --model default --images 2 --roll 10 --contrast 0.7,1.4 --methods g
 timeout 120 "${VR[@]}" "${AUDIT[@]}" --device cuda --out "$OUT/audit_cuda" 2>&1 | tee "$OUT/audit_cuda.txt"
 timeout 150 "${VR[@]}" "${AUDIT[@]}" --engine torch --out "$OUT/audit_cpu" 2>&1 | tee "$OUT/audit_cpu.txt"
 python3 -c "
-from vbl_robust.report.bundle import compare_runs
+from vbl_robust.paper.bundle import compare_runs
 print('cuda rows against cpu rows:', compare_runs('$OUT/audit_cuda', '$OUT/audit_cpu'))" 2>&1 | tee "$OUT/agree.txt"
 rm -f "$OUT"/audit_*/results.sqlite.lock

@@ -31,8 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def build_store(source: Path, copies: int, out: Path) -> Path:
     """``out/results.sqlite``: ``source``'s campaign with every sample and job row ``copies`` times."""
-    from vbl_robust.campaigns.store import ResultStore
     from vbl_robust.digest import digest
+    from vbl_robust.store import ResultStore
 
     out.mkdir(parents=True, exist_ok=True)
     with ResultStore.open_existing(source) as src, ResultStore(out / "results.sqlite") as dst:
@@ -92,7 +92,7 @@ def main() -> None:
     base = args.keep or Path(tempfile.mkdtemp(prefix="vbl-robust-memory-"))
     try:
         for c in args.copies:
-            from vbl_robust.campaigns.store import ResultStore
+            from vbl_robust.store import ResultStore
 
             with ResultStore.open_existing(args.source) as s:
                 name = s.require_campaign().name

@@ -45,3 +45,12 @@ def script():
         spec.loader.exec_module(mod)
         return mod
     return load
+
+
+@pytest.fixture(scope="session")
+def oracle():
+    """Oracle with a fixed per-image corner error: a non-trivial, deterministic landscape with some breaches (the
+    detector of the tests that run small campaigns)."""
+    from vbl_robust.campaigns.provenance import DetectorSpec
+
+    return DetectorSpec("oracle", options={"noise_px": 0.5, "fail_outside": True})

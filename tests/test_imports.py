@@ -90,9 +90,13 @@ def test_the_checker_sees_a_cycle():
 
 #: The floors, lowest first: a module imports only modules of its own floor or of floors below it (``cli`` may
 #: import everything). ``search`` sits low: it maximises any batched function over a box and imports nothing of
-#: images, detectors or PnP. Top-level helper modules (``atomic``, ``digest``, ``lazy``) are the ground floor.
-FLOORS = ("constants", "stats", "space", "atomic", "digest", "lazy", "search", "geometry", "data", "scenes",
-          "perturb", "pnp", "detect", "pipeline", "sequences", "campaigns", "report", "cli")
+#: images, detectors or PnP. Top-level helper modules (``atomic``, ``digest``, ``lazy``) are the ground floor. The
+#: risk estimators (``risk``) search a box too. A campaign's data (``specs``) and its results store (``store``) sit
+#: below the engine that runs it (``campaigns``); what reads a store sits above: ``analysis``, ``report`` (one run),
+#: ``paper`` (the paper's claims and bundle).
+FLOORS = ("constants", "stats", "space", "atomic", "digest", "lazy", "search", "risk", "geometry", "data", "scenes",
+          "perturb", "pnp", "detect", "pipeline", "sequences", "specs", "store", "campaigns", "analysis", "report",
+          "paper", "cli")
 #: Arrows up that are still there, each to be removed (issue 46); an arrow up not listed here fails the test, and
 #: so does a listed one that is gone (the list shrinks with the code).
 KNOWN_UP: set[str] = set()

@@ -119,8 +119,9 @@ def test_every_failure_is_penalised_with_its_reason(samples):
 def test_a_search_for_misleading_poses_counts_flagged_failures_as_safe(samples):
     """--target misleading: a failure the system sees (here no detection) evaluates to 0 m with its reason kept, so a
     search maximises only the confident poses' errors; the audit spec carries that penalty and says so."""
-    from vbl_robust.campaigns import BoxSpec, Budget, audit_spec
+    from vbl_robust.campaigns import audit_spec
     from vbl_robust.constants import TARGETS
+    from vbl_robust.specs.campaign import BoxSpec, Budget
 
     s, theta = samples[1], np.array([[0.0, 1.0], [5.0, 1.2]])
     ev = Objective(s, StubDetector(s.corners_2d, empty=True), BOX, penalty_m=TARGETS["misleading"])(theta)

@@ -3,10 +3,10 @@ runner or builder, and the line between the pipeline's failures and the tool's i
 
 from __future__ import annotations
 
-from vbl_robust.campaigns.kinds import JobKind, Role
 from vbl_robust.campaigns.work import JOB_RUNNERS
 from vbl_robust.constants import FAILURE_REASONS, FailureReason, NotMeasured
 from vbl_robust.detect.shipped import BUILDERS, CODE_KINDS, DetectorKind, DetectorSpec
+from vbl_robust.specs.kinds import JobKind, Role
 
 
 def test_stored_strings_are_the_values():

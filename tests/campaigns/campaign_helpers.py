@@ -51,7 +51,7 @@ class SlowOracle(OracleDetector):
 
 
 def kill_campaign_spec():
-    from vbl_robust.campaigns import Block, Budget, CampaignSpec, roll_box
+    from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
 
     blk = Block(boxes=(roll_box(5), roll_box(10)), methods=("random", "georobust"), budgets=(Budget(max_evals=12),))
     return CampaignSpec("kill-test", (blk,), seed=5)
@@ -60,8 +60,9 @@ def kill_campaign_spec():
 def main(out: str, n: int, delay: float, mode: str = "") -> None:
     import torch
 
-    from vbl_robust.campaigns import DetectorSpec, ResultStore, run_campaign
+    from vbl_robust.campaigns import DetectorSpec, run_campaign
     from vbl_robust.scenes import generate
+    from vbl_robust.store import ResultStore
 
     torch.set_num_threads(1)
     samples = generate(n, seed=3, width=96, height=96)

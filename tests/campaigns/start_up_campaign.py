@@ -8,16 +8,10 @@ import sys
 
 
 def main(out: str) -> None:
-    from vbl_robust.campaigns import (
-        Block,
-        Budget,
-        CampaignSpec,
-        DetectorSpec,
-        ResultStore,
-        roll_box,
-        run_campaign,
-    )
+    from vbl_robust.campaigns import DetectorSpec, run_campaign
     from vbl_robust.scenes import generate
+    from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+    from vbl_robust.store import ResultStore
 
     spec = CampaignSpec("start-up", (Block(boxes=(roll_box(5),), methods=("random",),
                                            budgets=(Budget(max_evals=8),)),), seed=5)

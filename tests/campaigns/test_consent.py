@@ -10,11 +10,10 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import ResultStore
-from vbl_robust.campaigns.store import pack_store
 from vbl_robust.cli import app
 from vbl_robust.detect.oracle import OracleDetector
 from vbl_robust.detect.shipped import CODE_KINDS, DetectorSpec, consent_needed, refuse_without_consent
+from vbl_robust.store import ResultStore, pack_store
 
 runner = CliRunner()
 

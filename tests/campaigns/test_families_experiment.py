@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import DetectorSpec, ResultStore, experiment, run_campaign
+from vbl_robust.campaigns import DetectorSpec, experiment, run_campaign
 from vbl_robust.campaigns.experiments import (
     EXPERIMENTS,
     FAMILY_GRID_POINTS,
@@ -17,12 +17,13 @@ from vbl_robust.campaigns.experiments import (
     levels_text,
     range_text,
 )
-from vbl_robust.campaigns.spec import Block, Budget, roll_box
 from vbl_robust.constants import EPS_SAFE_M, Verdict
 from vbl_robust.perturb import PERTURBATIONS
 from vbl_robust.report import build_report
 from vbl_robust.report.evidence import SAFETY_FIGURE
 from vbl_robust.report.html import fmt_num
+from vbl_robust.specs.campaign import Block, Budget, roll_box
+from vbl_robust.store import ResultStore
 
 TINY = Options(methods=("georobust", "random"), max_evals=6, family_grid=21)
 
@@ -100,8 +101,8 @@ def test_grid_count_and_level_texts():
 
 
 def test_estimate_and_planned_work():
-    from vbl_robust.campaigns.estimate import planned_work
     from vbl_robust.cli import app
+    from vbl_robust.paper.estimate import planned_work
 
     spec = experiment("families").build(0, Options(max_evals=10, family_grid=0))
     assert planned_work(spec, 3) == (3 * len(PERTURBATIONS) * 5 * 3 * 10, 0.0)  # georobust, georobust-av, random

@@ -3,19 +3,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from vbl_robust.campaigns import (
-    Block,
-    Budget,
-    CampaignSpec,
-    DetectorSpec,
-    ResultStore,
-    plan,
-    roll_box,
-    run_campaign,
-)
-from vbl_robust.campaigns.store import JobStatus, RunStatus
+from vbl_robust.campaigns import DetectorSpec, plan, run_campaign
 from vbl_robust.constants import FAILURE_REASONS, NotMeasured, Verdict
 from vbl_robust.data.sample import Sample
+from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+from vbl_robust.store import JobStatus, ResultStore, RunStatus
 
 
 def small_spec(name="t", methods=("georobust", "random"), **kw):
@@ -181,7 +173,7 @@ def test_one_writer_per_store(tmp_path, small_samples, oracle):
     """A second run on a store that another process is writing is refused with the writer's PID, not mixed in."""
     import os
 
-    from vbl_robust.campaigns.store import WriterLock
+    from vbl_robust.store import WriterLock
 
     with ResultStore(tmp_path / "r.sqlite") as st:
         with WriterLock(st.path):  # another writer (a lock taken on its own file descriptor)
@@ -229,7 +221,7 @@ def test_deleting_the_lock_file_does_not_let_a_second_writer_in(tmp_path):
     created anew by the second writer) does not make a second, free lock."""
     import os
 
-    from vbl_robust.campaigns.store import WriterLock
+    from vbl_robust.store import WriterLock
 
     store = tmp_path / "results.sqlite"
     with WriterLock(store):

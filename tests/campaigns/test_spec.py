@@ -2,9 +2,17 @@ import re
 
 import pytest
 
-from vbl_robust.campaigns import Block, Budget, CampaignSpec, experiment, roll_box, roll_contrast_box
+from vbl_robust.campaigns import experiment
 from vbl_robust.campaigns.experiments import EXPERIMENTS, Options
-from vbl_robust.campaigns.spec import canonical_json, derive_seed
+from vbl_robust.specs.campaign import (
+    Block,
+    Budget,
+    CampaignSpec,
+    canonical_json,
+    derive_seed,
+    roll_box,
+    roll_contrast_box,
+)
 
 SAMPLES = [("a", "fa"), ("b", "fb"), ("c", "fc")]
 

@@ -12,14 +12,15 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import Block, Budget, CampaignSpec, ResultStore, roll_box, run_campaign
-from vbl_robust.campaigns.metrics import main_rows
-from vbl_robust.campaigns.store import JOB_COLUMNS, JobRow, JobStatus, merge_runs
-from vbl_robust.campaigns.store.digest import FindingKind, reseal
+from vbl_robust.analysis.metrics import main_rows
+from vbl_robust.campaigns import run_campaign
 from vbl_robust.campaigns.verify import banner_lines, check_store, screen
 from vbl_robust.cli import app
 from vbl_robust.constants import Verdict
 from vbl_robust.scenes import generate
+from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+from vbl_robust.store import JOB_COLUMNS, JobRow, JobStatus, ResultStore, merge_runs
+from vbl_robust.store.digest import FindingKind, reseal
 
 runner = CliRunner()
 SPEC = CampaignSpec("verify-test", (
@@ -266,7 +267,7 @@ def test_a_deleted_sample_an_orphan_row_and_a_deleted_row_are_found(pristine, tm
 
 
 def test_a_resealed_digest_breaks_the_chain_and_a_resealed_store_changes_the_head(pristine, tmp_path):
-    from vbl_robust.campaigns.store.digest import row_digest
+    from vbl_robust.store.digest import row_digest
 
     row = _raw(pristine, TARGETS["search"])
     run = _copy(pristine, tmp_path / "forged")

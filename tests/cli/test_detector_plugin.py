@@ -11,10 +11,10 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import ResultStore
 from vbl_robust.campaigns.runner import WORKERS_ENV
 from vbl_robust.cli import app
 from vbl_robust.digest import file_sha256
+from vbl_robust.store import ResultStore
 
 runner = CliRunner()
 HELPERS = Path(__file__).with_name("plugin_helpers.py")
@@ -86,9 +86,10 @@ def test_a_plugin_that_is_not_a_detector_is_refused_before_the_run(factory, word
 def test_an_exception_inside_a_plugin_during_the_run_is_not_measured(tmp_path):
     """Past the first image's check (here: skipped by the library API), the plug-in's exceptions are detector
     errors: jobs not measured, exit 1 — never breaches."""
-    from vbl_robust.campaigns import Block, Budget, CampaignSpec, roll_box, run_campaign
+    from vbl_robust.campaigns import run_campaign
     from vbl_robust.detect.shipped import DetectorSpec
     from vbl_robust.scenes import generate
+    from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
 
     spec = CampaignSpec("audit", (Block(boxes=(roll_box(5),), methods=("random",), budgets=(Budget(max_evals=3),)),))
     det = DetectorSpec.plugin(f"{HELPERS}:exploding", trust=True)

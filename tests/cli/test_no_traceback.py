@@ -7,9 +7,9 @@ from __future__ import annotations
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import ResultStore
 from vbl_robust.cli import app
 from vbl_robust.scenes.envelopes import fit_margin
+from vbl_robust.store import ResultStore
 
 runner = CliRunner()
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns.estimate import Probe, expected_evals, expected_seconds, planned_work
 from vbl_robust.campaigns.experiments import EXPERIMENTS, PAPER, Options
 from vbl_robust.cli import app
+from vbl_robust.paper.estimate import Probe, expected_evals, expected_seconds, planned_work
 
 runner = CliRunner()
 SMALL = ["--oracle", "--oracle-noise", "0.5", "--width", "128", "--height", "128", "--quiet", "--images", "1",
@@ -34,7 +34,7 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
 
     import pyarrow.parquet as pq
 
-    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.store import ResultStore
 
     bundle = tmp_path / "bundle"
     repro = tmp_path / "REPRODUCTION.md"
@@ -73,7 +73,7 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
         assert f"| {t['search_s'] / 3600:.2f} | {t['clock']} |" in status
     # a smaller run reproduces the bundle's rows (the check: reproduce EXPERIMENT --images 3), checked
     # against the bundle's job table (what stays committed) and against the store
-    from vbl_robust.report.bundle import compare_runs
+    from vbl_robust.paper.bundle import compare_runs
 
     again = tmp_path / "again"
     res = runner.invoke(app, ["reproduce", "spatial-1d", "--out", str(again), "--workers", "1", "--check-against",
@@ -139,7 +139,7 @@ def test_bad_clock_and_workers_are_refused_before_any_work(tmp_path):
 
 
 def test_two_workers_and_the_process_clock_are_recorded(tmp_path):
-    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.store import ResultStore
 
     out = tmp_path / "r"
     res = runner.invoke(app, ["reproduce", "runtime-1d", "--out", str(out), *SMALL, "--workers", "2", "--no-report"])

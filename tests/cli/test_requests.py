@@ -9,11 +9,11 @@ from typing import get_args
 import typer
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns.store import ResultStore
 from vbl_robust.cli import app
 from vbl_robust.cli import options as o
 from vbl_robust.cli.config import run_config
 from vbl_robust.cli.requests import BoxRequest, DetectorRequest, ImagesRequest, RunRequest
+from vbl_robust.store import ResultStore
 
 runner = CliRunner()
 

@@ -9,17 +9,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import (
-    Budget,
-    DetectorSpec,
-    ResultStore,
-    audit_spec,
-    load_sequences,
-    roll_box,
-    run_campaign,
-)
+from vbl_robust.campaigns import DetectorSpec, audit_spec, load_sequences, run_campaign
 from vbl_robust.campaigns.replay import zones_of_run
 from vbl_robust.cli import app
+from vbl_robust.specs.campaign import Budget, roll_box
+from vbl_robust.store import ResultStore
 
 runner = CliRunner()
 SMALL = ["--oracle", "--width", "96", "--height", "96", "--quiet", "--workers", "1"]

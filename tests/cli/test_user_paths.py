@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import ResultStore
 from vbl_robust.campaigns.runner import WORKERS_ENV, default_workers
 from vbl_robust.cli import app
+from vbl_robust.store import ResultStore
 
 runner = CliRunner()
 

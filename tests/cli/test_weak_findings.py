@@ -13,8 +13,8 @@ import shutil
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns.risk import parse_dist
 from vbl_robust.cli import app
+from vbl_robust.risk import parse_dist
 
 runner = CliRunner()
 SMALL = ["--oracle", "--max-evals", "4", "--no-landscape", "--workers", "1", "--no-report", "-q"]

@@ -13,12 +13,13 @@ import torch
 from typer.testing import CliRunner
 
 import vbl_robust.search.api as search_api
-from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, ResultStore, run_campaign
+from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.replay import replay, zones_of_run
-from vbl_robust.campaigns.spec import roll_contrast_box
-from vbl_robust.campaigns.store.digest import reseal
 from vbl_robust.cli import app
+from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_contrast_box
 from vbl_robust.stats import Rate
+from vbl_robust.store import ResultStore
+from vbl_robust.store.digest import reseal
 
 runner = CliRunner()
 SMALL = ["--oracle", "--oracle-noise", "0.5", "--width", "256", "--height", "256", "--quiet"]
@@ -222,7 +223,7 @@ def test_report_markdown_survival_table_from_the_store(gated_run, tmp_path):
     assert "2 images measured by every method (of 2 started)" in res.output
     with ResultStore.open_existing(out) as store:
         spec = store.spec()
-        from vbl_robust.campaigns.metrics import main_rows, summarize
+        from vbl_robust.analysis.metrics import main_rows, summarize
 
         lines = summarize(main_rows(store, spec, with_trace=False), spec.eps_safe_m)
     survival = res.output.split("Breaches by kind")[0]

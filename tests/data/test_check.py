@@ -174,7 +174,7 @@ def test_an_image_outside_the_root_is_refused(rows, tmp_path):
 
 def test_digests_are_the_files_sha256_and_spare_the_store_a_second_read(rows, tmp_path, monkeypatch):
     import vbl_robust.digest
-    from vbl_robust.campaigns import ResultStore
+    from vbl_robust.store import ResultStore
 
     root, samples = rows
     checks = check_images(samples, root=root, sha256=True)

@@ -172,8 +172,8 @@ def test_the_sigma_monitor_turns_an_unsure_pose_into_a_flagged_failure():
 
 
 def test_a_campaign_runs_the_sigma_monitor_and_stores_the_worst_candidates_sigma():
-    from vbl_robust.campaigns.spec import CampaignSpec
     from vbl_robust.campaigns.work import Settings, build_objective, worst_details
+    from vbl_robust.specs.campaign import CampaignSpec
 
     sample = generate(1, seed=7)[0]
     box = ParameterBox({"roll_deg": (-5.0, 5.0)})

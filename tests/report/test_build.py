@@ -3,19 +3,11 @@ import re
 
 import pytest
 
-from vbl_robust.campaigns import (
-    Block,
-    Budget,
-    CampaignSpec,
-    DetectorSpec,
-    ResultStore,
-    roll_box,
-    run_campaign,
-)
+from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.experiments import audit_spec
-from vbl_robust.campaigns.spec import roll_contrast_box
-from vbl_robust.campaigns.store import RunProvenance
 from vbl_robust.report import build_report
+from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box, roll_contrast_box
+from vbl_robust.store import ResultStore, RunProvenance
 
 
 @pytest.fixture(scope="module")
@@ -74,8 +66,8 @@ def test_report_errors_name_the_run(tmp_path):
 
 
 def test_sections_cover_every_declarable_figure_in_order():
-    from vbl_robust.campaigns.spec import FIGURES
     from vbl_robust.report.build import SECTIONS
+    from vbl_robust.specs.campaign import FIGURES
 
     assert tuple(SECTIONS) == FIGURES
 
@@ -99,8 +91,8 @@ def test_figures_come_from_the_spec_not_from_the_experiment_name(tmp_path, sampl
 
 
 def test_report_shows_failed_evaluations_per_reason(tmp_path):
-    from vbl_robust.campaigns.store import JobRow
     from vbl_robust.constants import FAILURE_REASONS
+    from vbl_robust.store import JobRow
 
     spec = CampaignSpec("audit", (Block(boxes=(roll_box(5),), methods=("random",), budgets=(Budget(max_evals=10),)),))
     with ResultStore(tmp_path / "results.sqlite") as st:
@@ -120,8 +112,8 @@ def test_searches_with_no_evaluation_in_time_are_counted_apart_in_the_report_and
     rather than show a bare 100 % survival with no worst error."""
     from types import SimpleNamespace
 
-    from vbl_robust.campaigns.store import JobRow
     from vbl_robust.cli.run import finish
+    from vbl_robust.store import JobRow
 
     budget = Budget(max_seconds=0.1, stop_at_breach=False)
     spec = CampaignSpec("audit", (Block(boxes=(roll_box(5),), methods=("apgd", "random"), budgets=(budget,)),))
@@ -146,8 +138,8 @@ def test_searches_with_no_evaluation_in_time_are_counted_apart_in_the_report_and
 
 def test_markdown_survival_has_a_column_per_budget_when_the_run_has_several(tmp_path):
     """A runtime experiment's survival is per budget: pooling the budgets into one cell would mean nothing."""
-    from vbl_robust.campaigns.store import JobRow
     from vbl_robust.report.markdown import survival_markdown
+    from vbl_robust.store import JobRow
 
     short, long = Budget(max_seconds=0.5, stop_at_breach=False), Budget(max_evals=10, stop_at_breach=False)
     spec = CampaignSpec("runtime", (Block(boxes=(roll_box(5),), methods=("apgd", "random"), budgets=(long, short)),))

@@ -6,11 +6,11 @@ import json
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import ResultStore
-from vbl_robust.campaigns import metrics as mx
+from vbl_robust.analysis import metrics as mx
 from vbl_robust.cli import app
 from vbl_robust.constants import BreachKind
 from vbl_robust.stats import Rate, breach_fraction_bound
+from vbl_robust.store import ResultStore
 
 
 @pytest.fixture(scope="module")

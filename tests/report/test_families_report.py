@@ -7,14 +7,14 @@ import math
 import matplotlib.pyplot as plt
 import pytest
 
-from vbl_robust.campaigns import metrics as mx
+from vbl_robust.analysis import metrics as mx
 from vbl_robust.campaigns.experiments import family_boxes
-from vbl_robust.campaigns.spec import Budget
-from vbl_robust.campaigns.store import JobRow
 from vbl_robust.constants import Verdict
 from vbl_robust.report import figures as F
 from vbl_robust.report.html import figure_png
 from vbl_robust.report.sections import family_lines
+from vbl_robust.specs.campaign import Budget
+from vbl_robust.store import JobRow
 
 N = 10
 #: family -> method -> the level each of the N images first breaches at (inf: never), chained: breached above it

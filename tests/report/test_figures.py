@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from vbl_robust.campaigns import metrics as mx
-from vbl_robust.campaigns.levels import DistanceLine
-from vbl_robust.campaigns.metrics import Summary
+from vbl_robust.analysis import metrics as mx
+from vbl_robust.analysis.levels import DistanceLine
+from vbl_robust.analysis.metrics import Summary
 from vbl_robust.report import figures as F
 
 
@@ -271,9 +271,9 @@ def test_the_gallery_draws_pixels_as_blocks_with_predictions_on_both_sides(drawn
 def test_the_progress_median_never_falls_when_searches_start_late():
     """A median over the images that happen to have a point at a count fell (late starters joined low); every
     image counts at every count."""
-    from vbl_robust.campaigns.store import JobRow
     from vbl_robust.report.sections import progress_curves
     from vbl_robust.search.result import TraceRow
+    from vbl_robust.store import JobRow
 
     def row(sid, nfev, best):
         trace = tuple(TraceRow(iteration=i, nfev=n, elapsed=0.0, best_value=b, best_x=None, batch_size=1, n_failed=0)

@@ -10,12 +10,13 @@ import sqlite3
 
 import pytest
 
-from vbl_robust.campaigns import Budget, DetectorSpec, ResultStore, run_campaign
+from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.experiments import audit_spec
-from vbl_robust.campaigns.spec import roll_box
 from vbl_robust.report import build_report
 from vbl_robust.report.evidence import BoxEvidence, verdict_of, verdict_sentence
+from vbl_robust.specs.campaign import Budget, roll_box
 from vbl_robust.stats import Rate
+from vbl_robust.store import ResultStore
 
 SOURCE = {"kind": "synthetic", "n": 4, "seed": 5, "width": 128, "height": 128}
 MODEL = {"name": "runway-pose v9", "sha256": "ab12cd34ef56" + "0" * 52, "design": "two-stage", "input_size": 640,
@@ -134,8 +135,8 @@ def test_one_sentence_per_box(b, verdict, says):
 def test_a_truth_run_stands_by_its_dense_grids(tmp_path):
     """A run of dense grids alone (``vbl-robust truth``) has a first screen too: the grid is its search; its card's
     figure stays the landscape."""
-    from vbl_robust.campaigns import Block, CampaignSpec
     from vbl_robust.scenes import generate
+    from vbl_robust.specs.campaign import Block, CampaignSpec
 
     blk = Block(boxes=(roll_box(20),), methods=("grid",), budgets=(Budget(max_evals=9),), role="reference")
     spec = CampaignSpec("spatial-1d-truth", (blk,), figures=("landscape",), eps_safe_m=40.0)

@@ -11,17 +11,17 @@ import sqlite3
 import numpy as np
 import pytest
 
-from vbl_robust.campaigns import Budget, DetectorSpec, ResultStore, run_campaign
-from vbl_robust.campaigns import store as store_module
+from vbl_robust import store as store_module
+from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.experiments import audit_spec
-from vbl_robust.campaigns.spec import roll_contrast_box
-from vbl_robust.campaigns.store import JobRow, Points
-from vbl_robust.campaigns.store.digest import reseal
 from vbl_robust.perturb import Perturbation
 from vbl_robust.report import build_report
 from vbl_robust.report.evidence import WORST_CASES, worst_cases
 from vbl_robust.report.html import fmt_num
+from vbl_robust.specs.campaign import Budget, roll_contrast_box
 from vbl_robust.stats import Rate
+from vbl_robust.store import JobRow, Points, ResultStore
+from vbl_robust.store.digest import reseal
 
 EVIL = '<img src=x onerror=alert(1)>&"'
 SOURCE = {"kind": "synthetic", "n": 3, "seed": 5, "width": 128, "height": 128}
@@ -82,7 +82,7 @@ def test_the_predicted_corners_are_stored_where_the_detector_put_them(run, sampl
 def test_the_csv_carries_each_images_nominal_error(run, tmp_path):
     import csv
 
-    from vbl_robust.campaigns.tables import export
+    from vbl_robust.analysis.tables import export
 
     with ResultStore.open_existing(run) as st:
         stored = {r.sample_id: r.payload["nominal"]["error_m"] for r in st.jobs(role="main")}
@@ -242,8 +242,8 @@ def test_a_run_whose_images_cannot_be_rebuilt_shows_the_cases_without_pictures(r
 
 # -- the order of the cases, on rows made by hand ------------------------------------------------------------
 def _row(sid, worst, reasons_fs, level=5.0):
-    from vbl_robust.campaigns.spec import BoxSpec
     from vbl_robust.space import ParameterBox
+    from vbl_robust.specs.campaign import BoxSpec
 
     fs = [f for _, f in reasons_fs]
     return JobRow(key=f"{sid}{level}", experiment="t", kind="search", role="main", method="random", sample_id=sid,
@@ -277,7 +277,7 @@ def test_cases_are_the_breached_images_misleading_first_then_by_error_and_capped
 
 
 def test_a_row_read_off_a_longer_run_takes_its_corners_only_where_its_worst_point_is_the_runs():
-    from vbl_robust.campaigns.spec import Budget as B
+    from vbl_robust.specs.campaign import Budget as B
 
     corners = ((1.0, 2.0), (3.0, 4.0), (5.0, 6.0), (7.0, 8.0))
     run = _row("a", 2000.0, [("", 2000.0)]).replace(key="k", worst_corners=corners, payload={"worst": {"conf": 0.7}})
@@ -288,9 +288,9 @@ def test_a_row_read_off_a_longer_run_takes_its_corners_only_where_its_worst_poin
 
 
 def test_a_risk_runs_first_screen_gives_its_pooled_failure_probability(tmp_path, samples):
+    from vbl_robust.analysis.risk import pooled_risk
     from vbl_robust.campaigns.experiments import risk_spec
-    from vbl_robust.campaigns.risk import pooled_risk
-    from vbl_robust.campaigns.spec import roll_box
+    from vbl_robust.specs.campaign import roll_box
 
     spec = risk_spec(roll_box(20), methods=("mc",), max_evals=16, guide_evals=4)
     with ResultStore(tmp_path / "results.sqlite") as st:

@@ -14,16 +14,17 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.campaigns import Block, Budget, CampaignSpec, DetectorSpec, ResultStore, run_campaign
-from vbl_robust.campaigns import metrics as mx
+from vbl_robust.analysis import metrics as mx
+from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.replay import zones_of_run
-from vbl_robust.campaigns.spec import roll_box, roll_contrast_box
-from vbl_robust.campaigns.store.digest import reseal
 from vbl_robust.report import build_report
 from vbl_robust.report import zone_section as B
 from vbl_robust.report.html import fmt_num
 from vbl_robust.report.rows import Context
 from vbl_robust.search.zones import CLASSES
+from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box, roll_contrast_box
+from vbl_robust.store import ResultStore
+from vbl_robust.store.digest import reseal
 
 GATE = 4.0
 GATED = DetectorSpec("factory", "zones_helpers:RollGate")

@@ -1,10 +1,13 @@
-"""Robustness campaigns: specs as data, a resumable SQLite results store, local and Ray executors, metrics.
+"""Robustness campaigns, the engine: the paper's experiments and the ``audit`` / ``risk`` jobs as specs, the runner
+(local, Ray) and its jobs, verification, replay and refinement of stored searches, hardening. Below it: the specs
+(:mod:`vbl_robust.specs`) and the results store (:mod:`vbl_robust.store`); above it: what reads a store
+(:mod:`vbl_robust.analysis`, :mod:`vbl_robust.report`, :mod:`vbl_robust.paper`).
 
 >>> from vbl_robust.campaigns import EXPERIMENTS
 >>> sorted(EXPERIMENTS)[:3]
 ['convergence', 'distance-profile', 'families']
 
-Typical use (what ``vbl-robust reproduce`` does)::
+Typical use (what ``vbl-robust reproduce`` does; ``ResultStore`` from :mod:`vbl_robust.store`)::
 
     spec = experiment("spatial-1d").build(seed, Options())
     samples, source = load_samples(100, seed)
@@ -27,15 +30,6 @@ _LAZY: dict[str, str] = {
     "audit_spec": ".experiments",
     "risk_spec": ".experiments",
     "experiment": ".experiments",
-    "export": ".tables",
-    "convergence": ".metrics",
-    "distance_profile": ".metrics",
-    "phi_crit": ".metrics",
-    "pnp_summary": ".metrics",
-    "reference_rows": ".metrics",
-    "smallest_breach_levels": ".metrics",
-    "summarize": ".metrics",
-    "survival_rate": ".metrics",
     "DetectorSpec": ".provenance",
     "code_version": ".provenance",
     "dataset_identity": ".provenance",
@@ -49,21 +43,8 @@ _LAZY: dict[str, str] = {
     "find_lard_files": ".samples",
     "load_samples": ".samples",
     "load_sequences": ".samples",
-    "EPS_SAFE_M": ".spec",
-    "PENALTY_M": ".spec",
-    "Block": ".spec",
-    "BoxSpec": ".spec",
-    "Budget": ".spec",
-    "CampaignSpec": ".spec",
-    "Job": ".spec",
-    "roll_box": ".spec",
-    "roll_contrast_box": ".spec",
     "job_zones": ".replay",
     "zones_of_run": ".replay",
-    "JobRow": ".store",
-    "JobStatus": ".store",
-    "Points": ".store",
-    "ResultStore": ".store",
 }
 
 __all__ = sorted(_LAZY)  # every public name is lazy: listed once, in _LAZY

@@ -21,7 +21,7 @@ images, 1000 for the PnP validation), with georobust-av run beside the paper's G
   the heat map.
 
 Each spec declares the report's figures it needs (``CampaignSpec.figures``, names from
-:data:`~vbl_robust.campaigns.spec.FIGURES`): a new experiment gets its figures by declaring them.
+:data:`~vbl_robust.specs.campaign.FIGURES`): a new experiment gets its figures by declaring them.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 from fractions import Fraction
 
 from ..constants import TARGETS
-from .spec import Block, BoxSpec, Budget, CampaignSpec, roll_box, roll_contrast_box
+from ..specs.campaign import Block, BoxSpec, Budget, CampaignSpec, roll_box, roll_contrast_box
 
 #: The paper's experiments compare the paper's GeoRobust and georobust-av (labelled apart) with random and APGD.
 PAPER_METHODS = ("georobust", "georobust-av", "random", "apgd")
@@ -414,10 +414,10 @@ def audit_spec(box: BoxSpec, *, methods: Sequence[str] = AUDIT_METHODS, budget: 
 def risk_spec(box: BoxSpec, *, methods: Sequence[str] = ("mc", "guided"), max_evals: int = 1024, seed: int = 0,
               dist: dict[str, tuple[str, float, float]] | None = None, tau: float = 0.01, delta: float = 0.05,
               guide_evals: int = 64, pnp: str = "ippe_lm") -> CampaignSpec:
-    """The ``risk`` job (:mod:`vbl_robust.campaigns.risk`): per image, the failure probability under ``dist``
+    """The ``risk`` job (:mod:`vbl_robust.risk`): per image, the failure probability under ``dist``
     (parameter → ``("normal", mean, sd)``; uniform elsewhere) over ``box`` by each estimator of ``methods``, at
     most ``max_evals`` evaluations each, and the verdict on "p_fail ≤ ``tau``" at confidence 1 − ``delta``."""
-    from .risk import MAX_EVALS, ThetaDistribution
+    from ..risk import MAX_EVALS, ThetaDistribution
 
     if not 0.0 <= tau < 1.0:
         raise ValueError(f"--tau must be in [0, 1), got {tau}")

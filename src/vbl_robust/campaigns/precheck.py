@@ -14,8 +14,8 @@ from typing import Any
 
 from ..constants import NotMeasured
 from ..detect.shipped import DetectorKind
+from ..specs.campaign import CampaignSpec
 from .provenance import DetectorSpec
-from .spec import CampaignSpec
 
 __all__ = ["check_images", "check_methods", "check_plugin", "check_run", "gradient_methods"]
 

@@ -1,5 +1,5 @@
 """A stored search row as the search result it stands for (:func:`row_result`): what reading budgets off a trace
-(:mod:`.readoff`) and checking a row against its own evaluations (:mod:`.verify`) both rebuild."""
+(:mod:`vbl_robust.analysis.readoff`) and checking a row against its own evaluations (:mod:`.verify`) both rebuild."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from .store import JobRow
+from ..store import JobRow
 
 __all__ = ["row_result"]
 

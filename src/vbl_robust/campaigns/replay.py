@@ -24,12 +24,12 @@ from ..constants import EPS_SAFE_M
 from ..search.bounds import check_lipschitz
 from ..search.zones import ZoneMap, zones
 from ..space import ParameterBox
-from .kinds import JobKind
+from ..specs.kinds import JobKind
 
 if TYPE_CHECKING:
     from ..search.base import Optimizer
-    from .spec import CampaignSpec
-    from .store import JobRow
+    from ..specs.campaign import CampaignSpec
+    from ..store import JobRow
 
 __all__ = ["JobZones", "ReplayError", "job_zones", "replay", "zones_of_run"]
 
@@ -186,7 +186,7 @@ def zones_of_run(run: str | Path, *, roles: Sequence[str] | None = None, thresho
     """:func:`job_zones` of every search job of a run directory (or its ``results.sqlite``), in store order;
     ``roles`` keeps only those roles ("main", "reference", "landscape"). Rows inconsistent with their own
     evaluations or their digests are left out (:func:`vbl_robust.campaigns.verify.screen`; logged as a warning)."""
-    from .store import ResultStore
+    from ..store import ResultStore
     from .verify import screen
 
     with ResultStore.open_existing(run) as store:

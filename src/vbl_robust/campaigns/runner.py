@@ -24,7 +24,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..constants import Verdict
-from .kinds import Role
+from ..specs.campaign import CampaignSpec, Job
+from ..specs.kinds import Role
+from ..store import JobRow, ResultStore, RunProvenance, RunStatus, SampleRecord, WriterLock
 from .precheck import check_run
 from .provenance import (
     DetectorSpec,
@@ -34,8 +36,6 @@ from .provenance import (
     machine_identity,
     sample_fingerprint,
 )
-from .spec import CampaignSpec, Job
-from .store import JobRow, ResultStore, RunProvenance, RunStatus, SampleRecord, WriterLock
 from .work import SampleTask, Settings, detector_for, one_core, run_sample_task
 
 logger = logging.getLogger(__name__)
@@ -290,7 +290,7 @@ def run_campaign(
         precheck: check before anything is stored that every image can be read at its stated size and every method
             can run on the detector (:func:`~vbl_robust.campaigns.precheck.check_run`; ``ValueError``, one line);
             False only for a caller that has just checked.
-        wait: when another process is writing ``store`` (:class:`~vbl_robust.campaigns.store.WriterLock`), wait
+        wait: when another process is writing ``store`` (:class:`~vbl_robust.store.WriterLock`), wait
             for it instead of refusing (``ValueError`` naming its PID).
     """
     if executor not in EXECUTORS:

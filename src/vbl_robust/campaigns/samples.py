@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .kinds import SourceKind
+from ..specs.kinds import SourceKind
 from .provenance import file_sha256
 
 logger = logging.getLogger(__name__)

@@ -5,7 +5,7 @@ The unit of work is a :class:`SampleTask` (one sample + its pending jobs): the o
 yields, job after job, the rows to commit together (usually one; a breach in a chain brings the implied rows
 of the larger boxes with it, so a chain is never half-recorded).
 
-Rows are :class:`~vbl_robust.campaigns.store.JobRow` s. Every search evaluation carries its failure reason (no
+Rows are :class:`~vbl_robust.store.JobRow` s. Every search evaluation carries its failure reason (no
 detection, PnP failure, …) from the objective into the search result and the row (``n_failed``, ``failures``,
 ``worst_reason``, the reason of every stored point); the search itself sees the penalty value, as before.
 
@@ -31,17 +31,27 @@ import numpy as np
 
 from ..constants import NotMeasured, NotMeasuredError, Verdict
 from ..search.result import verdict_for
-from .kinds import JobKind, Role
+from ..specs.campaign import Job
+from ..specs.kinds import JobKind, Role
+from ..store import Corners, JobRow, JobStatus, Points, now_iso
+from ..store.payloads import (
+    Nominal,
+    RiskPayload,
+    RiskStratum,
+    SequenceFacts,
+    SequenceFrames,
+    SequencePayload,
+    WorstPayload,
+    WorstPoint,
+)
 from .provenance import DetectorSpec
-from .spec import Job
-from .store import Corners, JobRow, JobStatus, Points, now_iso
-from .store.payloads import Nominal, SequenceFacts, SequenceFrames, SequencePayload, WorstPayload, WorstPoint
 
 if TYPE_CHECKING:  # typing only: the pipeline (torch) is imported where an objective is built
     from ..data import Sample
     from ..data.sequence import ApproachSequence
     from ..detect import Detector
     from ..pipeline import SearchObjective
+    from ..risk import RiskResult, ThetaDistribution
     from ..search.result import SearchResult
     from ..space import ParameterBox
 
@@ -76,7 +86,7 @@ def detector_for(spec: DetectorSpec) -> Detector:
 
 @dataclass
 class Settings:
-    """Pipeline settings shared by all jobs of a campaign (see :class:`~vbl_robust.campaigns.spec.CampaignSpec`)."""
+    """Pipeline settings shared by all jobs of a campaign (see :class:`~vbl_robust.specs.campaign.CampaignSpec`)."""
 
     eps_safe_m: float
     penalty_m: float
@@ -262,11 +272,11 @@ def run_search_job(job: Job, objective: SearchObjective, settings: Settings) -> 
 
 
 def risk_row(job: Job, objective: SearchObjective, settings: Settings, run_id: int | None, t0: float) -> JobRow:
-    """Run a failure-probability job (:func:`vbl_robust.campaigns.risk.estimate_risk`; options: ``dist``, ``tau``,
+    """Run a failure-probability job (:func:`vbl_robust.risk.estimate_risk`; options: ``dist``, ``tau``,
     ``delta``, ``guide_evals``) and its row: every draw as the row's points, the estimate, its interval and the
     verdict in the ``risk`` payload; worst error and verdict as a search row's (the largest L drawn), and the corners
     predicted there (:func:`worst_details`: one more evaluation)."""
-    from .risk import ThetaDistribution, estimate_risk
+    from ..risk import ThetaDistribution, estimate_risk
 
     opts = dict(job.options)
     dist = ThetaDistribution.over(job.box.box, {k: tuple(v) for k, v in (opts.pop("dist", None) or {}).items()})
@@ -285,8 +295,16 @@ def risk_row(job: Job, objective: SearchObjective, settings: Settings, run_id: i
                 nfev=r.evaluations, nit=1, n_failed=sum(1 for x in r.reasons if x),
                 failures=dict(sorted(Counter(x for x in r.reasons if x).items())), worst_reason=r.reasons[i],
                 search_status="budget_exhausted", points=Points(r.xs, r.fs, r.reasons),
-                payload=r.payload(tau, delta, dist), search_s=t_search,
+                payload=risk_payload(r, tau, delta, dist), search_s=t_search,
                 job_s=time.perf_counter() - t0)
+
+
+def risk_payload(r: RiskResult, tau: float, delta: float, dist: ThetaDistribution) -> dict[str, Any]:
+    """A risk job row's payload (:class:`~vbl_robust.store.payloads.RiskPayload`) of the estimate ``r``."""
+    return RiskPayload(r.method, r.p_fail, r.eps_safe_m, r.ci.low, r.ci.high, r.ci.level, r.ci.method, r.verdict,
+                       tau, delta, r.evaluations, dist.to_dict(),
+                       tuple(RiskStratum(s.mass, s.k, s.n, a, b)
+                             for s, (a, b) in zip(r.strata, r.split, strict=True))).to_json()
 
 
 def search_kwargs(options: Mapping[str, Any], budget: Any, *, eps_safe_m: float, lipschitz: Any,

@@ -1,7 +1,7 @@
 """``vbl-robust audit`` (the main job) and ``vbl-robust demo`` (a small audit on the defaults, with its report).
 
 From an option to the objective: the options become request objects (:mod:`.requests`: the box, the detector, the
-images, how the run runs) and a :class:`~vbl_robust.campaigns.spec.CampaignSpec`
+images, how the run runs) and a :class:`~vbl_robust.specs.campaign.CampaignSpec`
 (:func:`vbl_robust.campaigns.experiments.audit_spec`: methods, budget, target, monitors); :meth:`RunRequest.run
 <.requests.RunRequest.run>` runs it (:func:`vbl_robust.campaigns.runner.run_campaign`), and each job's objective
 is built from the spec's settings, the sample and the detector by
@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from vbl_robust.campaigns.experiments import AUDIT_METHODS, audit_spec
-from vbl_robust.campaigns.spec import Budget, roll_contrast_box
 from vbl_robust.constants import TARGETS
+from vbl_robust.specs.campaign import Budget, roll_contrast_box
 
 from . import options as o
 from .common import (

@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from vbl_robust.campaigns.spec import BoxSpec, box_label
 from vbl_robust.perturb.registry import PERTURBATIONS, known
 from vbl_robust.space import ParameterBox
+from vbl_robust.specs.campaign import BoxSpec, box_label
 
 from .config import get_current_context
 
@@ -167,7 +167,7 @@ def parse_perturb(items: list[str] | None) -> dict[str, tuple[float, float]]:
 
 
 def parse_box(roll: str, contrast: str | None, perturb: list[str] | None) -> BoxSpec:
-    """The :class:`~vbl_robust.campaigns.spec.BoxSpec` of ``--roll``, ``--contrast`` and ``--perturb`` (level: the
+    """The :class:`~vbl_robust.specs.campaign.BoxSpec` of ``--roll``, ``--contrast`` and ``--perturb`` (level: the
     roll half-width, 0 without roll), or one line naming the option at fault."""
     bounds: dict[str, tuple[float, float]] = {}
     extra = parse_perturb(perturb)

@@ -1,8 +1,8 @@
 """``vbl-robust report RUN``: rebuild the HTML report (and exports) of a run directory from its results store, or
 print its tables as Markdown (``--format md``, :mod:`vbl_robust.report.markdown`);
 ``vbl-robust bundle ROOT --out DIR``: the committable bundle of a set of experiment runs
-(:mod:`vbl_robust.report.bundle`); ``vbl-robust merge SRC… --into RUN``: jobs computed elsewhere joined into one
-run (:func:`vbl_robust.campaigns.store.merge_runs`)."""
+(:mod:`vbl_robust.paper.bundle`); ``vbl-robust merge SRC… --into RUN``: jobs computed elsewhere joined into one
+run (:func:`vbl_robust.store.merge_runs`)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from typing import Annotated
 
 import typer
 
-from ..campaigns.kinds import JobKind
+from ..specs.kinds import JobKind
 from . import options as o
 from .common import check_writable, fail, one_line
 from .run import unmeasured_ok
@@ -48,8 +48,8 @@ def report(
 def _unmeasured_exit(run: Path, allow_unmeasured: bool) -> None:
     """The jobs of ``run`` the tool could not measure, on standard error, and exit 1 unless ``allow_unmeasured``;
     the rows inconsistent with their evaluations or digests (not used), on standard error too."""
-    from vbl_robust.campaigns.store import ResultStore
     from vbl_robust.campaigns.verify import screen
+    from vbl_robust.store import ResultStore
 
     with one_line(), ResultStore.open_existing(run) as store:
         unit = store.spec().unit if store.holds_campaign() else "image"
@@ -64,9 +64,9 @@ def _unmeasured_exit(run: Path, allow_unmeasured: bool) -> None:
 
 def _report(run: Path, out: Path | None, csv: Path | None, parquet: Path | None, fmt: str, others: list[Path] | None,
             compare: Path | None) -> None:
-    from vbl_robust.campaigns.store import ResultStore
-    from vbl_robust.campaigns.tables import export
+    from vbl_robust.analysis.tables import export
     from vbl_robust.report.build import build_report
+    from vbl_robust.store import ResultStore
 
     if fmt not in ("html", "md", "csv", "json"):
         fail(f"--format {fmt}: choose html, md, csv or json")
@@ -128,7 +128,7 @@ def bundle(root: Root, out: BundleOut, reproduction: Reproduction = None, stores
            detector: Detector = None, detector_label: DetectorLabel = "this bundle's detector") -> None:
     """Write a results bundle: per experiment the job table (Parquet), the report and the provenance, and a
     status table; runs still in progress are bundled as they stand (rerun to refresh)."""
-    from vbl_robust.report.bundle import write_bundle
+    from vbl_robust.paper.bundle import write_bundle
 
     if out.exists() and not out.is_dir():
         fail(f"--out {out}: is a file; a bundle is a directory")
@@ -172,8 +172,8 @@ def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None
     """Copy into one run the jobs that other runs of the same campaign and detector computed (another machine,
     a GPU, a cluster without a shared disk): rows it lacks, their samples and runs; rows it holds stay. Refused
     while a run writes it, and for a detector that names code unless --trust-model."""
-    from vbl_robust.campaigns.store import MergeReport, merge_runs, store_file
     from vbl_robust.campaigns.verify import screen
+    from vbl_robust.store import MergeReport, merge_runs, store_file
 
     def merged(report: MergeReport) -> None:
         part = report.sources[-1]
@@ -192,10 +192,10 @@ def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None
 
 
 def _summary(run: Path, fmt: str) -> None:
-    """The run's summary table (:func:`vbl_robust.campaigns.tables.summary_table`: survival, or a risk run's
+    """The run's summary table (:func:`vbl_robust.analysis.tables.summary_table`: survival, or a risk run's
     failure probability per estimator) on standard output."""
-    from vbl_robust.campaigns.store import ResultStore
-    from vbl_robust.campaigns.tables import summary_table, write_records
+    from vbl_robust.analysis.tables import summary_table, write_records
+    from vbl_robust.store import ResultStore
 
     with one_line(), ResultStore.open_existing(run) as store:
         records, columns = summary_table(store)
@@ -203,13 +203,13 @@ def _summary(run: Path, fmt: str) -> None:
 
 
 def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:
-    from vbl_robust.campaigns.store import ResultStore
     from vbl_robust.report.markdown import (
         compare_markdown,
         families_markdown,
         risk_markdown,
         survival_markdown,
     )
+    from vbl_robust.store import ResultStore
 
     with one_line():
         if compare is not None:

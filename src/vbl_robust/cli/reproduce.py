@@ -1,7 +1,7 @@
 """``vbl-robust reproduce EXPERIMENT|paper|all``: run one of the paper's experiments, the paper's seven, or all of
 them with ours (defaults are the paper's). ``paper`` and ``all`` give each experiment its own run directory under
 ``--out`` (each resumable on its own) and an ``index.html`` linking their reports; ``--estimate`` prints
-(:mod:`vbl_robust.campaigns.estimate`), from a short measured probe of the detector on this
+(:mod:`vbl_robust.paper.estimate`), from a short measured probe of the detector on this
 machine and the breach rates of its first images, each experiment's expected duration and an upper bound (every
 evaluation budget spent, no early stop), and exits.
 """
@@ -14,16 +14,9 @@ from typing import Annotated, Any
 
 import typer
 
-from ..campaigns.estimate import (
-    PROBE_IMAGES,
-    Probe,
-    expected_seconds,
-    measured_remaining,
-    planned_work,
-    probe,
-)
 from ..campaigns.experiments import EXPERIMENTS, PAPER, Options, experiment, with_options
 from ..constants import MAX_IMAGES
+from ..paper.estimate import PROBE_IMAGES, Probe, expected_seconds, measured_remaining, planned_work, probe
 from . import options as o
 from .common import (
     fail,
@@ -116,7 +109,7 @@ def reproduce(
     if resume_from is not None and not resume_from.is_dir():
         fail(f"--resume-from {resume_from}: not a directory")
     if resume_from is not None:
-        from vbl_robust.campaigns.store import PACKED  # torch behind the store: not for ``--help``
+        from vbl_robust.store import PACKED
 
         if not any((resume_from / exp.name / PACKED).is_file() for exp in exps):  # a run, or a bundle without --stores
             fail(f"--resume-from {resume_from}: holds no packed store of {', '.join(e.name for e in exps)} "
@@ -138,7 +131,7 @@ def reproduce(
         if references:
             differ |= _check(exp.name, out_dir, references[exp.name])
     if group:
-        from vbl_robust.report.claims import claims_html, claims_of, write_claims, write_index
+        from vbl_robust.paper.claims import claims_html, claims_of, write_claims, write_index
 
         typer.echo(f"claims: {write_claims(root)}")
         typer.echo(f"index: {write_index(root, [e.name for e in exps], claims_html(claims_of(root), str(root)))}")
@@ -165,8 +158,8 @@ def _check_method_options(options: dict, specs: list) -> None:
 def _refuse_code(bundle: Path, names: list[str], trust: bool) -> None:
     """``--resume-from``: one line, before anything runs or is restored, when a packed store of the bundle names a
     detector that is code (a factory, a .pt outside the package) and ``trust`` (--trust-model) is not given."""
-    from vbl_robust.campaigns.store import PACKED, ResultStore
     from vbl_robust.detect.shipped import refuse_without_consent
+    from vbl_robust.store import PACKED, ResultStore
 
     for name in names:
         packed = bundle / name / PACKED
@@ -179,7 +172,7 @@ def _refuse_code(bundle: Path, names: list[str], trust: bool) -> None:
 
 def _restore(bundle: Path, name: str, out_dir: Path) -> None:
     """``--resume-from``: the bundle's packed store of experiment ``name`` seeds ``out_dir`` if it has none yet."""
-    from vbl_robust.campaigns.store import PACKED, restore_store
+    from vbl_robust.store import PACKED, restore_store
 
     packed = bundle / name / PACKED
     with one_line(ValueError, prefix=f"--resume-from {bundle}: "):
@@ -203,9 +196,9 @@ def _floats(text: str | None, name: str) -> tuple[float, ...] | None:
 
 def _estimate(exps: list, opts: Any, seed: int, images: int | None, det: Any, probe_samples: list, workers: int,
               group: str, probe_seconds: float, clock: str = "wall", root: Path | None = None) -> None:
-    """Print each experiment's expected duration and its upper bound (:mod:`vbl_robust.campaigns.estimate`), the
+    """Print each experiment's expected duration and its upper bound (:mod:`vbl_robust.paper.estimate`), the
     probe's rates measured on the run's ``clock`` (process: CPU seconds, the durations of an idle machine)."""
-    from vbl_robust.campaigns.store import ResultStore  # torch behind it: not for ``--help``
+    from vbl_robust.store import ResultStore
 
     specs = [exp.build(seed, opts) for exp in exps]
     pr = probe(det, specs, probe_samples, seconds=probe_seconds, clock=clock)
@@ -239,7 +232,7 @@ def _reference(root: Path, name: str) -> Path:
     """``--check-against``: where experiment ``name``'s earlier rows are (``root/name`` or ``root`` itself: a run
     directory with a results store, a bundle's experiment directory with ``jobs.parquet``, or that file); refused
     before any work when there is none."""
-    from vbl_robust.campaigns.store import STORE
+    from vbl_robust.store import STORE
 
     for p in (root / name, root):
         if (p.is_dir() and ((p / STORE).is_file() or (p / "jobs.parquet").is_file())) or (
@@ -250,10 +243,10 @@ def _reference(root: Path, name: str) -> Path:
 
 
 def _check(name: str, run: Path, reference: Path) -> bool:
-    """Print how the rows of ``run`` compare with ``reference``'s (:func:`~vbl_robust.report.bundle.compare_runs`):
+    """Print how the rows of ``run`` compare with ``reference``'s (:func:`~vbl_robust.paper.bundle.compare_runs`):
     findings changed (status, verdict, a row missing) apart from numeric drift (same findings, other counts or
     worst errors); True only when a finding changed."""
-    from vbl_robust.report.bundle import compare_runs
+    from vbl_robust.paper.bundle import compare_runs
 
     c = compare_runs(run, reference)
     first = f" (first: {', '.join(c['differ'][:3])})" if c["differ"] else ""

@@ -7,7 +7,7 @@ options themselves are declared once in :mod:`.options`) and passed down to the 
 - :class:`DetectorRequest` (``--model``, ``--trust-model``, ``--detector``, ``--engine``, ``--device``, ``--oracle``,
   ``--oracle-noise``, ``--detector-plugin``, ``--plugin-digest``) → a
   :class:`~vbl_robust.detect.shipped.DetectorSpec`;
-- :class:`BoxRequest` (``--roll``, ``--contrast``, ``--perturb``) → a :class:`~vbl_robust.campaigns.spec.BoxSpec`;
+- :class:`BoxRequest` (``--roll``, ``--contrast``, ``--perturb``) → a :class:`~vbl_robust.specs.campaign.BoxSpec`;
 - :class:`RunRequest` (``--executor``, ``--address``, ``--workers``, ``--clock``, ``--wait``, ``--retry-failed``,
   ``--allow-unmeasured``) → the run into the store (:func:`.run.run_with_progress`, which calls
   :func:`vbl_robust.campaigns.runner.run_campaign`; each job's objective: :func:`vbl_robust.campaigns.work.build_objective`);
@@ -29,8 +29,8 @@ from .run import check_executor, check_exports, finish, load, run_settings, run_
 
 if TYPE_CHECKING:  # torch behind them: imported where they are built, so that ``vbl-robust --help`` stays instant
     from vbl_robust.campaigns.runner import RunSummary
-    from vbl_robust.campaigns.spec import BoxSpec, CampaignSpec
     from vbl_robust.detect.shipped import DetectorSpec
+    from vbl_robust.specs.campaign import BoxSpec, CampaignSpec
 
 __all__ = ["BoxRequest", "DetectorRequest", "ExportRequest", "ImagesRequest", "RunRequest"]
 

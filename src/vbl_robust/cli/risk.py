@@ -1,5 +1,5 @@
 """``vbl-robust risk``: the failure probability of each image when θ follows a distribution over the box
-(:mod:`vbl_robust.campaigns.risk`), with its interval and a verdict on "p_fail ≤ τ"; a store and a report like
+(:mod:`vbl_robust.risk`), with its interval and a verdict on "p_fail ≤ τ"; a store and a report like
 every campaign."""
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def risk(
 ) -> None:
     """Failure probability per image when θ is drawn from a distribution over the box (turbulence, not a worst
     case): p_fail with a valid interval, a verdict on p_fail ≤ τ, and the rate pooled over the images."""
-    from vbl_robust.campaigns.risk import RISK_METHODS, parse_dist  # torch behind it: not for ``--help``
+    from vbl_robust.risk import RISK_METHODS, parse_dist
 
     params = parameters()
     quiet = set_verbosity(quiet=quiet, verbose=verbose)
@@ -84,8 +84,8 @@ def risk(
 
 def _print_pooled(out: Path) -> None:
     """Per estimator: the verdict counts and the failure rate pooled over the images."""
-    from vbl_robust.campaigns.risk import pooled_risk  # torch behind these: not for ``--help``
-    from vbl_robust.campaigns.store import ResultStore
+    from vbl_robust.analysis.risk import pooled_risk
+    from vbl_robust.store import ResultStore
 
     with ResultStore.open_existing(out) as store:
         rows = store.jobs(kind="risk", with_points=True, with_trace=False)

@@ -18,7 +18,7 @@ from typing import Any
 
 import typer
 
-from ..campaigns.kinds import RunStatus
+from ..specs.kinds import RunStatus
 from .common import check_names, check_writable, fail, one_line
 from .config import record_configuration
 from .options import DEFAULT_IMAGES
@@ -66,7 +66,7 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
 
     from vbl_robust.campaigns.precheck import check_run
     from vbl_robust.campaigns.runner import run_campaign
-    from vbl_robust.campaigns.store import ResultStore
+    from vbl_robust.store import ResultStore
 
     with one_line(ValueError):
         spec.check()  # before anything is created or run
@@ -143,8 +143,8 @@ def check_store(out: Path, spec: Any, samples: list, detector: Any, *, wait: boo
     ``wait``), it holds results of another campaign or detector, or of other pixels of the same images — all read
     without writing, so a refusal leaves the run directory as it was."""
     from vbl_robust.campaigns.provenance import sample_fingerprint
-    from vbl_robust.campaigns.store import ResultStore
-    from vbl_robust.campaigns.store.identity import check_same
+    from vbl_robust.store import ResultStore
+    from vbl_robust.store.identity import check_same
 
     path = out / "results.sqlite"
     if not path.is_file():
@@ -166,7 +166,7 @@ def check_store(out: Path, spec: Any, samples: list, detector: Any, *, wait: boo
 
 def _refuse_in_use(path: Path) -> None:
     """``ValueError`` naming the PID when another process holds the store's writer lock
-    (:class:`~vbl_robust.campaigns.store.WriterLock`), probed without writing the lock file."""
+    (:class:`~vbl_robust.store.WriterLock`), probed without writing the lock file."""
     lock = Path(f"{path}.lock")
     try:
         fd = os.open(lock, os.O_RDONLY)
@@ -225,10 +225,10 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
     """Print the summary table, export, and write the HTML report; False when the run is incomplete or some job
     could not be measured (unless ``allow_unmeasured``): its caller ends with exit code 1 once it has done what else
     it can — a run that did not finish, or did not measure what it was asked to, never exits 0."""
-    from vbl_robust.campaigns.readoff import main_rows
-    from vbl_robust.campaigns.store import ResultStore
-    from vbl_robust.campaigns.tables import export
+    from vbl_robust.analysis.readoff import main_rows
+    from vbl_robust.analysis.tables import export
     from vbl_robust.report.build import build_report
+    from vbl_robust.store import ResultStore
 
     with ResultStore.open_existing(out) as store:
         spec = store.spec()
@@ -255,7 +255,7 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
 def unmeasured_ok(rows: list, unit: str, allow_unmeasured: bool) -> bool:
     """Tell the user what could not be measured (stderr, one line per reason) and whether the command may exit 0:
     yes when every job was measured, or ``--allow-unmeasured`` was given."""
-    from vbl_robust.campaigns.breach import not_measured_lines
+    from vbl_robust.analysis.breach import not_measured_lines
 
     lines = not_measured_lines(rows, len(rows), unit)
     for line in lines:
@@ -272,7 +272,7 @@ def print_summary(spec: Any, rows: list) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from vbl_robust.campaigns.summary import summarize
+    from vbl_robust.analysis.summary import summarize
 
     lines = summarize(rows, spec.eps_safe_m)
     cols = ["method"] + [c for c in ("box_label", "budget_label") if len({getattr(ln, c) for ln in lines}) > 1]

@@ -1,5 +1,5 @@
 """``vbl-robust truth RUN``: the dense grid over a run's largest box on the images every method left surviving
-(:mod:`vbl_robust.campaigns.truth`), a resumable campaign beside the run (``RUN-truth``)."""
+(:mod:`vbl_robust.analysis.truth`), a resumable campaign beside the run (``RUN-truth``)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from ..campaigns.kinds import SourceKind
+from ..specs.kinds import SourceKind
 from . import options as o
 from .common import fail, from_config, one_line, set_verbosity
 from .config import parameters, run_config
@@ -27,8 +27,7 @@ def truth(
 ) -> None:
     """Dense grid on the images every method of RUN left surviving at its largest box: is "no breach found"
     true? Prints the true survival there and the true breaches each method missed."""
-    from vbl_robust.campaigns.store import ResultStore, store_file  # torch behind these: not for ``--help``
-    from vbl_robust.campaigns.truth import (
+    from vbl_robust.analysis.truth import (
         TRUTH_SUFFIX,
         load_run_samples,
         survivors_of_every_method,
@@ -36,6 +35,7 @@ def truth(
         truth_spec,
     )
     from vbl_robust.detect.shipped import DetectorSpec
+    from vbl_robust.store import ResultStore, store_file
 
     params = parameters()
     quiet = set_verbosity(quiet=quiet, verbose=verbose)

@@ -21,8 +21,8 @@ from typing import Annotated, Any
 import typer
 
 from ..atomic import atomic_write
-from ..campaigns.kinds import Role
 from ..campaigns.refine import refine_run
+from ..specs.kinds import Role
 from . import options as o
 from .common import check_writable, fail, parse_lipschitz
 
@@ -49,8 +49,8 @@ def zones(
     """Breached / undecided / ruled-out zones of Θ for each search job of a run (replayed, not re-evaluated)."""
     # scipy, torch and matplotlib behind these: imported here, not for ``--help``
     from vbl_robust.campaigns.replay import ReplayError, zones_of_run
-    from vbl_robust.campaigns.store import ResultStore
     from vbl_robust.report.figures import plot_zones
+    from vbl_robust.store import ResultStore
 
     if fmt not in FORMATS:
         fail(f"--format {fmt}: choose json, csv or md")

@@ -20,8 +20,8 @@ very long ones folded), :mod:`.evidence` (the first section, and ``evidence.json
 only orders the sections and writes the page.
 
 Which figures: the ones the campaign spec declares (``CampaignSpec.figures``, see
-:data:`vbl_robust.campaigns.spec.FIGURES`; a spec stored without a declaration gets
-:func:`~vbl_robust.campaigns.spec.default_figures` of its blocks), each drawn by its entry of :data:`SECTIONS`
+:data:`vbl_robust.specs.campaign.FIGURES`; a spec stored without a declaration gets
+:func:`~vbl_robust.specs.campaign.default_figures` of its blocks), each drawn by its entry of :data:`SECTIONS`
 from the rows it needs; a declared figure without data is left out. The summary always shows the failed
 evaluations (``n_failed``) and their counts per failure reason.
 
@@ -33,7 +33,7 @@ landscape (:func:`vbl_robust.report.figures.plot_zones`), and a table gives the 
 A job whose replay fails is listed as skipped, with the reason.
 
 Budgets read off a trace (the runtime experiments' anytime methods): the main rows are derived per read budget
-from the stored runs (:func:`vbl_robust.campaigns.metrics.read_off_rows`), and every table that shows them has a
+from the stored runs (:func:`vbl_robust.analysis.metrics.read_off_rows`), and every table that shows them has a
 column "read off the run" naming the run they were read from; results of runs of their own leave it empty.
 """
 
@@ -44,11 +44,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from ..analysis import metrics as mx
 from ..atomic import atomic_write
-from ..campaigns import metrics as mx
 from ..campaigns.experiments import EXPERIMENTS
-from ..campaigns.spec import FIGURES
-from ..campaigns.store import ResultStore
+from ..specs.campaign import FIGURES
+from ..store import ResultStore
 from .evidence import SAFETY_FIGURE, Evidence, evidence_of, section_evidence
 from .gallery import section_gallery
 from .html import esc, page

@@ -23,11 +23,11 @@ from typing import Any
 
 import numpy as np
 
+from ..analysis import metrics as mx
 from ..atomic import atomic_write
-from ..campaigns import metrics as mx
-from ..campaigns.spec import CampaignSpec
-from ..campaigns.store import JobRow, ResultStore
+from ..specs.campaign import CampaignSpec
 from ..stats import Paired, Rate, paired
+from ..store import JobRow, ResultStore
 
 __all__ = ["ALL", "ANY", "Change", "Comparison", "PairedLine", "check_alike", "compare_html", "line_order",
            "paired_comparison"]

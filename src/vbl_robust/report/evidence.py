@@ -9,8 +9,8 @@ draws its worst cases, and ``evidence.json`` beside ``report.html`` holds the sa
 Per box, the images are counted over **every method together** (an image is breached when any method found a
 breach): survival, misleading and flagged-only images each with their exact 95 % interval
 (:class:`vbl_robust.stats.Rate`); for random search, the largest bound over its surviving images on the breached
-fraction of the box (:func:`vbl_robust.campaigns.metrics.residual_bound`); for a risk run, each estimator's pooled
-failure probability with its interval (:func:`vbl_robust.campaigns.risk.pooled_risk`); for the DIRECT family, the
+fraction of the box (:func:`vbl_robust.analysis.metrics.residual_bound`); for a risk run, each estimator's pooled
+failure probability with its interval (:func:`vbl_robust.risk.pooled_risk`); for the DIRECT family, the
 mean remaining area RA of the last iteration (the share of Θ not yet pruned as below the best value found).
 
 The worst cases (:func:`worst_cases`): one per breached image, at its most severe breach — misleading before
@@ -27,14 +27,14 @@ from typing import Any
 
 import numpy as np
 
+from ..analysis import metrics as mx
 from ..atomic import atomic_write
-from ..campaigns import metrics as mx
-from ..campaigns.kinds import SourceKind
-from ..campaigns.store import JobRow
-from ..campaigns.store.payloads import Nominal, WorstPayload, WorstPoint
 from ..constants import BreachKind, Verdict
 from ..search import direct_family
+from ..specs.kinds import SourceKind
 from ..stats import LEVEL, Rate
+from ..store import JobRow
+from ..store.payloads import Nominal, WorstPayload, WorstPoint
 from . import figures as F
 from .figure_style import param_name
 from .html import esc, fmt_num, folded, table
@@ -51,7 +51,7 @@ _KIND_ORDER: dict[BreachKind | None, int] = {BreachKind.MISLEADING: 0, None: 1, 
 
 @dataclass(frozen=True)
 class RiskBound:
-    """A risk run's pooled failure probability over a box's images (:func:`vbl_robust.campaigns.risk.pooled_risk`):
+    """A risk run's pooled failure probability over a box's images (:func:`vbl_robust.risk.pooled_risk`):
     θ drawn from its distribution, in %, with its interval at ``level``."""
 
     method: str
@@ -136,7 +136,7 @@ class Evidence:
 
 
 def _risk_bounds(rows: Sequence[JobRow]) -> tuple[RiskBound, ...]:
-    from ..campaigns.risk import pooled_risk
+    from ..analysis.risk import pooled_risk
 
     return tuple(RiskBound(p.method, 100.0 * p.p_fail, (100.0 * p.ci.low, 100.0 * p.ci.high), float(p.ci.level))
                  for p in pooled_risk(rows))
@@ -352,7 +352,7 @@ def audited_line(ctx: Context) -> str:
 
 
 def not_measured_banner(rows: Sequence[JobRow], total: int, unit: str) -> str:
-    """The first-screen warning of the jobs the tool could not measure (:func:`~vbl_robust.campaigns.metrics.
+    """The first-screen warning of the jobs the tool could not measure (:func:`~vbl_robust.analysis.metrics.
     not_measured_lines`), or ``""`` when it measured every job."""
     lines = mx.not_measured_lines(rows, total, unit)
     if not lines:

@@ -15,8 +15,8 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 
-from ..campaigns.metrics import ANY_METHOD, Summary  # noqa: E402
-from ..campaigns.metrics import REFERENCE_METHOD as REFERENCE  # noqa: E402
+from ..analysis.metrics import ANY_METHOD, Summary
+from ..analysis.metrics import REFERENCE_METHOD as REFERENCE
 
 STYLE: dict[str, dict[str, Any]] = {
     "georobust": {"color": "#1f77b4", "marker": "o"},

@@ -21,8 +21,8 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from ..campaigns.levels import DistanceLine  # noqa: E402
-from ..campaigns.metrics import ANY_METHOD, ConvergenceLine, PnpLine, Summary  # noqa: E402
+from ..analysis.levels import DistanceLine
+from ..analysis.metrics import ANY_METHOD, ConvergenceLine, PnpLine, Summary
 from .figure_style import (  # noqa: E402
     AXIS_LABELS,
     EPS_STYLE,

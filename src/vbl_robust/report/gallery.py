@@ -9,7 +9,7 @@ its error, the breach kind, the predicted corners and their confidence (stored w
 on; older rows have none, and the entry says so), L(0) with the corners predicted unperturbed (payload
 ``nominal``; older stores: "–"). An image whose L(0) is already above ε_safe / 2 is marked: the perturbation did
 not break a sound pose there. The pixels are not in the store: each image is rebuilt from the run's recorded
-dataset source (:func:`vbl_robust.campaigns.truth.load_run_samples`: synthetic images regenerated, LARD rows read
+dataset source (:func:`vbl_robust.analysis.truth.load_run_samples`: synthetic images regenerated, LARD rows read
 again), checked against the store (the geometry fingerprint; an image file's SHA-256, when its jobs recorded one),
 and perturbed at θ* (deterministic; at the image's own resolution, where the pipeline may have worked on a resized
 copy). Where that is not possible (another machine without the dataset, a changed file), the entry is shown
@@ -31,9 +31,9 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..campaigns.kinds import SourceKind
-from ..campaigns.truth import load_run_samples
+from ..analysis.truth import load_run_samples
 from ..constants import BreachKind, FailureReason
+from ..specs.kinds import SourceKind
 from . import figures as F
 from .evidence import Evidence, WorstCase
 from .html import esc, fmt_num

@@ -5,8 +5,8 @@ with ``vbl-robust verify RUN --head HEAD``."""
 
 from __future__ import annotations
 
-from ..campaigns.store.schema import DIGESTS_SINCE
 from ..campaigns.verify import banner_lines, screen
+from ..store.schema import DIGESTS_SINCE
 from .html import esc
 from .rows import Context
 

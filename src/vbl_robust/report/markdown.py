@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..campaigns import metrics as mx
-from ..campaigns.spec import CampaignSpec
-from ..campaigns.store import ResultStore
+from ..analysis import metrics as mx
+from ..specs.campaign import CampaignSpec
 from ..stats import Rate
+from ..store import ResultStore
 
 __all__ = ["compare_markdown", "families_markdown", "risk_markdown", "survival_markdown", "zones_markdown"]
 
@@ -81,7 +81,7 @@ def _unmeasured(run: str | Path, unit: str) -> list[str]:
 def _progress(run: str | Path) -> list[str]:
     """A line when the store holds fewer jobs than its last run planned — a run writing it now, or one stopped
     before its end — so a partial table is never read as the whole run; none otherwise."""
-    from ..campaigns.store import RunStatus
+    from ..store import RunStatus
 
     with ResultStore.open_existing(run) as store:
         runs = store.runs()
@@ -107,9 +107,9 @@ def _read_alike(run: str | Path, spec: CampaignSpec, rows: Sequence, other: str 
 
 def risk_markdown(run: str | Path) -> str:
     """A risk run's failure probability per estimator and box as a Markdown table
-    (:func:`~vbl_robust.campaigns.tables.risk_records`, what ``--format csv|json`` print), each estimate with its
+    (:func:`~vbl_robust.analysis.tables.risk_records`, what ``--format csv|json`` print), each estimate with its
     interval, and the run's jobs not measured."""
-    from ..campaigns.tables import risk_records
+    from ..analysis.tables import risk_records
 
     with ResultStore.open_existing(run) as store:
         records = risk_records(store)

@@ -3,9 +3,9 @@ with its interval and the verdict counts, a figure of each image's p_fail with i
 
 from __future__ import annotations
 
-from ..campaigns.risk import pooled_risk
-from ..campaigns.store import JobStatus
-from ..campaigns.store.payloads import RiskPayload
+from ..analysis.risk import pooled_risk
+from ..store import JobStatus
+from ..store.payloads import RiskPayload
 from . import figures as F
 from .html import esc, table
 from .rows import Context, Section, sample_cols

@@ -13,11 +13,11 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ..analysis import metrics as mx
 from ..atomic import atomic_write
-from ..campaigns import metrics as mx
-from ..campaigns.spec import BoxSpec, CampaignSpec
-from ..campaigns.store import JobRow, JobStatus, ResultStore, SampleRecord
-from ..campaigns.store.payloads import Nominal, WorstPayload
+from ..specs.campaign import BoxSpec, CampaignSpec
+from ..store import JobRow, JobStatus, ResultStore, SampleRecord
+from ..store.payloads import Nominal, WorstPayload
 from . import figures as F
 from .html import figure_png, img, img_file
 
@@ -42,7 +42,7 @@ class Context:
     figures: list[Path] = field(default_factory=list)
     embed: bool = True
     #: ``main`` is every stored main search row the tool measured, none read off a trace (:func:`~vbl_robust.
-    #: campaigns.metrics.main_rows` of a spec that reads no trace): :attr:`runs` is ``main`` itself, not a second
+    #: analysis.metrics.main_rows` of a spec that reads no trace): :attr:`runs` is ``main`` itself, not a second
     #: copy of every row.
     main_is_runs: bool = False
 
@@ -66,7 +66,7 @@ class Context:
 
     @cached_property
     def nominal(self) -> dict[str, Nominal]:
-        """Per sample, its unperturbed facts as its main jobs store them (:class:`~vbl_robust.campaigns.store.
+        """Per sample, its unperturbed facts as its main jobs store them (:class:`~vbl_robust.store.
         payloads.Nominal`: L(0), reason, confidence, predicted corners); a sample missing: its jobs were stored
         before they held it."""
         return {r.sample_id: p.nominal for r in self.main if (p := WorstPayload.of(r)) is not None and p.nominal}

@@ -11,14 +11,14 @@ from typing import Any
 
 import numpy as np
 
-from ..campaigns import metrics as mx
+from ..analysis import metrics as mx
+from ..analysis.reference import AgainstGrid
 from ..campaigns.experiments import range_text
-from ..campaigns.kinds import JobKind, Role
-from ..campaigns.reference import AgainstGrid
-from ..campaigns.store import JobRow, JobStatus, RunProvenance
 from ..constants import FAILURE_REASONS, Verdict
 from ..detect.shipped import DetectorKind
 from ..search import NON_FINITE
+from ..specs.kinds import JobKind, Role
+from ..store import JobRow, JobStatus, RunProvenance
 from . import figures as F
 from .html import esc, fmt_num, folded, table
 from .integrity import provenance_html
@@ -185,7 +185,7 @@ def section_survival_level(ctx: Context) -> Section | None:
 
 
 def _against_grid_table(lines: Sequence[AgainstGrid], unit: str = "image") -> str:
-    """Each method's verdicts against the dense grid's on the same images (:func:`~vbl_robust.campaigns.metrics.
+    """Each method's verdicts against the dense grid's on the same images (:func:`~vbl_robust.analysis.metrics.
     against_reference`); "" without a grid."""
     if not lines:
         return ""

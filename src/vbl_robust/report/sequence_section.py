@@ -9,10 +9,10 @@ approach the first run of at least ``sustain`` breached frames (a breach a filte
 
 from __future__ import annotations
 
-from ..campaigns.store import JobRow
-from ..campaigns.store.payloads import SequenceFacts, SequencePayload
 from ..constants import Verdict
 from ..sequences import plot_errors_along_approach
+from ..store import JobRow
+from ..store.payloads import SequenceFacts, SequencePayload
 from .html import esc, table
 from .rows import Context, Section, theta_text
 

@@ -11,10 +11,10 @@ from typing import Any
 import numpy as np
 
 from ..campaigns.replay import JobZones, ReplayError, job_zones
-from ..campaigns.spec import CampaignSpec
-from ..campaigns.store import JobRow, JobStatus
 from ..search import METHODS
 from ..search.zones import CLASSES, ZoneMap
+from ..specs.campaign import CampaignSpec
+from ..store import JobRow, JobStatus
 from . import figures as F
 from .figures import plot_zones
 from .html import esc, table

@@ -1,0 +1,209 @@
+"""Flat exports of a store: its job rows (CSV, standard library; Parquet, pyarrow) and its summary table.
+
+:func:`export` writes one line per job with the identifying columns, the worst error and point (one column per
+parameter, real units), verdict, the detector that was audited (name, SHA-256, design: single pass or two-stage,
+input size, engine), the kind of breach (``breach_kind``: safe / flagged / misleading) and what "no
+breach found" is worth for a uniform random search (``residual_bound``), the image's unperturbed error L(0)
+(``nominal_m``, from main jobs stored with it; empty in older stores), counts and timings (a sequence campaign's main jobs also their breach facts along the approach,
+:data:`SEQUENCE_COLUMNS`); traces, evaluated points and per-frame errors stay in the store. A run that reads smaller
+budgets off its trace (runtime experiments) is followed by one line per read budget, derived from it
+(:func:`~vbl_robust.analysis.metrics.read_off_rows`; column ``read_from`` = the run's budget label).
+
+:func:`summary_records` gives the summary table (``vbl-robust report RUN --format csv|json``): one record per
+method, box and budget with the survival rate and its exact 95 % interval (:data:`SUMMARY_COLUMNS`).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+from ..specs.kinds import JobKind
+from ..store import ResultStore
+from ..store.payloads import RiskPayload, SequencePayload, WorstPayload
+
+COLUMNS = (
+    "experiment", "kind", "role", "method", "sample_id", "sample_index", "slant_distance_m", "envelope", "box_label",
+    "box_level", "budget_label", "max_evals", "max_seconds", "max_iters", "stop_at_breach", "seed", "status",
+    "reason", "worst_m", "verdict", "nfev", "nit", "n_failed", "failures", "worst_reason", "search_status",
+    "search_s", "job_s", "upper_bound", "bound_estimate", "run_id", "key", "read_from", "breach_kind",
+    "residual_bound", "detector", "detector_sha256", "design", "input_size", "engine", "nominal_m",
+)
+#: The detector columns of every job line (the campaign's detector identity): which pipeline was audited.
+DETECTOR_COLUMNS = {"detector": "name", "detector_sha256": "sha256", "design": "design", "input_size": "input_size",
+                    "engine": "engine"}
+#: Columns of a risk job (``vbl-robust risk``; fractions): the failure probability, its interval, the verdict on
+#: p_fail ≤ τ and the evaluations spent.
+RISK_COLUMNS = ("p_fail", "ci_low", "ci_high", "ci_level", "tau", "risk_verdict", "evaluations")
+
+#: Columns of :func:`summary_records` (survival in %, its exact 95 % interval; ``residual_bound``: for random
+#: search, the largest bound on the breached fraction of the box over the images without a breach).
+SUMMARY_COLUMNS = (
+    "experiment", "method", "box_label", "box_level", "budget_label", "images", "survivors", "survival_pct",
+    "survival_ci_low", "survival_ci_high", "breaches", "misleading", "flagged", "certified", "not_measured",
+    "median_worst_m", "mean_evals", "residual_bound",
+)
+
+
+#: Columns of a sequence campaign's main jobs (after the parameters): the breach facts of the worst θ and the
+#: unperturbed θ's sustained error, from the job's ``sequence`` payload (:func:`vbl_robust.campaigns.work.sequence_details`).
+SEQUENCE_COLUMNS = ("longest_run_frames", "longest_run_s", "breached_frames", "failed_frames", "breach_start_m",
+                    "breach_start_frame", "first_breach_m", "nominal_sustained_m", "nominal_breached_frames")
+
+
+def _plain(v: Any) -> Any:
+    if isinstance(v, Enum):
+        return v.value
+    if isinstance(v, dict):
+        return json.dumps(v, sort_keys=True) if v else None
+    return v
+
+
+def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
+    """Job rows as flat dicts, and the column names (``COLUMNS`` then ``worst_<parameter>`` columns);
+    ``failures`` is the JSON ``{reason: count}`` of the failed evaluations."""
+    from ..constants import EPS_SAFE_M
+    from .metrics import breach_kind, read_off, residual_bound
+
+    samples = store.samples()
+    camp = store.require_campaign() if store.holds_campaign() else None
+    eps, penalty = ((camp.stored_spec.get("eps_safe_m"), camp.stored_spec.get("penalty_m")) if camp else (None, None))
+    eps_kind = EPS_SAFE_M if eps is None else eps
+    ident = (camp.detector if camp else None) or {}
+    detector = {col: ident.get(key) for col, key in DETECTOR_COLUMNS.items()}
+    stored = store.jobs(with_trace=False, with_points=True)
+    if any(r.budget is not None and r.budget.reads for r in stored):
+        full = {r.key: r for r in store.jobs(role="main", with_points=True) if r.budget is not None and r.budget.reads}
+        stored = [x for r in stored for x in
+                  ([r] + ([read_off(full[r.key], b, eps, penalty) for b in r.budget.read_budgets()]
+                          if r.key in full else []))]
+    rows, params, sequences, has_risk = [], [], False, False
+    nominal = {r.sample_id: p.nominal.error_m for r in stored
+               if (p := WorstPayload.of(r)) is not None and p.nominal}  # L(0): the image's, whatever the job
+    for r in stored:
+        s = samples.get(r.sample_id)
+        b = {} if r.budget is None else r.budget.to_dict()
+        d = {c: _plain(getattr(r, c, None)) for c in COLUMNS}
+        d.update(detector)
+        d["nominal_m"] = nominal.get(r.sample_id)
+        d.update(slant_distance_m=None if s is None else s.slant_distance_m, envelope=None if s is None else s.envelope,
+                 max_evals=b.get("max_evals"), max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"),
+                 stop_at_breach=b.get("stop_at_breach"))
+        risk = RiskPayload.of(r) if r.kind == JobKind.RISK else None
+        if risk is not None:
+            has_risk = True
+            d.update({c: getattr(risk, c) for c in RISK_COLUMNS if c != "risk_verdict"}, risk_verdict=risk.verdict)
+        if r.kind == JobKind.SEARCH and r.measured:
+            kind = breach_kind(r, eps_kind)
+            d.update(breach_kind=None if kind is None else kind.value, residual_bound=residual_bound(r, eps_kind))
+        for name, v in (r.worst_x or {}).items():
+            col = f"worst_{name}"
+            if col not in params:
+                params.append(col)
+            d[col] = v
+        seq = None if r.read_from else SequencePayload.of(r)
+        if seq is not None:
+            sequences = True
+            d.update({c: getattr(seq.worst, c) for c in SEQUENCE_COLUMNS[:7]},
+                     nominal_sustained_m=seq.nominal.sustained_m, nominal_breached_frames=seq.nominal.breached_frames)
+        rows.append(d)
+    return rows, [*COLUMNS, *params, *(SEQUENCE_COLUMNS if sequences else ()), *(RISK_COLUMNS if has_risk else ())]
+
+
+def summary_records(store: ResultStore) -> list[dict[str, Any]]:
+    """The run's summary table: one record per method, box and budget of its main search rows (and of the dense
+    grid's reference pseudo-rows, method ``grid (reference)``), :data:`SUMMARY_COLUMNS` each; ``ValueError`` for a
+    store without a campaign."""
+    import math
+
+    from .metrics import main_rows, reference_rows, summarize
+
+    spec = store.spec()
+    rows = main_rows(store, spec, with_trace=False, measured_only=False)  # counted apart (not_measured)
+    boxes = list({r.box.label: r.box for r in rows if r.box is not None}.values())
+    ref = store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
+    rows += reference_rows(ref, boxes, spec.eps_safe_m, spec.penalty_m)
+    out = []
+    for s in summarize(rows, spec.eps_safe_m):
+        ci = s.survival_rate.ci if s.measured else None
+        out.append({
+            "experiment": spec.name, "method": s.method, "box_label": s.box_label, "box_level": s.box_level,
+            "budget_label": s.budget_label, "images": s.n, "survivors": s.survivors,
+            "survival_pct": s.survival if s.measured else None, "survival_ci_low": ci and ci.low, "survival_ci_high": ci and ci.high, "breaches": s.breaches,
+            "misleading": s.misleading, "flagged": s.flagged, "certified": s.certified, "not_measured": s.not_measured,
+            "median_worst_m": None if math.isnan(s.median_worst_m) else s.median_worst_m,
+            "mean_evals": s.mean_nfev if s.measured else None, "residual_bound": s.residual,
+        })
+    return out
+
+
+#: Columns of a risk run's summary (:func:`risk_records`): per estimator, the failure probability pooled over the
+#: images (a fraction) with its interval at ``ci_level``, the verdicts on p_fail ≤ ``tau`` per image, evaluations.
+RISK_SUMMARY_COLUMNS = (
+    "experiment", "method", "box_label", "images", "p_fail", "p_fail_ci_low", "p_fail_ci_high", "ci_level", "tau",
+    "holds", "violated", "undecided", "not_measured", "evaluations",
+)
+
+
+def risk_records(store: ResultStore) -> list[dict[str, Any]]:
+    """A risk run's summary (:func:`vbl_robust.risk.pooled_risk` per estimator), one record of
+    :data:`RISK_SUMMARY_COLUMNS` per estimator; none for a run without risk rows."""
+    from .risk import pooled_risk
+
+    camp = store.require_campaign()
+    rows = store.jobs(kind="risk", with_points=True, with_trace=False)
+    boxes = {r.method: r.box_label for r in rows}
+    unmeasured: dict[str, int] = {}
+    for r in rows:
+        unmeasured[r.method] = unmeasured.get(r.method, 0) + (not r.measured)
+    out = [{"experiment": camp.name, "method": p.method, "box_label": boxes.get(p.method), "images": p.images,
+            "p_fail": p.p_fail, "p_fail_ci_low": p.ci.low, "p_fail_ci_high": p.ci.high, "ci_level": p.ci.level,
+            "tau": p.tau, "holds": p.holds, "violated": p.violated, "undecided": p.undecided,
+            "not_measured": unmeasured.pop(p.method, 0), "evaluations": p.evaluations} for p in pooled_risk(rows)]
+    out += [{"experiment": camp.name, "method": m, "box_label": boxes.get(m), "images": 0, "not_measured": k}
+            for m, k in unmeasured.items()]  # an estimator whose every job was not measured
+    return out
+
+
+def summary_table(store: ResultStore) -> tuple[list[dict[str, Any]], tuple[str, ...]]:
+    """What ``report --format csv|json`` prints: the records and their columns — a risk run's per-estimator
+    failure probability (:func:`risk_records`), any other run's survival table (:func:`summary_records`)."""
+    if any(blk.kind == JobKind.RISK for blk in store.spec().blocks):
+        return risk_records(store), RISK_SUMMARY_COLUMNS
+    return summary_records(store), SUMMARY_COLUMNS
+
+
+def write_records(records: list[dict[str, Any]], columns: tuple[str, ...], fmt: str, stream: Any) -> None:
+    """``records`` to ``stream`` as ``csv`` (a header, then one line each) or ``json`` (a list of objects)."""
+    if fmt == "csv":
+        w = csv.DictWriter(stream, fieldnames=list(columns), extrasaction="ignore", lineterminator="\n")
+        w.writeheader()
+        w.writerows(records)
+    elif fmt == "json":
+        stream.write(json.dumps([{c: r.get(c) for c in columns} for r in records], indent=1) + "\n")
+    else:
+        raise ValueError(f"format must be csv or json, got {fmt!r}")
+
+
+def export(store: ResultStore, path: str | Path) -> Path:
+    """Write the job rows to ``path``: ``.csv`` or ``.parquet`` (by suffix; ``ValueError`` otherwise)."""
+    p = Path(path)
+    rows, cols = flat_rows(store)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    if p.suffix.lower() == ".csv":
+        with open(p, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
+            w.writeheader()
+            w.writerows(rows)
+    elif p.suffix.lower() == ".parquet":
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        table = pa.table({c: [r.get(c) for r in rows] for c in cols})
+        pq.write_table(table, p)
+    else:
+        raise ValueError(f"export {p}: unknown format (use a .csv or .parquet file name)")
+    return p

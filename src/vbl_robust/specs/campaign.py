@@ -1,0 +1,476 @@
+"""Campaigns as data: a spec (boxes × methods × budgets, per block) expands into jobs with a seed stream.
+
+A :class:`CampaignSpec` holds the settings shared by all its jobs (ε_safe, τ_conf, failure penalty, PnP
+solver, base seed) and a tuple of :class:`Block` s. A block is one cross product *samples × boxes × methods ×
+budgets*; experiments use several blocks (the searches, a dense-grid reference, a landscape on one image).
+
+Every :class:`Job` has a stable ``key``: the SHA-256 of its canonical JSON (sorted keys, plain floats) together
+with the *context* (detector identity, dataset identity, shared settings). The key is what makes a campaign
+resumable: the results store holds one row per key, so a rerun of the same command skips finished jobs.
+
+Seed stream: each job's seed is derived from the base seed and the job's identity (sample, method, box,
+budget) by hashing, so it does not depend on the order of jobs or on which jobs were already done.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from ..constants import CONF_THRESHOLD, EPS_SAFE_M, PENALTY_M
+from ..digest import canonical_json, digest
+from ..space import ParameterBox
+from .budget import Budget
+from .kinds import JobKind, Role
+
+__all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FIGURES", "JOB_KINDS", "PENALTY_M", "ROLES", "Block", "BoxSpec", "Budget",
+           "CampaignSpec", "Job", "box_label", "canonical_json", "default_figures", "derive_seed", "digest", "roll_box",
+           "roll_contrast_box"]
+
+
+#: The values of :class:`JobKind` and :class:`Role`, in order.
+JOB_KINDS = tuple(k.value for k in JobKind)
+ROLES = tuple(r.value for r in Role)
+#: Figures (report sections) a campaign can declare, with the rows each one draws:
+#: ``pnp`` — the PnP-solver comparison (``kind="pnp"`` blocks); ``survival`` — survival against the box level
+#: (main, unchained blocks with several boxes; plus the reference grid); ``runtime`` — survival and median worst
+#: error against the per-image budget (main blocks with several time or evaluation budgets); ``distance`` —
+#: φ_crit per slant-distance quartile (chained main blocks); ``families`` — per perturbation family (the parameter
+#: of 1-D main boxes, level = budget index) survival against the level and the families ranked by the level at
+#: which survival drops below 50 % and 10 % (plus the reference grids); ``convergence`` — |PO_k| and RA(k) of
+#: DIRECT-family traces; ``landscape`` — L over a dense grid of one image (landscape role, else the reference grid) with the
+#: methods' points; ``progress`` — worst error found against evaluations; ``per_image`` — each image's worst case.
+#: ``sequences`` — a sequence campaign's errors along each approach and its per-sequence breach facts; ``risk`` —
+#: each image's failure probability under the θ distribution (``kind="risk"`` blocks) and the pooled rate.
+FIGURES = ("pnp", "risk", "survival", "runtime", "distance", "families", "sequences", "convergence", "landscape",
+           "progress", "per_image")
+
+
+def derive_seed(base_seed: int, *parts: Any) -> int:
+    """A seed in ``[0, 2**31)`` derived from ``base_seed`` and the identity ``parts`` (order independent of jobs)."""
+    h = hashlib.sha256(canonical_json([int(base_seed), *parts]).encode()).digest()
+    return int.from_bytes(h[:4], "big") & 0x7FFFFFFF
+
+
+@dataclass(frozen=True)
+class BoxSpec:
+    """A labelled perturbation box; ``level`` is the number plotted on a budget axis (e.g. the roll half-width)."""
+
+    box: ParameterBox
+    label: str
+    level: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"box": self.box.to_dict(), "label": self.label, "level": self.level}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> BoxSpec:
+        return cls(ParameterBox.from_dict(d["box"]), d["label"], float(d["level"]))
+
+
+def box_label(bounds: Mapping[str, tuple[float, float]]) -> str:
+    """The short label of a box (part of its jobs' seeds): ``"±15°, c∈[0.7, 1.4]"`` — a symmetric roll as ``±b°``,
+    another roll range as ``roll∈[lo, hi]°``, contrast as ``c∈[lo, hi]``, any other parameter as ``name∈[lo, hi]``."""
+    parts = []
+    for k, (lo, hi) in bounds.items():
+        if k == "roll_deg":
+            parts.append(f"±{hi:g}°" if lo == -hi else f"roll∈[{lo:g}, {hi:g}]°")
+        else:
+            parts.append(f"{'c' if k == 'contrast' else k}∈[{lo:g}, {hi:g}]")
+    return ", ".join(parts)
+
+
+def roll_box(half_width_deg: float) -> BoxSpec:
+    """The 1-D box roll ∈ [−b, b] degrees."""
+    b = abs(float(half_width_deg))
+    bounds = {"roll_deg": (-b, b)}
+    return BoxSpec(ParameterBox(bounds), box_label(bounds), b)
+
+
+def roll_contrast_box(half_width_deg: float, contrast: tuple[float, float]) -> BoxSpec:
+    """The 2-D box roll ∈ [−b, b] degrees × contrast ∈ [lo, hi]."""
+    b = abs(float(half_width_deg))
+    bounds = {"roll_deg": (-b, b), "contrast": (float(contrast[0]), float(contrast[1]))}
+    return BoxSpec(ParameterBox(bounds), box_label(bounds), b)
+
+
+@dataclass(frozen=True)
+class Block:
+    """One cross product samples × boxes × methods × budgets.
+
+    Attributes:
+        boxes, methods, budgets: the factors.
+        role: "main" (compared searches), "reference" (dense grid: the true worst case), "landscape" (dense
+            grid on a few images for the heat map).
+        kind: "search", "pnp" (the PnP-solver comparison: one job per image; boxes/methods/budgets unused) or
+            "risk" (a failure-probability estimate per image, box, method and budget).
+        max_samples: only the first ``max_samples`` samples (None: all).
+        chain: per (sample, method), run boxes in order and, once a breach is found at a box, record the larger
+            boxes as implied breaches without searching (used for the smallest breaching roll budget; boxes
+            must be nested, over the same parameters, and sorted by level). Each chained block is a chain of its
+            own (two blocks' chains never imply each other's boxes).
+        options: per-method keyword options for the search (e.g. ``{"grid": {"counts": [1201]}}``).
+    """
+
+    boxes: tuple[BoxSpec, ...] = ()
+    methods: tuple[str, ...] = ()
+    budgets: tuple[Budget, ...] = ()
+    role: Role = Role.MAIN
+    kind: JobKind = JobKind.SEARCH
+    max_samples: int | None = None
+    chain: bool = False
+    options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.role not in ROLES:
+            raise ValueError(f"Block: role must be one of {ROLES}, got {self.role!r}")
+        if self.kind not in JOB_KINDS:
+            raise ValueError(f"Block: kind must be one of {JOB_KINDS}, got {self.kind!r}")
+        object.__setattr__(self, "role", Role(self.role))
+        object.__setattr__(self, "kind", JobKind(self.kind))
+        if self.kind in (JobKind.SEARCH, JobKind.RISK) and not (self.boxes and self.methods and self.budgets):
+            raise ValueError(f"Block: a {self.kind} block needs at least one box, one method and one budget")
+        if self.kind == JobKind.RISK and (self.chain or self.role != Role.MAIN):
+            raise ValueError("Block: a risk block is a main block without a chain")
+        if self.chain:
+            levels = [b.level for b in self.boxes]
+            if levels != sorted(levels):
+                raise ValueError(f"Block: chained boxes must be sorted by level, got {levels}")
+            names = {b.box.names for b in self.boxes}
+            if len(names) > 1:
+                raise ValueError(f"Block: chained boxes must share their parameters, got {sorted(names)}")
+
+
+@dataclass(frozen=True)
+class Job:
+    """One unit of work: one search (or PnP comparison) on one sample. Rows of the store are keyed by ``key``."""
+
+    experiment: str
+    sample_id: str
+    sample_fp: str
+    sample_index: int
+    kind: JobKind
+    role: Role
+    method: str
+    box: BoxSpec | None
+    budget: Budget | None
+    seed: int
+    options: Mapping[str, Any]
+    context: str
+    chain: str | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", JobKind(self.kind))
+        object.__setattr__(self, "role", Role(self.role))
+
+    def identity(self) -> dict[str, Any]:
+        """Everything that determines the job's result (the key is its digest)."""
+        return {
+            "experiment": self.experiment,
+            "sample_id": self.sample_id,
+            "sample_fp": self.sample_fp,
+            "kind": self.kind.value,
+            "role": self.role.value,
+            "method": self.method,
+            "box": None if self.box is None else self.box.to_dict(),
+            "budget": None if self.budget is None else self.budget.to_dict(),
+            "seed": self.seed,
+            "options": dict(self.options),
+            "context": self.context,
+        }
+
+    @property
+    def key(self) -> str:
+        return digest(self.identity(), 40)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = self.identity()
+        d.update(sample_index=self.sample_index, chain=self.chain)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Job:
+        return cls(
+            experiment=d["experiment"], sample_id=d["sample_id"], sample_fp=d["sample_fp"],
+            sample_index=int(d["sample_index"]),
+            kind=d["kind"], role=d["role"], method=d["method"],
+            box=None if d["box"] is None else BoxSpec.from_dict(d["box"]),
+            budget=None if d["budget"] is None else Budget.from_dict(d["budget"]),
+            seed=int(d["seed"]), options=dict(d["options"]), context=d["context"], chain=d.get("chain"),
+        )
+
+
+def default_figures(blocks: Sequence[Block]) -> tuple[str, ...]:
+    """The figures a campaign shows when it declares none (e.g. a store written before figures were declared),
+    from what its blocks hold (see :data:`FIGURES`)."""
+    out: set[str] = set()
+    for b in blocks:
+        if b.kind in (JobKind.PNP, JobKind.RISK):
+            out.add(b.kind.value)
+        elif b.role in (Role.REFERENCE, Role.LANDSCAPE):
+            out.add("landscape")
+        elif b.chain:
+            out.add("distance")
+        else:
+            if len(b.boxes) > 1:
+                out.add("survival")
+            if len(b.budgets) > 1:
+                out.add("runtime")
+            if len(b.boxes) == 1 and len(b.budgets) == 1:
+                out.update(("convergence", "progress", "per_image"))
+    return tuple(f for f in FIGURES if f in out)
+
+
+@dataclass(frozen=True)
+class CampaignSpec:
+    """A campaign: shared settings plus blocks. :meth:`expand` turns it into jobs for a list of sample ids.
+
+    Attributes:
+        name: experiment name ("audit", "spatial-1d", …); part of every job key.
+        blocks: the cross products.
+        seed: base of the seed stream.
+        eps_safe_m, penalty_m, conf_threshold, pnp: the pipeline settings (paper: 1000 m, 5000 m, 0.25).
+        lipschitz: optional Lipschitz constant of L in real units (m per unit of each parameter, or one number
+            for the Euclidean norm) — with it, searches that keep a cover of the box can *certify* a sample.
+        notes: free text for the report (budgets chosen, deviations from the paper).
+        figures: the report's figures (names from :data:`FIGURES`; the report draws them in that order);
+            empty: :func:`default_figures` of the blocks. Presentation only: not part of any job key.
+        clock: what time budgets are measured on (:data:`vbl_robust.search.CLOCKS`): ``"wall"``, or
+            ``"process"`` (CPU seconds of the evaluating process, which other work on the machine does not move).
+            Part of the job context when not ``"wall"`` (so the keys of wall-clock campaigns stay as they were).
+        sustain: ``None`` — every sample is one image and a search job maximises its error; an integer ``k`` — a
+            *sequence campaign*: every sample is an :class:`~vbl_robust.data.ApproachSequence`, one θ is held over
+            its frames and a search job maximises the error sustained over ``k`` consecutive frames
+            (:class:`~vbl_robust.sequences.SequenceObjective`). Part of the job context when set.
+        monitor_px: a runtime monitor of the pipeline: poses whose PnP reprojection residual is above this many
+            pixels become flagged failures (:class:`~vbl_robust.pipeline.Objective` ``max_reproj_px``). Part of the
+            job context when set.
+        monitor_sigma_m: a runtime monitor for a detector that says how sure it is: poses whose corners' σ,
+            propagated through PnP, is above this many metres become flagged failures (``Objective``
+            ``max_sigma_m``). Part of the job context when set.
+    """
+
+    name: str
+    blocks: tuple[Block, ...]
+    seed: int = 0
+    eps_safe_m: float = EPS_SAFE_M
+    penalty_m: float = PENALTY_M
+    conf_threshold: float = CONF_THRESHOLD
+    pnp: str = "ippe_lm"
+    lipschitz: float | tuple[float, ...] | None = None
+    notes: str = ""
+    figures: tuple[str, ...] = ()
+    clock: str = "wall"
+    sustain: int | None = None
+    monitor_px: float | None = None
+    monitor_sigma_m: float | None = None
+
+    def __post_init__(self) -> None:
+        from ..search import CLOCKS
+
+        if self.clock not in CLOCKS:
+            raise ValueError(f"CampaignSpec: clock must be one of {sorted(CLOCKS)}, got {self.clock!r}")
+        unknown = [f for f in self.figures if f not in FIGURES]
+        if unknown:
+            raise ValueError(f"CampaignSpec: unknown figure(s) {unknown}; figures are {FIGURES}")
+        if self.sustain is not None and (isinstance(self.sustain, bool) or not isinstance(self.sustain, int)
+                                         or self.sustain < 1):
+            raise ValueError(f"sustain: need an integer >= 1 (frames), got {self.sustain!r}")
+        if self.sustain is not None and any(b.kind != JobKind.SEARCH for b in self.blocks):
+            raise ValueError("CampaignSpec: a sequence campaign (sustain set) holds search blocks only")
+        if self.monitor_px is not None and not (math.isfinite(self.monitor_px) and self.monitor_px > 0):
+            raise ValueError(f"--monitor-residual must be a finite number of pixels > 0, got {self.monitor_px}")
+        if self.monitor_px is not None and self.sustain is not None:
+            raise ValueError("--monitor-residual applies to image campaigns, not to sequences (--sequences)")
+        if self.monitor_sigma_m is not None and not (math.isfinite(self.monitor_sigma_m) and self.monitor_sigma_m > 0):
+            raise ValueError(f"--monitor-sigma must be a finite number of metres > 0, got {self.monitor_sigma_m}")
+        if self.monitor_sigma_m is not None and self.sustain is not None:
+            raise ValueError("--monitor-sigma applies to image campaigns, not to sequences (--sequences)")
+        object.__setattr__(self, "figures", tuple(self.figures))
+
+    def check(self) -> None:
+        """Refuse, before any work, a campaign the pipeline cannot run as asked: ``ValueError``, one line naming
+        the setting and its value (a box outside a perturbation family's domain, an unknown PnP solver or search
+        method, a method given twice in a block, a Lipschitz constant of the wrong length). Without this such a
+        campaign would run and record every job as failed — "every image unsafe" from a typing error."""
+        from ..perturb import Perturbation
+        from ..pnp import SOLVERS
+        from ..search import METHODS
+        from ..search.bounds import check_lipschitz
+
+        if self.pnp not in SOLVERS:
+            raise ValueError(f"pnp: unknown solver {self.pnp!r}; solvers are {', '.join(SOLVERS)}")
+        from ..risk import RISK_METHODS
+
+        for blk in self.blocks:
+            if blk.kind == JobKind.PNP:
+                continue
+            known = RISK_METHODS if blk.kind == JobKind.RISK else METHODS
+            unknown = [m for m in blk.methods if m not in known]
+            if unknown:
+                raise ValueError(f"methods: unknown method(s) {unknown}; methods are {', '.join(known)}")
+            twice = sorted({m for m in blk.methods if blk.methods.count(m) > 1})
+            if twice:
+                raise ValueError(f"methods: {', '.join(twice)} given more than once")
+            graded = [m for m in blk.methods if blk.kind != JobKind.RISK and METHODS[m].needs_gradient]
+            if self.monitor_sigma_m is not None and graded:  # the σ monitor reads the black-box path only
+                raise ValueError(f"--monitor-sigma: a gradient search ({', '.join(graded)}) cannot run under the σ "
+                                 "monitor; leave it out of --methods")
+            for box in blk.boxes:
+                try:
+                    Perturbation(box.box)
+                    check_lipschitz(self.lipschitz, "2", box.box.dim)
+                except ValueError as exc:
+                    raise ValueError(f"box {box.label}: {exc}") from None
+            if "grid" in blk.methods:  # a lattice beyond MAX_GRID_POINTS is refused here, not as failed jobs
+                from ..search import make_optimizer
+
+                for box in blk.boxes:
+                    for budget in blk.budgets:
+                        try:
+                            make_optimizer("grid", box.box, max_evals=budget.max_evals, **blk.options.get("grid", {}))
+                        except ValueError as exc:
+                            raise ValueError(f"dense grid on box {box.label}: {exc}") from None
+
+    @property
+    def unit(self) -> str:
+        """What one sample is, for tables and text: ``"image"``, or ``"sequence"`` in a sequence campaign."""
+        return "image" if self.sustain is None else "sequence"
+
+    def check_samples(self, samples: Sequence[Any]) -> None:
+        """Refuse, before any work, samples this campaign cannot run on: ``ValueError``, one line — images given to
+        a sequence campaign or sequences to an image campaign, or a sequence shorter than ``sustain`` frames
+        (every job of it would fail)."""
+        for s in samples:
+            frames = getattr(s, "samples", None)
+            if self.sustain is None and frames is not None:
+                raise ValueError(f"sample {s.id!r} is an approach sequence: a campaign of sequences needs sustain")
+            if self.sustain is not None and frames is None:
+                raise ValueError(f"sample {s.id!r} is one image: a sequence campaign (sustain {self.sustain}) needs "
+                                 "approach sequences")
+            if self.sustain is not None and len(frames) < self.sustain:
+                raise ValueError(f"sustain: need an integer k with 1 <= k <= {len(frames)} (sequence {s.id!r} has "
+                                 f"{len(frames)} frames), got {self.sustain}")
+
+    @property
+    def report_figures(self) -> tuple[str, ...]:
+        """The figures the report draws: the declared ones, else :func:`default_figures` of the blocks (with
+        ``sequences`` for a sequence campaign)."""
+        if self.figures:
+            return self.figures
+        found = default_figures(self.blocks) + (("sequences",) if self.sustain is not None else ())
+        return tuple(f for f in FIGURES if f in found)
+
+    def settings(self) -> dict[str, Any]:
+        """The settings that change results (part of the job context)."""
+        out = {"eps_safe_m": self.eps_safe_m, "penalty_m": self.penalty_m, "conf_threshold": self.conf_threshold,
+               "pnp": self.pnp, "lipschitz": self.lipschitz}
+        if self.clock != "wall":
+            out["clock"] = self.clock
+        if self.sustain is not None:
+            out["sustain"] = self.sustain
+        if self.monitor_px is not None:
+            out["monitor_px"] = self.monitor_px
+        if self.monitor_sigma_m is not None:
+            out["monitor_sigma_m"] = self.monitor_sigma_m
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name, "seed": self.seed, **self.settings(), "notes": self.notes, "figures": list(self.figures),
+            "blocks": [
+                {"boxes": [b.to_dict() for b in blk.boxes], "methods": list(blk.methods),
+                 "budgets": [b.to_dict() for b in blk.budgets], "role": blk.role.value, "kind": blk.kind.value,
+                 "max_samples": blk.max_samples, "chain": blk.chain, "options": {k: dict(v) for k, v in blk.options.items()}}
+                for blk in self.blocks
+            ],
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> CampaignSpec:
+        blocks = tuple(
+            Block(boxes=tuple(BoxSpec.from_dict(b) for b in blk["boxes"]), methods=tuple(blk["methods"]),
+                  budgets=tuple(Budget.from_dict(b) for b in blk["budgets"]), role=blk["role"], kind=blk["kind"],
+                  max_samples=blk["max_samples"], chain=blk["chain"], options=blk["options"])
+            for blk in d["blocks"]
+        )
+        lip = d.get("lipschitz")
+        return cls(name=d["name"], blocks=blocks, seed=int(d["seed"]), eps_safe_m=float(d["eps_safe_m"]),
+                   penalty_m=float(d["penalty_m"]), conf_threshold=float(d["conf_threshold"]), pnp=d["pnp"],
+                   lipschitz=tuple(lip) if isinstance(lip, list) else lip, notes=d.get("notes", ""),
+                   figures=tuple(d.get("figures", ())), clock=d.get("clock", "wall"), sustain=d.get("sustain"),
+                   monitor_px=d.get("monitor_px"), monitor_sigma_m=d.get("monitor_sigma_m"))
+
+    def context(self, detector_id: str) -> str:
+        """Digest of what every job of this campaign shares: the settings and the detector identity."""
+        return digest({"settings": self.settings(), "detector": detector_id}, 24)
+
+    def search_methods(self) -> set[str]:
+        """The methods its search blocks run."""
+        return {m for b in self.blocks if b.kind == JobKind.SEARCH for m in b.methods}
+
+    def with_method_options(self, options: Mapping[str, Mapping[str, Any]], *, strict: bool = True) -> CampaignSpec:
+        """This campaign with ``options[method]`` merged into the options of every search block that runs
+        ``method`` (over the block's own, e.g. a grid's counts stay unless named). Raises a ValueError naming the
+        method or option when no block runs a method (unless not ``strict``: such methods are then ignored, as
+        when one option set serves several experiments), or a method rejects its options (checked here, on each
+        block's first box, so that a campaign never starts with options its searches would refuse). The options
+        are part of the job keys: a run with other options never resumes one without them."""
+        from ..search import make_optimizer
+
+        blocks, used = [], set()
+        for blk in self.blocks:
+            touched = [m for m in blk.methods if m in options] if blk.kind == JobKind.SEARCH else []
+            if not touched:
+                blocks.append(blk)
+                continue
+            merged = {m: dict(v) for m, v in blk.options.items()}
+            for m in touched:
+                merged[m] = {**merged.get(m, {}), **dict(options[m])}
+                if blk.boxes:
+                    try:
+                        make_optimizer(m, blk.boxes[0].box, **merged[m])
+                    except (TypeError, ValueError) as exc:
+                        raise ValueError(f"{self.name}: options {merged[m]} of method {m!r}: {exc}") from None
+            used.update(touched)
+            blocks.append(replace(blk, options=merged))
+        missing = sorted(set(options) - used)
+        if missing and strict:
+            raise ValueError(f"{self.name}: no search runs method(s) {missing} (its methods: "
+                             f"{sorted(self.search_methods())})")
+        return replace(self, blocks=tuple(blocks))
+
+    def expand(self, samples: Sequence[tuple[str, str]], *, detector_id: str = "") -> list[Job]:
+        """All jobs for ``samples`` = ``(id, geometry fingerprint)`` pairs, ordered by sample, then block, then
+        method, budget, box (chained jobs in box order).
+
+        The fingerprint (see :func:`vbl_robust.campaigns.provenance.sample_fingerprint`) makes a job key change
+        when a sample with the same id has other geometry, while growing a dataset keeps the existing keys.
+        """
+        ids = [sid for sid, _ in samples]
+        if len(set(ids)) != len(ids):
+            raise ValueError("CampaignSpec.expand: sample ids must be unique")
+        ctx = self.context(detector_id)
+        jobs: list[Job] = []
+        for i, (sid, fp) in enumerate(samples):
+            for blk in self.blocks:
+                if blk.max_samples is not None and i >= blk.max_samples:
+                    continue
+                if blk.kind == JobKind.PNP:
+                    jobs.append(Job(self.name, sid, fp, i, JobKind.PNP, blk.role, "pnp", None, None,
+                                    derive_seed(self.seed, sid, "pnp"), {}, ctx))
+                    continue
+                for method in blk.methods:
+                    opts = dict(blk.options.get(method, {}))
+                    for budget in blk.budgets:
+                        # the boxes' labels keep the chains of two blocks apart (e.g. one per perturbation family)
+                        chain = (digest([sid, blk.role.value, method, budget.to_dict(), [b.label for b in blk.boxes]], 16)
+                                 if blk.chain else None)
+                        for box in blk.boxes:
+                            seed = derive_seed(self.seed, sid, method, box.label, budget.label)
+                            jobs.append(Job(self.name, sid, fp, i, blk.kind, blk.role, method, box, budget, seed,
+                                            opts, ctx, chain))
+        return jobs
