@@ -53,8 +53,8 @@ def test_an_incomplete_run_exits_1_and_a_rerun_completes_it(tmp_path, monkeypatc
     assert res.exit_code == 1 and "1 new jobs" in res.output and "run incomplete" in res.output, res.output
     paper = ["reproduce", "paper", "--out", str(tmp_path / "paper"), "--images", "2", "--workers", "1",
              "--max-evals", "4", "--grid-step", "0", "--iterations", "2", "--time-budgets", "0.05",
-             "--eval-budgets", "4", "--no-landscape", *SMALL]
-    res = runner.invoke(app, paper)
+             "--eval-budgets", "4", "--no-landscape", "--no-report", *SMALL]  # reports of incomplete runs:
+    res = runner.invoke(app, paper)  # tests/report/test_build.py
     assert res.exit_code == 1 and res.output.count("run incomplete") == 7 and "claims:" in res.output, res.output
     monkeypatch.setattr(runner_mod, "run_sample_task", real)
     res = runner.invoke(app, args)
@@ -317,7 +317,8 @@ def test_a_full_disk_ends_the_run_in_one_line_and_keeps_the_stored_jobs(tmp_path
         return real_commit(self, rows)
 
     monkeypatch.setattr(ResultStore, "commit", full_after_one)
-    args = ["audit", "--out", str(out), "--n", "2", "--max-evals", "5", "--methods", "random", *SMALL]
+    # one image: its random job and its landscape grid, the second commit fails (no worker processes to start)
+    args = ["audit", "--out", str(out), "--n", "1", "--max-evals", "5", "--methods", "random", *SMALL]
     res = runner.invoke(app, args)
     assert res.exit_code == 1 and "Traceback" not in res.output, res.output
     assert "error: the results store: database or disk is full (jobs stored before it are kept" in res.output
