@@ -17,7 +17,7 @@ SMALL = ["--oracle", "--oracle-noise", "0.5", "--width", "128", "--height", "128
 def test_audit_small_run_resumes_and_exports(tmp_path):
     out = tmp_path / "run"
     args = ["audit", "--out", str(out), "--n", "2", "--roll", "10", "--contrast", "0.8,1.2", "--methods",
-            "georobust,random", "--max-evals", "6", "--csv", str(tmp_path / "a.csv"), "--parquet",
+            "georobust,random", "--max-evals", "6", "--workers", "1", "--csv", str(tmp_path / "a.csv"), "--parquet",
             str(tmp_path / "a.parquet"), *SMALL]
     res = runner.invoke(app, args)
     assert res.exit_code == 0, res.output
@@ -90,7 +90,8 @@ def test_audit_lipschitz_can_certify(tmp_path):
 
 def test_reproduce_and_report_commands(tmp_path):
     out = tmp_path / "conv"
-    res = runner.invoke(app, ["reproduce", "convergence", "--images", "2", "--iterations", "4", "--out", str(out), *SMALL])
+    res = runner.invoke(app, ["reproduce", "convergence", "--images", "2", "--iterations", "4", "--workers", "1",
+                              "--out", str(out), *SMALL])
     assert res.exit_code == 0, res.output
     assert (out / "figures" / "convergence.png").exists()
     (out / "report.html").unlink()
