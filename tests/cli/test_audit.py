@@ -17,7 +17,7 @@ SMALL = ["--oracle", "--oracle-noise", "0.5", "--width", "128", "--height", "128
 def test_audit_small_run_resumes_and_exports(tmp_path):
     out = tmp_path / "run"
     args = ["audit", "--out", str(out), "--n", "2", "--roll", "10", "--contrast", "0.8,1.2", "--methods",
-            "georobust,random", "--max-evals", "6", "--csv", str(tmp_path / "a.csv"), "--parquet",
+            "georobust,random", "--max-evals", "6", "--workers", "1", "--csv", str(tmp_path / "a.csv"), "--parquet",
             str(tmp_path / "a.parquet"), *SMALL]
     res = runner.invoke(app, args)
     assert res.exit_code == 0, res.output
@@ -53,8 +53,8 @@ def test_an_incomplete_run_exits_1_and_a_rerun_completes_it(tmp_path, monkeypatc
     assert res.exit_code == 1 and "1 new jobs" in res.output and "run incomplete" in res.output, res.output
     paper = ["reproduce", "paper", "--out", str(tmp_path / "paper"), "--images", "2", "--workers", "1",
              "--max-evals", "4", "--grid-step", "0", "--iterations", "2", "--time-budgets", "0.05",
-             "--eval-budgets", "4", "--no-landscape", *SMALL]
-    res = runner.invoke(app, paper)
+             "--eval-budgets", "4", "--no-landscape", "--no-report", *SMALL]  # reports of incomplete runs:
+    res = runner.invoke(app, paper)  # tests/report/test_build.py
     assert res.exit_code == 1 and res.output.count("run incomplete") == 7 and "claims:" in res.output, res.output
     monkeypatch.setattr(runner_mod, "run_sample_task", real)
     res = runner.invoke(app, args)
@@ -90,7 +90,8 @@ def test_audit_lipschitz_can_certify(tmp_path):
 
 def test_reproduce_and_report_commands(tmp_path):
     out = tmp_path / "conv"
-    res = runner.invoke(app, ["reproduce", "convergence", "--images", "2", "--iterations", "4", "--out", str(out), *SMALL])
+    res = runner.invoke(app, ["reproduce", "convergence", "--images", "2", "--iterations", "4", "--workers", "1",
+                              "--out", str(out), *SMALL])
     assert res.exit_code == 0, res.output
     assert (out / "figures" / "convergence.png").exists()
     (out / "report.html").unlink()
@@ -311,7 +312,8 @@ def test_a_full_disk_ends_the_run_in_one_line_and_keeps_the_stored_jobs(tmp_path
         return real_commit(self, rows)
 
     monkeypatch.setattr(ResultStore, "commit", full_after_one)
-    args = ["audit", "--out", str(out), "--n", "2", "--max-evals", "5", "--methods", "random", *SMALL]
+    # one image: its random job and its landscape grid, the second commit fails (no worker processes to start)
+    args = ["audit", "--out", str(out), "--n", "1", "--max-evals", "5", "--methods", "random", *SMALL]
     res = runner.invoke(app, args)
     assert res.exit_code == 1 and "Traceback" not in res.output, res.output
     assert "error: the results store: database or disk is full (jobs stored before it are kept" in res.output

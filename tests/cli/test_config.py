@@ -21,12 +21,12 @@ def test_a_campaign_file_runs_the_command_line_overrides_it_and_the_run_keeps_it
                                                                                               monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "campaign.yaml").write_text(
-        "command: audit\nn: 2\nmax-evals: 6\nmethods: random\noracle: true\noracle_noise: 0.5\nwidth: 96\n"
+        "command: audit\nn: 1\nmax-evals: 6\nmethods: random\noracle: true\noracle_noise: 0.5\nwidth: 96\n"
         "height: 96\nperturb: [blur_px]\nearly-stop: false\nlandscape: false\nout: runs/a\n")
     res = runner.invoke(app, ["-q", "audit", "--config", "campaign.yaml", "--max-evals", "8"])
     assert res.exit_code == 0, res.output
     kept = yaml.safe_load((tmp_path / "runs/a/config.yaml").read_text())
-    assert kept["command"] == "audit" and kept["max_evals"] == 8 and kept["n"] == 2  # the override, the file
+    assert kept["command"] == "audit" and kept["max_evals"] == 8 and kept["n"] == 1  # the override, the file
     assert kept["perturb"] == ["blur_px"] and kept["early_stop"] is False and kept["seed"] == 0  # and a default
     assert "config" not in kept and "quiet" not in kept
     with sqlite3.connect(tmp_path / "runs/a/results.sqlite") as con:

@@ -21,7 +21,7 @@ def run_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("ro") / "run"
     res = runner.invoke(app, ["audit", "--oracle", "--n", "2", "--max-evals", "6", "--roll", "5", "--width", "96",
                               "--height", "96", "--methods", "georobust,random", "--no-report", "--quiet",
-                              "--out", str(out)])
+                              "--workers", "1", "--out", str(out)])
     assert res.exit_code == 0, res.output
     return out
 
