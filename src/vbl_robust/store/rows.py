@@ -234,7 +234,7 @@ def decode_points(blob: bytes | None) -> tuple[np.ndarray, np.ndarray]:
     return p.xs, p.fs
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class JobRow:
     """One finished job as the store holds it (what a worker produces and ``ResultStore.jobs`` returns).
 

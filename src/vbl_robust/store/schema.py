@@ -35,6 +35,7 @@ is refused with a one-line error.
 
 from __future__ import annotations
 
+import functools
 import json
 import sqlite3
 from collections.abc import Callable, Iterable, Mapping
@@ -58,6 +59,19 @@ def _same(v: Any) -> Any:
 
 def _json(v: Any) -> str | None:
     return None if v is None else json.dumps(v)
+
+
+@functools.lru_cache(maxsize=4096)
+def _box(text: str) -> BoxSpec:
+    """A stored box, decoded once per distinct text: the rows of a campaign share a few boxes (frozen: one object
+    serves every row, a large store's rows hold no copy each)."""
+    return BoxSpec.from_dict(json.loads(text))
+
+
+@functools.lru_cache(maxsize=4096)
+def _budget(text: str) -> Budget:
+    """A stored budget, decoded once per distinct text (as :func:`_box`)."""
+    return Budget.from_dict(json.loads(text))
 
 
 def _loads(v: str | None) -> Any:
@@ -184,10 +198,10 @@ JOBS = Table("jobs", (
     Column("box_label", "TEXT", "box_label", load=None),
     Column("box_level", "REAL", "box_level", load=None),
     Column("box_json", "TEXT", "box", lambda b: None if b is None else json.dumps(b.to_dict()),
-           lambda v: None if v is None else BoxSpec.from_dict(json.loads(v))),
+           lambda v: None if v is None else _box(v)),
     Column("budget_label", "TEXT", "budget_label", load=None),
     Column("budget_json", "TEXT", "budget", lambda b: None if b is None else json.dumps(b.to_dict()),
-           lambda v: None if v is None else Budget.from_dict(json.loads(v))),
+           lambda v: None if v is None else _budget(v)),
     Column("seed", "INTEGER", "seed"),
     Column("options_json", "TEXT", "options", lambda o: json.dumps(dict(o)), lambda v: _loads(v) or {}),
     Column("chain", "TEXT", "chain"),
