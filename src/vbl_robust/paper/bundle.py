@@ -113,7 +113,7 @@ def write_experiment(run: Path, out: Path, stores: bool = False, keep: Path | No
     from ..report import build_report
 
     out.mkdir(parents=True, exist_ok=True)
-    with ResultStore.open_existing(run) as store:
+    with ResultStore.open_existing(run, points_on_demand=True) as store:  # bounded memory, whatever the store's size
         prov = provenance(store)
         export(store, out / "jobs.parquet")
         if stores:
