@@ -86,14 +86,14 @@ def main() -> None:
     ap.add_argument("--out", type=Path, help="write the table here (Markdown) as well as printing it")
     ap.add_argument("--keep", type=Path, help="build the stores under this directory and keep them")
     args = ap.parse_args()
+    from vbl_robust.store import ResultStore
+
     exe = str(Path(sys.executable).with_name("vbl-robust"))
     lines = ["| copies | jobs | store MB | report peak RSS MB | report s | bundle --stores peak RSS MB | bundle s |",
              "|---:|---:|---:|---:|---:|---:|---:|"]
     base = args.keep or Path(tempfile.mkdtemp(prefix="vbl-robust-memory-"))
     try:
         for c in args.copies:
-            from vbl_robust.store import ResultStore
-
             with ResultStore.open_existing(args.source) as s:
                 name = s.require_campaign().name
             run = base / f"copies{c}" / name  # bundle reads ROOT/<experiment>/results.sqlite

@@ -435,11 +435,12 @@ class ResultStore:
             d = dict(zip(cols, r[len(lead):], strict=True))
             if d["key"] in self._left_out:
                 continue
+            read = {}
             if lazy and with_points and r[1]:
-                d["points"] = StoredPoints(partial(self._on_demand, "points", r[0]))
+                read["points"] = StoredPoints(partial(self._on_demand, "points", r[0]))
             if lazy and with_trace and r[2]:
-                d["trace_json"] = StoredTrace(partial(self._on_demand, "trace_json", r[0]))
-            out.append(job_row(d))
+                read["trace"] = StoredTrace(partial(self._on_demand, "trace_json", r[0]))
+            out.append(job_row(d, **read))
         return out
 
     def _column_at(self, column: str, rowid: int) -> Any:

@@ -45,7 +45,7 @@ from typing import Any
 
 from ..search.result import TraceRow
 from ..specs.campaign import BoxSpec, Budget
-from .rows import Corners, JobRow, Points, RunProvenance, RunRecord, StoredPoints, StoredTrace
+from .rows import Corners, JobRow, Points, RunProvenance, RunRecord
 
 #: Version of the layout below (``PRAGMA user_version``).
 SCHEMA_VERSION = 5
@@ -274,11 +274,11 @@ def to_columns(table: Table, row: Any, names: Iterable[str] | None = None) -> tu
     return tuple(by[n].dump(_get(row, by[n].field)) for n in names)
 
 
-def job_row(d: Mapping[str, Any]) -> JobRow:
-    """A job row from the columns read (``points`` / ``trace_json`` may be left out: None / empty; either may be
-    given already read: :class:`~.rows.StoredPoints`, :class:`~.rows.StoredTrace`)."""
-    return JobRow(**{c.field: v if isinstance(v := d[c.name], StoredPoints | StoredTrace) else c.load(v)
-                     for c in JOBS.columns if c.load is not None and c.name in d})
+def job_row(d: Mapping[str, Any], **read: Any) -> JobRow:
+    """A job row from the columns read (``points`` / ``trace_json`` may be left out: None / empty); ``read``: fields
+    given already read, e.g. ``points`` / ``trace`` left in the store (:class:`~.rows.StoredPoints`,
+    :class:`~.rows.StoredTrace`)."""
+    return JobRow(**{c.field: c.load(d[c.name]) for c in JOBS.columns if c.load is not None and c.name in d}, **read)
 
 
 def run_record(d: Mapping[str, Any]) -> RunRecord:
