@@ -4,8 +4,9 @@ runner or builder, and the line between the pipeline's failures and the tool's i
 from __future__ import annotations
 
 from vbl_robust.campaigns.work import JOB_RUNNERS
+from vbl_robust.consent import CODE_KINDS, DetectorKind
 from vbl_robust.constants import FAILURE_REASONS, FailureReason, NotMeasured
-from vbl_robust.detect.shipped import BUILDERS, CODE_KINDS, DetectorKind, DetectorSpec
+from vbl_robust.detect.shipped import BUILDERS, DetectorSpec
 from vbl_robust.specs.kinds import JobKind, Role
 
 

@@ -10,6 +10,7 @@ from vbl_robust.constants import BreachKind
 from vbl_robust.search import TraceRow
 from vbl_robust.specs.campaign import Budget, roll_box
 from vbl_robust.store import JobRow, Points
+from vbl_robust.store.rows import StoredPoints
 
 
 def row(**kw):
@@ -143,6 +144,14 @@ def test_reference_rows_restrict_a_dense_grid_to_nested_boxes():
     # each pseudo-row keeps the grid's points inside its box (the kind of its breach needs them)
     assert [len(r.points) for r in out] == [11, 21, 31]
     assert [mx.breach_kind(r, 1000.0) for r in out] == [BreachKind.FLAGGED, BreachKind.FLAGGED, BreachKind.MISLEADING]
+    # a grid read on demand (a large store's) is restricted on demand: the same points, none held per box
+    grid = grid_row(xs, fs, 61)
+    eager = grid.points
+    lazy = mx.reference_rows([grid.replace(points=StoredPoints(lambda raw=False: eager.to_blob() if raw else eager))],
+                             boxes, 1000.0, 5000.0)
+    assert all(isinstance(r.points, StoredPoints) for r in lazy)
+    assert [r.points for r in lazy] == [r.points for r in out] and [r.worst_m for r in lazy] == [r.worst_m for r in out]
+    assert [r.points.to_blob() for r in lazy] == [r.points.to_blob() for r in out]
     fs[30] = 10.0
     out = mx.reference_rows([grid_row(xs, fs, 61)], boxes, 1000.0, 5000.0)
     assert [r.worst_m for r in out] == [10.0, 10.0, 3000.0]

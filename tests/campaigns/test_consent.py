@@ -11,8 +11,9 @@ import pytest
 from typer.testing import CliRunner
 
 from vbl_robust.cli import app
+from vbl_robust.consent import CODE_KINDS, consent_needed, refuse_without_consent
 from vbl_robust.detect.oracle import OracleDetector
-from vbl_robust.detect.shipped import CODE_KINDS, DetectorSpec, consent_needed, refuse_without_consent
+from vbl_robust.detect.shipped import DetectorSpec
 from vbl_robust.store import ResultStore, pack_store
 
 runner = CliRunner()

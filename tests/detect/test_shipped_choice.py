@@ -5,9 +5,10 @@ import json
 
 import pytest
 
+from vbl_robust.consent import refuse_untrusted
 from vbl_robust.detect import shipped
 from vbl_robust.detect.engines import resolve_engine
-from vbl_robust.detect.shipped import DetectorSpec, refuse_untrusted
+from vbl_robust.detect.shipped import DetectorSpec
 
 
 @pytest.fixture()

@@ -7,6 +7,9 @@ import html
 import json
 import re
 import sqlite3
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
@@ -300,3 +303,31 @@ def test_a_risk_runs_first_screen_gives_its_pooled_failure_probability(tmp_path,
     first = build_report(tmp_path).read_text().split("<h2", 2)[1]
     assert first.startswith(">Safe where, and how sure")
     assert f"p_fail {100 * p.p_fail:.3g} % [{100 * p.ci.low:.3g}, {100 * p.ci.high:.3g}] (mc, 95 %)" in first
+
+
+def test_only_the_gallerys_pictures_load_torch_and_the_rows_are_gone_by_then(run, tmp_path):
+    """A large store's rows and torch are never held at once (a 1 GB store reported within 1 GB, BENCHMARKS.md):
+    nothing the report imports loads torch, no section before the gallery does, and the rows are released before
+    the gallery, drawn last but shown in its place."""
+    code = textwrap.dedent("""
+        import sys
+        import vbl_robust.cli.report
+        from vbl_robust.report import build as B
+        from vbl_robust.report.rows import Context
+        seen = {"torch on import": "torch" in sys.modules}
+        release = Context.release
+        def spy(self):
+            seen["torch at release"] = "torch" in sys.modules
+            release(self)
+            seen["rows after release"] = len(self.main) + len(self.__dict__.get("runs", ()))
+        Context.release = spy
+        B.build_report(sys.argv[1], sys.argv[2])
+        seen["torch at the end"] = "torch" in sys.modules
+        print(seen)
+    """)
+    out = subprocess.run([sys.executable, "-c", code, str(run), str(tmp_path)], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == str({"torch on import": False, "torch at release": False, "rows after release": 0,
+                               "torch at the end": True})
+    page = (tmp_path / "report.html").read_text()
+    assert re.findall(r"<h2>([^<]+)</h2>", page)[2].startswith("Worst cases: the 3 most severe")

@@ -47,6 +47,17 @@ def test_wal_mode_and_unique_keys(tmp_path):
         con.execute("INSERT INTO jobs (key, status) VALUES ('a', 'done')")
 
 
+
+def test_jobs_read_the_measured_or_the_unmeasured_alone_old_failed_rows_included(tmp_path):
+    with ResultStore(tmp_path / "r.sqlite") as st:
+        st.commit([row("a"), row("b", status="not measured", reason="tool_error: boom", verdict="not measured"),
+                   row("c", sample_index=1)])
+        st._con.execute("UPDATE jobs SET status = 'failed' WHERE key = 'c'")  # a store from before the name
+        assert [r.key for r in st.jobs(measured=False)] == ["b", "c"]
+        assert all(not r.measured for r in st.jobs(measured=False))
+        assert [r.key for r in st.jobs(measured=True)] == ["a"]
+        assert [r.key for r in st.jobs()] == ["a", "b", "c"]
+
 def test_points_round_trip_with_failed_values():
     xs = np.array([[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]])
     fs = np.array([0.5, np.nan, np.inf])

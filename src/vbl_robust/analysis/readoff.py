@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from ..campaigns.rebuild import row_result
+from ..campaigns.rebuild import result_fields, row_result
 from ..specs.campaign import Budget
 from ..store import JobRow, JobStatus, Points
 
@@ -21,7 +21,6 @@ def read_off(row: JobRow, budget: Budget, eps_safe_m: float, penalty_m: float) -
     """The row of ``budget`` (a time or an evaluation budget) read off the stored run ``row`` (with points): the
     best value and point, counts and trace of the evaluations within the budget; ``read_from`` = the run's
     budget label. A run not measured gives a row not measured for the budget."""
-    from ..campaigns.work import result_fields
     from ..search import at_budget
 
     base = row.replace(budget=budget, key=f"{row.key}@{budget.label}", read_from=row.budget_label, payload=None)

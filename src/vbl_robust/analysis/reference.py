@@ -8,6 +8,8 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from functools import partial
+from typing import Any
 
 import numpy as np
 
@@ -15,6 +17,7 @@ from ..constants import Verdict
 from ..specs.campaign import BoxSpec
 from ..stats import paired
 from ..store import JobRow, JobStatus, Points
+from ..store.rows import StoredPoints
 from .breach import survived
 
 #: ``method`` of the pseudo-rows of :func:`reference_rows`.
@@ -80,12 +83,19 @@ def reference_rows(ref_rows: Iterable[JobRow], boxes: Sequence[BoxSpec], eps_saf
                 bounds = list(zip(grid.lower, grid.upper, strict=True))
                 if counts is None or not lattice_covered(r.points.xs, bounds, counts, lo, hi):
                     continue
-            inside = _inside(r.points.xs, lo, hi)
-            pts = Points(r.points.xs[inside], r.points.fs[inside],
-                         tuple(c for c, k in zip(r.points.reasons, inside, strict=True) if k))
+            # a grid read on demand (a large store) is restricted on demand too: nothing held per box
+            pts = (StoredPoints(partial(_restricted, r.points, lo, hi)) if isinstance(r.points, StoredPoints)
+                   else _restricted(r.points, lo, hi))
             out.append(r.replace(method=REFERENCE_METHOD, box=b, worst_m=w, worst_x=None, points=pts, trace=(),
                                  verdict=Verdict.BREACH if w > eps_safe_m else Verdict.NO_BREACH_FOUND))
     return out
+
+
+def _restricted(points: Points, lower: Sequence[float], upper: Sequence[float], raw: bool = False) -> Any:
+    """The points of ``points`` inside the box ``[lower, upper]`` (``raw``: as stored bytes)."""
+    inside = _inside(points.xs, lower, upper)
+    out = Points(points.xs[inside], points.fs[inside], tuple(c for c, k in zip(points.reasons, inside, strict=True) if k))
+    return out.to_blob() if raw else out
 
 
 @dataclass(frozen=True)

@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import csv
 import json
+from collections.abc import Iterator
 from enum import Enum
 from pathlib import Path
 from typing import Any
 
-from ..specs.kinds import JobKind
-from ..store import ResultStore
+from ..specs.kinds import JobKind, Role
+from ..store import JobRow, ResultStore
 from ..store.payloads import RiskPayload, SequencePayload, WorstPayload
 
 COLUMNS = (
@@ -62,55 +63,86 @@ def _plain(v: Any) -> Any:
     return v
 
 
-def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
-    """Job rows as flat dicts, and the column names (``COLUMNS`` then ``worst_<parameter>`` columns);
-    ``failures`` is the JSON ``{reason: count}`` of the failed evaluations."""
-    from ..constants import EPS_SAFE_M
-    from .metrics import breach_kind, read_off, residual_bound
+class FlatRows:
+    """A store's job rows as flat dicts, read from the store one at a time (a reader of every row holds one): iterate
+    it for the dicts; :attr:`columns` after a whole iteration gives their column names (``COLUMNS``, then the
+    ``worst_<parameter>`` columns met, then a sequence's or a risk run's columns when some row had them).
+    ``failures`` is the JSON ``{reason: count}`` of the failed evaluations; a run that reads budgets off its trace
+    is followed by one line per read budget (the main rows only)."""
 
-    samples = store.samples()
-    camp = store.require_campaign() if store.holds_campaign() else None
-    eps, penalty = ((camp.stored_spec.get("eps_safe_m"), camp.stored_spec.get("penalty_m")) if camp else (None, None))
-    eps_kind = EPS_SAFE_M if eps is None else eps
-    ident = (camp.detector if camp else None) or {}
-    detector = {col: ident.get(key) for col, key in DETECTOR_COLUMNS.items()}
-    stored = store.jobs(with_trace=False, with_points=True)
-    if any(r.budget is not None and r.budget.reads for r in stored):
-        full = {r.key: r for r in store.jobs(role="main", with_points=True) if r.budget is not None and r.budget.reads}
-        stored = [x for r in stored for x in
-                  ([r] + ([read_off(full[r.key], b, eps, penalty) for b in r.budget.read_budgets()]
-                          if r.key in full else []))]
-    rows, params, sequences, has_risk = [], [], False, False
-    nominal = {r.sample_id: p.nominal.error_m for r in stored
-               if (p := WorstPayload.of(r)) is not None and p.nominal}  # L(0): the image's, whatever the job
-    for r in stored:
-        s = samples.get(r.sample_id)
-        b = {} if r.budget is None else r.budget.to_dict()
-        d = {c: _plain(getattr(r, c, None)) for c in COLUMNS}
-        d.update(detector)
-        d["nominal_m"] = nominal.get(r.sample_id)
-        d.update(slant_distance_m=None if s is None else s.slant_distance_m, envelope=None if s is None else s.envelope,
-                 max_evals=b.get("max_evals"), max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"),
-                 stop_at_breach=b.get("stop_at_breach"))
-        risk = RiskPayload.of(r) if r.kind == JobKind.RISK else None
-        if risk is not None:
-            has_risk = True
-            d.update({c: getattr(risk, c) for c in RISK_COLUMNS if c != "risk_verdict"}, risk_verdict=risk.verdict)
-        if r.kind == JobKind.SEARCH and r.measured:
-            kind = breach_kind(r, eps_kind)
-            d.update(breach_kind=None if kind is None else kind.value, residual_bound=residual_bound(r, eps_kind))
-        for name, v in (r.worst_x or {}).items():
-            col = f"worst_{name}"
-            if col not in params:
-                params.append(col)
-            d[col] = v
-        seq = None if r.read_from else SequencePayload.of(r)
-        if seq is not None:
-            sequences = True
-            d.update({c: getattr(seq.worst, c) for c in SEQUENCE_COLUMNS[:7]},
-                     nominal_sustained_m=seq.nominal.sustained_m, nominal_breached_frames=seq.nominal.breached_frames)
-        rows.append(d)
-    return rows, [*COLUMNS, *params, *(SEQUENCE_COLUMNS if sequences else ()), *(RISK_COLUMNS if has_risk else ())]
+    def __init__(self, store: ResultStore):
+        from ..constants import EPS_SAFE_M
+
+        self.store = store
+        self.samples = store.samples()
+        camp = store.require_campaign() if store.holds_campaign() else None
+        self.eps, self.penalty = ((camp.stored_spec.get("eps_safe_m"), camp.stored_spec.get("penalty_m")) if camp
+                                  else (None, None))
+        self.eps_kind = EPS_SAFE_M if self.eps is None else self.eps
+        ident = (camp.detector if camp else None) or {}
+        self.detector = {col: ident.get(key) for col, key in DETECTOR_COLUMNS.items()}
+        self.params: list[str] = []
+        self.sequences = self.has_risk = False
+
+    @property
+    def columns(self) -> list[str]:
+        return [*COLUMNS, *self.params, *(SEQUENCE_COLUMNS if self.sequences else ()),
+                *(RISK_COLUMNS if self.has_risk else ())]
+
+    def _rows(self, reads: bool) -> Iterator[JobRow]:
+        """Every stored row with its points (and the read-off rows after their run's, when ``reads``)."""
+        from .metrics import read_off
+
+        for r in self.store.iter_jobs(with_trace=reads, with_points=True):
+            yield r
+            if reads and r.role == Role.MAIN and r.budget is not None and r.budget.reads:
+                yield from (read_off(r, b, self.eps, self.penalty) for b in r.budget.read_budgets())
+
+    def __iter__(self) -> Iterator[dict[str, Any]]:
+        from .metrics import breach_kind, residual_bound
+
+        reads, nominal = False, {}
+        for r in self.store.iter_jobs(with_trace=False):  # a first pass: L(0), the image's whatever the job
+            reads |= r.budget is not None and r.budget.reads
+            if (p := WorstPayload.of(r)) is not None and p.nominal:
+                nominal[r.sample_id] = p.nominal.error_m
+        self.params, self.sequences, self.has_risk = [], False, False
+        for r in self._rows(reads):
+            s = self.samples.get(r.sample_id)
+            b = {} if r.budget is None else r.budget.to_dict()
+            d = {c: _plain(getattr(r, c, None)) for c in COLUMNS}
+            d.update(self.detector)
+            d["nominal_m"] = nominal.get(r.sample_id)
+            d.update(slant_distance_m=None if s is None else s.slant_distance_m,
+                     envelope=None if s is None else s.envelope, max_evals=b.get("max_evals"),
+                     max_seconds=b.get("max_seconds"), max_iters=b.get("max_iters"),
+                     stop_at_breach=b.get("stop_at_breach"))
+            risk = RiskPayload.of(r) if r.kind == JobKind.RISK else None
+            if risk is not None:
+                self.has_risk = True
+                d.update({c: getattr(risk, c) for c in RISK_COLUMNS if c != "risk_verdict"}, risk_verdict=risk.verdict)
+            if r.kind == JobKind.SEARCH and r.measured:
+                kind = breach_kind(r, self.eps_kind)
+                d.update(breach_kind=None if kind is None else kind.value, residual_bound=residual_bound(r, self.eps_kind))
+            for name, v in (r.worst_x or {}).items():
+                col = f"worst_{name}"
+                if col not in self.params:
+                    self.params.append(col)
+                d[col] = v
+            seq = None if r.read_from else SequencePayload.of(r)
+            if seq is not None:
+                self.sequences = True
+                d.update({c: getattr(seq.worst, c) for c in SEQUENCE_COLUMNS[:7]},
+                         nominal_sustained_m=seq.nominal.sustained_m,
+                         nominal_breached_frames=seq.nominal.breached_frames)
+            yield d
+
+
+def flat_rows(store: ResultStore) -> tuple[list[dict[str, Any]], list[str]]:
+    """Every job row as a flat dict (:class:`FlatRows`), and their column names."""
+    flat = FlatRows(store)
+    rows = list(flat)
+    return rows, flat.columns
 
 
 def summary_records(store: ResultStore) -> list[dict[str, Any]]:
@@ -191,19 +223,39 @@ def write_records(records: list[dict[str, Any]], columns: tuple[str, ...], fmt: 
 def export(store: ResultStore, path: str | Path) -> Path:
     """Write the job rows to ``path``: ``.csv`` or ``.parquet`` (by suffix; ``ValueError`` otherwise)."""
     p = Path(path)
-    rows, cols = flat_rows(store)
+    if p.suffix.lower() not in (".csv", ".parquet"):
+        raise ValueError(f"export {p}: unknown format (use a .csv or .parquet file name)")
     p.parent.mkdir(parents=True, exist_ok=True)
-    if p.suffix.lower() == ".csv":
+    if p.suffix.lower() == ".csv":  # the header names every column: the rows are read first
+        rows, cols = flat_rows(store)
         with open(p, "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
             w.writeheader()
             w.writerows(rows)
-    elif p.suffix.lower() == ".parquet":
-        import pyarrow as pa
-        import pyarrow.parquet as pq
+        return p
+    import pyarrow.parquet as pq
 
-        table = pa.table({c: [r.get(c) for r in rows] for c in cols})
-        pq.write_table(table, p)
-    else:
-        raise ValueError(f"export {p}: unknown format (use a .csv or .parquet file name)")
+    pq.write_table(_arrow_table(FlatRows(store)), p)
     return p
+
+
+#: Rows per Arrow batch of :func:`_arrow_table`.
+BATCH_ROWS = 4096
+
+
+def _arrow_table(flat: FlatRows) -> Any:
+    """The rows of ``flat`` as one Arrow table of its columns, built a batch of :data:`BATCH_ROWS` rows at a time
+    (the columns of a large store's rows, not a dict per row, are what is held): each column's type is what Arrow
+    infers from all its values, as from one list (a column without a value in one batch takes the others' type)."""
+    import pyarrow as pa
+
+    batches, batch = [], []
+    for d in flat:
+        batch.append(d)
+        if len(batch) == BATCH_ROWS:
+            batches.append(pa.table({c: [r.get(c) for r in batch] for c in flat.columns}))
+            batch = []
+    if batch or not batches:
+        batches.append(pa.table({c: [r.get(c) for r in batch] for c in flat.columns}))
+    cols = flat.columns  # a batch built before a column was met lacks it: added as nulls when joined
+    return pa.concat_tables(batches, promote_options="permissive").select(cols)

@@ -12,8 +12,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from ..consent import DetectorKind
 from ..constants import NotMeasured
-from ..detect.shipped import DetectorKind
 from ..specs.campaign import CampaignSpec
 from .provenance import DetectorSpec
 

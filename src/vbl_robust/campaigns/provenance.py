@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Any
 
 from ..detect.shipped import (  # noqa: F401 - re-exported: campaigns name detectors by DetectorSpec
-    DETECTOR_KINDS,
     DetectorSpec,
     default_model_caveats,
     default_model_info,

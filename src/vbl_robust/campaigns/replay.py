@@ -25,6 +25,7 @@ from ..search.bounds import check_lipschitz
 from ..search.zones import ZoneMap, zones
 from ..space import ParameterBox
 from ..specs.kinds import JobKind
+from .rebuild import search_kwargs
 
 if TYPE_CHECKING:
     from ..search.base import Optimizer
@@ -58,7 +59,6 @@ def replay(row: JobRow, spec: CampaignSpec | None = None, *, eps_safe_m: float |
     no search points.
     """
     from ..search import Evaluations, make_optimizer
-    from .work import search_kwargs
 
     if row.kind != JobKind.SEARCH or row.box is None or row.budget is None:
         raise ValueError(f"job {row.key}: not a search job ({row.kind})")

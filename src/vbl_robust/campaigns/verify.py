@@ -6,7 +6,7 @@ A job row is *inconsistent* when
 
 - its summary (worst value and θ*, verdict, evaluation and failure counts, failure reason at θ*) is not what its
   stored evaluations give under the campaign's settings (ε_safe, the failure penalty) — recomputed with the function
-  that made it (:func:`~vbl_robust.campaigns.work.result_fields` on the result its points stand for,
+  that made it (:func:`~vbl_robust.campaigns.rebuild.result_fields` on the result its points stand for,
   :func:`~vbl_robust.analysis.readoff.row_result`); an implied row without the breach that implies it; a job not
   measured that holds a result;
 - θ* lies outside its box;
@@ -29,7 +29,7 @@ import weakref
 from collections import Counter, defaultdict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -176,8 +176,7 @@ def row_findings(row: JobRow, *, eps_safe_m: float, penalty_m: float, committed:
         if row.kind == JobKind.RISK:
             expected = _risk_fields(row, penalty_m, eps_safe_m)
         else:
-            from .rebuild import row_result
-            from .work import result_fields
+            from .rebuild import result_fields, row_result
 
             expected = result_fields(row_result(row), eps_safe_m, penalty_m)
     except (ValueError, IndexError, KeyError, TypeError) as exc:
@@ -215,6 +214,22 @@ def check_store(store: ResultStore, spec: Any = None) -> StoreCheck:
         return _check(store, spec)
 
 
+class _Link(NamedTuple):
+    """What checking an implied breach against the searched breaches of its chain needs of a row (not the row: a
+    large store's breaches are many)."""
+
+    key: str
+    chain: str | None
+    status: JobStatus
+    box_level: float | None
+    worst_m: float | None
+    worst_x: Any
+
+    @classmethod
+    def of(cls, row: JobRow) -> _Link:
+        return cls(row.key, row.chain, row.status, row.box_level, row.worst_m, row.worst_x)
+
+
 def _check(store: ResultStore, spec: Any) -> StoreCheck:
     chains = read_chains(store.digest_entries())
     samples = store.samples()
@@ -223,8 +238,8 @@ def _check(store: ResultStore, spec: Any) -> StoreCheck:
     bad: set[str] = set()
     seen: set[str] = set()
     covered = before = n = 0
-    implied: list[JobRow] = []
-    breaches: dict[str, list[JobRow]] = defaultdict(list)  # chain -> its searched breaches
+    implied: list[_Link] = []
+    breaches: dict[str, list[_Link]] = defaultdict(list)  # chain -> its searched breaches
     for values in store.job_columns():
         n += 1
         key = str(values["key"])
@@ -251,9 +266,9 @@ def _check(store: ResultStore, spec: Any) -> StoreCheck:
             committed = entry is not None and entry["event"] == STORED and not row_f
             row_f += row_findings(row, eps_safe_m=settings[0], penalty_m=settings[1], committed=committed)
             if row.status == JobStatus.IMPLIED:
-                implied.append(row.replace(points=None, trace=()))
+                implied.append(_Link.of(row))
             elif row.chain is not None and row.verdict == Verdict.BREACH:
-                breaches[row.chain].append(row.replace(points=None, trace=()))
+                breaches[row.chain].append(_Link.of(row))
         findings += row_f
         if row_f:
             bad.add(key)

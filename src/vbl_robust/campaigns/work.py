@@ -19,18 +19,16 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import time
 import traceback
 from collections import Counter
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..constants import NotMeasured, NotMeasuredError, Verdict
-from ..search.result import verdict_for
 from ..specs.campaign import Job
 from ..specs.kinds import JobKind, Role
 from ..store import Corners, JobRow, JobStatus, Points, now_iso
@@ -45,6 +43,7 @@ from ..store.payloads import (
     WorstPoint,
 )
 from .provenance import DetectorSpec
+from .rebuild import finite_or_none, result_fields, search_kwargs
 
 if TYPE_CHECKING:  # typing only: the pipeline (torch) is imported where an objective is built
     from ..data import Sample
@@ -162,30 +161,6 @@ def not_measured_reason(exc: BaseException) -> tuple[NotMeasured, str]:
     return kind, f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
-def _finite(v: float | None) -> float | None:
-    return None if v is None or not math.isfinite(v) else float(v)
-
-
-def result_fields(result: Any, eps_safe_m: float, penalty_m: float) -> dict[str, Any]:
-    """The :class:`JobRow` fields of a :class:`~vbl_robust.search.SearchResult` (worst error = the penalty when
-    no evaluation was finite; None, verdict "no breach found", when none completed within a time budget)."""
-    ub = result.upper_bound
-    if result.nfev == 0:  # no evaluation completed within the budget: nothing found (no worst error)
-        worst, verdict = None, Verdict.NO_BREACH_FOUND
-    else:
-        worst = float(result.fun) if math.isfinite(result.fun) else penalty_m
-        verdict = verdict_for(worst, ub, eps_safe_m)
-    return dict(
-        worst_m=worst, worst_x=result.x_dict(), verdict=verdict, nfev=int(result.nfev),
-        nit=int(result.nit), n_failed=int(result.n_failed), failures=result.failures,
-        worst_reason=None if result.x is None else result.x_reason, worst_corners=None,  # set by run_sample_task
-        search_status=result.status.value, message=result.message, search_s=float(result.elapsed),
-        upper_bound=None if ub is None else (float(ub) if math.isfinite(ub) else 1e300),
-        bound_estimate=_finite(result.bound_estimate), lipschitz_estimate=_finite(result.lipschitz_estimate),
-        trace=result.trace, points=Points(result.xs, result.fs, result.reasons, result.times),
-    )
-
-
 def search_row(job: Job, result: Any, settings: Settings, run_id: int | None, job_s: float) -> JobRow:
     """Row of a finished search (a :class:`~vbl_robust.search.SearchResult`)."""
     return _row(job, run_id, JobStatus.DONE, job_s=job_s,
@@ -210,10 +185,10 @@ def worst_details(objective: SearchObjective, x: np.ndarray) -> tuple[WorstPoint
     err = float(rec.error_m[0])
     kp = np.asarray(rec.keypoints[0], dtype=np.float64)
     corners = tuple((float(u), float(v)) for u, v in kp) if kp.shape == (4, 2) and np.isfinite(kp).all() else None
-    sigma = None if rec.keypoint_sigma is None else tuple(tuple(_finite(float(v)) for v in c)
+    sigma = None if rec.keypoint_sigma is None else tuple(tuple(finite_or_none(float(v)) for v in c)
                                                           for c in rec.keypoint_sigma[0])
-    return WorstPoint(_finite(conf), _finite(err), tuple(_finite(float(v)) for v in rec.position[0]), sigma,
-                      None if sigma is None else _finite(float(rec.position_sigma_m[0]))), corners
+    return WorstPoint(finite_or_none(conf), finite_or_none(err), tuple(finite_or_none(float(v)) for v in rec.position[0]), sigma,
+                      None if sigma is None else finite_or_none(float(rec.position_sigma_m[0]))), corners
 
 
 def nominal_details(objective: SearchObjective) -> Nominal:
@@ -224,7 +199,7 @@ def nominal_details(objective: SearchObjective) -> Nominal:
 
     rec = objective.evaluate(nominal_theta(objective.box))
     kp = np.asarray(rec.keypoints[0], dtype=np.float64)
-    return Nominal(_finite(float(rec.loss[0])), rec.reason[0], _finite(float(rec.conf[0])),
+    return Nominal(finite_or_none(float(rec.loss[0])), rec.reason[0], finite_or_none(float(rec.conf[0])),
                    tuple(map(tuple, kp.tolist())) if kp.shape == (4, 2) and np.isfinite(kp).all() else None)
 
 
@@ -237,12 +212,12 @@ def sequence_details(objective: SearchObjective, x: np.ndarray, eps_safe_m: floa
 
     seq = objective.sequence
     frames = SequenceFrames(tuple(str(s.id) for s in seq.samples), tuple(int(i) for i in seq.frame_index),
-                            tuple(_finite(float(t)) for t in seq.times), tuple(float(d) for d in seq.distances_m))
+                            tuple(finite_or_none(float(t)) for t in seq.times), tuple(float(d) for d in seq.distances_m))
     facts = []
     for theta in (np.asarray(x, dtype=np.float64)[None], nominal_theta(objective.box)):
         rec = objective.evaluate(theta)
-        summary = {k: (_finite(v) if isinstance(v, float) else v) for k, v in rec.summary(0, eps_safe_m).items()}
-        facts.append(SequenceFacts.of_summary(summary, [_finite(float(v)) for v in rec.loss[:, 0]],
+        summary = {k: (finite_or_none(v) if isinstance(v, float) else v) for k, v in rec.summary(0, eps_safe_m).items()}
+        facts.append(SequenceFacts.of_summary(summary, [finite_or_none(float(v)) for v in rec.loss[:, 0]],
                                               [r[0] for r in rec.reasons]))
     return SequencePayload(frames, *facts)
 
@@ -305,18 +280,6 @@ def risk_payload(r: RiskResult, tau: float, delta: float, dist: ThetaDistributio
                        tau, delta, r.evaluations, dist.to_dict(),
                        tuple(RiskStratum(s.mass, s.k, s.n, a, b)
                              for s, (a, b) in zip(r.strata, r.split, strict=True))).to_json()
-
-
-def search_kwargs(options: Mapping[str, Any], budget: Any, *, eps_safe_m: float, lipschitz: Any,
-                  seed: int | None) -> dict[str, Any]:
-    """The optimizer's arguments of a search job apart from its time budget: evaluation and iteration budgets, the
-    early stop at ε_safe, the seed and the method's options (the run's ``lipschitz`` unless the job sets one).
-    :func:`run_search_job` runs a job with them and :func:`vbl_robust.campaigns.replay.replay` rebuilds its optimizer."""
-    opts = dict(options)
-    if lipschitz is not None and "lipschitz" not in opts:
-        opts["lipschitz"] = lipschitz  # it changes no point
-    return {"max_evals": budget.max_evals, "max_iters": budget.max_iters,
-            "stop_above": eps_safe_m if budget.stop_at_breach else None, "seed": seed or 0, **opts}
 
 
 def breach_chunk(objective: SearchObjective) -> int:

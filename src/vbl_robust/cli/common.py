@@ -251,7 +251,8 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
     options, or one line; notes on standard error when the oracle stands in for the shipped model (and why) or
     when the shipped model has open accuracy goals."""
     # torch behind it: not for ``--help``
-    from vbl_robust.detect.shipped import DetectorKind, DetectorSpec, default_model_status
+    from vbl_robust.consent import DetectorKind
+    from vbl_robust.detect.shipped import DetectorSpec, default_model_status
 
     # consent to run code (a .pt pickle, a plug-in) is the user's typing, never a value read from a --config file:
     # a plug-in named on the command line is consent to import it; one from a file needs --trust-model typed

@@ -41,29 +41,39 @@ def report(
     its results.sqlite, or a bundle's packed results.sqlite.xz, read through a temporary copy). Exit 1 when some job
     of the run was not measured, unless --allow-unmeasured, and when a row contradicts its own evaluations or
     digest (left out of the report; `vbl-robust verify` names it)."""
-    _report(run, out, csv, parquet, fmt, others, compare)
-    _unmeasured_exit(run, allow_unmeasured)
+    held = _report(run, out, csv, parquet, fmt, others, compare)
+    _unmeasured_exit(run, *(held or _held_back(run)), allow_unmeasured)
 
 
-def _unmeasured_exit(run: Path, allow_unmeasured: bool) -> None:
-    """The jobs of ``run`` the tool could not measure, on standard error, and exit 1 unless ``allow_unmeasured``;
-    the rows inconsistent with their evaluations or digests (not used), on standard error too."""
+def _held_back(run: Path) -> tuple[str, frozenset[str], list, int]:
+    """What the report leaves out of its numbers: the unit, the rows inconsistent with their evaluations or digests,
+    the jobs the tool could not measure, and the number of the other jobs."""
     from vbl_robust.campaigns.verify import screen
     from vbl_robust.store import ResultStore
 
-    with one_line(), ResultStore.open_existing(run) as store:
+    with one_line(), ResultStore.open_existing(run, points_on_demand=True) as store:
         unit = store.spec().unit if store.holds_campaign() else "image"
         bad = screen(store).inconsistent
-        if bad:
-            typer.secho(f"{run}: {len(bad)} job row(s) inconsistent — not used (vbl-robust verify {run} names them)",
-                        err=True, fg=typer.colors.YELLOW)
-        rows = store.jobs(with_trace=False)
-    if not unmeasured_ok(rows, unit, allow_unmeasured) or bad:  # a row that contradicts itself: never exit 0
+        missing = store.jobs(with_trace=False, measured=False)  # of the others only their number
+        return unit, bad, missing, store.count() - len(bad)
+
+
+def _unmeasured_exit(run: Path, unit: str, bad: frozenset[str], missing: list, total: int,
+                     allow_unmeasured: bool) -> None:
+    """The jobs of ``run`` the tool could not measure, on standard error, and exit 1 unless ``allow_unmeasured``;
+    the rows inconsistent with their evaluations or digests (not used), on standard error too."""
+    if bad:
+        typer.secho(f"{run}: {len(bad)} job row(s) inconsistent — not used (vbl-robust verify {run} names them)",
+                    err=True, fg=typer.colors.YELLOW)
+    # a row that contradicts itself: never exit 0
+    if not unmeasured_ok(missing, unit, allow_unmeasured, total=total) or bad:
         raise typer.Exit(1)
 
 
 def _report(run: Path, out: Path | None, csv: Path | None, parquet: Path | None, fmt: str, others: list[Path] | None,
-            compare: Path | None) -> None:
+            compare: Path | None) -> tuple[str, frozenset[str], list, int] | None:
+    """Write or print what ``fmt`` asks for; the HTML report returns what it left out of its numbers
+    (:func:`_held_back`, read before it: a large store's rows and the gallery's torch are not held yet)."""
     from vbl_robust.analysis.tables import export
     from vbl_robust.report.build import build_report
     from vbl_robust.store import ResultStore
@@ -75,12 +85,12 @@ def _report(run: Path, out: Path | None, csv: Path | None, parquet: Path | None,
             fail(f"--format {fmt} prints the summary table: --out, --csv, --parquet, --with and --compare "
                  "belong to the other formats")
         _summary(run, fmt)
-        return
+        return None
     if fmt == "md":
         if out is not None or csv is not None or parquet is not None:
             fail("--format md prints to standard output: --out, --csv and --parquet belong to --format html")
         typer.echo(_markdown(run, others or [], compare), nl=False)
-        return
+        return None
     if others:
         fail("--with belongs to --format md")
     if out is not None and out.exists() and not out.is_dir():
@@ -92,18 +102,20 @@ def _report(run: Path, out: Path | None, csv: Path | None, parquet: Path | None,
 
         with one_line():
             typer.echo(f"compare: {compare_html(run, compare, out)}")
-        return
+        return None
     for option, target in (("--csv", csv), ("--parquet", parquet)):
         if target is not None:
             check_writable(option, target)
+    held = _held_back(run)
     with one_line():
         path = build_report(run, out)
         if csv or parquet:
-            with ResultStore.open_existing(run) as store:
+            with ResultStore.open_existing(run, points_on_demand=True) as store:
                 for p in (csv, parquet):
                     if p is not None:
                         typer.echo(f"exported {export(store, p)}")
     typer.echo(f"report: {path}")
+    return held
 
 
 Root = Annotated[Path, typer.Argument(help="Directory of experiment run directories (the --out of reproduce "

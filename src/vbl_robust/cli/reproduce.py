@@ -158,7 +158,7 @@ def _check_method_options(options: dict, specs: list) -> None:
 def _refuse_code(bundle: Path, names: list[str], trust: bool) -> None:
     """``--resume-from``: one line, before anything runs or is restored, when a packed store of the bundle names a
     detector that is code (a factory, a .pt outside the package) and ``trust`` (--trust-model) is not given."""
-    from vbl_robust.detect.shipped import refuse_without_consent
+    from vbl_robust.consent import refuse_without_consent
     from vbl_robust.store import PACKED, ResultStore
 
     for name in names:

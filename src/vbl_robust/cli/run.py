@@ -252,12 +252,13 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
     return summary.status == RunStatus.FINISHED and unmeasured_ok(every, spec.unit, allow_unmeasured)
 
 
-def unmeasured_ok(rows: list, unit: str, allow_unmeasured: bool) -> bool:
+def unmeasured_ok(rows: list, unit: str, allow_unmeasured: bool, *, total: int | None = None) -> bool:
     """Tell the user what could not be measured (stderr, one line per reason) and whether the command may exit 0:
-    yes when every job was measured, or ``--allow-unmeasured`` was given."""
+    yes when every job was measured, or ``--allow-unmeasured`` was given. ``total``: how many jobs there are, when
+    ``rows`` are not all of them (default ``len(rows)``)."""
     from vbl_robust.analysis.breach import not_measured_lines
 
-    lines = not_measured_lines(rows, len(rows), unit)
+    lines = not_measured_lines(rows, len(rows) if total is None else total, unit)
     for line in lines:
         typer.secho(line, fg=typer.colors.RED if not allow_unmeasured else typer.colors.YELLOW, err=True)
     if lines and not allow_unmeasured:

@@ -7,7 +7,7 @@ declared, a ``detect(context)`` returning one :class:`~vbl_robust.detect.Detecti
 
 Importing a plug-in runs its code: naming it on the command line is the user's consent; a plug-in named by data (a
 stored run, a bundle, a ``--config`` file) is imported only with ``--trust-model``
-(:func:`~vbl_robust.detect.shipped.consent_needed`). Its identity in the store and the report is the plug-in's
+(:func:`~vbl_robust.consent.consent_needed`). Its identity in the store and the report is the plug-in's
 name, the SHA-256 of its source file (so two versions of it never mix in one store) and, where the user gives one
 (``--plugin-digest``), the digest of its weights. A plug-in that does not satisfy the protocol is refused in one
 line when it is built; one that raises on the run's first image is refused before the run

@@ -21,19 +21,18 @@ import logging
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
-from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
+from vbl_robust.consent import CODE_KINDS, DETECTOR_KINDS, DetectorKind, refuse_without_consent
 from vbl_robust.digest import digest, file_sha256
 
 from .pose import PoseDetector
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_MODEL", "DESIGNS", "DETECTOR_KINDS", "MODELS_DIR", "SHIPPED_MODELS", "DetectorKind", "DetectorSpec",
-           "CODE_KINDS", "consent_needed", "default_detector", "default_model_caveats", "default_model_info",
-           "default_model_path", "default_model_status", "refuse_untrusted", "refuse_without_consent",
+__all__ = ["DEFAULT_MODEL", "DESIGNS", "MODELS_DIR", "SHIPPED_MODELS", "DetectorSpec", "default_detector",
+           "default_model_caveats", "default_model_info", "default_model_path", "default_model_status",
            "shipped_model_dir", "with_design"]
 
 MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
@@ -50,50 +49,6 @@ SHIPPED_MODELS = {"default": "", "hardened": "hardened", "yolo26": "yolo26"}  # 
 DESIGNS = ("single", "twostage")
 
 
-class DetectorKind(StrEnum):
-    """What a :class:`DetectorSpec` builds; the value is the ``kind`` its identity records (a store's bytes).
-
-    ``ORACLE`` projects the ground truth; ``DEFAULT`` is a shipped model; ``ULTRALYTICS`` / ``ONNX`` a user's
-    ``.pt`` / ``.onnx`` file; ``FACTORY`` / ``PLUGIN`` name code, ``"module:callable"``.
-    """
-
-    ORACLE = "oracle"
-    DEFAULT = "default"
-    ULTRALYTICS = "ultralytics"
-    ONNX = "onnx"
-    FACTORY = "factory"
-    PLUGIN = "plugin"
-
-    @property
-    def runs_code(self) -> bool:
-        """The spec names code: building the detector imports the module and calls the callable with the spec's
-        options (a factory: tests and the Python API; a plug-in: ``--detector-plugin``). Only with the user's
-        consent when the spec comes from data (:func:`consent_needed`)."""
-        return self in (DetectorKind.FACTORY, DetectorKind.PLUGIN)
-
-    @property
-    def model_file(self) -> bool:
-        """The spec's ``path`` is a user's model file (it must exist)."""
-        return self in (DetectorKind.ULTRALYTICS, DetectorKind.ONNX)
-
-    @property
-    def pose_model(self) -> bool:
-        """A pose model of ours or a user's: run by an engine on a device, both recorded in its identity."""
-        return self in (DetectorKind.DEFAULT, DetectorKind.ULTRALYTICS, DetectorKind.ONNX)
-
-    @property
-    def default_engine(self) -> str:
-        """What runs a model of this kind's black-box forwards unless told otherwise (:mod:`.engines`)."""
-        return "onnxruntime" if self == DetectorKind.ONNX else "torch"
-
-
-#: The values of :class:`DetectorKind`, in order.
-DETECTOR_KINDS = tuple(k.value for k in DetectorKind)
-#: Kinds whose spec names code (:attr:`DetectorKind.runs_code`).
-CODE_KINDS = tuple(k for k in DetectorKind if k.runs_code)
-#: What a ``.pt`` outside the package is (the reason every refusal of one gives).
-_PICKLE = "a .pt file is a pickle that runs code when loaded"
-_PACKAGE_DIR = Path(__file__).resolve().parent.parent
 #: options of a two-stage detector's crop window (``TwoStageDetector(margin=..., min_side=...)``)
 CROP_WINDOW_KEYS = ("margin", "min_side")
 
@@ -198,55 +153,6 @@ def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str |
     if first is not None:  # a single pass: the shipped model's pass 1 alone is the other model
         raise ValueError(f"shipped model {model} is a pass-2 (crop) network behind {first!r}: it runs two-stage only")
     return with_design(with_engine(det, engine, trust=True), design, **window)
-
-
-def refuse_untrusted(what: str | Path, trust: bool) -> None:
-    """Unless ``trust``, ``ValueError`` naming ``what``: a ``.pt`` file is a pickle, and loading it runs code (the
-    one refusal every command gives; ``--trust-model``)."""
-    if not trust:
-        raise ValueError(f"{what}: {_PICKLE}; pass --trust-model if you trust it")
-
-
-def _packaged(path: str | Path) -> bool:
-    """``path`` lies inside the installed package (the shipped models: trusted as its code is)."""
-    try:
-        return Path(path).resolve().is_relative_to(_PACKAGE_DIR)
-    except (OSError, RuntimeError, TypeError, ValueError):  # a path that cannot be resolved is not the package's
-        return False
-
-
-def consent_needed(detector: DetectorSpec | Mapping[str, Any]) -> str | None:
-    """Why building ``detector`` would run code that is not this package's, in one line; None when it would not.
-
-    The one place that decides it, for a :class:`DetectorSpec` or an identity as a store records it
-    (:meth:`DetectorSpec.identity`: a campaign, a bundle's packed store, a file). Code is run by a kind of
-    :data:`CODE_KINDS` (its ``"module:callable"`` is imported and called with the stored options) and by a ``.pt``
-    outside the package (a pickle: loading it runs code). The shipped models, the oracle and an ONNX file (a graph
-    of operators, no code) need no consent. What gives consent is the caller's: ``--trust-model`` on the command
-    line (:func:`refuse_without_consent`), never a value read from the data itself.
-    """
-    if isinstance(detector, DetectorSpec):
-        kind, path = detector.kind, detector.path
-    elif isinstance(detector, Mapping):
-        kind = detector.get("kind")
-        path = detector.get("factory") if kind in CODE_KINDS else detector.get("path")
-    else:
-        raise TypeError(f"a DetectorSpec or a detector identity (a mapping), not {type(detector).__name__}")
-    if kind in CODE_KINDS:
-        module, _, attr = str(path).partition(":")
-        return (f"detector {kind} {path!r} is code: building it imports module {module!r} and calls {attr!r} "
-                "with the stored options")
-    if kind == DetectorKind.ULTRALYTICS and (not path or not _packaged(path)):
-        return f"{path}: {_PICKLE}"
-    return None
-
-
-def refuse_without_consent(detector: DetectorSpec | Mapping[str, Any], trust: bool, *, where: str = "") -> None:
-    """Unless ``trust`` (``--trust-model``), ``ValueError`` when :func:`consent_needed` says building ``detector``
-    runs code: one line, ``where`` first (e.g. ``"RUN: "``), the reason, and the flag that gives consent."""
-    reason = None if trust else consent_needed(detector)
-    if reason:
-        raise ValueError(f"{where}{reason}; pass --trust-model if you trust it")
 
 
 def _model_options(oracle: bool, oracle_noise: float, design: str, engine: str, device: str,
@@ -419,7 +325,7 @@ class DetectorSpec:
     @classmethod
     def from_identity(cls, ident: Mapping[str, Any], *, trust: bool = False, where: str = "") -> DetectorSpec:
         """The spec a run recorded (:meth:`identity`, as stored with its campaign): to run more jobs with the same
-        detector. A stored identity is data: one that names code (:func:`consent_needed`: a factory or plug-in's
+        detector. A stored identity is data: one that names code (:func:`~vbl_robust.consent.consent_needed`: a factory or plug-in's
         ``module:callable``, a ``.pt`` outside the package) is refused unless ``trust`` (``--trust-model``) —
         ``ValueError``, one line beginning with ``where``, before anything is imported or loaded."""
         if not isinstance(ident, Mapping):

@@ -18,21 +18,11 @@ from pathlib import Path
 
 import torch
 
+from ..consent import packaged
 from .offline import import_ultralytics
 from .pose import PoseDetector
 
 logger = logging.getLogger(__name__)
-
-_PACKAGE_DIR = Path(__file__).resolve().parents[1]
-
-
-def _is_packaged(path: Path) -> bool:
-    try:
-        path.resolve().relative_to(_PACKAGE_DIR)
-        return True
-    except ValueError:
-        return False
-
 
 def load_pose_model(path: str | Path, *, trust: bool = False) -> tuple[torch.nn.Module, dict]:
     """Load an ultralytics pose checkpoint and check it: returns ``(model in eval mode, checkpoint dict)``.
@@ -47,7 +37,7 @@ def load_pose_model(path: str | Path, *, trust: bool = False) -> tuple[torch.nn.
         raise FileNotFoundError(f"{p}: model file not found")
     if p.suffix.lower() == ".onnx":
         raise ValueError(f"{p}: an ONNX file; use OnnxDetector (vr.OnnxDetector) for it")
-    if not (trust or _is_packaged(p)):
+    if not (trust or packaged(p)):
         raise ValueError(
             f"{p}: a .pt checkpoint is a pickle and loading it runs code; pass trust=True (CLI: --trust-model) "
             "if you trust this file"

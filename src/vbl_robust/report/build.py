@@ -12,6 +12,9 @@ Order: the first screen answers "safe where, and how sure" (:mod:`.evidence`: pe
 the images breached, survival with its interval and what it means at this number of images —, the model, data,
 date and version, then the table and the survival figure), then the run's settings (the summary), the
 worst-case gallery (:mod:`.gallery`), the table per method, box and budget, the declared figures, provenance.
+Memory: the gallery is drawn last, after :meth:`.rows.Context.release` drops the rows, and shown in its place:
+nothing else the report imports loads torch (``tests/report/test_report_memory.py``), so a large store's rows and
+torch are never held at once.
 
 Where things are: :mod:`.rows` (the context and which stored rows each section reads), :mod:`.sections` (one
 function per section), :mod:`.zone_section` (the vulnerability zones), :mod:`.sequence_section` (a sequence
@@ -144,9 +147,7 @@ def build_report(run: str | Path, out: str | Path | None = None, *, embed: bool 
         ev = _guarded("evidence", evidence_of, ctx)
         # the first screen answers "safe where, and how sure"; then the run's settings, then the failures
         sections = [_guarded("evidence", section_evidence, ctx, ev) if isinstance(ev, Evidence) else ev,
-                    section_overview(ctx, title),
-                    _guarded("gallery", section_gallery, ctx, ev) if isinstance(ev, Evidence) else None,
-                    section_methods(ctx)]
+                    section_overview(ctx, title), section_methods(ctx)]
         declared = spec.report_figures
         for name in FIGURES:
             builds = [SECTIONS[name]] if name in declared else []
@@ -154,6 +155,10 @@ def build_report(run: str | Path, out: str | Path | None = None, *, embed: bool 
                 builds.append(section_zones)
             sections += [_guarded(build.__name__.removeprefix("section_"), build, ctx) for build in builds]
         sections.append(section_provenance(ctx))
+        # the gallery shows after the settings but is drawn last, from the evidence alone: its pictures need torch
+        # and the images, not the rows, which go first (a large store's rows and torch are not held at once)
+        ctx.release()
+        sections.insert(2, _guarded("gallery", section_gallery, ctx, ev) if isinstance(ev, Evidence) else None)
         sections = [sec for sec in sections if sec is not None]
     body = [f"<h1>vbl-robust — {esc(title)} <small>({esc(spec.name)})</small></h1>"]
     for sec in sections:  # a section's id is what a link to it names (rows.anchor)

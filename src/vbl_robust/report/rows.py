@@ -74,7 +74,16 @@ class Context:
     @cached_property
     def unmeasured(self) -> list[JobRow]:
         """Every stored job the tool could not measure (any kind and role): in no rate, listed apart."""
-        return [r for r in self.store.jobs(with_trace=False) if not r.measured]
+        return self.store.jobs(with_trace=False, measured=False)
+
+    def release(self) -> None:
+        """Drop every row read (``main`` and the rows read on first use: :attr:`runs`, :attr:`risk`,
+        :attr:`unmeasured`, :attr:`nominal`) and the store's cache of points: what is built after this needs none
+        of them (the worst-case gallery, whose pictures need torch: a large store's rows do not sit beside it)."""
+        self.main = []
+        for name in ("runs", "risk", "unmeasured", "nominal"):
+            self.__dict__.pop(name, None)
+        self.store.forget_points()
 
     def figure(self, fig: Any, name: str, caption: str, *, colors: int | None = None) -> str:
         """``fig`` written to ``figures/<name>.png`` (atomically; ``colors``: a palette of that many colours, see

@@ -14,8 +14,8 @@ import numpy as np
 from ..analysis import metrics as mx
 from ..analysis.reference import AgainstGrid
 from ..campaigns.experiments import range_text
+from ..consent import DetectorKind
 from ..constants import FAILURE_REASONS, Verdict
-from ..detect.shipped import DetectorKind
 from ..search import NON_FINITE
 from ..specs.kinds import JobKind, Role
 from ..store import JobRow, JobStatus, RunProvenance

@@ -2,7 +2,7 @@
 
 Drawn from the ``sequence`` payload of the main search jobs (:func:`vbl_robust.campaigns.work.sequence_details`):
 per sequence the method whose worst θ sustains the largest error, its per-frame errors against the distance from the
-runway threshold beside the unperturbed θ's (:func:`vbl_robust.sequences.plot_errors_along_approach`), and a table
+runway threshold beside the unperturbed θ's (:func:`.sequence_figure.plot_errors_along_approach`), and a table
 of the breach facts — the worst sustained error and its θ, the longest run of breached frames, and where along the
 approach the first run of at least ``sustain`` breached frames (a breach a filter cannot ride out) starts.
 """
@@ -10,11 +10,11 @@ approach the first run of at least ``sustain`` breached frames (a breach a filte
 from __future__ import annotations
 
 from ..constants import Verdict
-from ..sequences import plot_errors_along_approach
 from ..store import JobRow
 from ..store.payloads import SequenceFacts, SequencePayload
 from .html import esc, table
 from .rows import Context, Section, theta_text
+from .sequence_figure import plot_errors_along_approach
 
 
 def worst_per_sequence(ctx: Context) -> list[tuple[JobRow, SequencePayload]]:

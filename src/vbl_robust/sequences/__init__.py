@@ -4,7 +4,8 @@ A filter downstream of the pose estimate rides out one bad frame, not a perturba
 :class:`~vbl_robust.data.ApproachSequence` and a box Θ, :class:`SequenceObjective` scores θ by the error sustained
 over ``k`` consecutive frames (:func:`sustained`), callable by every method of :func:`vbl_robust.search.maximize`
 (a torch θ takes the differentiable path APGD needs); :func:`breach_summary` gives the breach runs and where along
-the approach they start; :func:`plot_errors_along_approach` draws the per-frame errors against distance.
+the approach they start (the report draws the per-frame errors against distance:
+:func:`vbl_robust.report.sequence_figure.plot_errors_along_approach`).
 
 >>> import vbl_robust as vr                                                                # doctest: +SKIP
 >>> from vbl_robust.sequences import SequenceObjective
@@ -15,7 +16,6 @@ the approach they start; :func:`plot_errors_along_approach` draws the per-frame 
 >>> f.evaluate(r.x[None]).summary(0)["longest_run_frames"]                                 # doctest: +SKIP
 """
 
-from .figure import plot_errors_along_approach
 from .objective import SequenceObjective, SequenceRecord, nominal_theta
 from .sustain import breach_runs, breach_summary, sustained, sustained_torch
 
@@ -25,7 +25,6 @@ __all__ = [
     "breach_runs",
     "breach_summary",
     "nominal_theta",
-    "plot_errors_along_approach",
     "sustained",
     "sustained_torch",
 ]

@@ -411,10 +411,21 @@ class ResultStore:
         return new
 
     def jobs(self, *, kind: str | None = None, role: str | None = None, with_points: bool = False,
-             with_trace: bool = True) -> list[JobRow]:
+             with_trace: bool = True, measured: bool | None = None) -> list[JobRow]:
         """The stored :class:`JobRow` s, ordered by sample index, then insertion; ``points`` only when
-        ``with_points`` (else None), ``trace`` only when ``with_trace`` (else empty)."""
+        ``with_points`` (else None), ``trace`` only when ``with_trace`` (else empty); ``measured``: only the jobs
+        the tool completed (True) or only those it could not (False: :attr:`JobRow.measured`)."""
+        return list(self.iter_jobs(kind=kind, role=role, with_points=with_points, with_trace=with_trace,
+                                   measured=measured))
+
+    def iter_jobs(self, *, kind: str | None = None, role: str | None = None, with_points: bool = False,
+                  with_trace: bool = True, measured: bool | None = None) -> Iterator[JobRow]:
+        """:meth:`jobs` one row at a time (what a reader that needs no list of every row reads: a large store's
+        export)."""
         where, args = [], []
+        if measured is not None:  # "failed": the name of "not measured" in stores written before it
+            where.append(f"status {'NOT ' if measured else ''}IN (?, 'failed')")
+            args.append(JobStatus.NOT_MEASURED.value)
         if kind is not None:
             where.append("kind = ?")
             args.append(kind)
@@ -430,7 +441,6 @@ class ResultStore:
         lead = lead if lazy else []
         sql = f"SELECT {', '.join(lead + cols)} FROM jobs" + (f" WHERE {' AND '.join(where)}" if where else "")
         sql += " ORDER BY sample_index, rowid"
-        out = []
         for r in self._con.execute(sql, args):
             d = dict(zip(cols, r[len(lead):], strict=True))
             if d["key"] in self._left_out:
@@ -440,8 +450,12 @@ class ResultStore:
                 read["points"] = StoredPoints(partial(self._on_demand, "points", r[0]))
             if lazy and with_trace and r[2]:
                 read["trace"] = StoredTrace(partial(self._on_demand, "trace_json", r[0]))
-            out.append(job_row(d, **read))
-        return out
+            yield job_row(d, **read)
+
+    def forget_points(self) -> None:
+        """Empty the cache of points and traces read on demand (they are read again when asked for)."""
+        self._cache.clear()
+        self._cache_bytes = 0
 
     def _column_at(self, column: str, rowid: int) -> Any:
         return self._con.execute(f"SELECT {column} FROM jobs WHERE rowid = ?", (rowid,)).fetchone()[0]

@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..detect.shipped import refuse_without_consent
+from ..consent import refuse_without_consent
 from .core import STORE, ResultStore
 from .identity import check_same
 from .lock import WriterLock
@@ -55,7 +55,7 @@ def check_mergeable(store: ResultStore, other: ResultStore, campaign: StoredCamp
     """``ValueError`` unless ``other`` holds job rows of ``store``'s campaign and detector (or of ``campaign``, when
     given: several sources checked against the first before anything is written) on samples that agree with
     ``store``'s; returns ``other``'s campaign. A campaign whose detector names code (a factory's
-    ``module:callable``, a ``.pt`` outside the package: :func:`~vbl_robust.detect.shipped.consent_needed`) is
+    ``module:callable``, a ``.pt`` outside the package: :func:`~vbl_robust.consent.consent_needed`) is
     refused unless ``trust`` (``--trust-model``): the merged store would build it, wherever it is read next."""
     theirs = other.campaign()
     if theirs is None or other.count() == 0:
@@ -152,7 +152,7 @@ def merge_runs(sources: Sequence[str | Path], into: str | Path, *, trust: bool =
     ``bundle --stores`` writes them) into the run ``into`` (a directory or ``.sqlite`` file; created when missing)
     with :func:`merge_store`, each source recorded under the name given.
 
-    A source whose detector names code (:func:`~vbl_robust.detect.shipped.consent_needed`) is refused unless
+    A source whose detector names code (:func:`~vbl_robust.consent.consent_needed`) is refused unless
     ``trust`` (``--trust-model``), before ``into`` is created or touched. Every source is checked against the
     first and against ``into`` before anything is written (``ValueError``); ``into`` is refused while a run writes
     it (:class:`~vbl_robust.store.lock.WriterLock`: ``ValueError``); a missing packed store is a
