@@ -214,8 +214,9 @@ def write_bundle(root: Path, out: Path, names: Sequence[str] | None = None,
     shutil.rmtree(stage, ignore_errors=True)
     stage.mkdir(parents=True)
     try:
+        read = _read_top(root, detectors)  # first: the experiments' reports load torch for their galleries
         totals = {run.name: write_experiment(run, stage / run.name, stores, keep=out / run.name) for run in runs}
-        claims, compared = _write_top(stage, totals, root, detectors)
+        claims, compared = _write_top(stage, totals, root, detectors, read)
         _publish(stage, out)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
@@ -230,22 +231,32 @@ def _ordered(totals: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
     return {n: totals[n] for n in paper_order(list(totals))}
 
 
+def _read_top(root: Path, detectors: Mapping[str, Path] | None) -> tuple[list[Any], Any]:
+    """What the bundle's top pages say, read from the stores: the claims of the stores under ``root`` and, with
+    ``detectors``, the detectors' tables (:func:`~.detectors.detectors_tables`: every store read once). Read before
+    the experiments are written: a large store's rows and the torch a report's gallery loads are not held at
+    once."""
+    from .claims import claims_of
+    from .detectors import detectors_tables
+
+    return claims_of(root), (detectors_tables(detectors) if detectors else None)
+
+
 def _write_top(out: Path, totals: dict[str, dict[str, Any]], root: Path,
-               detectors: Mapping[str, Path] | None = None) -> tuple[str, str]:
-    """Write ``out/status.md``, ``out/claims.md`` (the claims of the stores under ``root``), with ``detectors``
-    ``out/detectors.md``, and ``out/index.html`` (the experiments ``totals`` names, in the paper's order); returns
-    the claims' Markdown and the detectors' ("" without)."""
-    from .claims import claims_html, claims_markdown, claims_of, write_index
-    from .detectors import detectors_html, detectors_markdown, detectors_tables
+               detectors: Mapping[str, Path] | None, read: tuple[list[Any], Any]) -> tuple[str, str]:
+    """Write ``out/status.md``, ``out/claims.md`` (the claims of the stores under ``root``, ``read`` by
+    :func:`_read_top`), with ``detectors`` ``out/detectors.md``, and ``out/index.html`` (the experiments ``totals``
+    names, in the paper's order); returns the claims' Markdown and the detectors' ("" without)."""
+    from .claims import claims_html, claims_markdown, write_index
+    from .detectors import detectors_html, detectors_markdown
 
     totals = _ordered(totals)
-    checked = claims_of(root)
+    checked, tables = read
     claims = claims_markdown(checked, str(root))
     atomic_write(out / "status.md", status_markdown(totals))
     atomic_write(out / "claims.md", claims)
     compared, extra = "", ""
     if detectors:
-        tables = detectors_tables(detectors)  # every store read once, both forms written from it
         compared = detectors_markdown(detectors, tables)
         atomic_write(out / "detectors.md", compared)
         extra = detectors_html(detectors, out, tables)
@@ -290,12 +301,13 @@ def refresh_bundle(out: Path, reproduction: Path | None = None, *, reports: bool
         totals[prov.parent.name] = json.loads(prov.read_text())["totals"]
     if not totals:
         raise FileNotFoundError(f"{out}: no bundled experiment (<experiment>/provenance.json) found")
+    read = _read_top(out, detectors)
     if reports:
         for name in totals:
             if (out / name / PACKED).is_file():
                 rebuild_report(out / name)
-    claims, compared = _write_top(out, totals, out, detectors)  # each file replaced atomically; the experiments
-    if text is not None:                                            # are left as they are
+    claims, compared = _write_top(out, totals, out, detectors, read)  # each file replaced atomically; the
+    if text is not None:                                                  # experiments are left as they are
         _write_reproduction(Path(reproduction), text, claims, status_markdown(_ordered(totals)), compared)
     return totals
 
