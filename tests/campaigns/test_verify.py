@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.analysis.metrics import main_rows
+from vbl_robust.analysis.readoff import main_rows
 from vbl_robust.campaigns import run_campaign
 from vbl_robust.campaigns.verify import banner_lines, check_store, screen
 from vbl_robust.cli import app

@@ -223,7 +223,8 @@ def test_report_markdown_survival_table_from_the_store(gated_run, tmp_path):
     assert "2 images measured by every method (of 2 started)" in res.output
     with ResultStore.open_existing(out) as store:
         spec = store.spec()
-        from vbl_robust.analysis.metrics import main_rows, summarize
+        from vbl_robust.analysis.readoff import main_rows
+        from vbl_robust.analysis.summary import summarize
 
         lines = summarize(main_rows(store, spec, with_trace=False), spec.eps_safe_m)
     survival = res.output.split("Breaches by kind")[0]

@@ -12,7 +12,10 @@ import pytest
 from scipy.stats import binomtest
 from typer.testing import CliRunner
 
-from vbl_robust.analysis import metrics as mx
+from vbl_robust.analysis.metrics import pnp_summary
+from vbl_robust.analysis.readoff import main_rows
+from vbl_robust.analysis.reference import REFERENCE_METHOD, against_reference, grid_complete, reference_rows
+from vbl_robust.analysis.summary import summarize
 from vbl_robust.campaigns.pnpcheck import TRUNCATED
 from vbl_robust.cli import app
 from vbl_robust.paper import claims as C
@@ -50,7 +53,7 @@ def _open(root, name):
 
 def _survival(rows, eps):
     """Per method the survival % per box, by box level, straight from metrics.summarize."""
-    lines = sorted(mx.summarize(rows, eps, by=("method", "box_label")), key=lambda ln: ln.box_level)
+    lines = sorted(summarize(rows, eps, by=("method", "box_label")), key=lambda ln: ln.box_level)
     out: dict[str, list[float]] = {}
     for ln in lines:
         out.setdefault(ln.method, []).append(ln.survival)
@@ -71,7 +74,7 @@ def test_pnp_row_is_pnp_summary_of_the_store(root, claims):
     store, _ = _open(root, "pnp-validation")
     with store:
         jobs = store.jobs(kind="pnp")
-        med = {(s.source, s.solver): s.median_rel_pct for s in mx.pnp_summary(jobs)}
+        med = {(s.source, s.solver): s.median_rel_pct for s in pnp_summary(jobs)}
     row = claims[0]
     parts = []
     for src in (TRUNCATED, "detector"):
@@ -94,21 +97,21 @@ def _spatial_1d_rows(root):
     """The spatial-1d store's spec, main rows (no chain) and the dense grid's pseudo-rows per box."""
     store, spec = _open(root, "spatial-1d")
     with store:
-        main = [r for r in mx.main_rows(store, spec) if r.chain is None]
-        ref = mx.reference_rows(store.jobs(kind="search", role="reference", with_points=True), boxes_of(main),
-                                spec.eps_safe_m, spec.penalty_m)
+        main = [r for r in main_rows(store, spec) if r.chain is None]
+        ref = reference_rows(store.jobs(kind="search", role="reference", with_points=True), boxes_of(main),
+                             spec.eps_safe_m, spec.penalty_m)
     return spec, main, ref
 
 
 def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
     spec, main, ref = _spatial_1d_rows(root)
-    surv, true = _survival(main, spec.eps_safe_m), _survival(ref, spec.eps_safe_m)[mx.REFERENCE_METHOD]
+    surv, true = _survival(main, spec.eps_safe_m), _survival(ref, spec.eps_safe_m)[REFERENCE_METHOD]
     row = claims[1]
     for m in ("georobust", "georobust-av", "random", "apgd"):
         assert f"{m} {'/'.join(fmt_num(v) for v in surv[m])}" in row.ours
-    assert f"{mx.REFERENCE_METHOD} {'/'.join(fmt_num(v) for v in true)}" in row.truth
+    assert f"{REFERENCE_METHOD} {'/'.join(fmt_num(v) for v in true)}" in row.truth
     last = max(boxes_of(main), key=lambda b: b.level).label
-    found = [ln for ln in mx.against_reference(main, ref, spec.eps_safe_m) if ln.box_label == last]
+    found = [ln for ln in against_reference(main, ref, spec.eps_safe_m) if ln.box_label == last]
     assert found
     for ln in found:
         if ln.grid_breaches:
@@ -125,7 +128,7 @@ def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
 
 def test_the_report_shows_each_method_against_the_grid(root):
     spec, main, ref = _spatial_1d_rows(root)
-    lines = mx.against_reference(main, ref, spec.eps_safe_m)
+    lines = against_reference(main, ref, spec.eps_safe_m)
     assert {ln.method for ln in lines} == {"georobust", "georobust-av", "random", "apgd"}
     assert all(ln.n == N_IMAGES and ln.found + ln.missed == ln.grid_breaches for ln in lines)
     res = CliRunner().invoke(app, ["report", str(root / "spatial-1d")])
@@ -137,7 +140,7 @@ def test_the_report_shows_each_method_against_the_grid(root):
 def test_roughness_row_reads_the_complete_runtime_grid(root, claims):
     store, spec = _open(root, "runtime-1d")
     with store:
-        grids = [r for r in store.jobs(kind="search", role="reference", with_points=True) if mx.grid_complete(r)]
+        grids = [r for r in store.jobs(kind="search", role="reference", with_points=True) if grid_complete(r)]
     assert len(grids) == N_IMAGES
     jumps = []
     for g in grids:
