@@ -22,11 +22,10 @@ evaluation budget off those stamps (one run of an *anytime* method answers every
 """
 
 from .adaptive import AdaptiveGeoRobust, AdaptiveGeoRobustV
-from .anytime import at_budget, prefix_length
+from .anytime import at_budget
 from .apgd import APGD, apgd_checkpoints
 from .api import METHODS, anytime_methods, direct_family, make_optimizer, maximize, method_options
 from .base import CLOCKS, Optimizer, use_clock
-from .bounds import sound_upper_bound
 from .cells import Cells
 from .direct import Direct, DirectL, GeoRobust
 from .evaluations import NON_FINITE, Evaluations
@@ -63,6 +62,4 @@ __all__ = [
     "use_clock",
     "method_options",
     "potentially_optimal",
-    "prefix_length",
-    "sound_upper_bound",
 ]
