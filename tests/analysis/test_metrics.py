@@ -12,7 +12,8 @@ from vbl_robust.analysis.reference import REFERENCE_METHOD, against_reference, l
 from vbl_robust.analysis.summary import summarize
 from vbl_robust.constants import BreachKind
 from vbl_robust.search import TraceRow
-from vbl_robust.specs.campaign import Budget, roll_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import roll_box
 from vbl_robust.store import JobRow, Points
 from vbl_robust.store.rows import StoredPoints
 

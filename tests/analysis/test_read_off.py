@@ -15,7 +15,8 @@ from vbl_robust.analysis.summary import summarize
 from vbl_robust.campaigns.work import Settings, search_row
 from vbl_robust.constants import Verdict
 from vbl_robust.search import at_budget, maximize
-from vbl_robust.specs.campaign import BoxSpec, Budget, CampaignSpec, Job, roll_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import BoxSpec, CampaignSpec, Job, roll_box
 from vbl_robust.store import JobStatus, Points, ResultStore, schema
 
 

@@ -16,7 +16,8 @@ import vbl_robust.search.api as search_api
 from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.replay import replay, zones_of_run
 from vbl_robust.cli import app
-from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_contrast_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import Block, CampaignSpec, roll_contrast_box
 from vbl_robust.stats import Rate
 from vbl_robust.store import ResultStore
 from vbl_robust.store.digest import reseal

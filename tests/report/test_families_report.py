@@ -13,7 +13,7 @@ from vbl_robust.constants import Verdict
 from vbl_robust.report import figures as F
 from vbl_robust.report.html import figure_png
 from vbl_robust.report.sections import family_lines
-from vbl_robust.specs.campaign import Budget
+from vbl_robust.specs.budget import Budget
 from vbl_robust.store import JobRow
 
 N = 10

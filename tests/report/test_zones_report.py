@@ -22,7 +22,8 @@ from vbl_robust.report import zone_section as B
 from vbl_robust.report.html import fmt_num
 from vbl_robust.report.rows import Context
 from vbl_robust.search.zones import CLASSES
-from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box, roll_contrast_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box, roll_contrast_box
 from vbl_robust.store import ResultStore
 from vbl_robust.store.digest import reseal
 

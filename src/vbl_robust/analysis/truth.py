@@ -19,7 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..specs.campaign import Block, BoxSpec, Budget, CampaignSpec
+from ..specs.budget import Budget
+from ..specs.campaign import Block, BoxSpec, CampaignSpec
 from ..specs.kinds import SourceKind
 from ..store import JobRow, JobStatus, ResultStore
 from .breach import budget_value, survived

@@ -131,7 +131,8 @@ def reproduce(
         if references:
             differ |= _check(exp.name, out_dir, references[exp.name])
     if group:
-        from vbl_robust.paper.claims import claims_html, claims_of, write_claims, write_index
+        from vbl_robust.paper.claims import claims_of, write_claims
+        from vbl_robust.paper.claims_page import claims_html, write_index
 
         typer.echo(f"claims: {write_claims(root)}")
         typer.echo(f"index: {write_index(root, [e.name for e in exps], claims_html(claims_of(root), str(root)))}")

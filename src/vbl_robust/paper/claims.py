@@ -95,24 +95,16 @@ from ..search import direct_family
 from ..stats import Rate
 from ..store import PACKED, STORE, JobRow, JobStatus, ResultStore
 from .claim_rules import (
-    ABOUT_AS_ACCURATE,
-    CONTRADICTED,
     CROSS_BY_S,
-    FAILS,
-    HOLDS,
     NEAR_M,
     NEAR_ZERO_PCT,
     NOT_RUN,
-    PARTLY,
     PHI_TOL_DEG,
     RA_BY_ITER,
-    TIE,
-    VERDICTS,
     Claim,
     ClaimResult,
     ClaimRule,
     Outcome,
-    combine,
     cross_part,
     fewer_evals,
     first_breach_s,
@@ -131,12 +123,9 @@ from .claim_rules import (
     survival_parts,
     times_part,
 )
-from .claims_page import claims_html, claims_markdown, write_index
+from .claims_page import claims_markdown
 
-__all__ = ["ABOUT_AS_ACCURATE", "CLAIMS", "CONTRADICTED", "FAILS", "HOLDS", "NOT_RUN", "PARTLY", "TIE", "VERDICTS",
-           "Claim", "claims_html", "claims_markdown", "claims_of", "combine", "cross_part", "fewer_evals",
-           "first_breach_s", "in_range", "largest_jump", "phi_interval", "plateau_part", "pnp_part", "po_part",
-           "ra_part", "rate_part", "rough_part", "survival_parts", "times_part", "write_claims", "write_index"]
+__all__ = ["CLAIMS", "claims_of", "write_claims"]
 
 logger = logging.getLogger(__name__)
 

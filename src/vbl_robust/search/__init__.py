@@ -21,6 +21,7 @@ evaluation budget off those stamps (one run of an *anytime* method answers every
 ('budget_exhausted', True, True)
 """
 
+from ..constants import Verdict
 from .adaptive import AdaptiveGeoRobust, AdaptiveGeoRobustV
 from .anytime import at_budget
 from .apgd import APGD, apgd_checkpoints
@@ -30,7 +31,7 @@ from .cells import Cells
 from .direct import Direct, DirectL, GeoRobust
 from .evaluations import NON_FINITE, Evaluations
 from .po import potentially_optimal
-from .result import SearchResult, Status, TraceRow, Verdict
+from .result import SearchResult, Status, TraceRow
 from .sampling import GridSearch, RandomSearch, SobolSearch
 
 __all__ = [

@@ -16,10 +16,10 @@ Modules, each importing only those above it:
 - :mod:`.merge` — :func:`merge_runs`: parts of one campaign computed elsewhere joined into one store.
 """
 
-from .core import STORE, ResultStore
+from .core import PACKED, STORE, ResultStore
 from .lock import WriterLock
 from .merge import MergedSource, MergeReport, merge_runs, merge_store, store_file
-from .pack import PACKED, pack_store, restore_store
+from .pack import pack_store, restore_store
 from .rows import (
     Corners,
     JobRow,

@@ -20,7 +20,8 @@ import numpy as np
 
 from ..constants import MAX_BLOB_BYTES, NotMeasured, Verdict
 from ..search.result import TraceRow
-from ..specs.campaign import BoxSpec, Budget, CampaignSpec
+from ..specs.budget import Budget
+from ..specs.campaign import BoxSpec, CampaignSpec
 from ..specs.kinds import JobKind, JobStatus, Role, RunStatus
 
 
