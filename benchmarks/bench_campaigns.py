@@ -46,7 +46,8 @@ def overhead(detector, n_images: int, max_evals: int) -> tuple[str, list[dict]]:
     from vbl_robust.pipeline import Objective
     from vbl_robust.scenes import generate
     from vbl_robust.search import maximize
-    from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+    from vbl_robust.specs.budget import Budget
+    from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
     from vbl_robust.store import ResultStore
 
     samples = generate(n_images, seed=11)

@@ -52,7 +52,8 @@ NOMINAL_QUANTILE = 0.98
 
 def misleading_points(limit: int | None) -> list[tuple[str, object, np.ndarray]]:
     """(sample id, box, θ) of each misleading job's worst silent point, one per image and θ."""
-    from vbl_robust.analysis import metrics as mx
+    from vbl_robust.analysis.breach import breach_kind
+    from vbl_robust.analysis.readoff import main_rows
     from vbl_robust.constants import BreachKind
     from vbl_robust.store import ResultStore
 
@@ -64,8 +65,8 @@ def misleading_points(limit: int | None) -> list[tuple[str, object, np.ndarray]]
     out, seen = [], set()
     with ResultStore(store, readonly=True) as st:
         spec = st.spec()
-        for r in mx.main_rows(st, spec, with_trace=False):
-            if mx.breach_kind(r, spec.eps_safe_m) is not BreachKind.MISLEADING:
+        for r in main_rows(st, spec, with_trace=False):
+            if breach_kind(r, spec.eps_safe_m) is not BreachKind.MISLEADING:
                 continue
             p = r.points
             silent = np.array([not c for c in p.reasons]) & np.isfinite(p.fs) & (p.fs > spec.eps_safe_m)

@@ -42,7 +42,7 @@ BOXES = (15.0, 7.5)
 
 def _grids() -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], float]:
     """The paper's complete runtime-1d dense grids (sample id → sorted roll nodes and their L) and ε_safe."""
-    from vbl_robust.analysis import metrics as mx
+    from vbl_robust.analysis.reference import grid_complete
     from vbl_robust.store import ResultStore
 
     WORK.mkdir(parents=True, exist_ok=True)
@@ -51,7 +51,7 @@ def _grids() -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], float]:
         with lzma.open(PAPER) as src, open(store, "wb") as dst:
             shutil.copyfileobj(src, dst)
     with ResultStore(store, readonly=True) as st:
-        rows = [r for r in st.jobs(kind="search", role="reference", with_points=True) if mx.grid_complete(r)]
+        rows = [r for r in st.jobs(kind="search", role="reference", with_points=True) if grid_complete(r)]
         eps = st.spec().eps_safe_m
     out = {}
     for g in rows:

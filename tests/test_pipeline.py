@@ -121,7 +121,8 @@ def test_a_search_for_misleading_poses_counts_flagged_failures_as_safe(samples):
     search maximises only the confident poses' errors; the audit spec carries that penalty and says so."""
     from vbl_robust.campaigns import audit_spec
     from vbl_robust.constants import TARGETS
-    from vbl_robust.specs.campaign import BoxSpec, Budget
+    from vbl_robust.specs.budget import Budget
+    from vbl_robust.specs.campaign import BoxSpec
 
     s, theta = samples[1], np.array([[0.0, 1.0], [5.0, 1.2]])
     ev = Objective(s, StubDetector(s.corners_2d, empty=True), BOX, penalty_m=TARGETS["misleading"])(theta)

@@ -10,11 +10,13 @@ import pytest
 
 import vbl_robust.search.base as base_module
 from vbl_robust import store as store_module
-from vbl_robust.analysis import metrics as mx
+from vbl_robust.analysis.readoff import main_rows, read_off, read_off_rows
+from vbl_robust.analysis.summary import summarize
 from vbl_robust.campaigns.work import Settings, search_row
 from vbl_robust.constants import Verdict
 from vbl_robust.search import at_budget, maximize
-from vbl_robust.specs.campaign import BoxSpec, Budget, CampaignSpec, Job, roll_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import BoxSpec, CampaignSpec, Job, roll_box
 from vbl_robust.store import JobStatus, Points, ResultStore, schema
 
 
@@ -99,7 +101,7 @@ def _stored_run(tmp_path, monkeypatch, method="random"):
 def test_rows_read_off_a_stored_run_equal_the_search_read_at_each_budget(tmp_path, monkeypatch):
     r, stored, spec = _stored_run(tmp_path, monkeypatch)
     assert stored.points.times is not None and stored.nfev >= 60
-    rows = mx.read_off_rows([stored], spec.eps_safe_m, spec.penalty_m)
+    rows = read_off_rows([stored], spec.eps_safe_m, spec.penalty_m)
     assert [x.budget_label for x in rows] == [b.label for b in stored.budget.read_budgets()]
     for x, b in zip(rows, stored.budget.read_budgets(), strict=True):
         want = at_budget(r, seconds=b.max_seconds, evals=b.max_evals)
@@ -108,15 +110,15 @@ def test_rows_read_off_a_stored_run_equal_the_search_read_at_each_budget(tmp_pat
         assert x.verdict is (Verdict.BREACH if want.fun > 1000 else Verdict.NO_BREACH_FOUND)
         assert np.all(x.points.times <= (b.max_seconds or math.inf)) and len(x.points) == x.nfev
     assert rows[3].nfev == 5 and rows[4].nfev == 60
-    s = mx.summarize(rows, spec.eps_safe_m)
+    s = summarize(rows, spec.eps_safe_m)
     assert all(line.read_from == stored.budget_label for line in s)
 
 
 def test_a_time_budget_before_the_first_evaluation_finds_nothing(tmp_path, monkeypatch):
     r, stored, spec = _stored_run(tmp_path, monkeypatch)
-    early = mx.read_off(stored, Budget(max_seconds=0.001, stop_at_breach=False), spec.eps_safe_m, spec.penalty_m)
+    early = read_off(stored, Budget(max_seconds=0.001, stop_at_breach=False), spec.eps_safe_m, spec.penalty_m)
     assert early.nfev == 0 and early.worst_m is None and early.verdict is Verdict.NO_BREACH_FOUND
-    (line,) = mx.summarize([early], spec.eps_safe_m)
+    (line,) = summarize([early], spec.eps_safe_m)
     assert line.survival == 100.0 and line.n_empty == 1 and math.isnan(line.median_worst_m)
 
 
@@ -124,16 +126,16 @@ def test_a_run_not_measured_reads_as_not_measured_at_every_budget(tmp_path, monk
     _, stored, spec = _stored_run(tmp_path, monkeypatch)
     failed = stored.replace(status=JobStatus.NOT_MEASURED, points=None, worst_m=None, verdict=Verdict.NOT_MEASURED,
                             reason="tool error: boom")
-    rows = mx.read_off_rows([failed], spec.eps_safe_m, spec.penalty_m)
+    rows = read_off_rows([failed], spec.eps_safe_m, spec.penalty_m)
     assert len(rows) == 5 and all(x.status is JobStatus.NOT_MEASURED and x.read_from for x in rows)
-    lines = mx.summarize(rows, spec.eps_safe_m)
+    lines = summarize(rows, spec.eps_safe_m)
     assert all(ln.n == 0 and ln.not_measured == 1 and math.isnan(ln.survival) for ln in lines)
 
 
 def test_rows_without_reads_pass_through(tmp_path, monkeypatch):
     _, stored, spec = _stored_run(tmp_path, monkeypatch)
     plain = stored.replace(budget=Budget(max_evals=10), box=BoxSpec(stored.box.box, "b", 1.0))
-    assert mx.read_off_rows([plain], spec.eps_safe_m, spec.penalty_m) == [plain]
+    assert read_off_rows([plain], spec.eps_safe_m, spec.penalty_m) == [plain]
 
 
 def test_export_and_main_rows_add_the_read_off_rows(tmp_path, monkeypatch):
@@ -147,4 +149,4 @@ def test_export_and_main_rows_add_the_read_off_rows(tmp_path, monkeypatch):
         assert "read_from" in cols and [ln["read_from"] for ln in lines] == [None] + [stored.budget_label] * 5
         assert lines[2]["max_seconds"] == 0.2 and lines[5]["max_evals"] == 60
         # a spec without reading budgets: stored rows as they are
-        assert len(mx.main_rows(st, spec)) == 1
+        assert len(main_rows(st, spec)) == 1

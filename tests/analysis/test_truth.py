@@ -4,7 +4,8 @@ true; the counts are recomputed here from both stores."""
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.analysis import metrics as mx
+from vbl_robust.analysis.breach import survived
+from vbl_robust.analysis.readoff import main_rows
 from vbl_robust.analysis.truth import survivors_of_every_method, true_survival
 from vbl_robust.cli import app
 from vbl_robust.store import ResultStore
@@ -28,21 +29,21 @@ def test_the_grid_runs_on_the_images_every_method_left_surviving(run):
     assert res.exit_code == 0, res.output
     with ResultStore.open_existing(run) as st:
         spec, box, methods, keep = survivors_of_every_method(st)
-        rows = [r for r in mx.main_rows(st, spec, with_trace=False) if r.box_label == box.label]
+        rows = [r for r in main_rows(st, spec, with_trace=False) if r.box_label == box.label]
     eps = spec.eps_safe_m
-    assert keep == sorted({r.sample_id for r in rows} - {r.sample_id for r in rows if not mx.survived(r, eps)},
+    assert keep == sorted({r.sample_id for r in rows} - {r.sample_id for r in rows if not survived(r, eps)},
                           key=lambda s: next(r.sample_index for r in rows if r.sample_id == s))
     truth = run.with_name(run.name + "-truth")
     with ResultStore.open_existing(truth) as t:
         grids = {r.sample_id: r for r in t.jobs(role="reference", with_trace=False)}
     assert set(grids) == set(keep) and keep  # the fixture leaves some survivors (else the test says nothing)
-    hit = {sid for sid, g in grids.items() if not mx.survived(g, eps)}
+    hit = {sid for sid, g in grids.items() if not survived(g, eps)}
     ts = true_survival(run)
     assert (ts.survivors_any, ts.gridded, ts.grid_breaches) == (len(keep), len(keep), len(hit))
     assert ts.true_survivors == len(keep) - len(hit) and ts.images == 6 and ts.counts == (13, 3)
     for m in methods:  # every grid breach is a miss of every method; plus the other methods' breaches it missed
-        others = {r.sample_id for r in rows if r.method != m and not mx.survived(r, eps)}
-        mine = {r.sample_id for r in rows if r.method == m and not mx.survived(r, eps)}
+        others = {r.sample_id for r in rows if r.method != m and not survived(r, eps)}
+        mine = {r.sample_id for r in rows if r.method == m and not survived(r, eps)}
         assert ts.missed[m] == len((others | hit) - mine)
     assert f"true survival {ts.true_survivors} of 6" in res.output
     # a rerun resumes: nothing new

@@ -51,7 +51,8 @@ class SlowOracle(OracleDetector):
 
 
 def kill_campaign_spec():
-    from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+    from vbl_robust.specs.budget import Budget
+    from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
 
     blk = Block(boxes=(roll_box(5), roll_box(10)), methods=("random", "georobust"), budgets=(Budget(max_evals=12),))
     return CampaignSpec("kill-test", (blk,), seed=5)

@@ -10,7 +10,8 @@ import sys
 def main(out: str) -> None:
     from vbl_robust.campaigns import DetectorSpec, run_campaign
     from vbl_robust.scenes import generate
-    from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+    from vbl_robust.specs.budget import Budget
+    from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
     from vbl_robust.store import ResultStore
 
     spec = CampaignSpec("start-up", (Block(boxes=(roll_box(5),), methods=("random",),

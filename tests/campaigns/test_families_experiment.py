@@ -22,7 +22,8 @@ from vbl_robust.perturb import PERTURBATIONS
 from vbl_robust.report import build_report
 from vbl_robust.report.evidence import SAFETY_FIGURE
 from vbl_robust.report.html import fmt_num
-from vbl_robust.specs.campaign import Block, Budget, roll_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import Block, roll_box
 from vbl_robust.store import ResultStore
 
 TINY = Options(methods=("georobust", "random"), max_evals=6, family_grid=21)

@@ -6,7 +6,8 @@ from pathlib import Path
 import pytest
 
 from vbl_robust.campaigns import run_campaign
-from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
 from vbl_robust.store import ResultStore
 
 HERE = Path(__file__).resolve().parent

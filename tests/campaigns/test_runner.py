@@ -6,7 +6,8 @@ import pytest
 from vbl_robust.campaigns import DetectorSpec, plan, run_campaign
 from vbl_robust.constants import FAILURE_REASONS, NotMeasured, Verdict
 from vbl_robust.data.sample import Sample
-from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
 from vbl_robust.store import JobStatus, ResultStore, RunStatus
 
 

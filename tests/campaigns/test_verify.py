@@ -12,13 +12,14 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.analysis.metrics import main_rows
+from vbl_robust.analysis.readoff import main_rows
 from vbl_robust.campaigns import run_campaign
 from vbl_robust.campaigns.verify import banner_lines, check_store, screen
 from vbl_robust.cli import app
 from vbl_robust.constants import Verdict
 from vbl_robust.scenes import generate
-from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
 from vbl_robust.store import JOB_COLUMNS, JobRow, JobStatus, ResultStore, merge_runs
 from vbl_robust.store.digest import FindingKind, reseal
 

@@ -203,7 +203,8 @@ def test_a_configuration_error_is_refused_before_any_work(tmp_path, args, messag
 def test_the_api_refuses_the_same_configuration_errors(tmp_path):
     from vbl_robust.campaigns import DetectorSpec, run_campaign
     from vbl_robust.space import ParameterBox
-    from vbl_robust.specs.campaign import Block, BoxSpec, Budget, CampaignSpec
+    from vbl_robust.specs.budget import Budget
+    from vbl_robust.specs.campaign import Block, BoxSpec, CampaignSpec
     from vbl_robust.store import ResultStore
 
     box = BoxSpec(ParameterBox({"contrast": (-1.0, 2.0)}), "contrast [-1, 2]", 1.0)

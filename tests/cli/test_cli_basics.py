@@ -101,7 +101,8 @@ def test_an_os_error_outside_a_campaign_is_one_line_without_the_resume_hint(tmp_
     resuming."""
     from vbl_robust.campaigns import DetectorSpec, run_campaign
     from vbl_robust.scenes import generate
-    from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+    from vbl_robust.specs.budget import Budget
+    from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
     from vbl_robust.store import ResultStore
 
     spec = CampaignSpec("zones-out", (Block(boxes=(roll_box(5),), methods=("georobust",),

@@ -91,7 +91,8 @@ def test_an_exception_inside_a_plugin_during_the_run_is_not_measured(tmp_path):
     from vbl_robust.campaigns import run_campaign
     from vbl_robust.detect.shipped import DetectorSpec
     from vbl_robust.scenes import generate
-    from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+    from vbl_robust.specs.budget import Budget
+    from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
 
     spec = CampaignSpec("audit", (Block(boxes=(roll_box(5),), methods=("random",), budgets=(Budget(max_evals=3),)),))
     det = DetectorSpec.plugin(f"{HELPERS}:exploding", trust=True)

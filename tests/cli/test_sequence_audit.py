@@ -12,7 +12,8 @@ from typer.testing import CliRunner
 from vbl_robust.campaigns import DetectorSpec, audit_spec, load_sequences, run_campaign
 from vbl_robust.campaigns.replay import zones_of_run
 from vbl_robust.cli import app
-from vbl_robust.specs.campaign import Budget, roll_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import roll_box
 from vbl_robust.store import ResultStore
 
 runner = CliRunner()

@@ -16,7 +16,8 @@ import vbl_robust.search.api as search_api
 from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.replay import replay, zones_of_run
 from vbl_robust.cli import app
-from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_contrast_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import Block, CampaignSpec, roll_contrast_box
 from vbl_robust.stats import Rate
 from vbl_robust.store import ResultStore
 from vbl_robust.store.digest import reseal
@@ -223,7 +224,8 @@ def test_report_markdown_survival_table_from_the_store(gated_run, tmp_path):
     assert "2 images measured by every method (of 2 started)" in res.output
     with ResultStore.open_existing(out) as store:
         spec = store.spec()
-        from vbl_robust.analysis.metrics import main_rows, summarize
+        from vbl_robust.analysis.readoff import main_rows
+        from vbl_robust.analysis.summary import summarize
 
         lines = summarize(main_rows(store, spec, with_trace=False), spec.eps_safe_m)
     survival = res.output.split("Breaches by kind")[0]

@@ -28,7 +28,8 @@ def audit_rows(config: str, n_samples: int = 2, max_evals: int = 20) -> list[dic
     from vbl_robust.campaigns.experiments import audit_spec
     from vbl_robust.campaigns.runner import run_campaign
     from vbl_robust.scenes import generate
-    from vbl_robust.specs.campaign import Budget, roll_contrast_box
+    from vbl_robust.specs.budget import Budget
+    from vbl_robust.specs.campaign import roll_contrast_box
     from vbl_robust.store import ResultStore
 
     torch.set_num_threads(1)

@@ -10,11 +10,19 @@ import struct
 from pathlib import Path
 
 from vbl_robust.campaigns import DetectorSpec, run_campaign
-from vbl_robust.paper import claims as C
 from vbl_robust.paper.bundle import BEGIN, END, refresh_bundle, write_bundle
-from vbl_robust.paper.claims_page import FIGURE_PX, SYNTHETIC, paper_order, verdict_sentence
+from vbl_robust.paper.claim_rules import CONTRADICTED, HOLDS, TIE, Claim
+from vbl_robust.paper.claims_page import (
+    FIGURE_PX,
+    SYNTHETIC,
+    claims_html,
+    paper_order,
+    verdict_sentence,
+    write_index,
+)
 from vbl_robust.scenes import generate
-from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
 from vbl_robust.store import ResultStore
 
 PAPER_ORDER = ["pnp-validation", "spatial-1d", "runtime-1d", "spatial-2d", "runtime-2d", "distance-profile",
@@ -33,9 +41,9 @@ def test_cards_follow_the_papers_order_then_the_truth_runs():
 
 
 def _claims():
-    return [C.Claim("spatial-1d", "claim A", "", "", C.HOLDS, "", 3),
-            C.Claim("spatial-1d + spatial-2d", "(ours) claim B & more", "", "", C.TIE, "", 3),
-            C.Claim("runtime-1d", "claim C", "", "", C.CONTRADICTED, "p = 0.01", 3)]
+    return [Claim("spatial-1d", "claim A", "", "", HOLDS, "", 3),
+            Claim("spatial-1d + spatial-2d", "(ours) claim B & more", "", "", TIE, "", 3),
+            Claim("runtime-1d", "claim C", "", "", CONTRADICTED, "p = 0.01", 3)]
 
 
 def test_the_index_says_the_verdict_and_the_data_first_then_the_claims_then_the_cards(tmp_path):
@@ -50,8 +58,8 @@ def test_the_index_says_the_verdict_and_the_data_first_then_the_claims_then_the_
     for name, n in (("spatial-1d", 100), ("pnp-validation", 1000)):
         (tmp_path / name / "provenance.json").write_text(json.dumps({"runs": [run], "totals": {"images": n}}))
     claims = _claims()
-    page = C.write_index(tmp_path, ["x<y>", "spatial-1d", "pnp-validation"], C.claims_html(claims, "results/paper"),
-                         {"spatial-1d": "3 of 3 jobs"}, claims=claims).read_text()
+    page = write_index(tmp_path, ["x<y>", "spatial-1d", "pnp-validation"], claims_html(claims, "results/paper"),
+                       {"spatial-1d": "3 of 3 jobs"}, claims=claims).read_text()
     verdict, data = page.index("Verdict."), page.index(SYNTHETIC.replace("'", "&#x27;")[1:])
     table, cards = page.index('<section class="claims">'), page.index('<div class="cards">')
     assert verdict < data < table < cards  # the first screen: the verdict and the data, then the claims

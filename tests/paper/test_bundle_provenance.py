@@ -8,7 +8,8 @@ import pytest
 from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.paper.bundle import provenance
 from vbl_robust.scenes import generate
-from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
 from vbl_robust.store import ResultStore
 
 
@@ -61,7 +62,7 @@ def test_a_check_tells_a_changed_finding_from_numeric_drift(tmp_path):
 
 def test_bundle_index_links_stay_relative_and_a_bundle_never_overwrites_its_runs(tmp_path):
     from vbl_robust.paper.bundle import write_bundle
-    from vbl_robust.paper.claims import write_index
+    from vbl_robust.paper.claims_page import write_index
     from vbl_robust.store import restore_store
 
     name = "javascript:alert(1)"

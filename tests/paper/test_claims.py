@@ -12,10 +12,34 @@ import pytest
 from scipy.stats import binomtest
 from typer.testing import CliRunner
 
-from vbl_robust.analysis import metrics as mx
+from vbl_robust.analysis.metrics import pnp_summary
+from vbl_robust.analysis.readoff import main_rows
+from vbl_robust.analysis.reference import REFERENCE_METHOD, against_reference, grid_complete, reference_rows
+from vbl_robust.analysis.summary import summarize
 from vbl_robust.campaigns.pnpcheck import TRUNCATED
 from vbl_robust.cli import app
 from vbl_robust.paper import claims as C
+from vbl_robust.paper.claim_rules import (
+    CONTRADICTED,
+    FAILS,
+    HOLDS,
+    NOT_RUN,
+    PARTLY,
+    TIE,
+    VERDICTS,
+    Claim,
+    ClaimResult,
+    ClaimRule,
+    combine,
+    fewer_evals,
+    first_breach_s,
+    largest_jump,
+    pnp_part,
+    rate_part,
+    rough_part,
+    survival_parts,
+)
+from vbl_robust.paper.claims_page import claims_html, claims_markdown
 from vbl_robust.report.html import fmt_num
 from vbl_robust.specs.campaign import roll_box
 from vbl_robust.stats import ClaimVerdict
@@ -50,7 +74,7 @@ def _open(root, name):
 
 def _survival(rows, eps):
     """Per method the survival % per box, by box level, straight from metrics.summarize."""
-    lines = sorted(mx.summarize(rows, eps, by=("method", "box_label")), key=lambda ln: ln.box_level)
+    lines = sorted(summarize(rows, eps, by=("method", "box_label")), key=lambda ln: ln.box_level)
     out: dict[str, list[float]] = {}
     for ln in lines:
         out.setdefault(ln.method, []).append(ln.survival)
@@ -61,7 +85,7 @@ def test_every_claim_has_a_row_computed_on_every_image(claims):
     assert [c.experiment for c in claims] == [" + ".join(rule.experiments) for rule in C.CLAIMS]
     assert len(claims) == 9 and claims[7].experiment == "spatial-1d + spatial-2d"
     for c in claims:
-        assert c.verdict in C.VERDICTS and c.verdict != C.NOT_RUN, c
+        assert c.verdict in VERDICTS and c.verdict != NOT_RUN, c
         assert c.images == N_IMAGES and "failed to compute" not in c.reason and "partial" not in c.reason, c
         assert c.claim and c.ours and c.reason.endswith("."), c
     assert "2.2 %" in claims[0].claim and "2600 m" in claims[5].claim and "1000 m" in claims[4].claim
@@ -71,7 +95,7 @@ def test_pnp_row_is_pnp_summary_of_the_store(root, claims):
     store, _ = _open(root, "pnp-validation")
     with store:
         jobs = store.jobs(kind="pnp")
-        med = {(s.source, s.solver): s.median_rel_pct for s in mx.pnp_summary(jobs)}
+        med = {(s.source, s.solver): s.median_rel_pct for s in pnp_summary(jobs)}
     row = claims[0]
     parts = []
     for src in (TRUNCATED, "detector"):
@@ -79,11 +103,11 @@ def test_pnp_row_is_pnp_summary_of_the_store(root, claims):
         assert f"{src}: ippe_lm {fmt_num(a)} % vs iterative {fmt_num(b)} %" in row.ours
         errs = [r.payload["errors"][src] for r in jobs if r.payload]
         rel = {s: [math.nan if e[s]["abs_m"] is None else e[s]["rel_pct"] for e in errs] for s in ("ippe_lm", "iterative")}
-        out, text = C.pnp_part(rel["ippe_lm"], rel["iterative"], src)
+        out, text = pnp_part(rel["ippe_lm"], rel["iterative"], src)
         parts.append(out)
         assert text in row.reason and "median ratio ippe_lm / iterative" in text
     assert not math.isnan(med[(TRUNCATED, "ippe_lm")])  # the sizes above leave something to compare
-    assert row.verdict == C.combine(parts) and row.truth == ""
+    assert row.verdict == combine(parts) and row.truth == ""
 
 
 def boxes_of(rows):
@@ -94,21 +118,21 @@ def _spatial_1d_rows(root):
     """The spatial-1d store's spec, main rows (no chain) and the dense grid's pseudo-rows per box."""
     store, spec = _open(root, "spatial-1d")
     with store:
-        main = [r for r in mx.main_rows(store, spec) if r.chain is None]
-        ref = mx.reference_rows(store.jobs(kind="search", role="reference", with_points=True), boxes_of(main),
-                                spec.eps_safe_m, spec.penalty_m)
+        main = [r for r in main_rows(store, spec) if r.chain is None]
+        ref = reference_rows(store.jobs(kind="search", role="reference", with_points=True), boxes_of(main),
+                             spec.eps_safe_m, spec.penalty_m)
     return spec, main, ref
 
 
 def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
     spec, main, ref = _spatial_1d_rows(root)
-    surv, true = _survival(main, spec.eps_safe_m), _survival(ref, spec.eps_safe_m)[mx.REFERENCE_METHOD]
+    surv, true = _survival(main, spec.eps_safe_m), _survival(ref, spec.eps_safe_m)[REFERENCE_METHOD]
     row = claims[1]
     for m in ("georobust", "georobust-av", "random", "apgd"):
         assert f"{m} {'/'.join(fmt_num(v) for v in surv[m])}" in row.ours
-    assert f"{mx.REFERENCE_METHOD} {'/'.join(fmt_num(v) for v in true)}" in row.truth
+    assert f"{REFERENCE_METHOD} {'/'.join(fmt_num(v) for v in true)}" in row.truth
     last = max(boxes_of(main), key=lambda b: b.level).label
-    found = [ln for ln in mx.against_reference(main, ref, spec.eps_safe_m) if ln.box_label == last]
+    found = [ln for ln in against_reference(main, ref, spec.eps_safe_m) if ln.box_label == last]
     assert found
     for ln in found:
         if ln.grid_breaches:
@@ -117,15 +141,15 @@ def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
             assert "breaches at" not in row.truth
     # the verdict is the tests': recomputed from the rows, each box a part
     labels = [b.label for b in sorted(boxes_of(main), key=lambda b: b.level)]
-    groups = C.survival_parts(main, spec.eps_safe_m, (("georobust", "random"), ("georobust", "apgd"),
-                                                      ("random", "apgd")), labels)
-    assert row.verdict == C.combine([o for out, _ in groups for o in out])
+    groups = survival_parts(main, spec.eps_safe_m, (("georobust", "random"), ("georobust", "apgd"),
+                                                    ("random", "apgd")), labels)
+    assert row.verdict == combine([o for out, _ in groups for o in out])
     assert all(text in row.reason for _, text in groups) and "p = " in row.reason
 
 
 def test_the_report_shows_each_method_against_the_grid(root):
     spec, main, ref = _spatial_1d_rows(root)
-    lines = mx.against_reference(main, ref, spec.eps_safe_m)
+    lines = against_reference(main, ref, spec.eps_safe_m)
     assert {ln.method for ln in lines} == {"georobust", "georobust-av", "random", "apgd"}
     assert all(ln.n == N_IMAGES and ln.found + ln.missed == ln.grid_breaches for ln in lines)
     res = CliRunner().invoke(app, ["report", str(root / "spatial-1d")])
@@ -137,14 +161,14 @@ def test_the_report_shows_each_method_against_the_grid(root):
 def test_roughness_row_reads_the_complete_runtime_grid(root, claims):
     store, spec = _open(root, "runtime-1d")
     with store:
-        grids = [r for r in store.jobs(kind="search", role="reference", with_points=True) if mx.grid_complete(r)]
+        grids = [r for r in store.jobs(kind="search", role="reference", with_points=True) if grid_complete(r)]
     assert len(grids) == N_IMAGES
     jumps = []
     for g in grids:
         f = np.where(np.isfinite(g.points.fs), g.points.fs, spec.penalty_m)[np.argsort(g.points.xs[:, 0])]
         jumps.append(float(np.max(np.abs(np.diff(f)))))
     assert f"median largest jump {fmt_num(float(np.median(jumps)))} m" in claims[8].ours
-    verdict, why = C.rough_part(jumps, spec.eps_safe_m)
+    verdict, why = rough_part(jumps, spec.eps_safe_m)
     assert claims[8].verdict == verdict and claims[8].reason == why + "." and "exact 95 %" in why
 
 
@@ -158,16 +182,16 @@ def test_every_row_states_a_test_or_an_interval(claims):
 
 def test_missing_experiments_say_not_run_yet(root, tmp_path):
     none = C.claims_of(tmp_path / "nothing")
-    assert len(none) == len(C.CLAIMS) and {c.verdict for c in none} == {C.NOT_RUN}
+    assert len(none) == len(C.CLAIMS) and {c.verdict for c in none} == {NOT_RUN}
     assert all(c.ours == "not run yet" and c.images == 0 and "no results store" in c.reason for c in none)
 
     shutil.copytree(root / "spatial-1d", tmp_path / "some" / "spatial-1d")
     some = C.claims_of(tmp_path / "some")
     by = {c.experiment: c for c in some}
-    assert by["spatial-1d"].verdict != C.NOT_RUN and by["spatial-1d"].images == N_IMAGES
-    assert all(c.verdict == C.NOT_RUN for c in some if "spatial-1d" not in c.experiment)
+    assert by["spatial-1d"].verdict != NOT_RUN and by["spatial-1d"].images == N_IMAGES
+    assert all(c.verdict == NOT_RUN for c in some if "spatial-1d" not in c.experiment)
     both = by["spatial-1d + spatial-2d"]  # half of its inputs: never "holds"
-    assert both.verdict != C.HOLDS and "2-D: not run yet — not measured" in both.reason
+    assert both.verdict != HOLDS and "2-D: not run yet — not measured" in both.reason
 
 
 def _copy_store(root, dst, keep, extra_sample=False):
@@ -199,11 +223,11 @@ def test_partial_experiments_use_their_complete_images(root, claims, tmp_path):
 
     _copy_store(root, tmp_path / "started", half_of_first)
     row = next(c for c in C.claims_of(tmp_path / "started") if c.experiment == "spatial-1d")
-    assert row.verdict == C.NOT_RUN and row.ours == f"partial: 0 of {N_IMAGES} images" and row.images == 0
+    assert row.verdict == NOT_RUN and row.ours == f"partial: 0 of {N_IMAGES} images" and row.images == 0
 
 
 def test_markdown_has_one_row_per_claim_and_says_how_it_was_made(root, claims):
-    md = C.claims_markdown(claims, str(root))
+    md = claims_markdown(claims, str(root))
     rows = [ln for ln in md.splitlines() if ln.startswith("| ")]
     assert len(rows) == 1 + len(claims)  # the header, then one per claim
     assert all(ln.replace("\\|", "").count("|") == 8 for ln in rows)  # 7 cells each, escaped pipes aside
@@ -213,8 +237,8 @@ def test_markdown_has_one_row_per_claim_and_says_how_it_was_made(root, claims):
 
 
 def test_html_escapes_every_text(claims):
-    evil = C.Claim("x<script>", "a & b", "<b>", '"q"', C.HOLDS, "1 < 2", 3)
-    out = C.claims_html([*claims, evil])
+    evil = Claim("x<script>", "a & b", "<b>", '"q"', HOLDS, "1 < 2", 3)
+    out = claims_html([*claims, evil])
     assert out.startswith('<section class="claims">') and out.endswith("</section>")
     assert "<script>" not in out and "x&lt;script&gt;" in out and "a &amp; b" in out and "&quot;q&quot;" in out
     assert out.count("<tr>") == 1 + len(claims) + 1
@@ -222,14 +246,14 @@ def test_html_escapes_every_text(claims):
 
 # -- the verdict rules on hand-made numbers ------------------------------------------------------------------
 @pytest.mark.parametrize(("parts", "verdict"), [
-    ([True, True], C.HOLDS), ([True, False], C.PARTLY), ([True, None], C.PARTLY), ([False, None], C.FAILS),
-    ([False, False], C.FAILS), ([None, None], C.NOT_RUN), ([], C.NOT_RUN),
-    ([ClaimVerdict.HOLDS, True], C.HOLDS), ([ClaimVerdict.HOLDS, ClaimVerdict.TIE], C.PARTLY),
-    ([ClaimVerdict.TIE, ClaimVerdict.TIE], C.TIE), ([ClaimVerdict.TIE, False], C.TIE),
-    ([ClaimVerdict.HOLDS, ClaimVerdict.CONTRADICTED], C.CONTRADICTED), ([ClaimVerdict.CONTRADICTED, None], C.CONTRADICTED),
+    ([True, True], HOLDS), ([True, False], PARTLY), ([True, None], PARTLY), ([False, None], FAILS),
+    ([False, False], FAILS), ([None, None], NOT_RUN), ([], NOT_RUN),
+    ([ClaimVerdict.HOLDS, True], HOLDS), ([ClaimVerdict.HOLDS, ClaimVerdict.TIE], PARTLY),
+    ([ClaimVerdict.TIE, ClaimVerdict.TIE], TIE), ([ClaimVerdict.TIE, False], TIE),
+    ([ClaimVerdict.HOLDS, ClaimVerdict.CONTRADICTED], CONTRADICTED), ([ClaimVerdict.CONTRADICTED, None], CONTRADICTED),
 ])
 def test_combine(parts, verdict):
-    assert C.combine(parts) == verdict
+    assert combine(parts) == verdict
 
 
 def _verdict_row(method, half_width, sid, worst, status=JobStatus.DONE, nfev=4):
@@ -252,19 +276,19 @@ def test_survival_claims_are_judged_by_their_paired_tests():
                  # ±20°: the other way round: contradicted
                  _verdict_row("georobust", 20, f"s{i}", 10.0 if i < 12 else 3000.0),
                  _verdict_row("random", 20, f"s{i}", 3000.0)]
-    [(outcomes, text)] = C.survival_parts(rows, eps, [("georobust", "random")], ["±5°", "±10°", "±20°"])
+    [(outcomes, text)] = survival_parts(rows, eps, [("georobust", "random")], ["±5°", "±10°", "±20°"])
     assert outcomes == [ClaimVerdict.TIE, ClaimVerdict.HOLDS, ClaimVerdict.CONTRADICTED]
     # Holm over three tests: raw p 0.5 (2 vs 0), p12 = 2 · 0.5^12 twice -> 3 · p12 for both, 0.5 unchanged
     p12 = 3 * binomtest(12, 12).pvalue
     assert text == (f"georobust survives less than random: ±5° tie (2 vs 0 of 20, p = 0.5), ±10° holds (0 vs 12 of "
                     f"20, p = {p12:.2g}), ±20° contradicted (12 vs 0 of 20, p = {p12:.2g})")
-    assert C.combine(outcomes) == C.CONTRADICTED and C.combine(outcomes[:2]) == C.PARTLY
+    assert combine(outcomes) == CONTRADICTED and combine(outcomes[:2]) == PARTLY
     # no paired images: not measured
-    [(none, text)] = C.survival_parts(rows, eps, [("georobust", "apgd")], ["±5°"])
+    [(none, text)] = survival_parts(rows, eps, [("georobust", "apgd")], ["±5°"])
     assert none == [None] and "±5° not measured" in text
     # a name no method has is an error, not a method without rows
     with pytest.raises(ValueError, match="unknown method 'georobst'"):
-        C.survival_parts(rows, eps, [("georobst", "random")], ["±5°"])
+        survival_parts(rows, eps, [("georobst", "random")], ["±5°"])
 
 
 def test_a_misspelt_method_fails_its_claim_and_says_so(root, monkeypatch):
@@ -275,26 +299,26 @@ def test_a_misspelt_method_fails_its_claim_and_says_so(root, monkeypatch):
     with pytest.raises(ValueError, match="unknown method 'randm'"):
         table["randm"]
     rule = C.CLAIMS[1]
-    misspelt = C.ClaimRule(rule.experiments, rule.claim,
-                           lambda e: C.ClaimResult(C._text(C._survival(e.ctx.main, e.eps)[1], [], "randm"), "",
-                                                   C.HOLDS, "", 1))
+    misspelt = ClaimRule(rule.experiments, rule.claim,
+                         lambda e: ClaimResult(C._text(C._survival(e.ctx.main, e.eps)[1], [], "randm"), "",
+                                               HOLDS, "", 1))
     monkeypatch.setattr(C, "CLAIMS", (misspelt,))
     [row] = C.claims_of(root)
-    assert row.verdict == C.NOT_RUN and "failed to compute (ValueError: claims: unknown method 'randm'" in row.reason
+    assert row.verdict == NOT_RUN and "failed to compute (ValueError: claims: unknown method 'randm'" in row.reason
 
 
 def test_a_rate_against_a_threshold_is_judged_by_its_interval():
-    assert C.rate_part(0, 100, 5.0)[0] is ClaimVerdict.HOLDS  # [0, 3.6] % lies below 5 %
-    assert C.rate_part(2, 100, 5.0)[0] is ClaimVerdict.TIE  # [0.2, 7.0] % straddles it
-    assert C.rate_part(20, 100, 5.0)[0] is ClaimVerdict.CONTRADICTED
-    assert C.rate_part(0, 0, 5.0)[0] is None
+    assert rate_part(0, 100, 5.0)[0] is ClaimVerdict.HOLDS  # [0, 3.6] % lies below 5 %
+    assert rate_part(2, 100, 5.0)[0] is ClaimVerdict.TIE  # [0.2, 7.0] % straddles it
+    assert rate_part(20, 100, 5.0)[0] is ClaimVerdict.CONTRADICTED
+    assert rate_part(0, 0, 5.0)[0] is None
 
 
 def test_fewer_evaluations_is_judged_by_the_signed_rank_test():
     a, b = [5.0] * 12, [9.0 + i for i in range(12)]
-    assert C.fewer_evals(a, b)[0] is ClaimVerdict.HOLDS and C.fewer_evals(b, a)[0] is ClaimVerdict.CONTRADICTED
-    assert C.fewer_evals([5.0, 7.0, 6.0], [6.0, 6.0, 6.5])[0] is ClaimVerdict.TIE
-    assert C.fewer_evals([3.0], [3.0])[0] is ClaimVerdict.TIE and C.fewer_evals([], [])[0] is None
+    assert fewer_evals(a, b)[0] is ClaimVerdict.HOLDS and fewer_evals(b, a)[0] is ClaimVerdict.CONTRADICTED
+    assert fewer_evals([5.0, 7.0, 6.0], [6.0, 6.0, 6.5])[0] is ClaimVerdict.TIE
+    assert fewer_evals([3.0], [3.0])[0] is ClaimVerdict.TIE and fewer_evals([], [])[0] is None
 
 
 def _row(fs, xs=None, times=None):
@@ -305,8 +329,8 @@ def _row(fs, xs=None, times=None):
 
 def test_first_breach_and_largest_jump():
     row = _row([10, math.nan, 2000], times=[0.1, 0.2, 0.3])
-    assert C.first_breach_s(row, 1000, 5000) == 0.2  # a non-finite value counts as the penalty
-    assert C.first_breach_s(_row([10, 20], times=[0.1, 0.2]), 1000, 5000) == math.inf
-    assert math.isnan(C.first_breach_s(_row([10, 2000]), 1000, 5000))  # no stamped times
-    jump, slope = C.largest_jump(np.array([[0.1], [0.0], [0.2]]), np.array([300.0, 100.0, 5000.0]), 5000)
+    assert first_breach_s(row, 1000, 5000) == 0.2  # a non-finite value counts as the penalty
+    assert first_breach_s(_row([10, 20], times=[0.1, 0.2]), 1000, 5000) == math.inf
+    assert math.isnan(first_breach_s(_row([10, 2000]), 1000, 5000))  # no stamped times
+    jump, slope = largest_jump(np.array([[0.1], [0.0], [0.2]]), np.array([300.0, 100.0, 5000.0]), 5000)
     assert jump == pytest.approx(4700) and slope == pytest.approx(47000)

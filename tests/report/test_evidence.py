@@ -6,7 +6,8 @@ import json
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.analysis import metrics as mx
+from vbl_robust.analysis.breach import breach_kind, survived
+from vbl_robust.analysis.readoff import main_rows
 from vbl_robust.cli import app
 from vbl_robust.constants import BreachKind
 from vbl_robust.stats import Rate, breach_fraction_bound
@@ -28,12 +29,12 @@ def test_evidence_counts_images_over_every_method_with_exact_intervals(run):
     ev = json.loads((run / "evidence.json").read_text())
     with ResultStore.open_existing(run) as st:
         spec = st.spec()
-        rows = mx.main_rows(st, spec)
+        rows = main_rows(st, spec)
     eps = spec.eps_safe_m
     [box] = ev["boxes"]
     ids = {r.sample_id for r in rows}
-    breached = {r.sample_id for r in rows if not mx.survived(r, eps)}
-    silent = {r.sample_id for r in rows if mx.breach_kind(r, eps) is BreachKind.MISLEADING}
+    breached = {r.sample_id for r in rows if not survived(r, eps)}
+    silent = {r.sample_id for r in rows if breach_kind(r, eps) is BreachKind.MISLEADING}
     assert box["images"] == len(ids) == 4 and box["survivors"] == len(ids - breached)
     assert 0 < box["survivors"] < 4  # the run has both kinds of image (the test would be vacuous otherwise)
     assert box["misleading"] == len(silent) and box["flagged"] == len(breached - silent)

@@ -7,13 +7,13 @@ import math
 import matplotlib.pyplot as plt
 import pytest
 
-from vbl_robust.analysis import metrics as mx
+from vbl_robust.analysis.levels import ANY_METHOD, family_profile, rank_families
 from vbl_robust.campaigns.experiments import family_boxes
 from vbl_robust.constants import Verdict
 from vbl_robust.report import figures as F
 from vbl_robust.report.html import figure_png
 from vbl_robust.report.sections import family_lines
-from vbl_robust.specs.campaign import Budget
+from vbl_robust.specs.budget import Budget
 from vbl_robust.store import JobRow
 
 N = 10
@@ -48,15 +48,15 @@ def synthetic_rows() -> list[JobRow]:
 
 @pytest.fixture(scope="module")
 def profile():
-    return mx.family_profile(synthetic_rows(), 1000.0)
+    return family_profile(synthetic_rows(), 1000.0)
 
 
 def test_ranking_order_and_levels_are_the_known_answer(profile):
-    assert mx.rank_families(profile) == EXPECTED
+    assert rank_families(profile) == EXPECTED
     levels = {(p["family"], p["method"]): (p["below_50"], p["below_10"]) for p in profile}
-    assert levels[("roll_deg", mx.ANY_METHOD)] == (2.0, 4.0)
-    assert levels[("haze", mx.ANY_METHOD)] == (2.0, math.inf)
-    assert levels[("gamma", "random")] == (math.inf, math.inf) and levels[("gamma", mx.ANY_METHOD)] == (3.0, 3.0)
+    assert levels[("roll_deg", ANY_METHOD)] == (2.0, 4.0)
+    assert levels[("haze", ANY_METHOD)] == (2.0, math.inf)
+    assert levels[("gamma", "random")] == (math.inf, math.inf) and levels[("gamma", ANY_METHOD)] == (3.0, 3.0)
     roll = next(p for p in profile if p["family"] == "roll_deg" and p["method"] == "georobust")
     assert roll["survival"] == [100.0, 40.0, 40.0, 0.0, 0.0] and roll["n"] == [N] * 5
     assert roll["labels"][0] == "roll_deg ±2°" and roll["bounds"][-1] == (-30.0, 30.0) and roll["unit"] == "deg"
@@ -64,7 +64,7 @@ def test_ranking_order_and_levels_are_the_known_answer(profile):
 
 def test_table_numbers_equal_the_job_rows(profile):
     rows = synthetic_rows()
-    lines = family_lines(profile, mx.rank_families(profile))
+    lines = family_lines(profile, rank_families(profile))
     assert [ln["family"] for ln in lines][::3] == EXPECTED  # GeoRobust, Random, any method per family
     for ln in lines:
         if ln["method"] == "any method (grid included)":
@@ -82,7 +82,7 @@ def test_table_numbers_equal_the_job_rows(profile):
 
 
 def test_ranking_figure_puts_the_most_vulnerable_on_top(profile, tmp_path):
-    order = mx.rank_families(profile)
+    order = rank_families(profile)
     fig = F.family_ranking(profile, order)
     ax = fig.axes[0]
     top_down = [t.get_text().split()[0] for t in ax.get_yticklabels()][::-1]
@@ -103,7 +103,7 @@ def test_ranking_figure_puts_the_most_vulnerable_on_top(profile, tmp_path):
 
 
 def test_survival_figure_has_a_panel_per_family_in_ranking_order(profile):
-    fig = F.family_survival(profile, mx.rank_families(profile))
+    fig = F.family_survival(profile, rank_families(profile))
     visible = [a for a in fig.axes if a.get_visible()]
     assert [a.get_title().split("\n")[0] for a in visible] == EXPECTED
     assert visible[1].get_title() == "roll_deg\n±2/5/10/20/30°"

@@ -6,15 +6,18 @@ import numpy as np
 import pytest
 from matplotlib.figure import Figure
 
-from vbl_robust.analysis import metrics as mx
 from vbl_robust.analysis.levels import DistanceLine
-from vbl_robust.analysis.metrics import Summary
+from vbl_robust.analysis.metrics import ConvergenceLine, PnpLine
+from vbl_robust.analysis.summary import Summary
 from vbl_robust.report import figures as F
+from vbl_robust.report.figure_style import REFERENCE, style
+from vbl_robust.report.view_figure import worst_view
+from vbl_robust.report.zone_figure import COLOURS, zones_figure
 
 
 def summary_rows():
     out = []
-    for m, base in (("georobust", 20.0), ("random", 50.0), ("apgd", 70.0), (F.REFERENCE, 10.0)):
+    for m, base in (("georobust", 20.0), ("random", 50.0), ("apgd", 70.0), (REFERENCE, 10.0)):
         for lv in (2.0, 5.0, 10.0):
             out.append(Summary(
                 method=m, box_level=lv, box_label=f"±{lv:g}°", budget_label=None, survival=20.0 * round(base / lv / 10),
@@ -62,7 +65,7 @@ def _conv(iterations, n):
     def spread(k):
         return [10.0 / k, 1.0, 8.0 / k, 9.0 / k, 10.0 / k, 11.0 / k, 12.0 / k, 500.0]
 
-    return [mx.ConvergenceLine(k, n, *spread(k), *spread(k), 10.0 / k, 2.0 * k, 100.0) for k in range(1, iterations + 1)]
+    return [ConvergenceLine(k, n, *spread(k), *spread(k), 10.0 / k, 2.0 * k, 100.0) for k in range(1, iterations + 1)]
 
 
 def test_convergence_and_landscapes_and_pnp():
@@ -77,7 +80,7 @@ def test_convergence_and_landscapes_and_pnp():
     assert "Random (4 points)" in [t.get_text() for t in fig.legends[0].get_texts()]
     fig = F.landscape_1d(xs[:9, :1], fs[:9], "roll_deg", {"apgd": (xs[:3, :1], fs[:3])}, eps_safe_m=1000.0, title="t")
     assert "APGD (3 points)" in labels(fig.axes[0])
-    pnp = [mx.PnpLine(s, v, 4, 0, 30.0, 60.0, 1.0, 2.0, 3.0) for s in ("ground truth", "detector")
+    pnp = [PnpLine(s, v, 4, 0, 30.0, 60.0, 1.0, 2.0, 3.0) for s in ("ground truth", "detector")
            for v in ("ippe_lm", "iterative")]
     fig = F.pnp_comparison(pnp)
     assert [a.get_title() for a in fig.axes] == ["ground truth keypoints", "detector keypoints"]
@@ -86,7 +89,7 @@ def test_convergence_and_landscapes_and_pnp():
 
 @pytest.mark.parametrize("method", ["georobust", "unknown-method"])
 def test_style_has_defaults(method):
-    assert {"color", "marker", "label", "linestyle"} <= set(F.style(method))
+    assert {"color", "marker", "label", "linestyle"} <= set(style(method))
 
 
 def outside(fig):
@@ -118,20 +121,20 @@ def every_figure():
                                       worst={"random": xs[3]},
                                       title="L over ±30°, c∈[0.4, 2.5], image synth_s0_000000 (slant distance 5597 m)")
     yield "convergence", F.convergence(_conv(29, 100), title="GeoRobust convergence")
-    pnp = [mx.PnpLine(s, v, 1000, 12, 30.0, 60.0, 1.0, 2.0, 3.0) for s in ("ground truth", "detector")
+    pnp = [PnpLine(s, v, 1000, 12, 30.0, 60.0, 1.0, 2.0, 3.0) for s in ("ground truth", "detector")
            for v in ("ippe_lm", "iterative", "sqpnp", "ippe")]
     yield "pnp", F.pnp_comparison(pnp)
     yield "risk", F.risk_per_image({"mc": [(i, 0.01, 0.0, 0.05) for i in range(40)]}, 40, 0.01)
     img = np.full((64, 80, 3), 0.5)
     corners = np.array([[50.0, 30.0], [40.0, 30.0], [35.0, 50.0], [55.0, 50.0]])
-    yield "gallery", F.worst_view(img, img, corners, corners + 3, corners + 6, predicted_before=corners + 0.5,
+    yield "gallery", worst_view(img, img, corners, corners + 3, corners + 6, predicted_before=corners + 0.5,
                                   confident=False, titles=("unperturbed: L(0) = 812 m", "perturbed at θ*: L = 5000 m"))
     # a grid stopped at its first breach: part of the box evaluated, no method's worst point drawn
     yield "landscape_partial", F.landscape_2d(
         xs[np.abs(xs[:, 0]) <= 15], fs[np.abs(xs[:, 0]) <= 15], ["roll_deg", "contrast"], {}, eps_safe_m=1000.0,
         bounds=[(-30.0, 30.0), (0.4, 2.5)], title="L over ±30°, c∈[0.4, 2.5], image synth_s0_000047 (slant distance "
         "2469 m); the grid stopped at its first breach after 25 of 1681 points (blank: not evaluated)")
-    yield "zones", F.zones_figure(zone_map_2d(), landscape=(xs, fs),
+    yield "zones", zones_figure(zone_map_2d(), landscape=(xs, fs),
                                   title="GeoRobust zones on ±30°, c∈[0.4, 2.5], image synth_s0_000047 — estimate K̂: "
                                         "not sound (the search's own Lipschitz estimate)")
     yield "safety", F.survival_per_box(boxes_evidence(), eps_safe_m=1000.0)
@@ -252,7 +255,7 @@ def test_the_zones_ruled_out_colour_stands_out_from_its_landscape(drawn):
     from vbl_robust.search.zones import RULED_OUT
 
     cmap = plt.get_cmap(LANDSCAPE_CMAP)(np.linspace(0, 1, 256))[:, :3]
-    green = np.array(to_rgb(F.COLOURS[RULED_OUT]))
+    green = np.array(to_rgb(COLOURS[RULED_OUT]))
     assert np.min(np.linalg.norm(cmap - green, axis=1)) > 0.3
     ax = drawn["zones"].axes[0]
     assert ax.get_xlabel() == "roll φ (°)" and ax.get_ylabel() == "contrast factor α"

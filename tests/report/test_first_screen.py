@@ -14,7 +14,8 @@ from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.experiments import audit_spec
 from vbl_robust.report import build_report
 from vbl_robust.report.evidence import BoxEvidence, verdict_of, verdict_sentence
-from vbl_robust.specs.campaign import Budget, roll_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import roll_box
 from vbl_robust.stats import Rate
 from vbl_robust.store import ResultStore
 

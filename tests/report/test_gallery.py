@@ -21,7 +21,8 @@ from vbl_robust.perturb import Perturbation
 from vbl_robust.report import build_report
 from vbl_robust.report.evidence import WORST_CASES, worst_cases
 from vbl_robust.report.html import fmt_num
-from vbl_robust.specs.campaign import Budget, roll_contrast_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import roll_contrast_box
 from vbl_robust.stats import Rate
 from vbl_robust.store import JobRow, Points, ResultStore
 from vbl_robust.store.digest import reseal
@@ -280,7 +281,7 @@ def test_cases_are_the_breached_images_misleading_first_then_by_error_and_capped
 
 
 def test_a_row_read_off_a_longer_run_takes_its_corners_only_where_its_worst_point_is_the_runs():
-    from vbl_robust.specs.campaign import Budget as B
+    from vbl_robust.specs.budget import Budget as B
 
     corners = ((1.0, 2.0), (3.0, 4.0), (5.0, 6.0), (7.0, 8.0))
     run = _row("a", 2000.0, [("", 2000.0)]).replace(key="k", worst_corners=corners, payload={"worst": {"conf": 0.7}})

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.analysis import metrics as mx
+from vbl_robust.analysis.readoff import main_rows
 from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.replay import zones_of_run
 from vbl_robust.report import build_report
@@ -22,7 +22,8 @@ from vbl_robust.report import zone_section as B
 from vbl_robust.report.html import fmt_num
 from vbl_robust.report.rows import Context
 from vbl_robust.search.zones import CLASSES
-from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box, roll_contrast_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box, roll_contrast_box
 from vbl_robust.store import ResultStore
 from vbl_robust.store.digest import reseal
 
@@ -68,7 +69,7 @@ def gated_2d(tmp_path_factory, samples):
 
 def _context(run: Path, store: ResultStore) -> Context:
     spec = store.spec()
-    return Context(store, spec, run, mx.main_rows(store, spec), store.samples())
+    return Context(store, spec, run, main_rows(store, spec), store.samples())
 
 
 def _expected(run: Path) -> dict[str, dict[str, float]]:
@@ -203,7 +204,7 @@ def test_a_search_stopped_at_its_first_point_has_no_estimate_and_rules_nothing_o
 
 
 def test_the_zone_figure_takes_a_2d_landscape_as_a_heat_map(tmp_path):
-    from vbl_robust.report.figures import plot_zones
+    from vbl_robust.report.zone_figure import plot_zones
     from vbl_robust.search import make_optimizer
     from vbl_robust.search.zones import zones
 

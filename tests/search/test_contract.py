@@ -282,7 +282,7 @@ def test_gradient_methods_call_the_objective_with_a_tensor_the_others_with_an_ar
 
 def test_every_method_names_and_labels_itself_once():
     """The registry key is the class's ``name``; its display label (figures, reports) lives on the class too."""
-    from vbl_robust.report.figures import style
+    from vbl_robust.report.figure_style import style
     from vbl_robust.search import METHODS
 
     labels = set()

@@ -7,7 +7,8 @@ from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.cli import app
 from vbl_robust.paper.bundle import compare_runs
 from vbl_robust.scenes import generate
-from vbl_robust.specs.campaign import Block, Budget, CampaignSpec, roll_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
 from vbl_robust.store import (
     MergedSource,
     MergeReport,

@@ -14,7 +14,8 @@ from vbl_robust import store as store_module
 from vbl_robust.constants import Verdict
 from vbl_robust.search import TraceRow
 from vbl_robust.space import ParameterBox
-from vbl_robust.specs.campaign import JOB_KINDS, ROLES, BoxSpec, Budget
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import JOB_KINDS, ROLES, BoxSpec
 from vbl_robust.store import (
     JobRow,
     JobStatus,

@@ -8,14 +8,14 @@ is ≤ ε_safe: S_rate = 100 · #survivors / N (%), N the images measured: a job
 measured) is in no rate, counted apart.
 
 Budgets read off a trace: a stored run whose budget reads smaller budgets (``Budget.reads``, the runtime
-experiments' anytime methods) stands for one result per read budget; :func:`read_off_rows` derives those rows
-(``JobRow.read_from`` = the run's budget label) from the run's stamped evaluations
+experiments' anytime methods) stands for one result per read budget; :func:`.readoff.read_off_rows` derives those
+rows (``JobRow.read_from`` = the run's budget label) from the run's stamped evaluations
 (:func:`vbl_robust.search.at_budget`): at a time budget t only the evaluations completed by t count.
 
-The metrics live in modules by concern and are all importable from here: per-job facts (:mod:`.breach`),
-summaries (:mod:`.summary`), the grid reference (:mod:`.reference`), breach levels and families (:mod:`.levels`)
-and budgets read off a trace (:mod:`.readoff`); the convergence of DIRECT-family traces and the PnP comparison
-are here.
+The metrics live in modules by concern, each imported from the module that defines it: per-job facts
+(:mod:`.breach`), summaries (:mod:`.summary`), the grid reference (:mod:`.reference`), breach levels and families
+(:mod:`.levels`) and budgets read off a trace (:mod:`.readoff`); the convergence of DIRECT-family traces and the
+PnP comparison are here.
 """
 
 from __future__ import annotations
@@ -27,53 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..store import JobRow, JobStatus
-from .breach import (
-    breach_kind,
-    breached_images,
-    budget_value,
-    empty_row,
-    failure_counts,
-    measured_rows,
-    not_measured_lines,
-    residual_bound,
-    survival_rate,
-    survived,
-)
-from .levels import (
-    ANY_METHOD,
-    RANK_THRESHOLDS,
-    distance_profile,
-    family_of,
-    family_profile,
-    first_level_below,
-    phi_crit,
-    quartile_edges,
-    quartile_of,
-    rank_families,
-    smallest_breach_levels,
-    survival_curve,
-)
-from .readoff import main_rows, read_off, read_off_rows, reads_trace, row_result
-from .reference import (
-    REFERENCE_METHOD,
-    against_reference,
-    grid_complete,
-    lattice_covered,
-    reference_rows,
-    worst_within,
-)
-from .summary import GROUP_BY, Summary, columns, summarize
 
-__all__ = [
-    "ANY_METHOD", "GROUP_BY", "RANK_THRESHOLDS", "REFERENCE_METHOD", "ConvergenceLine", "PnpLine", "Summary",
-    "against_reference", "breach_kind",
-    "breached_images", "budget_value", "columns", "convergence", "distance_profile", "empty_row", "failure_counts",
-    "family_of", "family_profile", "first_level_below", "grid_complete", "lattice_covered", "main_rows",
-    "measured_rows", "not_measured_lines",
-    "phi_crit", "pnp_summary", "quartile_edges", "quartile_of", "rank_families", "read_off", "read_off_rows",
-    "reads_trace", "reference_rows", "residual_bound", "row_result", "smallest_breach_levels", "summarize",
-    "survival_curve", "survival_rate", "survived", "worst_within",
-]
+__all__ = ["ConvergenceLine", "PnpLine", "convergence", "pnp_summary"]
 
 
 def _or_nan(v: float | None) -> float:

@@ -11,10 +11,10 @@ from collections.abc import Iterable
 from typing import Any
 
 from ..campaigns.rebuild import result_fields, row_result
-from ..specs.campaign import Budget
+from ..specs.budget import Budget
 from ..store import JobRow, JobStatus, Points
 
-__all__ = ["main_rows", "read_off", "read_off_rows", "reads_trace", "row_result"]
+__all__ = ["main_rows", "read_off", "read_off_rows", "reads_trace"]
 
 
 def read_off(row: JobRow, budget: Budget, eps_safe_m: float, penalty_m: float) -> JobRow:

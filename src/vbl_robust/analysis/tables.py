@@ -7,7 +7,7 @@ breach found" is worth for a uniform random search (``residual_bound``), the ima
 (``nominal_m``, from main jobs stored with it; empty in older stores), counts and timings (a sequence campaign's main jobs also their breach facts along the approach,
 :data:`SEQUENCE_COLUMNS`); traces, evaluated points and per-frame errors stay in the store. A run that reads smaller
 budgets off its trace (runtime experiments) is followed by one line per read budget, derived from it
-(:func:`~vbl_robust.analysis.metrics.read_off_rows`; column ``read_from`` = the run's budget label).
+(:func:`~vbl_robust.analysis.readoff.read_off_rows`; column ``read_from`` = the run's budget label).
 
 :func:`summary_records` gives the summary table (``vbl-robust report RUN --format csv|json``): one record per
 method, box and budget with the survival rate and its exact 95 % interval (:data:`SUMMARY_COLUMNS`).
@@ -91,7 +91,7 @@ class FlatRows:
 
     def _rows(self, reads: bool) -> Iterator[JobRow]:
         """Every stored row with its points (and the read-off rows after their run's, when ``reads``)."""
-        from .metrics import read_off
+        from .readoff import read_off
 
         for r in self.store.iter_jobs(with_trace=reads, with_points=True):
             yield r
@@ -99,7 +99,7 @@ class FlatRows:
                 yield from (read_off(r, b, self.eps, self.penalty) for b in r.budget.read_budgets())
 
     def __iter__(self) -> Iterator[dict[str, Any]]:
-        from .metrics import breach_kind, residual_bound
+        from .breach import breach_kind, residual_bound
 
         reads, nominal = False, {}
         for r in self.store.iter_jobs(with_trace=False):  # a first pass: L(0), the image's whatever the job
@@ -151,7 +151,9 @@ def summary_records(store: ResultStore) -> list[dict[str, Any]]:
     store without a campaign."""
     import math
 
-    from .metrics import main_rows, reference_rows, summarize
+    from .readoff import main_rows
+    from .reference import reference_rows
+    from .summary import summarize
 
     spec = store.spec()
     rows = main_rows(store, spec, with_trace=False, measured_only=False)  # counted apart (not_measured)

@@ -19,10 +19,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..specs.campaign import Block, BoxSpec, Budget, CampaignSpec
+from ..specs.budget import Budget
+from ..specs.campaign import Block, BoxSpec, CampaignSpec
 from ..specs.kinds import SourceKind
 from ..store import JobRow, JobStatus, ResultStore
-from .metrics import budget_value, main_rows, survived
+from .breach import budget_value, survived
+from .readoff import main_rows
 
 __all__ = ["TRUTH_SUFFIX", "TrueSurvival", "survivors_of_every_method", "true_survival", "truth_spec"]
 

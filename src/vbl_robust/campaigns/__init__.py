@@ -25,25 +25,15 @@ from vbl_robust.lazy import lazy_names
 #: public name -> the submodule that defines it
 _LAZY: dict[str, str] = {
     "EXPERIMENTS": ".experiments",
-    "Experiment": ".experiments",
     "Options": ".experiments",
     "audit_spec": ".experiments",
-    "risk_spec": ".experiments",
     "experiment": ".experiments",
     "DetectorSpec": ".provenance",
-    "code_version": ".provenance",
-    "dataset_identity": ".provenance",
-    "file_sha256": ".provenance",
-    "sample_fingerprint": ".provenance",
-    "EXECUTORS": ".runner",
-    "Progress": ".runner",
-    "RunSummary": ".runner",
     "plan": ".runner",
     "run_campaign": ".runner",
     "find_lard_files": ".samples",
     "load_samples": ".samples",
     "load_sequences": ".samples",
-    "job_zones": ".replay",
     "zones_of_run": ".replay",
 }
 

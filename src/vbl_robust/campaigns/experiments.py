@@ -32,7 +32,8 @@ from dataclasses import dataclass, replace
 from fractions import Fraction
 
 from ..constants import TARGETS
-from ..specs.campaign import Block, BoxSpec, Budget, CampaignSpec, roll_box, roll_contrast_box
+from ..specs.budget import Budget
+from ..specs.campaign import Block, BoxSpec, CampaignSpec, roll_box, roll_contrast_box
 
 #: The paper's experiments compare the paper's GeoRobust and georobust-av (labelled apart) with random and APGD.
 PAPER_METHODS = ("georobust", "georobust-av", "random", "apgd")

@@ -7,8 +7,8 @@ A job row is *inconsistent* when
 - its summary (worst value and θ*, verdict, evaluation and failure counts, failure reason at θ*) is not what its
   stored evaluations give under the campaign's settings (ε_safe, the failure penalty) — recomputed with the function
   that made it (:func:`~vbl_robust.campaigns.rebuild.result_fields` on the result its points stand for,
-  :func:`~vbl_robust.analysis.readoff.row_result`); an implied row without the breach that implies it; a job not
-  measured that holds a result;
+  :func:`~vbl_robust.campaigns.rebuild.row_result`); an implied row without the breach that implies it; a job
+  not measured that holds a result;
 - θ* lies outside its box;
 - its sample is not in the samples table (an orphan row, or its sample row deleted: in a store that records
   samples, or where the row's digest recorded one), or the sample's row changed;
@@ -39,7 +39,7 @@ from ..store import JobRow, JobStatus, ResultStore
 from ..store.digest import BEFORE, STORED, Finding, FindingKind, check_row, read_chains
 from ..store.schema import DIGESTS_SINCE, job_row
 
-__all__ = ["Finding", "FindingKind", "StoreCheck", "banner_lines", "check_store", "row_findings", "screen"]
+__all__ = ["StoreCheck", "banner_lines", "check_store", "row_findings", "screen"]
 
 #: Relative tolerance of a recomputed value (the same floats give the same value; a margin for the last bit).
 REL_TOL = 1e-9

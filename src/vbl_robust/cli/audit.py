@@ -19,7 +19,8 @@ import typer
 
 from vbl_robust.campaigns.experiments import AUDIT_METHODS, audit_spec
 from vbl_robust.constants import TARGETS
-from vbl_robust.specs.campaign import Budget, roll_contrast_box
+from vbl_robust.specs.budget import Budget
+from vbl_robust.specs.campaign import roll_contrast_box
 
 from . import options as o
 from .common import (

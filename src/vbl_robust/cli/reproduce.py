@@ -131,10 +131,11 @@ def reproduce(
         if references:
             differ |= _check(exp.name, out_dir, references[exp.name])
     if group:
-        from vbl_robust.paper.claims import claims_html, claims_of, write_claims, write_index
+        from vbl_robust.paper import claims, claims_page
 
-        typer.echo(f"claims: {write_claims(root)}")
-        typer.echo(f"index: {write_index(root, [e.name for e in exps], claims_html(claims_of(root), str(root)))}")
+        typer.echo(f"claims: {claims.write_claims(root)}")
+        page = claims_page.claims_html(claims.claims_of(root), str(root))
+        typer.echo(f"index: {claims_page.write_index(root, [e.name for e in exps], page)}")
     if differ or incomplete:
         raise typer.Exit(1)
 

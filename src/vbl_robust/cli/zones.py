@@ -49,7 +49,7 @@ def zones(
     """Breached / undecided / ruled-out zones of Θ for each search job of a run (replayed, not re-evaluated)."""
     # scipy, torch and matplotlib behind these: imported here, not for ``--help``
     from vbl_robust.campaigns.replay import ReplayError, zones_of_run
-    from vbl_robust.report.figures import plot_zones
+    from vbl_robust.report.zone_figure import plot_zones
     from vbl_robust.store import ResultStore
 
     if fmt not in FORMATS:

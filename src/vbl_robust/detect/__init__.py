@@ -22,22 +22,6 @@ from .base import (
 )
 from .oracle import OracleDetector
 
-__all__ = [
-    "DetectContext",
-    "Detections",
-    "Detector",
-    "DifferentiableDetector",
-    "OracleDetector",
-    "Selection",
-    "Views",
-    "select",
-    "UltralyticsDetector",
-    "OnnxDetector",
-    "TwoStageDetector",
-    "DetectorSpec",
-    "default_detector",
-]
-
 # The model adapters import ultralytics/onnxruntime: resolved on first use only.
 _LAZY = {
     "UltralyticsDetector": ".ultralytics",
@@ -46,6 +30,10 @@ _LAZY = {
     "OnnxDetector": ".onnx",
     "TwoStageDetector": ".twostage",
 }
+
+# each public name listed once: the eager re-exports above, then the lazy ones
+__all__ = ["DetectContext", "Detections", "Detector", "DifferentiableDetector", "OracleDetector", "Selection",
+           "Views", "select", *_LAZY]
 
 
 __getattr__, __dir__ = lazy_names(__name__, _LAZY, globals(), __all__)

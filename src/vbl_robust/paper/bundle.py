@@ -247,7 +247,7 @@ def _write_top(out: Path, totals: dict[str, dict[str, Any]], root: Path,
     """Write ``out/status.md``, ``out/claims.md`` (the claims of the stores under ``root``, ``read`` by
     :func:`_read_top`), with ``detectors`` ``out/detectors.md``, and ``out/index.html`` (the experiments ``totals``
     names, in the paper's order); returns the claims' Markdown and the detectors' ("" without)."""
-    from .claims import claims_html, claims_markdown, write_index
+    from .claims_page import claims_html, claims_markdown, write_index
     from .detectors import detectors_html, detectors_markdown
 
     totals = _ordered(totals)

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..analysis import metrics as mx
+from ..analysis.breach import survived
+from ..analysis.reference import REFERENCE_METHOD
 from ..report.html import fmt_num
 from ..search.api import METHODS as SEARCH_METHODS
 from ..stats import ALPHA, LEVEL, ClaimVerdict, Rate, claim_verdict, holm, paired
@@ -92,9 +93,9 @@ class ClaimRule:
 def known_method(method: str) -> str:
     """``method`` when it names a search method or the dense-grid reference; ``ValueError`` otherwise: a misspelt
     name in a claim's computation must fail, not read as a method without rows."""
-    if method not in SEARCH_METHODS and method != mx.REFERENCE_METHOD:
+    if method not in SEARCH_METHODS and method != REFERENCE_METHOD:
         raise ValueError(f"claims: unknown method {method!r}; methods are {', '.join(SEARCH_METHODS)} and "
-                         f"{mx.REFERENCE_METHOD!r}")
+                         f"{REFERENCE_METHOD!r}")
     return method
 
 
@@ -120,7 +121,7 @@ def survival_parts(rows: Sequence[JobRow], eps_safe_m: float, pairs: Sequence[tu
     ``pairs``, judged with its noise: per box the exact McNemar test of their survival on the images both have a
     row for, Holm-adjusted over every test of ``pairs`` × ``labels``, and its :class:`ClaimVerdict`. One group per
     pair: (the boxes' outcomes, ``"georobust < random: ±2° tie (3 vs 1 of 100, p = 1); …"``)."""
-    ok = {(r.method, r.box_label, r.sample_id): mx.survived(r, eps_safe_m) for r in rows}
+    ok = {(r.method, r.box_label, r.sample_id): survived(r, eps_safe_m) for r in rows}
     tests = []
     for low, high in pairs:
         known_method(low), known_method(high)
@@ -350,7 +351,7 @@ def cross_part(worst: Sequence[Sequence[float]], budgets: Sequence[str], thresho
 def phi_interval(levels: Sequence[float], budgets: Sequence[float],
                  pct: float = PHI_PCT) -> tuple[float, float, float]:
     """(φ_crit, low, high) of images whose smallest breaching budgets are ``levels`` (∞: none within ``budgets``):
-    φ_crit is the smallest budget at which survival drops below ``pct`` % (:func:`~vbl_robust.analysis.metrics.
+    φ_crit is the smallest budget at which survival drops below ``pct`` % (:func:`~vbl_robust.analysis.levels.
     phi_crit`); low the smallest at which the exact 95 % interval of survival reaches below ``pct`` (it may have
     dropped there), high the smallest at which the whole interval is below (it surely has); ∞ for "not within
     the budgets". Pointwise intervals, so [low, high] is as wide as each budget's noise."""

@@ -73,8 +73,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis import metrics as mx
-from ..analysis.levels import DistanceLine
+from ..analysis.breach import empty_row, measured_rows, survived
+from ..analysis.levels import (
+    DistanceLine,
+    distance_profile,
+    quartile_edges,
+    quartile_of,
+    smallest_breach_levels,
+)
+from ..analysis.metrics import convergence, pnp_summary
+from ..analysis.readoff import main_rows
+from ..analysis.reference import REFERENCE_METHOD, against_reference, grid_complete
+from ..analysis.summary import summarize
 from ..atomic import atomic_write
 from ..campaigns.experiments import PAPER, PAPER_METHODS
 from ..campaigns.pnpcheck import TRUNCATED
@@ -85,24 +95,16 @@ from ..search import direct_family
 from ..stats import Rate
 from ..store import PACKED, STORE, JobRow, JobStatus, ResultStore
 from .claim_rules import (
-    ABOUT_AS_ACCURATE,
-    CONTRADICTED,
     CROSS_BY_S,
-    FAILS,
-    HOLDS,
     NEAR_M,
     NEAR_ZERO_PCT,
     NOT_RUN,
-    PARTLY,
     PHI_TOL_DEG,
     RA_BY_ITER,
-    TIE,
-    VERDICTS,
     Claim,
     ClaimResult,
     ClaimRule,
     Outcome,
-    combine,
     cross_part,
     fewer_evals,
     first_breach_s,
@@ -121,12 +123,9 @@ from .claim_rules import (
     survival_parts,
     times_part,
 )
-from .claims_page import claims_html, claims_markdown, write_index
+from .claims_page import claims_markdown
 
-__all__ = ["ABOUT_AS_ACCURATE", "CLAIMS", "CONTRADICTED", "FAILS", "HOLDS", "NOT_RUN", "PARTLY", "TIE", "VERDICTS",
-           "Claim", "claims_html", "claims_markdown", "claims_of", "combine", "cross_part", "fewer_evals",
-           "first_breach_s", "in_range", "largest_jump", "phi_interval", "plateau_part", "pnp_part", "po_part",
-           "ra_part", "rate_part", "rough_part", "survival_parts", "times_part", "write_claims", "write_index"]
+__all__ = ["CLAIMS", "claims_of", "write_claims"]
 
 logger = logging.getLogger(__name__)
 
@@ -175,7 +174,7 @@ def _open(root: Path, name: str, stack: ExitStack) -> _Exp | str:
     planned = Counter(j.sample_id for j in spec.expand([(s, d.fingerprint or "") for s, d in samples.items()]))
     stored = Counter(r.sample_id for r in store.jobs(with_trace=False))
     ids = frozenset(s for s, n in planned.items() if stored[s] >= n)
-    main = [r for r in mx.main_rows(store, spec) if r.sample_id in ids]
+    main = [r for r in main_rows(store, spec) if r.sample_id in ids]
     return _Exp(Context(store, spec, root / name, main, samples), ids, len(samples))
 
 
@@ -198,8 +197,8 @@ class _Survival:
 
 def _survival(rows: Sequence[JobRow], eps: float) -> tuple[list[str], _Survival]:
     """(box labels by level, per method the survival % at each box): the report's survival table
-    (:func:`~vbl_robust.analysis.metrics.summarize` by method and box)."""
-    lines = mx.summarize(rows, eps, by=("method", "box_label"))
+    (:func:`~vbl_robust.analysis.summary.summarize` by method and box)."""
+    lines = summarize(rows, eps, by=("method", "box_label"))
     labels = [lab for _, lab in sorted({(ln.box_level, ln.box_label) for ln in lines})]
     got = {(ln.method, ln.box_label): ln.survival for ln in lines}
     return labels, _Survival({m: [got.get((m, b), math.nan) for b in labels] for m, _ in got})
@@ -221,7 +220,7 @@ def _text(s: _Survival, labels: Sequence[str], *methods: str,
 def _last_ci(rows: Sequence[JobRow], eps: float, label: str) -> dict[str, str]:
     """Per method, the exact 95 % interval of its survival at the box ``label`` (``"[37.0, 57.2]"``, in %)."""
     out = {}
-    for ln in mx.summarize([r for r in rows if r.box_label == label], eps, by=("method",)):
+    for ln in summarize([r for r in rows if r.box_label == label], eps, by=("method",)):
         ci = ln.survival_rate.ci
         out[ln.method] = f"[{ci.low:.1f}, {ci.high:.1f}]"
     return out
@@ -233,7 +232,7 @@ def _last_ci(rows: Sequence[JobRow], eps: float, label: str) -> dict[str, str]:
 
 def _pnp(e: _Exp) -> ClaimResult:
     jobs = e.jobs(kind="pnp", with_trace=False)
-    summary = mx.pnp_summary(jobs)
+    summary = pnp_summary(jobs)
     med = {(s.source, s.solver): s.median_rel_pct for s in summary}
     done = [r.payload["errors"] for r in jobs if r.status == JobStatus.DONE and r.payload]
     parts, ours = [], []
@@ -254,9 +253,9 @@ def _pnp(e: _Exp) -> ClaimResult:
 def _spatial_1d(e: _Exp) -> ClaimResult:
     rows = [r for r in e.ctx.main if r.chain is None] + e.reference()
     labels, s = _survival(rows, e.eps)
-    truth = _text(s, labels, mx.REFERENCE_METHOD) if mx.REFERENCE_METHOD in s else ""
-    found = [ln for ln in mx.against_reference([r for r in rows if r.method in PAPER_METHODS],
-                                               [r for r in rows if r.method == mx.REFERENCE_METHOD], e.eps)
+    truth = _text(s, labels, REFERENCE_METHOD) if REFERENCE_METHOD in s else ""
+    found = [ln for ln in against_reference([r for r in rows if r.method in PAPER_METHODS],
+                                            [r for r in rows if r.method == REFERENCE_METHOD], e.eps)
              if ln.box_label == labels[-1] and ln.grid_breaches]
     if found:
         truth += (f"; of the grid's breaches at {labels[-1]} found: "
@@ -310,7 +309,7 @@ def _spatial_2d(e: _Exp) -> ClaimResult:
     rows = [r for r in e.ctx.main if r.chain is None]
     labels, s = _survival(rows, e.eps)
     geo = [r for r in rows if r.method == "georobust" and labels and r.box_label == labels[-1]]
-    alive = sum(mx.survived(r, e.eps) for r in geo)
+    alive = sum(survived(r, e.eps) for r in geo)
     ok, text = rate_part(alive, len(geo), NEAR_ZERO_PCT)
     cis = _last_ci(rows, e.eps, labels[-1]) if labels else {}
     return ClaimResult(_text(s, labels, *PAPER_METHODS, cis=cis), truth_2d(e),
@@ -320,18 +319,18 @@ def _spatial_2d(e: _Exp) -> ClaimResult:
 
 def _worst_by(rows: Sequence[JobRow]) -> dict[str, dict[float, dict[str, float]]]:
     """Per method and time budget (s) each measured image's worst error (NaN: no evaluation within the budget),
-    as :func:`~vbl_robust.analysis.metrics.summarize` counts it in the median."""
+    as :func:`~vbl_robust.analysis.summary.summarize` counts it in the median."""
     out: dict[str, dict[float, dict[str, float]]] = {}
-    for r in mx.measured_rows(rows)[0]:
+    for r in measured_rows(rows)[0]:
         out.setdefault(r.method, {}).setdefault(r.budget.max_seconds, {})[r.sample_id] = (
-            math.nan if mx.empty_row(r) or r.worst_m is None else float(r.worst_m))
+            math.nan if empty_row(r) or r.worst_m is None else float(r.worst_m))
     return out
 
 
 def _runtime_2d(e: _Exp) -> ClaimResult:
     rows = [r for r in e.ctx.main if r.budget is not None and r.budget.max_seconds is not None]
     by: dict[str, list[tuple[float, float]]] = {}
-    for ln in mx.summarize(rows, e.eps, by=("method", "budget_label")):
+    for ln in summarize(rows, e.eps, by=("method", "budget_label")):
         by.setdefault(ln.method, []).append((ln.max_seconds, ln.median_worst_m))
     curve = {m: sorted(v) for m, v in by.items()}
     ours = "; ".join(f"{m} " + ", ".join(f"{t:g} s: {fmt_num(w)} m" for t, w in v) for m, v in curve.items())
@@ -359,8 +358,8 @@ def _distance(e: _Exp) -> ClaimResult:
     limit = max(budgets, default=math.nan)
     dist = {sid: s.slant_distance_m for sid, s in e.ctx.samples.items() if sid in e.ids}
     every = rows + e.reference()
-    prof = [p for p in mx.distance_profile(every, dist, budgets) if p.n]
-    levels = mx.smallest_breach_levels(every)
+    prof = [p for p in distance_profile(every, dist, budgets) if p.n]
+    levels = smallest_breach_levels(every)
 
     def of(m: str) -> list[DistanceLine]:
         return [p for p in prof if p.method == known_method(m)]
@@ -370,11 +369,11 @@ def _distance(e: _Exp) -> ClaimResult:
                                    for p in of(m))
 
     ids = sorted({s for s, _ in levels if s in dist}, key=dist.__getitem__)  # as distance_profile splits them
-    edges = mx.quartile_edges([dist[s] for s in ids]) if ids else np.zeros(5)
+    edges = quartile_edges([dist[s] for s in ids]) if ids else np.zeros(5)
 
     def interval(p: DistanceLine) -> tuple[float, float, float]:
         return phi_interval([levels[(s, p.method)] for s in ids
-                             if (s, p.method) in levels and mx.quartile_of(dist[s], edges) + 1 == p.quartile], budgets)
+                             if (s, p.method) in levels and quartile_of(dist[s], edges) + 1 == p.quartile], budgets)
 
     def group(ps: list[DistanceLine], target: float | None, claim: str) -> tuple[list[Outcome], str]:
         outs, texts = [], []
@@ -393,7 +392,7 @@ def _distance(e: _Exp) -> ClaimResult:
               group(far, 30.0, f"within {PHI_TOL_DEG:g}° of 30° beyond"),
               group(of("apgd"), None, f"apgd's ≥ {limit:g}°")]
     return ClaimResult("φ_crit: " + "; ".join(text(m) for m in ("georobust", "apgd") if of(m)),
-                       text(mx.REFERENCE_METHOD) if of(mx.REFERENCE_METHOD) else "", *judge([], groups), len(dist))
+                       text(REFERENCE_METHOD) if of(REFERENCE_METHOD) else "", *judge([], groups), len(dist))
 
 
 def _per_run(rows: Sequence[JobRow], field: str, scale: float = 1.0) -> np.ndarray:
@@ -417,7 +416,7 @@ def _convergence(e: _Exp) -> ClaimResult:
     ra, po = _per_run(runs, "remaining_area", 100.0), _per_run(runs, "po_count_before")
     ra_ok, ra_text = ra_part(ra)
     po_ok, po_text = po_part(po)
-    conv = mx.convergence(runs)
+    conv = convergence(runs)
     mean_ra = {c.iteration: c.ra_mean for c in conv}
     early = {k: v for k, v in mean_ra.items() if k <= RA_BY_ITER and math.isfinite(v)}
     k = min(early, key=early.__getitem__, default=None)
@@ -456,7 +455,7 @@ def _av(s1: _Exp | None, s2: _Exp | None) -> ClaimResult:
 
 def _rough(e: _Exp) -> ClaimResult:
     grids = [r for r in e.jobs(kind="search", role="reference", with_points=True, with_trace=False)
-             if r.status == JobStatus.DONE and r.points is not None and len(r.points) > 1 and mx.grid_complete(r)]
+             if r.status == JobStatus.DONE and r.points is not None and len(r.points) > 1 and grid_complete(r)]
     got = [largest_jump(r.points.xs, r.points.fs, e.ctx.spec.penalty_m) for r in grids]
     jumps, slopes = [j for j, _ in got], [s for _, s in got]
     verdict, why = rough_part(jumps, e.eps)

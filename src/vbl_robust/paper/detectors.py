@@ -31,8 +31,8 @@ from urllib.parse import quote
 
 import numpy as np
 
-from ..analysis import metrics as mx
 from ..analysis.breach import survived
+from ..analysis.readoff import main_rows
 from ..constants import EPS_SAFE_M
 from ..report.html import esc
 from ..report.markdown import esc_md
@@ -134,7 +134,7 @@ def largest_box_survivors(root: str | Path, experiment: str) -> tuple[str, tuple
         if not store.holds_campaign():
             return None
         spec = store.spec()
-        rows = mx.main_rows(store, spec, with_trace=False)
+        rows = main_rows(store, spec, with_trace=False)
     rows = [r for r in rows if r.box_level is not None and (r.budget is None or r.budget.max_seconds is None)]
     if not rows:
         return None

@@ -32,11 +32,12 @@ Vulnerability zones (:func:`section_zones`, after the landscape) need no declara
 method that keeps a cover of its box (DIRECT family, grid) gets them. Each such job is replayed on its stored
 values (:func:`vbl_robust.campaigns.replay.job_zones`: no evaluation) and classified sound under the run's Lipschitz
 constant, else on the method's own estimate (labelled "not sound"); the landscape image's jobs are drawn over its
-landscape (:func:`vbl_robust.report.figures.plot_zones`), and a table gives the fractions of Θ per class over all jobs.
+landscape (:func:`vbl_robust.report.zone_figure.plot_zones`), and a table gives the fractions of Θ per class over all
+jobs.
 A job whose replay fails is listed as skipped, with the reason.
 
 Budgets read off a trace (the runtime experiments' anytime methods): the main rows are derived per read budget
-from the stored runs (:func:`vbl_robust.analysis.metrics.read_off_rows`), and every table that shows them has a
+from the stored runs (:func:`vbl_robust.analysis.readoff.read_off_rows`), and every table that shows them has a
 column "read off the run" naming the run they were read from; results of runs of their own leave it empty.
 """
 
@@ -47,7 +48,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from ..analysis import metrics as mx
+from ..analysis.readoff import main_rows, reads_trace
 from ..atomic import atomic_write
 from ..campaigns.experiments import EXPERIMENTS
 from ..specs.campaign import FIGURES
@@ -138,8 +139,8 @@ def build_report(run: str | Path, out: str | Path | None = None, *, embed: bool 
         spec = store.spec()
         out_dir = Path(out) if out is not None else (run if run.is_dir() else run.parent)
         out_dir.mkdir(parents=True, exist_ok=True)
-        ctx = Context(store, spec, out_dir, mx.main_rows(store, spec), store.samples(), embed=embed,
-                      main_is_runs=not mx.reads_trace(spec))
+        ctx = Context(store, spec, out_dir, main_rows(store, spec), store.samples(), embed=embed,
+                      main_is_runs=not reads_trace(spec))
         exp = EXPERIMENTS.get(spec.name)
         title = exp.title if exp else TITLES.get(spec.name, "Robustness audit")
         if spec.name.endswith("-truth"):  # vbl-robust truth RUN: the dense grid behind "no breach found"

@@ -23,7 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from ..analysis import metrics as mx
+from ..analysis.breach import survived
+from ..analysis.readoff import main_rows
+from ..analysis.summary import columns
 from ..atomic import atomic_write
 from ..specs.campaign import CampaignSpec
 from ..stats import Paired, Rate, paired
@@ -93,7 +95,7 @@ def _read(run: str | Path) -> tuple[CampaignSpec, list[JobRow], str, dict[str, s
         runs = store.runs()
         det = str(((runs[-1].provenance.detector if runs else None) or {}).get("name", "?"))
         envelopes = {sid: str(rec.envelope) for sid, rec in store.samples().items() if rec.envelope}
-        return spec, mx.main_rows(store, spec, with_trace=False), det, envelopes
+        return spec, main_rows(store, spec, with_trace=False), det, envelopes
 
 
 def check_alike(run: str | Path, spec: CampaignSpec, rows: Sequence[JobRow], other: str | Path,
@@ -121,13 +123,13 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
         raise ValueError(f"{after}: the image files of {pixels[:5]} differ from those {before} read (other pixels "
                          "under the same names): no paired comparison")
     eps = spec.eps_safe_m
-    _, where = mx.columns(rows_a)  # the box, and the budget where the run has several
+    _, where = columns(rows_a)  # the box, and the budget where the run has several
 
     def index_rows(rows: Sequence[JobRow]) -> dict[tuple[str, str, str], JobRow]:
         return {(r.method, where(r), r.sample_id): r for r in rows}
 
     def ok(r: JobRow) -> bool:
-        return mx.survived(r, eps)
+        return survived(r, eps)
 
     ia, ib = index_rows(rows_a), index_rows(rows_b)
     level = {where(r): float(r.box_level or 0.0) for r in rows_a}
@@ -179,6 +181,7 @@ def compare_html(before: str | Path, after: str | Path, out: str | Path | None =
     import matplotlib.pyplot as plt
 
     from . import figures as F
+    from .figure_style import style
     from .html import esc, figure_png, img, page, table
 
     c = paired_comparison(before, after)
@@ -189,7 +192,7 @@ def compare_html(before: str | Path, after: str | Path, out: str | Path | None =
     plt.close(fig)
     (out_dir / "figures").mkdir(parents=True, exist_ok=True)
     atomic_write(out_dir / "figures" / "compare_survival.png", png)
-    rows = [{"method": ln.method if ln.method == ANY else F.style(ln.method)["label"], "box": ln.box,
+    rows = [{"method": ln.method if ln.method == ANY else style(ln.method)["label"], "box": ln.box,
              "envelope": ln.envelope, "n": ln.n,
              "before": ln.before.text(1, percent=False), "after": ln.after.text(1, percent=False),
              "gain": ln.after_pct - ln.before_pct, "fixed": ln.fixed,

@@ -9,7 +9,7 @@ draws its worst cases, and ``evidence.json`` beside ``report.html`` holds the sa
 Per box, the images are counted over **every method together** (an image is breached when any method found a
 breach): survival, misleading and flagged-only images each with their exact 95 % interval
 (:class:`vbl_robust.stats.Rate`); for random search, the largest bound over its surviving images on the breached
-fraction of the box (:func:`vbl_robust.analysis.metrics.residual_bound`); for a risk run, each estimator's pooled
+fraction of the box (:func:`vbl_robust.analysis.breach.residual_bound`); for a risk run, each estimator's pooled
 failure probability with its interval (:func:`vbl_robust.risk.pooled_risk`); for the DIRECT family, the
 mean remaining area RA of the last iteration (the share of Θ not yet pruned as below the best value found).
 
@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from ..analysis import metrics as mx
+from ..analysis import breach as br
 from ..atomic import atomic_write
 from ..constants import BreachKind, Verdict
 from ..search import direct_family
@@ -145,12 +145,12 @@ def _risk_bounds(rows: Sequence[JobRow]) -> tuple[RiskBound, ...]:
 def _box_evidence(label: str, rows: Sequence[JobRow], eps: float) -> BoxEvidence:
     box = rows[0].box.box if rows[0].box is not None else None
     ids = sorted({r.sample_id for r in rows})
-    breached, silent, unknown = mx.breached_images(rows, eps)
+    breached, silent, unknown = br.breached_images(rows, eps)
     survivors = len(ids) - len(breached)
     misleading = None if unknown else len(silent)
     flagged = None if unknown else len(breached - silent)
     surv = Rate(survivors, len(ids))
-    bounds = [b for b in (mx.residual_bound(r, eps) for r in rows if r.sample_id not in breached) if b is not None]
+    bounds = [b for b in (br.residual_bound(r, eps) for r in rows if r.sample_id not in breached) if b is not None]
     ra = [r.trace[-1].remaining_area for r in rows if r.method in direct_family() and r.trace
           and r.trace[-1].remaining_area is not None]
     status: dict[str, int] = {}
@@ -193,9 +193,9 @@ def worst_cases(rows: Sequence[JobRow], eps: float, penalty_m: float, cap: int =
     image's unperturbed facts (:attr:`Context.nominal <vbl_robust.report.rows.Context.nominal>`)."""
     best: dict[str, tuple[tuple[float, float, float], JobRow, BreachKind | None, float | None]] = {}
     for r in rows:
-        if mx.survived(r, eps):
+        if br.survived(r, eps):
             continue
-        kind = mx.breach_kind(r, eps)
+        kind = br.breach_kind(r, eps)
         conf_m = confident_m(r)
         err = conf_m if kind == BreachKind.MISLEADING and conf_m is not None else (
             r.worst_m if r.worst_m is not None else penalty_m)
@@ -230,7 +230,7 @@ def evidence_of(ctx: Context) -> Evidence:
                 if r.measured and r.chain is None and r.box is not None]
     budget = None
     if len({r.budget_label for r in rows}) > 1:  # runtime experiments: the evidence of the largest budget
-        top = max(rows, key=lambda r: (mx.budget_value(r, "max_seconds"), mx.budget_value(r, "max_evals")))
+        top = max(rows, key=lambda r: (br.budget_value(r, "max_seconds"), br.budget_value(r, "max_evals")))
         budget = top.budget_label
         rows = [r for r in rows if r.budget_label == budget]
     boxes = {}
@@ -352,9 +352,9 @@ def audited_line(ctx: Context) -> str:
 
 
 def not_measured_banner(rows: Sequence[JobRow], total: int, unit: str) -> str:
-    """The first-screen warning of the jobs the tool could not measure (:func:`~vbl_robust.analysis.metrics.
+    """The first-screen warning of the jobs the tool could not measure (:func:`~vbl_robust.analysis.breach.
     not_measured_lines`), or ``""`` when it measured every job."""
-    lines = mx.not_measured_lines(rows, total, unit)
+    lines = br.not_measured_lines(rows, total, unit)
     if not lines:
         return ""
     items = "".join(f"<li>{esc(line)}</li>" for line in lines[1:])

@@ -15,8 +15,9 @@ import numpy as np  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 
-from ..analysis.metrics import ANY_METHOD, Summary
-from ..analysis.metrics import REFERENCE_METHOD as REFERENCE
+from ..analysis.levels import ANY_METHOD
+from ..analysis.reference import REFERENCE_METHOD as REFERENCE
+from ..analysis.summary import Summary
 
 STYLE: dict[str, dict[str, Any]] = {
     "georobust": {"color": "#1f77b4", "marker": "o"},

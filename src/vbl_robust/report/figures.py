@@ -1,8 +1,9 @@
 """The report's figures (matplotlib, Agg): one function per paper figure, each taking metric tables.
 
 Every function returns a :class:`matplotlib.figure.Figure` (the caller saves and closes it). Conventions shared
-by all: survival rate in %, errors in metres, ε_safe drawn as a dashed red line, one colour and marker per
-method (:data:`STYLE`), the dense-grid reference (true worst case up to the grid spacing) in black dashes.
+by all (:mod:`.figure_style`): survival rate in %, errors in metres, ε_safe drawn as a dashed red line, one colour
+and marker per method (:data:`.figure_style.STYLE`), the dense-grid reference (true worst case up to the grid
+spacing) in black dashes.
 """
 
 from __future__ import annotations
@@ -11,24 +12,20 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import matplotlib
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.colors import LogNorm
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.colors import LogNorm  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.lines import Line2D  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
-
-from ..analysis.levels import DistanceLine
-from ..analysis.metrics import ANY_METHOD, ConvergenceLine, PnpLine, Summary
-from .figure_style import (  # noqa: E402
-    AXIS_LABELS,
+from ..analysis.levels import ANY_METHOD, DistanceLine
+from ..analysis.metrics import ConvergenceLine, PnpLine
+from ..analysis.summary import Summary
+from .figure_style import (
     EPS_STYLE,
     PLAIN,
     REFERENCE,
-    STYLE,
     axis_label,
     ci_bars,
     method_order,
@@ -37,22 +34,10 @@ from .figure_style import (  # noqa: E402
     style,
     wrapped,
 )
-from .view_figure import (  # noqa: E402
-    PREDICTED_CORNERS,
-    TRUE_CORNERS,
-    corner_shifts,
-    crop_side,
-    crop_window,
-    shifts_text,
-    worst_view,
-)
-from .zone_figure import COLOURS, plot_zones, zones_figure  # noqa: E402
 
-__all__ = ["AXIS_LABELS", "COLOURS", "EPS_STYLE", "PREDICTED_CORNERS", "REFERENCE", "STYLE", "TRUE_CORNERS",
-           "best_vs_evals", "convergence", "corner_shifts", "crop_side", "crop_window", "distance_profile", "family_ranking",
-           "family_survival", "landscape_1d", "landscape_2d", "method_order", "plot_zones", "pnp_comparison",
-           "risk_per_image", "runtime", "shifts_text", "style", "survival_before_after", "survival_per_box", "survival_vs_level",
-           "worst_view", "zones_figure"]
+__all__ = ["best_vs_evals", "convergence", "distance_profile", "family_ranking", "family_survival", "landscape_1d",
+           "landscape_2d", "pnp_comparison", "risk_per_image", "runtime", "survival_before_after", "survival_per_box",
+           "survival_vs_level"]
 
 
 def survival_vs_level(summary: Sequence[Summary], *, title: str, xlabel: str,
@@ -224,7 +209,7 @@ def distance_profile(profile: Sequence[DistanceLine], *, limit_deg: float, budge
     ax.set_title("critical roll per quartile", fontsize=10)
     ax.grid(alpha=0.3, axis="y")
     fig.legend(handles=handles, fontsize=8, loc="outside lower center", ncol=len(handles))
-    colors = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, max(len(quartiles), 1)))
+    colors = colormaps["viridis"](np.linspace(0.0, 0.85, max(len(quartiles), 1)))
     shown = [m for m in methods if m != REFERENCE][:1] + [m for m in methods if m == REFERENCE]
     for q, c in zip(quartiles, colors, strict=True):
         for m in shown:

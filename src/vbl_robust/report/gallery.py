@@ -34,10 +34,11 @@ import numpy as np
 from ..analysis.truth import load_run_samples
 from ..constants import BreachKind, FailureReason
 from ..specs.kinds import SourceKind
-from . import figures as F
 from .evidence import Evidence, WorstCase
+from .figure_style import style
 from .html import esc, fmt_num
 from .rows import Context, Section, theta_text
+from .view_figure import corner_shifts, shifts_text, worst_view
 
 logger = logging.getLogger(__name__)
 
@@ -102,7 +103,7 @@ def _metres(v: float | None) -> str:
 
 
 def case_figure(case: WorstCase, sample: Any) -> Any:
-    """The :func:`~vbl_robust.report.figures.worst_view` figure of ``case`` on its rebuilt ``sample``: the image
+    """The :func:`~vbl_robust.report.view_figure.worst_view` figure of ``case`` on its rebuilt ``sample``: the image
     perturbed at θ*, the corners predicted there and unperturbed (``ValueError``/``OSError`` when its pixels cannot
     be read)."""
     from ..perturb import Perturbation
@@ -118,7 +119,7 @@ def case_figure(case: WorstCase, sample: Any) -> Any:
     pred = None if case.corners is None else np.asarray(case.corners, dtype=np.float64)
     pred0 = None if case.nominal_corners is None else np.asarray(case.nominal_corners, dtype=np.float64)
     titles = (f"unperturbed: L(0) = {_metres(case.nominal_m)}", f"perturbed at θ*: L = {_metres(case.worst_m)}")
-    return F.worst_view(image, perturbed, np.asarray(sample.corners_2d, dtype=np.float64), true_after(case, sample),
+    return worst_view(image, perturbed, np.asarray(sample.corners_2d, dtype=np.float64), true_after(case, sample),
                         pred, predicted_before=pred0, confident=not case.reason, titles=titles)
 
 
@@ -182,15 +183,15 @@ def _facts(ctx: Context, rank: int, case: WorstCase, picture: str, sample: Any =
              ("unperturbed, L(0)", nominal_text(case, ctx.eps, ctx.spec.conf_threshold)),
              ("θ*", esc(theta_text(case.theta) or "–")), ("the pipeline at θ*", outcome), ("confidence", conf),
              ("box", esc(case.box_label)),
-             ("found by", esc(F.style(case.method)["label"]) + (f", {esc(case.budget_label)}" if case.budget_label
+             ("found by", esc(style(case.method)["label"]) + (f", {esc(case.budget_label)}" if case.budget_label
                                                                else "")),
              ("predicted corners", corners)]
     if sample is not None:
-        shift = F.corner_shifts(None if case.corners is None else np.asarray(case.corners), true_after(case, sample))
-        shift0 = F.corner_shifts(None if case.nominal_corners is None else np.asarray(case.nominal_corners),
+        shift = corner_shifts(None if case.corners is None else np.asarray(case.corners), true_after(case, sample))
+        shift0 = corner_shifts(None if case.nominal_corners is None else np.asarray(case.nominal_corners),
                                  sample.corners_2d)
-        items.append(("corner shift at θ*", esc(F.shifts_text(shift)) + " (predicted − true)"))
-        items.append(("corner shift unperturbed", esc(F.shifts_text(shift0))))
+        items.append(("corner shift at θ*", esc(shifts_text(shift)) + " (predicted − true)"))
+        items.append(("corner shift unperturbed", esc(shifts_text(shift0))))
         items.append(("what a pixel is worth", esc(geometry_text(sample))))
     if case.position_sigma_m is not None:  # a detector that says how sure it is
         monitor = ctx.spec.monitor_sigma_m

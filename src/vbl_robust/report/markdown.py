@@ -27,7 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis import metrics as mx
+from ..analysis import readoff as ro
+from ..analysis.breach import breached_images, not_measured_lines
+from ..analysis.levels import ANY_METHOD, family_of, family_profile, rank_families
+from ..analysis.summary import Summary, columns, summarize
 from ..specs.campaign import CampaignSpec
 from ..stats import Rate
 from ..store import ResultStore
@@ -57,7 +60,7 @@ def _mean(values: list) -> float:
     return float(np.mean(vals)) if vals else float("nan")
 
 
-def _kinds(line: mx.Summary) -> str:
+def _kinds(line: Summary) -> str:
     """``"misleading / flagged"`` breach counts of a summary line (``?`` when unknown)."""
     return "? / ?" if line.misleading is None else f"{line.misleading} / {line.flagged}"
 
@@ -65,7 +68,7 @@ def _kinds(line: mx.Summary) -> str:
 def _read(run: str | Path):
     with ResultStore.open_existing(run) as store:
         spec = store.spec()
-        rows = mx.main_rows(store, spec, with_trace=False)
+        rows = ro.main_rows(store, spec, with_trace=False)
         land = store.jobs(kind="search", role="landscape", with_points=True, with_trace=False)
     return spec, rows, land
 
@@ -74,7 +77,7 @@ def _unmeasured(run: str | Path, unit: str) -> list[str]:
     """The run's jobs not measured, as Markdown lines (none when every job was measured)."""
     with ResultStore.open_existing(run) as store:
         every = store.jobs(with_trace=False)
-    lines = mx.not_measured_lines(every, len(every), unit)
+    lines = not_measured_lines(every, len(every), unit)
     return [f"**{esc_md(lines[0])}**", *(f"- {esc_md(line)}" for line in lines[1:]), ""] if lines else []
 
 
@@ -135,7 +138,7 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
         rows += [dataclasses.replace(r, method=_labelled(r)) for r in more]
     if not rows:
         raise ValueError(f"{run}: no search jobs stored yet")
-    several, col = mx.columns(rows)  # a column per box, or per box and budget (the runtime experiments)
+    several, col = columns(rows)  # a column per box, or per box and budget (the runtime experiments)
     keys = {(r.method, col(r)) for r in rows}
     per_image: dict[str, set] = defaultdict(set)
     for r in rows:
@@ -143,7 +146,7 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
     done = sorted(s for s, k in per_image.items() if k == keys)
     rows = [r for r in rows if r.sample_id in done]
     eps = spec.eps_safe_m
-    lines = mx.summarize(rows, eps)
+    lines = summarize(rows, eps)
 
     def order(ln) -> tuple:  # boxes by size, then time budgets before evaluation budgets, each ascending
         def num(v: float) -> float:
@@ -167,7 +170,7 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
     if len(methods) > 1 and done:  # the union: an image breaches a column when any method found a breach there
         hit, silent = {}, {}
         for c in cols:
-            hit[c], silent[c], _ = mx.breached_images([r for r in rows if col(r) == c], eps)
+            hit[c], silent[c], _ = breached_images([r for r in rows if col(r) == c], eps)
         table.append(["any of them", *(f"{Rate(len(done) - len(hit[c]), len(done)).text(1, percent=False)} "
                                        f"({len(hit[c])})" for c in cols)])
         kinds.append(["any of them", *(f"{len(silent[c])} / {len(hit[c]) - len(silent[c])}" for c in cols)])
@@ -206,14 +209,14 @@ def families_markdown(run: str | Path, series: str = "all") -> str:
     """The families ranking of a ``reproduce families`` run (``series="any"``: only the combined series, the
     ranking's basis); ``ValueError`` when the run holds no family jobs."""
     from . import rows as R
-    from .figures import style
+    from .figure_style import style
     from .sections import family_lines
 
     if series not in ("all", "any"):
         raise ValueError(f"series must be 'all' or 'any', got {series!r}")
     with ResultStore.open_existing(run) as store:
         spec = store.spec()
-        main_rows = mx.main_rows(store, spec)
+        main_rows = ro.main_rows(store, spec)
         ctx = R.Context(store, spec, Path(run), main_rows, store.samples())
         ref = R.reference(ctx, R.main_boxes(ctx))
     per_image_main = len({(r.method, r.box_label) for r in main_rows})
@@ -225,14 +228,14 @@ def families_markdown(run: str | Path, series: str = "all") -> str:
         ref_counts[r.sample_id] += 1
     ref_full = max(ref_counts.values(), default=0)
     done = {s for s, n in counts.items() if n == per_image_main and (not ref or ref_counts[s] == ref_full)}
-    rows = [r for r in main_rows if r.sample_id in done and mx.family_of(r) is not None]
+    rows = [r for r in main_rows if r.sample_id in done and family_of(r) is not None]
     if not rows:
         raise ValueError(f"{run}: no complete family jobs (a `reproduce families` run)")
-    profile = mx.family_profile(rows + [r for r in ref if r.sample_id in done], spec.eps_safe_m)
-    order = mx.rank_families(profile)
+    profile = family_profile(rows + [r for r in ref if r.sample_id in done], spec.eps_safe_m)
+    order = rank_families(profile)
     lines = family_lines(profile, order)
     if series == "any":
-        lines = [ln for ln in lines if ln["method"] == style(mx.ANY_METHOD)["label"]]
+        lines = [ln for ln in lines if ln["method"] == style(ANY_METHOD)["label"]]
     ks = [k for k in lines[0] if k.startswith("L") and k[1:].isdigit()] if lines else []
 
     def num(v) -> str:

@@ -13,12 +13,12 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..analysis import metrics as mx
+from ..analysis.reference import reference_rows
 from ..atomic import atomic_write
 from ..specs.campaign import BoxSpec, CampaignSpec
 from ..store import JobRow, JobStatus, ResultStore, SampleRecord
 from ..store.payloads import Nominal, WorstPayload
-from . import figures as F
+from .figure_style import method_order
 from .html import figure_png, img, img_file
 
 
@@ -42,7 +42,7 @@ class Context:
     figures: list[Path] = field(default_factory=list)
     embed: bool = True
     #: ``main`` is every stored main search row the tool measured, none read off a trace (:func:`~vbl_robust.
-    #: analysis.metrics.main_rows` of a spec that reads no trace): :attr:`runs` is ``main`` itself, not a second
+    #: analysis.readoff.main_rows` of a spec that reads no trace): :attr:`runs` is ``main`` itself, not a second
     #: copy of every row.
     main_is_runs: bool = False
 
@@ -96,7 +96,7 @@ class Context:
         return self.figure_file(path, name, caption, png)
 
     def figure_file(self, path: Path, name: str, caption: str, png: bytes | None = None) -> str:
-        """A PNG already written under ``figures/`` (e.g. by :func:`vbl_robust.report.figures.plot_zones`; ``png``:
+        """A PNG already written under ``figures/`` (e.g. by :func:`vbl_robust.report.zone_figure.plot_zones`; ``png``:
         its bytes when at hand): embedded, or with ``embed`` off shown from its file, relative to the page."""
         self.figures.append(path)
         if self.embed:
@@ -112,7 +112,7 @@ def anchor(title: str) -> str:
 
 def reference(ctx: Context, boxes: Sequence[BoxSpec]) -> list[JobRow]:
     ref = ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
-    return mx.reference_rows(ref, boxes, ctx.eps, ctx.spec.penalty_m)
+    return reference_rows(ref, boxes, ctx.eps, ctx.spec.penalty_m)
 
 
 def main_boxes(ctx: Context) -> list[BoxSpec]:
@@ -150,7 +150,7 @@ def landscape_runs(ctx: Context, g: JobRow) -> dict[str, JobRow]:
     first: dict[str, JobRow] = {}
     for r in sorted(on_box, key=lambda r: (r.budget.max_seconds is not None, -r.nfev)):
         first.setdefault(r.method, r)
-    return {m: first[m] for m in F.method_order(first)}
+    return {m: first[m] for m in method_order(first)}
 
 
 def where(ctx: Context, sid: str) -> str:

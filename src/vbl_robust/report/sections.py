@@ -11,8 +11,11 @@ from typing import Any
 
 import numpy as np
 
-from ..analysis import metrics as mx
-from ..analysis.reference import AgainstGrid
+from ..analysis.breach import survival_rate
+from ..analysis.levels import RANK_THRESHOLDS, distance_profile, family_of, family_profile, rank_families
+from ..analysis.metrics import convergence, pnp_summary
+from ..analysis.reference import AgainstGrid, against_reference, grid_complete
+from ..analysis.summary import Summary, summarize
 from ..campaigns.experiments import range_text
 from ..consent import DetectorKind
 from ..constants import FAILURE_REASONS, Verdict
@@ -20,6 +23,7 @@ from ..search import NON_FINITE
 from ..specs.kinds import JobKind, Role
 from ..store import JobRow, JobStatus, RunProvenance
 from . import figures as F
+from .figure_style import method_order, style
 from .html import esc, fmt_num, folded, table
 from .integrity import provenance_html
 from .rows import (
@@ -36,7 +40,7 @@ from .rows import (
 )
 
 
-def _summary_table(summary: Sequence[mx.Summary], unit: str = "image") -> str:
+def _summary_table(summary: Sequence[Summary], unit: str = "image") -> str:
     """Per method, box and budget: survival with its exact 95 % interval, breaches split by kind (misleading /
     flagged only), verdicts and effort."""
     cols = [
@@ -58,7 +62,7 @@ def _summary_table(summary: Sequence[mx.Summary], unit: str = "image") -> str:
     return table(rows, cols, left=("method", "box_label", "budget_label", "read_from"))
 
 
-def _failures_table(summary: Sequence[mx.Summary], penalty_m: float) -> str:
+def _failures_table(summary: Sequence[Summary], penalty_m: float) -> str:
     """Failed evaluations per reason and group (the search used the penalty for them), with the codes' meaning."""
     codes = sorted({c for line in summary for c in line.failures})
     if not codes:
@@ -130,8 +134,8 @@ def section_methods(ctx: Context) -> Section | None:
     if not ctx.main:
         return None
     s = Section(METHODS_TITLE)
-    summary = mx.summarize([*ctx.main, *(r for r in ctx.unmeasured if r.kind == JobKind.SEARCH and r.role == Role.MAIN)],
-                           ctx.eps)
+    summary = summarize([*ctx.main, *(r for r in ctx.unmeasured if r.kind == JobKind.SEARCH and r.role == Role.MAIN)],
+                        ctx.eps)
     s.html.append(_summary_table(summary, ctx.spec.unit))
     failures = _failures_table(summary, ctx.spec.penalty_m)
     if failures:
@@ -163,8 +167,8 @@ def section_survival_level(ctx: Context) -> Section | None:
     if len({r.box_level for r in rows}) < 2:
         return None
     boxes = main_boxes(ctx)
-    summary = mx.summarize(rows, ctx.eps, by=("method", "box_label"))
-    ref = mx.summarize(reference(ctx, boxes), ctx.eps, by=("method", "box_label"))
+    summary = summarize(rows, ctx.eps, by=("method", "box_label"))
+    ref = summarize(reference(ctx, boxes), ctx.eps, by=("method", "box_label"))
     two_d = any(b.box.dim > 1 for b in boxes)
     ticks = {b.level: b.label for b in boxes} if two_d else None
     title = "Survival vs roll and contrast budget" if two_d else "Survival vs roll budget"
@@ -180,12 +184,12 @@ def section_survival_level(ctx: Context) -> Section | None:
             s.html.append("<p>The dense grid (the true worst case up to its spacing):</p>" + _summary_table(ref))
     else:
         s.html.append(_summary_table(summary + ref))
-    s.html.append(_against_grid_table(mx.against_reference(rows, reference(ctx, boxes), ctx.eps), ctx.spec.unit))
+    s.html.append(_against_grid_table(against_reference(rows, reference(ctx, boxes), ctx.eps), ctx.spec.unit))
     return s
 
 
 def _against_grid_table(lines: Sequence[AgainstGrid], unit: str = "image") -> str:
-    """Each method's verdicts against the dense grid's on the same images (:func:`~vbl_robust.analysis.metrics.
+    """Each method's verdicts against the dense grid's on the same images (:func:`~vbl_robust.analysis.reference.
     against_reference`); "" without a grid."""
     if not lines:
         return ""
@@ -211,7 +215,7 @@ def section_runtime(ctx: Context) -> Section | None:
     ref = None
     if ref_rows:
         w = [r.worst_m for r in ref_rows]
-        ref = {"survival": mx.survival_rate(w, ctx.eps), "median_worst_m": float(np.median(w))}
+        ref = {"survival": survival_rate(w, ctx.eps), "median_worst_m": float(np.median(w))}
     box_label = boxes[0].label if boxes else ""
     s = Section(f"Runtime budgets ({box_label})")
     same = _repeats_methods_table(ctx, [*time_rows, *eval_rows], ("method", "budget_label"))
@@ -219,7 +223,7 @@ def section_runtime(ctx: Context) -> Section | None:
         if len({r.budget_label for r in rs}) < 2:
             continue
         summary = [dataclasses.replace(line, box_label=box_label)
-                   for line in mx.summarize(rs, ctx.eps, by=("method", "budget_label"))]
+                   for line in summarize(rs, ctx.eps, by=("method", "budget_label"))]
         dims = "2d" if boxes and boxes[0].box.dim > 1 else "1d"
         fig = F.runtime(summary, axis=axis, eps_safe_m=ctx.eps, reference=ref,
                         title=f"{'Time' if axis == 'max_seconds' else 'Evaluation'} budget per image, box {box_label}")
@@ -251,7 +255,7 @@ def section_distance(ctx: Context) -> Section | None:
     budgets = sorted({r.box_level for r in rows})
     limit = max(budgets)
     ref = reference(ctx, main_boxes(ctx))
-    profile = mx.distance_profile(rows + ref, distances, budgets)
+    profile = distance_profile(rows + ref, distances, budgets)
     s = Section("Vulnerability profile by approach distance")
     fig = F.distance_profile(profile, limit_deg=limit, budgets=budgets)
     s.html.append(ctx.figure(fig, "distance_profile",
@@ -284,24 +288,24 @@ def family_lines(profile: Sequence[Mapping[str, Any]], order: Sequence[str]) -> 
     lines = []
     for rank, fam in enumerate(order, start=1):
         series = {p["method"]: p for p in profile if p["family"] == fam}
-        for m in F.method_order(series):
+        for m in method_order(series):
             p = series[m]
-            line: dict[str, Any] = {"rank": rank, "family": fam, "method": F.style(m)["label"],
+            line: dict[str, Any] = {"rank": rank, "family": fam, "method": style(m)["label"],
                                     "n": max(p["n"], default=0)}
             line.update({f"L{k}": v for k, v in enumerate(p["survival"], start=1)})
-            for t in mx.RANK_THRESHOLDS:
+            for t in RANK_THRESHOLDS:
                 line[f"below_{t:g}"] = _level_name(p, p[f"below_{t:g}"])
             lines.append(line)
     return lines
 
 
 def section_families(ctx: Context) -> Section | None:
-    rows = [r for r in ctx.main if mx.family_of(r) is not None]
+    rows = [r for r in ctx.main if family_of(r) is not None]
     if not rows:
         return None
     ref = reference(ctx, main_boxes(ctx))
-    profile = mx.family_profile(rows + ref, ctx.eps)
-    order = mx.rank_families(profile)
+    profile = family_profile(rows + ref, ctx.eps)
+    order = rank_families(profile)
     s = Section("Perturbation families: survival vs budget level")
     s.html.append(ctx.figure(F.family_ranking(profile, order), "families_ranking",
                              "Each family alone, ranked by the budget level at which survival drops below 50 % "
@@ -324,16 +328,16 @@ def section_families(ctx: Context) -> Section | None:
                         left=("family", "unit", *ks)))
     cols = [("rank", "rank", None), ("family", "family", None), ("method", "method", None), ("n", "images", None),
             *[(k, f"survival % {k}", None) for k in ks],
-            *[(f"below_{t:g}", f"survival < {t:g} % at", esc) for t in mx.RANK_THRESHOLDS]]
+            *[(f"below_{t:g}", f"survival < {t:g} % at", esc) for t in RANK_THRESHOLDS]]
     s.html.append(table(family_lines(profile, order), cols,
-                        left=("family", "method", *[f"below_{t:g}" for t in mx.RANK_THRESHOLDS])))
+                        left=("family", "method", *[f"below_{t:g}" for t in RANK_THRESHOLDS])))
     return s
 
 
 def section_convergence(ctx: Context) -> Section | None:
     from ..search import direct_family
 
-    conv = mx.convergence([r for r in ctx.main if r.method in direct_family()])
+    conv = convergence([r for r in ctx.main if r.method in direct_family()])
     if not conv:
         return None
     s = Section("GeoRobust convergence: |PO_k| and RA(k)")
@@ -354,7 +358,7 @@ def section_convergence(ctx: Context) -> Section | None:
 
 def section_pnp(ctx: Context) -> Section | None:
     rows = ctx.store.jobs(kind="pnp", with_trace=False)
-    summary = mx.pnp_summary(rows)
+    summary = pnp_summary(rows)
     if not summary:
         return None
     s = Section("PnP solvers")
@@ -387,8 +391,8 @@ def section_landscapes(ctx: Context) -> Section | None:
         xs, fs = g.points.xs, g.points.fs
         # a grid stopped at its first breach covers the centre of the box only: the title says so, the axes span
         # the whole box it names
-        stopped = "" if mx.grid_complete(g) else (f"; the grid stopped at its first breach after {len(fs)} of "
-                                                  f"{g.budget.max_evals} points (blank: not evaluated)")
+        stopped = "" if grid_complete(g) else (f"; the grid stopped at its first breach after {len(fs)} of "
+                                               f"{g.budget.max_evals} points (blank: not evaluated)")
         title = f"L over {g.box_label}, {place}{stopped}"
         if len(names) == 2:
             fig = F.landscape_2d(xs, fs, names, {m: r.points.xs for m, r in by_method.items()}, eps_safe_m=ctx.eps,
@@ -399,14 +403,14 @@ def section_landscapes(ctx: Context) -> Section | None:
             fig = F.landscape_1d(xs, fs, names[0], {m: (r.points.xs, r.points.fs) for m, r in by_method.items()},
                                  eps_safe_m=ctx.eps, title=title)
             name = "landscape_1d"
-        lab = ", ".join(f"{F.style(m)['label']} on {r.box_label} ({r.budget_label})" for m, r in by_method.items())
+        lab = ", ".join(f"{style(m)['label']} on {r.box_label} ({r.budget_label})" for m, r in by_method.items())
         part = "" if not stopped else (f", evaluated from the centre outwards and stopped at its first "
                                        f"breach after {len(fs)} of {g.budget.max_evals} points")
         s.html.append(ctx.figure(fig, name, f"Dense grid of {len(fs)} points ({esc(g.box_label)}{part}); "
                                             "markers: "
                                             f"the points each method evaluated — {esc(lab)}; stars: each method's worst "
                                             "point. Red: the ε_safe level set."))
-        lines = [{"method": F.style(m)["label"], "box": r.box_label, "budget": r.budget_label, "nfev": r.nfev,
+        lines = [{"method": style(m)["label"], "box": r.box_label, "budget": r.budget_label, "nfev": r.nfev,
                   "worst": r.worst_m, "x": theta_text(r.worst_x), "verdict": r.verdict} for m, r in by_method.items()]
         lines.append({"method": "dense grid", "box": g.box_label, "budget": g.budget_label, "nfev": g.nfev,
                       "worst": g.worst_m, "x": theta_text(g.worst_x), "verdict": g.verdict})
@@ -423,7 +427,7 @@ def progress_curves(rows: Sequence[JobRow], points: int = 200) -> dict[str, tupl
     a point: every row counts at every count, so a median never falls (a median over the rows that happen to have
     a point at a count did: the late starters joined low)."""
     curves = {}
-    for m in F.method_order(r.method for r in rows):
+    for m in method_order(r.method for r in rows):
         traces = [(np.array([t.nfev for t in r.trace]),  # no value yet (NaN): nothing found so far
                    np.nan_to_num(np.array([t.best_value for t in r.trace], dtype=np.float64), nan=-np.inf))
                   for r in rows if r.method == m]
@@ -460,7 +464,7 @@ def section_best_vs_evals(ctx: Context) -> Section | None:
 def section_per_image(ctx: Context) -> Section | None:
     if not ctx.main:
         return None
-    methods = F.method_order(r.method for r in ctx.main)
+    methods = method_order(r.method for r in ctx.main)
     by: dict[str, dict[str, Any]] = {}
     for r in ctx.main:
         line = by.setdefault(r.sample_id, {"sample_id": r.sample_id, **sample_cols(ctx, r.sample_id),
@@ -477,7 +481,7 @@ def section_per_image(ctx: Context) -> Section | None:
     cols = [("sample_id", ctx.spec.unit, None), ("slant_distance_m", "slant dist. (m)", None),
             ("envelope", "envelope", None), ("nominal_m", "unperturbed L(0) (m)", None)]
     for m in methods:
-        cols += [(f"{m}_worst", f"{F.style(m)['label']} worst (m)", None), (f"{m}_x", "at θ", esc)]
+        cols += [(f"{m}_worst", f"{style(m)['label']} worst (m)", None), (f"{m}_x", "at θ", esc)]
     cols += [("worst", "worst of all (m)", None), ("verdict", "verdict", None)]
     s = Section(f"Per {ctx.spec.unit}: worst case found")
     s.html.append(f"<p>L(0): the error of the {ctx.spec.unit} unperturbed (θ at its identity: roll 0, contrast 1, …; "

@@ -15,10 +15,10 @@ from ..search import METHODS
 from ..search.zones import CLASSES, ZoneMap
 from ..specs.campaign import CampaignSpec
 from ..store import JobRow, JobStatus
-from . import figures as F
-from .figures import plot_zones
+from .figure_style import method_order, style
 from .html import esc, table
 from .rows import Context, Section, landscape_grids, landscape_runs, where
+from .zone_figure import plot_zones
 
 logger = logging.getLogger(__name__)
 
@@ -107,7 +107,7 @@ def zone_lines(jobs: Sequence[Zoned]) -> list[dict[str, Any]]:
     groups: dict[tuple[str, str | None, str | None], list[Zoned]] = {}
     for j in jobs:
         groups.setdefault((j.row.method, j.row.box_label, j.row.budget_label), []).append(j)
-    methods = F.method_order(m for m, _, _ in groups)
+    methods = method_order(m for m, _, _ in groups)
     # boxes of one parameter set together (a family), by level within it
     params = list(dict.fromkeys(js[0].row.box.box.names for js in groups.values()))
     order = {k: (methods.index(k[0]), params.index(js[0].row.box.box.names), js[0].row.box_level or 0.0)
@@ -116,7 +116,7 @@ def zone_lines(jobs: Sequence[Zoned]) -> list[dict[str, Any]]:
     for key in sorted(groups, key=order.__getitem__):
         js = groups[key]
         maps = [j.map for j in js if j.map is not None]
-        line: dict[str, Any] = {"method": F.style(key[0])["label"], "box": key[1], "budget": key[2],
+        line: dict[str, Any] = {"method": style(key[0])["label"], "box": key[1], "budget": key[2],
                                 "n": len(maps), "skipped": len(js) - len(maps),
                                 "basis": ", ".join(sorted({zm.basis for zm in maps}))}
         for c in CLASSES:
@@ -196,7 +196,7 @@ def _zone_figures(ctx: Context, g: JobRow | None, by_key: dict[Any, JobZones]) -
         j = by_key.get(r.key)
         if j is None or j.map is None:
             if j is not None:
-                not_drawn.append(f"{F.style(m)['label']} ({j.reason})")
+                not_drawn.append(f"{style(m)['label']} ({j.reason})")
             continue
         zm = j.map
         box = r.box.box
@@ -205,18 +205,18 @@ def _zone_figures(ctx: Context, g: JobRow | None, by_key: dict[Any, JobZones]) -
         label = basis_label(zm)
         png = plot_zones(zm, ctx.out_dir / "figures" / f"{name}.png",
                          landscape=(g.points.xs[inside], g.points.fs[inside]),
-                         title=f"{F.style(m)['label']} zones on {r.box_label}, image {r.sample_id} — "
+                         title=f"{style(m)['label']} zones on {r.box_label}, image {r.sample_id} — "
                                f"{label.split(' (')[0]}")
         outside = len(j.zones.outside_breaches)
         ground = ("the dense grid's L(θ) (line)" if box.dim == 1
                   else "the dense grid's L(θ) (heat map; dashed: ε_safe)")
         out.append(ctx.figure_file(png, name, (
-            f"{esc(F.style(m)['label'])} on {esc(r.box_label)} (budget {esc(r.budget_label)}; {r.nfev} evaluated), "
+            f"{esc(style(m)['label'])} on {esc(r.box_label)} (budget {esc(r.budget_label)}; {r.nfev} evaluated), "
             f"{esc(where(ctx, r.sample_id))}: "
             f"{len(zm.zones)} cells over {ground}. Red: breached; grey: undecided; green: ruled out. Basis: "
             f"<b>{esc(label)}</b>." + (f" {outside} breaching evaluation(s) are no cell's centre (not drawn as "
                                        "zones)." if outside else ""))))
-        drawn.append({"method": F.style(m)["label"], "box": r.box_label, "budget": r.budget_label,
+        drawn.append({"method": style(m)["label"], "box": r.box_label, "budget": r.budget_label,
                       "nfev": r.nfev, "cells": len(zm.zones),
                       **{c: 100.0 * zm.fractions[c] for c in CLASSES}, "basis": label})
     if not_drawn:

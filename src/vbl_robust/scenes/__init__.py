@@ -6,33 +6,24 @@
 (256, 256, 3)
 """
 
-from .airports import REFERENCE_LAT_LON_ALT, Airport, designation, make_airports
-from .envelopes import ENVELOPES, Approach, Envelope, corners_visible, sample_approach, sample_approaches
+from .airports import REFERENCE_LAT_LON_ALT, designation, make_airports
+from .envelopes import ENVELOPES, corners_visible, sample_approaches
 from .export import write_dataset
-from .generate import generate, render_sample
-from .render import Look, debug_look, ground_homography, render_scene, sample_look
+from .generate import generate
+from .render import ground_homography
 from .sequences import envelope_of, generate_sequences, write_sequences
 
 __all__ = [
     "ENVELOPES",
     "REFERENCE_LAT_LON_ALT",
-    "Airport",
-    "Approach",
-    "Envelope",
-    "Look",
     "corners_visible",
-    "debug_look",
     "designation",
     "envelope_of",
     "generate",
     "generate_sequences",
     "ground_homography",
     "make_airports",
-    "render_sample",
-    "render_scene",
-    "sample_approach",
     "sample_approaches",
-    "sample_look",
     "write_dataset",
     "write_sequences",
 ]

@@ -21,17 +21,17 @@ evaluation budget off those stamps (one run of an *anytime* method answers every
 ('budget_exhausted', True, True)
 """
 
+from ..constants import Verdict
 from .adaptive import AdaptiveGeoRobust, AdaptiveGeoRobustV
-from .anytime import at_budget, prefix_length
+from .anytime import at_budget
 from .apgd import APGD, apgd_checkpoints
 from .api import METHODS, anytime_methods, direct_family, make_optimizer, maximize, method_options
 from .base import CLOCKS, Optimizer, use_clock
-from .bounds import sound_upper_bound
 from .cells import Cells
 from .direct import Direct, DirectL, GeoRobust
 from .evaluations import NON_FINITE, Evaluations
 from .po import potentially_optimal
-from .result import SearchResult, Status, TraceRow, Verdict
+from .result import SearchResult, Status, TraceRow
 from .sampling import GridSearch, RandomSearch, SobolSearch
 
 __all__ = [
@@ -63,6 +63,4 @@ __all__ = [
     "use_clock",
     "method_options",
     "potentially_optimal",
-    "prefix_length",
-    "sound_upper_bound",
 ]

@@ -42,11 +42,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from ..constants import Verdict
 from ..space import ParameterBox
 from .bounds import check_lipschitz, sound_upper_bound
 from .cells import Cells
 from .evaluations import Evaluations, recorded_reasons, split
-from .result import PARTIAL, SearchResult, Status, TraceRow, Verdict, verdict_for
+from .result import PARTIAL, SearchResult, Status, TraceRow, verdict_for
 
 logger = logging.getLogger(__name__)
 #: The clocks a search can run on: wall time, or the CPU seconds of this process (all its threads), which other

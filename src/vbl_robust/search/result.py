@@ -26,7 +26,7 @@ import numpy as np
 
 from ..constants import Verdict
 
-__all__ = ["PARTIAL", "SearchResult", "Status", "TraceRow", "Verdict", "verdict_for"]
+__all__ = ["PARTIAL", "SearchResult", "Status", "TraceRow", "verdict_for"]
 
 
 class Status(StrEnum):

@@ -26,9 +26,8 @@ from ..space import ParameterBox
 from .budget import Budget
 from .kinds import JobKind, Role
 
-__all__ = ["CONF_THRESHOLD", "EPS_SAFE_M", "FIGURES", "JOB_KINDS", "PENALTY_M", "ROLES", "Block", "BoxSpec", "Budget",
-           "CampaignSpec", "Job", "box_label", "canonical_json", "default_figures", "derive_seed", "digest", "roll_box",
-           "roll_contrast_box"]
+__all__ = ["FIGURES", "JOB_KINDS", "ROLES", "Block", "BoxSpec", "CampaignSpec", "Job", "box_label",
+           "default_figures", "derive_seed", "roll_box", "roll_contrast_box"]
 
 
 #: The values of :class:`JobKind` and :class:`Role`, in order.

@@ -3,8 +3,9 @@ resumable and crash-safe.
 
 Modules, each importing only those above it:
 
-- :mod:`.rows` — the typed rows: :class:`StoredCampaign`, :class:`SampleRecord`, :class:`JobRow`, :class:`Points`,
-  :class:`JobStatus`, :class:`RunRecord` (a :class:`RunProvenance` and how the run ended, :class:`RunStatus`);
+- :mod:`.rows` — the typed rows: :class:`~.rows.StoredCampaign`, :class:`SampleRecord`, :class:`JobRow`,
+  :class:`Points`, :class:`JobStatus`, :class:`RunRecord` (a :class:`RunProvenance` and how the run ended,
+  :class:`RunStatus`);
 - :mod:`.payloads` — what a job row's payload holds, one class per kind (:class:`~.payloads.WorstPayload`,
   :class:`~.payloads.SequencePayload`, :class:`~.payloads.RiskPayload`), each writing and reading its JSON;
 - :mod:`.schema` — the tables, each declared once as columns (DDL, migrations, row ↔ columns), :data:`SCHEMA_VERSION`;
@@ -15,11 +16,10 @@ Modules, each importing only those above it:
 - :mod:`.merge` — :func:`merge_runs`: parts of one campaign computed elsewhere joined into one store.
 """
 
-from .core import STORE, ResultStore
-from .identity import PRESENTATION_KEYS
+from .core import PACKED, STORE, ResultStore
 from .lock import WriterLock
-from .merge import MergedSource, MergeReport, check_mergeable, merge_runs, merge_store, store_file
-from .pack import PACKED, pack_store, restore_store
+from .merge import MergedSource, MergeReport, merge_runs, merge_store, store_file
+from .pack import pack_store, restore_store
 from .rows import (
     Corners,
     JobRow,
@@ -29,7 +29,6 @@ from .rows import (
     RunRecord,
     RunStatus,
     SampleRecord,
-    StoredCampaign,
     decode_points,
     encode_points,
     now_iso,
@@ -39,7 +38,6 @@ from .schema import JOB_COLUMNS, SCHEMA_VERSION
 __all__ = [
     "JOB_COLUMNS",
     "PACKED",
-    "PRESENTATION_KEYS",
     "SCHEMA_VERSION",
     "STORE",
     "Corners",
@@ -53,9 +51,7 @@ __all__ = [
     "RunRecord",
     "RunStatus",
     "SampleRecord",
-    "StoredCampaign",
     "WriterLock",
-    "check_mergeable",
     "decode_points",
     "encode_points",
     "merge_runs",

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .core import _UNPACK_CHUNK, PACKED, STORE, ResultStore, unpack
+from .core import _UNPACK_CHUNK, STORE, ResultStore, unpack
 
-__all__ = ["PACKED", "PACK_PRESET", "pack_store", "restore_store"]
+__all__ = ["PACK_PRESET", "pack_store", "restore_store"]
 
 #: xz preset of a packed store: 6 (xz's default) needs ~94 MB to compress where 9 needs ~670 MB, for a file a few
 #: per cent larger.

@@ -20,7 +20,8 @@ import numpy as np
 
 from ..constants import MAX_BLOB_BYTES, NotMeasured, Verdict
 from ..search.result import TraceRow
-from ..specs.campaign import BoxSpec, Budget, CampaignSpec
+from ..specs.budget import Budget
+from ..specs.campaign import BoxSpec, CampaignSpec
 from ..specs.kinds import JobKind, JobStatus, Role, RunStatus
 
 
@@ -256,7 +257,7 @@ class JobRow:
     evaluated point (None unless asked for); ``payload`` = the JSON as stored: a PnP comparison, or what
     :mod:`~vbl_robust.store.payloads` reads (the worst point, a sequence's facts, a risk estimate);
     ``finished_at`` (ISO time, UTC). ``read_from`` is set only on rows *derived* from a stored run at a smaller
-    budget (:func:`vbl_robust.analysis.metrics.read_off_rows`; never stored): the budget label of that run.
+    budget (:func:`vbl_robust.analysis.readoff.read_off_rows`; never stored): the budget label of that run.
 
     Floats are finite or None (SQLite stores NaN as NULL).
     """

@@ -44,7 +44,8 @@ from pathlib import Path
 from typing import Any
 
 from ..search.result import TraceRow
-from ..specs.campaign import BoxSpec, Budget
+from ..specs.budget import Budget
+from ..specs.campaign import BoxSpec
 from .rows import Corners, JobRow, Points, RunProvenance, RunRecord
 
 #: Version of the layout below (``PRAGMA user_version``).
