@@ -235,10 +235,12 @@ def export(store: ResultStore, path: str | Path) -> Path:
             w.writeheader()
             w.writerows(rows)
         return p
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     pq.write_table(_arrow_table(FlatRows(store)), p)
-    return p
+    pa.default_memory_pool().release_unused()  # Arrow's allocator keeps what it freed: given back (what follows, a
+    return p                                   # bundle's report, needs it more)
 
 
 #: Rows per Arrow batch of :func:`_arrow_table`.
