@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
+from vbl_robust.consent import DetectorKind
 from vbl_robust.perturb.registry import PERTURBATIONS, known
 from vbl_robust.space import ParameterBox
 from vbl_robust.specs.campaign import BoxSpec, box_label
@@ -251,7 +252,6 @@ def detector_spec(model: Path | None, trust_model: bool, oracle: bool, oracle_no
     options, or one line; notes on standard error when the oracle stands in for the shipped model (and why) or
     when the shipped model has open accuracy goals."""
     # torch behind it: not for ``--help``
-    from vbl_robust.consent import DetectorKind
     from vbl_robust.detect.shipped import DetectorSpec, default_model_status
 
     # consent to run code (a .pt pickle, a plug-in) is the user's typing, never a value read from a --config file:

@@ -15,6 +15,7 @@ from typing import Annotated, Any
 import typer
 
 from ..campaigns.experiments import EXPERIMENTS, PAPER, Options, experiment, with_options
+from ..consent import refuse_without_consent
 from ..constants import MAX_IMAGES
 from ..paper.estimate import PROBE_IMAGES, Probe, expected_seconds, measured_remaining, planned_work, probe
 from . import options as o
@@ -159,7 +160,6 @@ def _check_method_options(options: dict, specs: list) -> None:
 def _refuse_code(bundle: Path, names: list[str], trust: bool) -> None:
     """``--resume-from``: one line, before anything runs or is restored, when a packed store of the bundle names a
     detector that is code (a factory, a .pt outside the package) and ``trust`` (--trust-model) is not given."""
-    from vbl_robust.consent import refuse_without_consent
     from vbl_robust.store import PACKED, ResultStore
 
     for name in names:

@@ -12,6 +12,7 @@ from typing import Annotated
 
 import typer
 
+from ..consent import DetectorKind, refuse_untrusted
 from ..constants import MAX_IMAGES
 from ..space import ParameterBox
 from . import options as o
@@ -92,7 +93,6 @@ def train(
 def _weights(model: str | Path, trust: bool, option: str) -> Path:
     """The weights a training starts from: a shipped model's name or a user's ``.pt`` (refused unless trusted), read
     as every command reads a model (:meth:`~vbl_robust.detect.shipped.DetectorSpec.from_choice`)."""
-    from vbl_robust.consent import DetectorKind
     from vbl_robust.detect.shipped import DetectorSpec, default_model_status
 
     with one_line():
@@ -131,7 +131,6 @@ def ship(
 ) -> None:
     """Ship a trained checkpoint as a shipped detector (two-stage, 320 px): the default, or with --as hardened
     beside it; its default.json from the checkpoint's protocol."""
-    from vbl_robust.consent import refuse_untrusted
     from vbl_robust.detect.protocol import info_from_protocol, replacement_verdict
     from vbl_robust.detect.shipped import SHIPPED_MODELS, shipped_model_dir
 
