@@ -253,13 +253,15 @@ def _arrow_table(flat: FlatRows) -> Any:
     infers from all its values, as from one list (a column without a value in one batch takes the others' type)."""
     import pyarrow as pa
 
+    def table(batch: list[dict[str, Any]]) -> Any:  # the columns met so far; a later one is null here when joined
+        return pa.table({c: [r.get(c) for r in batch] for c in flat.columns})
+
     batches, batch = [], []
     for d in flat:
         batch.append(d)
         if len(batch) == BATCH_ROWS:
-            batches.append(pa.table({c: [r.get(c) for r in batch] for c in flat.columns}))
+            batches.append(table(batch))
             batch = []
     if batch or not batches:
-        batches.append(pa.table({c: [r.get(c) for r in batch] for c in flat.columns}))
-    cols = flat.columns  # a batch built before a column was met lacks it: added as nulls when joined
-    return pa.concat_tables(batches, promote_options="permissive").select(cols)
+        batches.append(table(batch))
+    return pa.concat_tables(batches, promote_options="permissive").select(flat.columns)

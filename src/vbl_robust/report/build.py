@@ -13,7 +13,7 @@ the images breached, survival with its interval and what it means at this number
 date and version, then the table and the survival figure), then the run's settings (the summary), the
 worst-case gallery (:mod:`.gallery`), the table per method, box and budget, the declared figures, provenance.
 Memory: the gallery is drawn last, after :meth:`.rows.Context.release` drops the rows, and shown in its place:
-nothing else the report imports loads torch (``tests/report/test_report_memory.py``), so a large store's rows and
+nothing else the report imports loads torch (``tests/report/test_gallery.py``), so a large store's rows and
 torch are never held at once.
 
 Where things are: :mod:`.rows` (the context and which stored rows each section reads), :mod:`.sections` (one

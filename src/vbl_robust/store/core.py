@@ -90,6 +90,11 @@ def _nbytes(v: Any, raw: Any = None) -> int:
     return 10 * len(raw or "")
 
 
+#: The rows of jobs not measured (one ``?``: ``JobStatus.NOT_MEASURED``); "failed" was their status's name in
+#: stores written before it.
+_UNMEASURED = "status IN (?, 'failed')"
+
+
 class ResultStore:
     """A campaign's results in one SQLite file (see :mod:`~vbl_robust.store.schema` for the layout).
 
@@ -382,7 +387,7 @@ class ResultStore:
         """Delete the rows of jobs not measured (the tool could not complete them: status "not measured", or "failed"
         in stores written before the name), so that a rerun runs them again; returns how many were deleted. Each
         leaves a ``forgotten`` digest entry in its run's chain (:mod:`~vbl_robust.store.digest`)."""
-        where = "WHERE status IN (?, 'failed')"
+        where = f"WHERE {_UNMEASURED}"
         with self.transaction():
             gone = self._con.execute(f"SELECT key, run_id FROM jobs {where} ORDER BY rowid",
                                      (JobStatus.NOT_MEASURED.value,)).fetchall()
@@ -423,8 +428,8 @@ class ResultStore:
         """:meth:`jobs` one row at a time (what a reader that needs no list of every row reads: a large store's
         export)."""
         where, args = [], []
-        if measured is not None:  # "failed": the name of "not measured" in stores written before it
-            where.append(f"status {'NOT ' if measured else ''}IN (?, 'failed')")
+        if measured is not None:
+            where.append(_UNMEASURED if not measured else f"NOT {_UNMEASURED}")
             args.append(JobStatus.NOT_MEASURED.value)
         if kind is not None:
             where.append("kind = ?")
