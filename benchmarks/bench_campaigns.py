@@ -101,9 +101,9 @@ def durations(detector, bundle: Path, quick: bool) -> str:
     import json
     from dataclasses import replace
 
-    from vbl_robust.campaigns import EXPERIMENTS, Options, load_samples
-    from vbl_robust.campaigns.experiments import PAPER
+    from vbl_robust.campaigns import load_samples
     from vbl_robust.paper.estimate import PROBE_IMAGES, Probe, expected_seconds, probe
+    from vbl_robust.paper.experiments import EXPERIMENTS, PAPER, Options
 
     specs = {name: replace(EXPERIMENTS[name].build(0, Options()), clock="process") for name in PAPER}
     pr = probe(detector, list(specs.values()), load_samples(PROBE_IMAGES, 0)[0], seconds=1.0 if quick else 5.0,
@@ -158,7 +158,7 @@ def _convergence_spend(bundle: Path) -> str:
 def main(quick: bool = False, oracle_only: bool = False) -> str:
     import torch
 
-    from vbl_robust.campaigns.experiments import CONVERGENCE_MAX_EVALS
+    from vbl_robust.paper.experiments import CONVERGENCE_MAX_EVALS
 
     torch.set_num_threads(1)
     oracle, det = _detectors(oracle_only)

@@ -4,9 +4,9 @@ import math
 
 import pytest
 
-from vbl_robust.campaigns import experiment, run_campaign
-from vbl_robust.campaigns.experiments import EXPERIMENTS, Options
+from vbl_robust.campaigns import run_campaign
 from vbl_robust.campaigns.pnpcheck import TRUNCATED
+from vbl_robust.paper.experiments import EXPERIMENTS, Options, experiment
 from vbl_robust.report import build_report
 from vbl_robust.specs.campaign import FIGURES as FIGURE_NAMES
 from vbl_robust.store import ResultStore

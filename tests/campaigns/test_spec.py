@@ -2,9 +2,8 @@ import re
 
 import pytest
 
-from vbl_robust.campaigns import experiment
-from vbl_robust.campaigns.experiments import EXPERIMENTS, Options
 from vbl_robust.digest import canonical_json
+from vbl_robust.paper.experiments import EXPERIMENTS, Options, experiment
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, CampaignSpec, derive_seed, roll_box, roll_contrast_box
 

@@ -358,7 +358,7 @@ def test_zones_and_findings_are_typed(pristine, tmp_path):
 
 def test_risk_rows_agree_with_their_draws(tmp_path):
     from vbl_robust.campaigns import DetectorSpec
-    from vbl_robust.campaigns.experiments import risk_spec
+    from vbl_robust.campaigns.audit import risk_spec
 
     spec = risk_spec(roll_box(10), methods=("mc",), max_evals=32, guide_evals=8, seed=1)
     with ResultStore(tmp_path / "results.sqlite") as store:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns.experiments import EXPERIMENTS, PAPER, Options
 from vbl_robust.cli import app
 from vbl_robust.paper.estimate import Probe, expected_evals, expected_seconds, planned_work
+from vbl_robust.paper.experiments import EXPERIMENTS, PAPER, Options
 
 runner = CliRunner()
 SMALL = ["--oracle", "--oracle-noise", "0.5", "--width", "128", "--height", "128", "--quiet", "--images", "1",

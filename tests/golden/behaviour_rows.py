@@ -25,7 +25,7 @@ def audit_rows(config: str, n_samples: int = 2, max_evals: int = 20) -> list[dic
     import torch
 
     from vbl_robust.campaigns import DetectorSpec
-    from vbl_robust.campaigns.experiments import audit_spec
+    from vbl_robust.campaigns.audit import audit_spec
     from vbl_robust.campaigns.runner import run_campaign
     from vbl_robust.scenes import generate
     from vbl_robust.specs.budget import Budget

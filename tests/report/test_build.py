@@ -4,7 +4,7 @@ import re
 import pytest
 
 from vbl_robust.campaigns import DetectorSpec, run_campaign
-from vbl_robust.campaigns.experiments import audit_spec
+from vbl_robust.campaigns.audit import audit_spec
 from vbl_robust.report import build_report
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box, roll_contrast_box

@@ -8,8 +8,8 @@ import matplotlib.pyplot as plt
 import pytest
 
 from vbl_robust.analysis.levels import ANY_METHOD, family_profile, rank_families
-from vbl_robust.campaigns.experiments import family_boxes
 from vbl_robust.constants import Verdict
+from vbl_robust.paper.experiments import family_boxes
 from vbl_robust.report import figures as F
 from vbl_robust.report.html import figure_png
 from vbl_robust.report.sections import family_lines

@@ -11,7 +11,7 @@ import sqlite3
 import pytest
 
 from vbl_robust.campaigns import DetectorSpec, run_campaign
-from vbl_robust.campaigns.experiments import audit_spec
+from vbl_robust.campaigns.audit import audit_spec
 from vbl_robust.report import build_report
 from vbl_robust.report.evidence import BoxEvidence, verdict_of, verdict_sentence
 from vbl_robust.specs.budget import Budget

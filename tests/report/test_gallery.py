@@ -16,7 +16,7 @@ import pytest
 
 from vbl_robust import store as store_module
 from vbl_robust.campaigns import DetectorSpec, run_campaign
-from vbl_robust.campaigns.experiments import audit_spec
+from vbl_robust.campaigns.audit import audit_spec
 from vbl_robust.perturb import Perturbation
 from vbl_robust.report import build_report
 from vbl_robust.report.evidence import WORST_CASES, worst_cases
@@ -293,7 +293,7 @@ def test_a_row_read_off_a_longer_run_takes_its_corners_only_where_its_worst_poin
 
 def test_a_risk_runs_first_screen_gives_its_pooled_failure_probability(tmp_path, samples):
     from vbl_robust.analysis.risk import pooled_risk
-    from vbl_robust.campaigns.experiments import risk_spec
+    from vbl_robust.campaigns.audit import risk_spec
     from vbl_robust.specs.campaign import roll_box
 
     spec = risk_spec(roll_box(20), methods=("mc",), max_evals=16, guide_evals=4)

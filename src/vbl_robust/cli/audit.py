@@ -2,7 +2,7 @@
 
 From an option to the objective: the options become request objects (:mod:`.requests`: the box, the detector, the
 images, how the run runs) and a :class:`~vbl_robust.specs.campaign.CampaignSpec`
-(:func:`vbl_robust.campaigns.experiments.audit_spec`: methods, budget, target, monitors); :meth:`RunRequest.run
+(:func:`vbl_robust.campaigns.audit.audit_spec`: methods, budget, target, monitors); :meth:`RunRequest.run
 <.requests.RunRequest.run>` runs it (:func:`vbl_robust.campaigns.runner.run_campaign`), and each job's objective
 is built from the spec's settings, the sample and the detector by
 :func:`vbl_robust.campaigns.work.build_objective` (:class:`vbl_robust.pipeline.Objective`).
@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from vbl_robust.campaigns.experiments import AUDIT_METHODS, audit_spec
+from vbl_robust.campaigns.audit import AUDIT_METHODS, audit_spec
 from vbl_robust.constants import TARGETS
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import roll_contrast_box

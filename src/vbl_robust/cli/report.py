@@ -75,6 +75,7 @@ def _report(run: Path, out: Path | None, csv: Path | None, parquet: Path | None,
     """Write or print what ``fmt`` asks for; the HTML report returns what it left out of its numbers
     (:func:`_held_back`, read before it: a large store's rows and the gallery's torch are not held yet)."""
     from vbl_robust.analysis.tables import export
+    from vbl_robust.paper.experiments import EXPERIMENT_TITLES
     from vbl_robust.report.build import build_report
     from vbl_robust.store import ResultStore
 
@@ -108,7 +109,7 @@ def _report(run: Path, out: Path | None, csv: Path | None, parquet: Path | None,
             check_writable(option, target)
     held = _held_back(run)
     with one_line():
-        path = build_report(run, out)
+        path = build_report(run, out, titles=EXPERIMENT_TITLES)
         if csv or parquet:
             with ResultStore.open_existing(run, points_on_demand=True) as store:
                 for p in (csv, parquet):

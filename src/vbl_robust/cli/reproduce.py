@@ -14,10 +14,10 @@ from typing import Annotated, Any
 
 import typer
 
-from ..campaigns.experiments import EXPERIMENTS, PAPER, Options, experiment, with_options
 from ..consent import refuse_without_consent
 from ..constants import MAX_IMAGES
 from ..paper.estimate import PROBE_IMAGES, Probe, expected_seconds, measured_remaining, planned_work, probe
+from ..paper.experiments import EXPERIMENTS, PAPER, Options, experiment, with_options
 from . import options as o
 from .common import (
     fail,

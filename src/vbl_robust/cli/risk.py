@@ -10,7 +10,7 @@ from typing import Annotated
 
 import typer
 
-from vbl_robust.campaigns.experiments import risk_spec
+from vbl_robust.campaigns.audit import risk_spec
 
 from . import options as o
 from .common import fail, one_line, set_verbosity

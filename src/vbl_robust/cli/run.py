@@ -227,6 +227,7 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
     it can — a run that did not finish, or did not measure what it was asked to, never exits 0."""
     from vbl_robust.analysis.readoff import main_rows
     from vbl_robust.analysis.tables import export
+    from vbl_robust.paper.experiments import EXPERIMENT_TITLES
     from vbl_robust.report.build import build_report
     from vbl_robust.store import ResultStore
 
@@ -248,7 +249,7 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
     if summary.status != RunStatus.FINISHED:
         typer.secho(f"run {summary.status}: rerun the same command to resume", fg=typer.colors.YELLOW, err=True)
     if report:
-        typer.echo(f"report: {build_report(out)}")
+        typer.echo(f"report: {build_report(out, titles=EXPERIMENT_TITLES)}")
     return summary.status == RunStatus.FINISHED and unmeasured_ok(every, spec.unit, allow_unmeasured)
 
 

@@ -50,6 +50,7 @@ from typing import Any
 from ..atomic import atomic_write
 from ..report.markdown import esc_md
 from ..store import PACKED, STORE, ResultStore, RunRecord, pack_store
+from .experiments import EXPERIMENT_TITLES
 
 #: Markers of the generated part of a REPRODUCTION.md (:func:`write_bundle`).
 BEGIN, END = "<!-- bundle:begin -->", "<!-- bundle:end -->"
@@ -121,7 +122,7 @@ def write_experiment(run: Path, out: Path, stores: bool = False, keep: Path | No
         elif keep is not None and (keep / PACKED).is_file():
             shutil.copy2(keep / PACKED, out / PACKED)
     atomic_write(out / "provenance.json", json.dumps(prov, indent=1, sort_keys=True, default=str) + "\n")
-    build_report(run, out, embed=False)
+    build_report(run, out, embed=False, titles=EXPERIMENT_TITLES)
     return prov["totals"]
 
 
@@ -135,7 +136,8 @@ def rebuild_report(experiment: Path) -> Path:
     stage = experiment.parent / f".{experiment.name}.report"
     shutil.rmtree(stage, ignore_errors=True)
     try:
-        build_report(experiment, stage, embed=False)  # reads <experiment>/results.sqlite.xz
+        # reads <experiment>/results.sqlite.xz
+        build_report(experiment, stage, embed=False, titles=EXPERIMENT_TITLES)
         for name in REPORT_FILES:
             new, target = stage / name, experiment / name
             if new.is_dir():

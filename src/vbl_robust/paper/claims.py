@@ -86,7 +86,6 @@ from ..analysis.readoff import main_rows
 from ..analysis.reference import REFERENCE_METHOD, against_reference, grid_complete
 from ..analysis.summary import summarize
 from ..atomic import atomic_write
-from ..campaigns.experiments import PAPER, PAPER_METHODS
 from ..campaigns.pnpcheck import TRUNCATED
 from ..constants import Verdict
 from ..report.html import fmt_num
@@ -124,6 +123,7 @@ from .claim_rules import (
     times_part,
 )
 from .claims_page import claims_markdown
+from .experiments import PAPER, PAPER_METHODS
 
 __all__ = ["CLAIMS", "claims_of", "write_claims"]
 

@@ -99,7 +99,7 @@ def paper_order(names: Sequence[str]) -> list[str]:
     distance-profile, convergence, then ours), then the dense-grid truth runs in the same order, then any other
     run by name."""
     from ..analysis.truth import TRUTH_SUFFIX
-    from ..campaigns.experiments import EXPERIMENTS
+    from .experiments import EXPERIMENTS
 
     known = list(EXPERIMENTS)
 
@@ -189,8 +189,8 @@ def _png_size(path: Path) -> tuple[int, int] | None:
 def _card(out: Path, name: str, note: str, claims: Sequence[Claim]) -> str:
     """One experiment's card on the index: its title and link, jobs done, the verdicts of the claims on it, its
     headline figure at a width where its text reads (≥ 9 px; a narrower window scrolls it sideways)."""
-    from ..campaigns.experiments import EXPERIMENTS
     from ..report.build import HEADLINE_FILE
+    from .experiments import EXPERIMENTS
 
     href = quote(name)  # quoted: a folder named "javascript:…" stays a relative path
     exp = EXPERIMENTS.get(name.removesuffix("-truth"))

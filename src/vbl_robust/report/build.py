@@ -44,13 +44,12 @@ column "read off the run" naming the run they were read from; results of runs of
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 from ..analysis.readoff import main_rows, reads_trace
 from ..atomic import atomic_write
-from ..campaigns.experiments import EXPERIMENTS
 from ..specs.campaign import FIGURES
 from ..store import ResultStore
 from .evidence import SAFETY_FIGURE, Evidence, evidence_of, section_evidence
@@ -124,7 +123,8 @@ def _guarded(name: str, build: Callable[..., Any], *args: Any) -> Any:
         return Section(name, ['<p class="warn">This section failed to build; see the log.</p>'])
 
 
-def build_report(run: str | Path, out: str | Path | None = None, *, embed: bool = True) -> Path:
+def build_report(run: str | Path, out: str | Path | None = None, *, embed: bool = True,
+                 titles: Mapping[str, str] | None = None) -> Path:
     """Write ``report.html`` and ``figures/*.png`` for the run directory (or store file) ``run``; returns the HTML
     path. ``out`` defaults to the run directory.
 
@@ -133,7 +133,12 @@ def build_report(run: str | Path, out: str | Path | None = None, *, embed: bool 
     it gets lost; 1–2 MB with a full worst-case gallery is nothing for one run. ``embed=False`` (a committed
     bundle, :mod:`.bundle`): the page shows ``figures/*.png`` by relative path — a folder that opens offline, a page
     of tens of kB, and a figure that did not change is the same file in git, not another megabyte of base64 in its
-    history each time the page is regenerated."""
+    history each time the page is regenerated.
+
+    ``titles``: the titles of the paper's experiments by campaign name, given by what sits above the report (the
+    commands and the bundle pass :data:`vbl_robust.paper.experiments.EXPERIMENT_TITLES`; the report cannot import
+    the paper). A run named in it is titled so and stands on an index card by :data:`HEADLINE`; any other run
+    by :data:`TITLES` (else "Robustness audit") and :data:`AUDIT_HEADLINE`."""
     run = Path(run)
     with ResultStore.open_existing(run, points_on_demand=True) as store:
         spec = store.spec()
@@ -141,8 +146,8 @@ def build_report(run: str | Path, out: str | Path | None = None, *, embed: bool 
         out_dir.mkdir(parents=True, exist_ok=True)
         ctx = Context(store, spec, out_dir, main_rows(store, spec), store.samples(), embed=embed,
                       main_is_runs=not reads_trace(spec))
-        exp = EXPERIMENTS.get(spec.name)
-        title = exp.title if exp else TITLES.get(spec.name, "Robustness audit")
+        experiment_title = (titles or {}).get(spec.name)
+        title = experiment_title if experiment_title is not None else TITLES.get(spec.name, "Robustness audit")
         if spec.name.endswith("-truth"):  # vbl-robust truth RUN: the dense grid behind "no breach found"
             title = f"Dense-grid truth behind {spec.name.removesuffix('-truth')}'s survivors"
         ev = _guarded("evidence", evidence_of, ctx)
@@ -168,6 +173,6 @@ def build_report(run: str | Path, out: str | Path | None = None, *, embed: bool 
         body.append("</section>")
     path = out_dir / "report.html"
     atomic_write(path, page(f"vbl-robust {spec.name}", "\n".join(body)))
-    _headline(ctx.figures, out_dir, TRUTH_HEADLINE if spec.name.endswith("-truth") else HEADLINE if exp is not None
-              else AUDIT_HEADLINE)
+    _headline(ctx.figures, out_dir, TRUTH_HEADLINE if spec.name.endswith("-truth") else HEADLINE
+              if experiment_title is not None else AUDIT_HEADLINE)
     return path

@@ -22,6 +22,7 @@ from matplotlib.patches import Patch
 from ..analysis.levels import ANY_METHOD, DistanceLine
 from ..analysis.metrics import ConvergenceLine, PnpLine
 from ..analysis.summary import Summary
+from ..specs.campaign import levels_text
 from .figure_style import (
     EPS_STYLE,
     PLAIN,
@@ -388,8 +389,6 @@ def survival_per_box(boxes: Sequence[Any], *, eps_safe_m: float, unit: str = "im
 
 
 def _family_text(p: Mapping[str, Any]) -> str:
-    from ..campaigns.experiments import levels_text
-
     return levels_text(p["bounds"], p["unit"])
 
 

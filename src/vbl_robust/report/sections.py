@@ -16,10 +16,10 @@ from ..analysis.levels import RANK_THRESHOLDS, distance_profile, family_of, fami
 from ..analysis.metrics import convergence, pnp_summary
 from ..analysis.reference import AgainstGrid, against_reference, grid_complete
 from ..analysis.summary import Summary, summarize
-from ..campaigns.experiments import range_text
 from ..consent import DetectorKind
 from ..constants import FAILURE_REASONS, Verdict
 from ..search import NON_FINITE
+from ..specs.campaign import range_text
 from ..specs.kinds import JobKind, Role
 from ..store import JobRow, JobStatus, RunProvenance
 from . import figures as F

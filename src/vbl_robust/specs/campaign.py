@@ -27,7 +27,8 @@ from .budget import Budget
 from .kinds import JobKind, Role
 
 __all__ = ["FIGURES", "JOB_KINDS", "ROLES", "Block", "BoxSpec", "CampaignSpec", "Job", "box_label",
-           "default_figures", "derive_seed", "roll_box", "roll_contrast_box"]
+           "default_figures", "derive_seed", "levels_text", "range_text", "roll_box", "roll_contrast_box",
+           "unit_suffix"]
 
 
 #: The values of :class:`JobKind` and :class:`Role`, in order.
@@ -80,6 +81,37 @@ def box_label(bounds: Mapping[str, tuple[float, float]]) -> str:
         else:
             parts.append(f"{'c' if k == 'contrast' else k}∈[{lo:g}, {hi:g}]")
     return ", ".join(parts)
+
+
+#: How a unit prints in a level's range (dimensionless units print nothing; FS = fraction of full scale): part of
+#: a perturbation family's box labels (:func:`range_text`), so of its jobs' seeds, like :func:`box_label`.
+_UNIT_SUFFIX = {"deg": "°", "px": " px", "full scale": " FS"}
+
+
+def unit_suffix(unit: str) -> str:
+    """How ``unit`` follows a number in a range (``"°"``, ``" px"``, ``" FS"``; ``""`` when dimensionless)."""
+    return _UNIT_SUFFIX.get(unit, "")
+
+
+def range_text(lower: float, upper: float, unit: str = "") -> str:
+    """A budget level's range in its unit: ``±2°``, ``[0, 0.5] px``, ``[0.9, 1.1]``, ``±0.05 FS``."""
+    if lower == -upper and upper > 0:
+        return f"±{upper:g}{unit_suffix(unit)}"
+    return f"[{lower:g}, {upper:g}]{unit_suffix(unit)}"
+
+
+def levels_text(bounds: Sequence[tuple[float, float]], unit: str = "") -> str:
+    """Nested levels in short form: ``±2/5/10/20/30°``, ``0 to 0.5/1/2/4/8 px``, ``[0.9, 1.1] … [0.4, 2.5]``."""
+    if not bounds:
+        return ""
+    his = "/".join(f"{hi:g}" for _, hi in bounds)
+    if all(lo == -hi and hi > 0 for lo, hi in bounds):
+        return f"±{his}{unit_suffix(unit)}"
+    if len({lo for lo, _ in bounds}) == 1:
+        return f"{bounds[0][0]:g} to {his}{unit_suffix(unit)}"
+    if len(bounds) == 1:
+        return range_text(*bounds[0], unit)
+    return f"{range_text(*bounds[0], unit)} … {range_text(*bounds[-1], unit)}"
 
 
 def roll_box(half_width_deg: float) -> BoxSpec:

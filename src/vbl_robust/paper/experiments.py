@@ -1,4 +1,5 @@
-"""The paper's experiments (and the ``audit`` job) as data: each is a function returning a :class:`CampaignSpec`.
+"""The paper's experiments as data: each is a function returning a :class:`CampaignSpec` (the engine's own jobs,
+``audit`` and ``risk``, are :mod:`vbl_robust.campaigns.audit`).
 
 Defaults are the paper's (ε_safe = 1000 m, τ_conf = 0.25, penalty 5000 m, GeoRobust / random / APGD, 100
 images, 1000 for the PnP validation), with georobust-av run beside the paper's GeoRobust, labelled apart. Where the paper leaves a choice open we fix it here and state it in
@@ -31,15 +32,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from fractions import Fraction
 
-from ..constants import TARGETS
+from ..campaigns.audit import GRID_STOP_BATCH, grid_block
 from ..specs.budget import Budget
-from ..specs.campaign import Block, BoxSpec, CampaignSpec, roll_box, roll_contrast_box
+from ..specs.campaign import Block, BoxSpec, CampaignSpec, range_text, roll_box, roll_contrast_box
 
 #: The paper's experiments compare the paper's GeoRobust and georobust-av (labelled apart) with random and APGD.
 PAPER_METHODS = ("georobust", "georobust-av", "random", "apgd")
-#: ``audit``'s and the demo's methods: georobust-av in place of GeoRobust (it found as many or more breaches at
-#: every spatial-2d box on 30 images, in fewer evaluations; BENCHMARKS.md, spatial-2d section).
-AUDIT_METHODS = ("georobust-av", "random", "apgd")
 ROLL_BUDGETS_DEG = (2.0, 5.0, 10.0, 15.0, 20.0, 30.0)
 BOXES_2D = ((2.0, (0.9, 1.1)), (5.0, (0.8, 1.25)), (10.0, (0.7, 1.4)), (15.0, (0.6, 1.6)), (20.0, (0.5, 2.0)),
             (30.0, (0.4, 2.5)))
@@ -49,8 +47,6 @@ DISTANCE_BUDGETS_DEG = (5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 40.0, 45.0)
 ROLL_LIMIT_DEG = 45.0
 #: Evaluation cap of the convergence experiment (GeoRobust's published budgets are 2000–3000 evaluations).
 CONVERGENCE_MAX_EVALS = 3000
-#: Batch of a centre-out reference grid that stops at the first breach (the stop is checked once per batch).
-GRID_STOP_BATCH = 32
 #: Fewest points of a family's dense-grid reference over its largest level (``families``): at least 10 grid steps
 #: inside the mildest level of every family of the registry (its largest level is at most 20 times its mildest).
 FAMILY_GRID_POINTS = 201
@@ -95,28 +91,16 @@ class Experiment:
     build: Callable[[int, Options], CampaignSpec]
 
 
-def _grid_block(box: BoxSpec, counts: Sequence[int], role: str = "reference", max_samples: int | None = None,
-                stop_at_breach: bool = False) -> Block:
-    n = 1
-    for c in counts:
-        n *= int(c)
-    grid: dict[str, object] = {"counts": [int(c) for c in counts]}
-    if stop_at_breach:  # centre-out, so the grid answers every nested budget before it stops (GridSearch)
-        grid.update(order="center-out", batch_size=GRID_STOP_BATCH)
-    return Block(boxes=(box,), methods=("grid",), budgets=(Budget(max_evals=n, stop_at_breach=stop_at_breach),),
-                 role=role, max_samples=max_samples, options={"grid": grid})
-
-
 def _roll_grid(half_width: float, step: float, stop_at_breach: bool = False) -> Block | None:
     if step <= 0:
         return None
-    return _grid_block(roll_box(half_width), [int(round(2 * half_width / step)) + 1], stop_at_breach=stop_at_breach)
+    return grid_block(roll_box(half_width), [int(round(2 * half_width / step)) + 1], stop_at_breach=stop_at_breach)
 
 
 def _landscape(box: BoxSpec, counts: tuple[int, int]) -> Block | None:
     if min(counts) <= 0:
         return None
-    return _grid_block(box, counts, role="landscape", max_samples=1)
+    return grid_block(box, counts, role="landscape", max_samples=1)
 
 
 def _blocks(*blocks: Block | None) -> tuple[Block, ...]:
@@ -236,36 +220,6 @@ def convergence(seed: int, o: Options) -> CampaignSpec:
 
 
 # -- perturbation families one by one ---------------------------------------------------------------------
-#: How a unit prints in a level's range (dimensionless units print nothing; FS = fraction of full scale).
-_UNIT_SUFFIX = {"deg": "°", "px": " px", "full scale": " FS"}
-
-
-def unit_suffix(unit: str) -> str:
-    """How ``unit`` follows a number in a range (``"°"``, ``" px"``, ``" FS"``; ``""`` when dimensionless)."""
-    return _UNIT_SUFFIX.get(unit, "")
-
-
-def range_text(lower: float, upper: float, unit: str = "") -> str:
-    """A budget level's range in its unit: ``±2°``, ``[0, 0.5] px``, ``[0.9, 1.1]``, ``±0.05 FS``."""
-    if lower == -upper and upper > 0:
-        return f"±{upper:g}{unit_suffix(unit)}"
-    return f"[{lower:g}, {upper:g}]{unit_suffix(unit)}"
-
-
-def levels_text(bounds: Sequence[tuple[float, float]], unit: str = "") -> str:
-    """Nested levels in short form: ``±2/5/10/20/30°``, ``0 to 0.5/1/2/4/8 px``, ``[0.9, 1.1] … [0.4, 2.5]``."""
-    if not bounds:
-        return ""
-    his = "/".join(f"{hi:g}" for _, hi in bounds)
-    if all(lo == -hi and hi > 0 for lo, hi in bounds):
-        return f"±{his}{unit_suffix(unit)}"
-    if len({lo for lo, _ in bounds}) == 1:
-        return f"{bounds[0][0]:g} to {his}{unit_suffix(unit)}"
-    if len(bounds) == 1:
-        return range_text(*bounds[0], unit)
-    return f"{range_text(*bounds[0], unit)} … {range_text(*bounds[-1], unit)}"
-
-
 def family_boxes(name: str) -> tuple[BoxSpec, ...]:
     """The five nested budget levels of the perturbation family ``name`` as 1-D boxes; box level = the level index
     (1 = mild … 5 = extreme), label = the parameter and its range (``"blur_px [0, 0.5] px"``)."""
@@ -380,63 +334,9 @@ EXPERIMENTS: dict[str, Experiment] = {
 
 #: The paper's seven experiments (``reproduce paper``); ``all`` adds ours (``families``).
 PAPER = tuple(name for name in EXPERIMENTS if name != "families")
-
-
-def audit_spec(box: BoxSpec, *, methods: Sequence[str] = AUDIT_METHODS, budget: Budget, seed: int = 0,
-               lipschitz: float | tuple[float, ...] | None = None, pnp: str = "ippe_lm",
-               landscape: tuple[int, ...] | None = None, sustain: int | None = None,
-               target: str = "any") -> CampaignSpec:
-    """The ``audit`` job: one box, the given methods and budget; optionally a landscape grid on the first image
-    (counts per parameter) for the heat map. ``sustain``: an audit of approach sequences (a sequence campaign,
-    :class:`CampaignSpec`), the error sustained over that many consecutive frames. ``target``: a key of
-    :data:`vbl_robust.constants.TARGETS` (``"misleading"``: flagged failures count 0 m, so every method searches
-    for the worst confident pose)."""
-    if target not in TARGETS:
-        raise ValueError(f"--target must be one of {', '.join(TARGETS)}, got {target!r}")
-    blocks = [Block(boxes=(box,), methods=tuple(methods), budgets=(budget,))]
-    if landscape and min(landscape) > 0:
-        blocks.append(_grid_block(box, landscape, role="landscape", max_samples=1))
-    stop = "early stop at the first breach" if budget.stop_at_breach else "no early stop"
-    unit = "image" if sustain is None else "sequence"
-    figures = ("convergence", "landscape", "progress", "per_image")
-    if sustain is not None:
-        figures = ("sequences", *figures)
-    return CampaignSpec("audit", tuple(blocks), seed=seed, lipschitz=lipschitz, pnp=pnp, figures=figures,
-                        sustain=sustain, penalty_m=TARGETS[target], notes=(
-        f"Box {box.label}; methods {', '.join(methods)}; budget per {unit}: {budget.label} ({stop})."
-        + ("" if sustain is None else f" One θ held over each approach sequence; its error is the error sustained "
-           f"over {sustain} consecutive frame(s).")
-        + ("" if lipschitz is None else f" Lipschitz bound given: {lipschitz} m per unit (certificates possible).")
-        + ("" if target == "any" else " Target: misleading poses only — a flagged failure (no detection, low "
-           "confidence, PnP failed …) counts 0 m, as safe; survival is then the share with no misleading pose "
-           "found.")))
-
-
-def risk_spec(box: BoxSpec, *, methods: Sequence[str] = ("mc", "guided"), max_evals: int = 1024, seed: int = 0,
-              dist: dict[str, tuple[str, float, float]] | None = None, tau: float = 0.01, delta: float = 0.05,
-              guide_evals: int = 64, pnp: str = "ippe_lm") -> CampaignSpec:
-    """The ``risk`` job (:mod:`vbl_robust.risk`): per image, the failure probability under ``dist``
-    (parameter → ``("normal", mean, sd)``; uniform elsewhere) over ``box`` by each estimator of ``methods``, at
-    most ``max_evals`` evaluations each, and the verdict on "p_fail ≤ ``tau``" at confidence 1 − ``delta``."""
-    from ..risk import MAX_EVALS, ThetaDistribution
-
-    if not 0.0 <= tau < 1.0:
-        raise ValueError(f"--tau must be in [0, 1), got {tau}")
-    if not 0.0 < delta < 1.0:
-        raise ValueError(f"--delta must be in (0, 1), got {delta}")
-    if not 2 <= max_evals <= MAX_EVALS:
-        raise ValueError(f"--max-evals must be in [2, {MAX_EVALS}], got {max_evals}")
-    if "guided" in methods and not 1 <= guide_evals < max_evals:  # an option of guided alone
-        raise ValueError(f"--guide-evals must be in [1, --max-evals), got {guide_evals}")
-    d = ThetaDistribution.over(box.box, dist)  # refuses a parameter not in the box, a normal with no mass
-    base = {"dist": {k: list(v) for k, v in sorted((dist or {}).items())}, "tau": tau, "delta": delta}
-    options = {m: {**base, **({"guide_evals": guide_evals} if m == "guided" else {})} for m in methods}
-    blk = Block(boxes=(box,), methods=tuple(methods), budgets=(Budget(max_evals=max_evals, stop_at_breach=False),),
-                kind="risk", options=options)
-    return CampaignSpec("risk", (blk,), seed=seed, pnp=pnp, figures=("risk",), notes=(
-        f"Failure probability p_fail = P(L > ε_safe) per image, θ ~ {d.text()} over {box.label}; estimators "
-        f"{', '.join(methods)}, at most {max_evals} evaluations each; verdict on p_fail ≤ {tau:g} at confidence "
-        f"{1 - delta:g}."))
+#: Each experiment's report title, by campaign name: what the commands above the report give
+#: :func:`vbl_robust.report.build.build_report` (``titles``), which cannot import the paper.
+EXPERIMENT_TITLES = {name: e.title for name, e in EXPERIMENTS.items()}
 
 
 def experiment(name: str) -> Experiment:
