@@ -99,13 +99,12 @@ def durations(detector, bundle: Path, quick: bool) -> str:
     workers) beside what its full-size run in ``bundle`` measured (the provenance totals of ``vbl-robust bundle``):
     how far the estimate can be trusted, and what the run costs."""
     import json
-    from dataclasses import replace
 
     from vbl_robust.campaigns import load_samples
     from vbl_robust.paper.estimate import PROBE_IMAGES, Probe, expected_seconds, probe
     from vbl_robust.paper.experiments import EXPERIMENTS, PAPER, Options
 
-    specs = {name: replace(EXPERIMENTS[name].build(0, Options()), clock="process") for name in PAPER}
+    specs = {name: EXPERIMENTS[name].build(0, Options()).with_settings(clock="process") for name in PAPER}
     pr = probe(detector, list(specs.values()), load_samples(PROBE_IMAGES, 0)[0], seconds=1.0 if quick else 5.0,
                clock="process")
     lines = [f"Probe: {pr.rate:.1f} evaluations per CPU second black box, {pr.grad_rate:.1f} with a gradient; "

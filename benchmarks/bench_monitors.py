@@ -66,10 +66,10 @@ def misleading_points(limit: int | None) -> list[tuple[str, object, np.ndarray]]
     with ResultStore(store, readonly=True) as st:
         spec = st.spec()
         for r in main_rows(st, spec, with_trace=False):
-            if breach_kind(r, spec.eps_safe_m) is not BreachKind.MISLEADING:
+            if breach_kind(r, spec.settings.eps_safe_m) is not BreachKind.MISLEADING:
                 continue
             p = r.points
-            silent = np.array([not c for c in p.reasons]) & np.isfinite(p.fs) & (p.fs > spec.eps_safe_m)
+            silent = np.array([not c for c in p.reasons]) & np.isfinite(p.fs) & (p.fs > spec.settings.eps_safe_m)
             i = int(np.flatnonzero(silent)[np.argmax(p.fs[silent])])
             key = (r.sample_id, tuple(np.round(p.xs[i], 9)))
             if key not in seen:
@@ -82,13 +82,14 @@ def measure(quick: bool) -> dict:
     import torch
 
     torch.set_num_threads(1)
-    from vbl_robust.campaigns.work import Settings, build_objective
+    from vbl_robust.campaigns.work import build_objective
     from vbl_robust.detect.shipped import DetectorSpec
     from vbl_robust.scenes import generate
     from vbl_robust.space import ParameterBox
+    from vbl_robust.specs.settings import PipelineSettings
 
     det = DetectorSpec.shipped("default", {"engine": "onnxruntime"}).build()
-    settings = Settings(1000.0, 5000.0, 0.25, "ippe_lm")
+    settings = PipelineSettings()
     n_nominal = 6 if quick else NOMINAL
     samples = {s.id: s for s in generate(max(n_nominal, 100), seed=0)}
     mis = {"residual": [], "conf": []}
@@ -174,14 +175,15 @@ def sigma_measure(quick: bool, model: Path = SIGMA_MODEL) -> dict:
     torch.set_num_threads(1)
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from bench_detector import held_out
-    from vbl_robust.campaigns.work import Settings, build_objective
+    from vbl_robust.campaigns.work import build_objective
     from vbl_robust.detect.shipped import default_detector
     from vbl_robust.detect.twostage import TwoStageDetector
     from vbl_robust.detect.ultralytics import UltralyticsDetector
     from vbl_robust.scenes import generate
     from vbl_robust.space import ParameterBox
+    from vbl_robust.specs.settings import PipelineSettings
 
-    settings = Settings(1000.0, 5000.0, 0.25, "ippe_lm")
+    settings = PipelineSettings()
     v9 = default_detector()
     cand = TwoStageDetector(v9.first, UltralyticsDetector(model, trust=True, imgsz=320))
     ident = ParameterBox({"roll_deg": (-1.0, 1.0)})

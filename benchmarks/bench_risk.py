@@ -52,7 +52,7 @@ def _grids() -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], float]:
             shutil.copyfileobj(src, dst)
     with ResultStore(store, readonly=True) as st:
         rows = [r for r in st.jobs(kind="search", role="reference", with_points=True) if grid_complete(r)]
-        eps = st.spec().eps_safe_m
+        eps = st.spec().settings.eps_safe_m
     out = {}
     for g in rows:
         order = np.argsort(g.points.xs[:, 0])
@@ -79,12 +79,13 @@ def run_case(case: dict) -> dict:
     import torch
 
     torch.set_num_threads(1)
-    from vbl_robust.campaigns.work import Settings, build_objective
+    from vbl_robust.campaigns.work import build_objective
     from vbl_robust.detect.shipped import DetectorSpec
     from vbl_robust.risk import ThetaDistribution, estimate_risk
     from vbl_robust.scenes import generate
     from vbl_robust.space import ParameterBox
     from vbl_robust.specs.campaign import derive_seed
+    from vbl_robust.specs.settings import PipelineSettings
     from vbl_robust.stats import clopper_pearson
 
     global _DET
@@ -94,7 +95,7 @@ def run_case(case: dict) -> dict:
     sample = next(s for i, s in enumerate(generate(index + 1, seed=0)) if i == index)
     h = case["half_width"]
     box = ParameterBox({"roll_deg": (-h, h)})
-    settings = Settings(1000.0, 5000.0, 0.25, "ippe_lm")
+    settings = PipelineSettings()
     f = build_objective(sample, _DET, box, settings)
     dist = ThetaDistribution.over(box)
     rng = np.random.default_rng(derive_seed(0, case["sample_id"], h))

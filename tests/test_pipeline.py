@@ -128,8 +128,8 @@ def test_a_search_for_misleading_poses_counts_flagged_failures_as_safe(samples):
     ev = Objective(s, StubDetector(s.corners_2d, empty=True), BOX, penalty_m=TARGETS["misleading"])(theta)
     assert ev.values.tolist() == [0.0, 0.0] and ev.reasons == ("no_detection", "no_detection")
     spec = audit_spec(BoxSpec(BOX, "b", 1.0), methods=("random",), budget=Budget(max_evals=4), target="misleading")
-    assert spec.penalty_m == 0.0 and "misleading poses only" in spec.notes
-    assert audit_spec(BoxSpec(BOX, "b", 1.0), methods=("random",), budget=Budget(max_evals=4)).penalty_m == 5000.0
+    assert spec.settings.penalty_m == 0.0 and "misleading poses only" in spec.notes
+    assert audit_spec(BoxSpec(BOX, "b", 1.0), methods=("random",), budget=Budget(max_evals=4)).settings.penalty_m == 5000.0
     with pytest.raises(ValueError, match="--target must be one of any, misleading"):
         audit_spec(BoxSpec(BOX, "b", 1.0), methods=("random",), budget=Budget(max_evals=4), target="flagged")
     with pytest.raises(ValueError, match="penalty_m must be finite and >= 0"):

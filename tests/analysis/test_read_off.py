@@ -12,7 +12,7 @@ import vbl_robust.search.base as base_module
 from vbl_robust import store as store_module
 from vbl_robust.analysis.readoff import main_rows, read_off, read_off_rows
 from vbl_robust.analysis.summary import summarize
-from vbl_robust.campaigns.work import Settings, search_row
+from vbl_robust.campaigns.work import search_row
 from vbl_robust.constants import Verdict
 from vbl_robust.search import at_budget, maximize
 from vbl_robust.specs.budget import Budget
@@ -91,7 +91,7 @@ def _stored_run(tmp_path, monkeypatch, method="random"):
     r = maximize(clock.wrap(f), box.box, method, max_seconds=0.5, min_evals=60, time_marks=budget.read_seconds)
     spec = CampaignSpec("t", ())
     job = Job("t", "s0", "fp", 0, "search", "main", method, box, budget, 0, {}, "ctx")
-    row = search_row(job, r, Settings.from_spec(spec), None, 1.0)
+    row = search_row(job, r, spec.settings, None, 1.0)
     with ResultStore(tmp_path / "r.sqlite") as st:
         st.commit([row])
         (stored,) = st.jobs(with_points=True)
@@ -101,7 +101,7 @@ def _stored_run(tmp_path, monkeypatch, method="random"):
 def test_rows_read_off_a_stored_run_equal_the_search_read_at_each_budget(tmp_path, monkeypatch):
     r, stored, spec = _stored_run(tmp_path, monkeypatch)
     assert stored.points.times is not None and stored.nfev >= 60
-    rows = read_off_rows([stored], spec.eps_safe_m, spec.penalty_m)
+    rows = read_off_rows([stored], spec.settings.eps_safe_m, spec.settings.penalty_m)
     assert [x.budget_label for x in rows] == [b.label for b in stored.budget.read_budgets()]
     for x, b in zip(rows, stored.budget.read_budgets(), strict=True):
         want = at_budget(r, seconds=b.max_seconds, evals=b.max_evals)
@@ -110,15 +110,15 @@ def test_rows_read_off_a_stored_run_equal_the_search_read_at_each_budget(tmp_pat
         assert x.verdict is (Verdict.BREACH if want.fun > 1000 else Verdict.NO_BREACH_FOUND)
         assert np.all(x.points.times <= (b.max_seconds or math.inf)) and len(x.points) == x.nfev
     assert rows[3].nfev == 5 and rows[4].nfev == 60
-    s = summarize(rows, spec.eps_safe_m)
+    s = summarize(rows, spec.settings.eps_safe_m)
     assert all(line.read_from == stored.budget_label for line in s)
 
 
 def test_a_time_budget_before_the_first_evaluation_finds_nothing(tmp_path, monkeypatch):
     r, stored, spec = _stored_run(tmp_path, monkeypatch)
-    early = read_off(stored, Budget(max_seconds=0.001, stop_at_breach=False), spec.eps_safe_m, spec.penalty_m)
+    early = read_off(stored, Budget(max_seconds=0.001, stop_at_breach=False), spec.settings.eps_safe_m, spec.settings.penalty_m)
     assert early.nfev == 0 and early.worst_m is None and early.verdict is Verdict.NO_BREACH_FOUND
-    (line,) = summarize([early], spec.eps_safe_m)
+    (line,) = summarize([early], spec.settings.eps_safe_m)
     assert line.survival == 100.0 and line.n_empty == 1 and math.isnan(line.median_worst_m)
 
 
@@ -126,16 +126,16 @@ def test_a_run_not_measured_reads_as_not_measured_at_every_budget(tmp_path, monk
     _, stored, spec = _stored_run(tmp_path, monkeypatch)
     failed = stored.replace(status=JobStatus.NOT_MEASURED, points=None, worst_m=None, verdict=Verdict.NOT_MEASURED,
                             reason="tool error: boom")
-    rows = read_off_rows([failed], spec.eps_safe_m, spec.penalty_m)
+    rows = read_off_rows([failed], spec.settings.eps_safe_m, spec.settings.penalty_m)
     assert len(rows) == 5 and all(x.status is JobStatus.NOT_MEASURED and x.read_from for x in rows)
-    lines = summarize(rows, spec.eps_safe_m)
+    lines = summarize(rows, spec.settings.eps_safe_m)
     assert all(ln.n == 0 and ln.not_measured == 1 and math.isnan(ln.survival) for ln in lines)
 
 
 def test_rows_without_reads_pass_through(tmp_path, monkeypatch):
     _, stored, spec = _stored_run(tmp_path, monkeypatch)
     plain = stored.replace(budget=Budget(max_evals=10), box=BoxSpec(stored.box.box, "b", 1.0))
-    assert read_off_rows([plain], spec.eps_safe_m, spec.penalty_m) == [plain]
+    assert read_off_rows([plain], spec.settings.eps_safe_m, spec.settings.penalty_m) == [plain]
 
 
 def test_export_and_main_rows_add_the_read_off_rows(tmp_path, monkeypatch):

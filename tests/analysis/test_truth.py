@@ -30,7 +30,7 @@ def test_the_grid_runs_on_the_images_every_method_left_surviving(run):
     with ResultStore.open_existing(run) as st:
         spec, box, methods, keep = survivors_of_every_method(st)
         rows = [r for r in main_rows(st, spec, with_trace=False) if r.box_label == box.label]
-    eps = spec.eps_safe_m
+    eps = spec.settings.eps_safe_m
     assert keep == sorted({r.sample_id for r in rows} - {r.sample_id for r in rows if not survived(r, eps)},
                           key=lambda s: next(r.sample_index for r in rows if r.sample_id == s))
     truth = run.with_name(run.name + "-truth")

@@ -15,7 +15,8 @@ HERE = Path(__file__).resolve().parent
 
 @pytest.mark.slow
 def test_ray_and_local_executors_agree(tmp_path, small_samples, oracle):
-    ray = pytest.importorskip("ray")
+    import ray
+
     blk = Block(boxes=(roll_box(10),), methods=("georobust", "random"), budgets=(Budget(max_evals=10),))
     spec = CampaignSpec("ray-test", (blk,), seed=2)
     samples = small_samples[:2]

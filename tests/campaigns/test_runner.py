@@ -130,7 +130,7 @@ def test_store_refuses_another_campaign(tmp_path, small_samples, oracle):
     with ResultStore(tmp_path / "r.sqlite") as st:
         run_campaign(small_spec(methods=("random",)), small_samples[:1], st, detector=oracle)
         with pytest.raises(ValueError, match="other settings"):
-            run_campaign(small_spec(methods=("random",), eps_safe_m=10.0), small_samples[:1], st, detector=oracle)
+            run_campaign(small_spec(methods=("random",)).with_settings(eps_safe_m=10.0), small_samples[:1], st, detector=oracle)
         with pytest.raises(ValueError, match="executor"):
             run_campaign(small_spec(methods=("random",)), small_samples[:1], st, detector=oracle, executor="gpu")
 

@@ -6,6 +6,7 @@ from vbl_robust.digest import canonical_json
 from vbl_robust.paper.experiments import EXPERIMENTS, Options, experiment
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, CampaignSpec, derive_seed, roll_box, roll_contrast_box
+from vbl_robust.specs.settings import PipelineSettings
 
 SAMPLES = [("a", "fa"), ("b", "fb"), ("c", "fc")]
 
@@ -26,7 +27,7 @@ def test_expand_is_the_cross_product_with_unique_stable_keys():
 def test_keys_change_with_what_changes_results():
     base = {j.key for j in spec().expand(SAMPLES, detector_id="d")}
     assert base.isdisjoint(j.key for j in spec().expand(SAMPLES, detector_id="other"))
-    assert base.isdisjoint(j.key for j in spec(eps_safe_m=500.0).expand(SAMPLES, detector_id="d"))
+    assert base.isdisjoint(j.key for j in spec(settings=PipelineSettings(eps_safe_m=500.0)).expand(SAMPLES, detector_id="d"))
     assert base.isdisjoint(j.key for j in spec().expand([("a", "changed")], detector_id="d"))
     # growing the dataset keeps the existing jobs' keys (and seeds): a rerun with more images resumes
     grown = {j.key for j in spec().expand([*SAMPLES, ("d", "fd")], detector_id="d")}

@@ -149,7 +149,7 @@ def test_two_workers_and_the_process_clock_are_recorded(tmp_path):
     with ResultStore.open_existing(out) as store:
         run = store.runs()[0]
         assert run.provenance.config["workers"] == 2 and run.provenance.config["clock"] == "process"
-        assert store.spec().clock == "process"
+        assert store.spec().settings.clock == "process"
 
 
 def test_expected_duration_follows_the_breach_shares():

@@ -42,7 +42,7 @@ def test_audit_sequences_writes_a_store_with_the_frames_and_resumes(tmp_path):
         spec = store.spec()
         samples = store.samples()
         run = store.runs()[-1]
-    assert spec.sustain == 2 and run.provenance.config["user"]["sequences"] == "2"
+    assert spec.settings.sustain == 2 and run.provenance.config["user"]["sequences"] == "2"
     assert samples["synth_q0_0000"].width == 96
     seq = next(iter(rows.values())).payload["sequence"]
     assert len(seq["frames"]["distance_m"]) == len(seq["worst"]["errors_m"]) == len(seq["nominal"]["reasons"]) == 5

@@ -103,7 +103,6 @@ def test_reproduce_on_a_lard_directory_with_the_default_options(lard_dir, tmp_pa
 
 @pytest.mark.slow
 def test_audit_of_a_lard_directory_on_ray(lard_dir, tmp_path):
-    pytest.importorskip("ray")
     out = tmp_path / "run"
     res = runner.invoke(app, ["audit", "--lard", str(lard_dir), "--out", str(out), "--executor", "ray",
                               "--max-evals", "3", "--methods", "random", "--no-landscape", "--quiet"])

@@ -227,7 +227,7 @@ def test_report_markdown_survival_table_from_the_store(gated_run, tmp_path):
         from vbl_robust.analysis.readoff import main_rows
         from vbl_robust.analysis.summary import summarize
 
-        lines = summarize(main_rows(store, spec, with_trace=False), spec.eps_safe_m)
+        lines = summarize(main_rows(store, spec, with_trace=False), spec.settings.eps_safe_m)
     survival = res.output.split("Breaches by kind")[0]
     rows = _md_rows(survival)
     head = next(ln for ln in survival.splitlines() if ln.startswith("| method"))

@@ -53,7 +53,6 @@ def test_auto_engine_on_cuda_is_torch():
 
 
 def test_openvino_refuses_a_gpu(tmp_path):
-    pytest.importorskip("openvino")
     from vbl_robust.detect.openvino import OpenVinoDetector
 
     f = tmp_path / "m.onnx"

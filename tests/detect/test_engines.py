@@ -83,7 +83,6 @@ def test_export_leaves_only_the_model_behind(tmp_path, tiny_pose_pt):
 
 @pytest.mark.parametrize("engine", ["onnxruntime", "openvino"])
 def test_engine_agrees_with_torch_within_1e_3_px(cache, pt, engine):
-    pytest.importorskip(engine)
     fast = with_engine(pt, engine, trust=True)
     assert isinstance(fast, EnginePose) and fast.engine == engine and "32" in fast.precision
     x = DetectContext.of_images(_images())

@@ -57,7 +57,6 @@ def test_onnx_without_pose_metadata(tmp_path):
     onnx.save(model, p)
     with pytest.raises(ValueError, match="kpt_shape"):
         OnnxDetector(p)
-    pytest.importorskip("openvino")
     from vbl_robust.detect.openvino import OpenVinoDetector
 
     with pytest.raises(ValueError, match="kpt_shape"):  # the same check on the other engine

@@ -5,12 +5,11 @@ one forward pass where the graph leaves the channels symbolic)."""
 from __future__ import annotations
 
 import numpy as np
+import onnx
 import pytest
+from onnx import TensorProto, helper, numpy_helper
 
 from vbl_robust.detect.onnx import OnnxDetector, check_output_shape, pose_metadata
-
-onnx = pytest.importorskip("onnx")
-from onnx import TensorProto, helper, numpy_helper  # noqa: E402
 
 META = {"kpt_shape": "[4, 3]", "names": "{0: 'runway'}", "imgsz": "[64, 64]"}
 

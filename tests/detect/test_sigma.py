@@ -172,22 +172,22 @@ def test_the_sigma_monitor_turns_an_unsure_pose_into_a_flagged_failure():
 
 
 def test_a_campaign_runs_the_sigma_monitor_and_stores_the_worst_candidates_sigma():
-    from vbl_robust.campaigns.work import Settings, build_objective, worst_details
+    from vbl_robust.campaigns.work import build_objective, worst_details
     from vbl_robust.specs.campaign import CampaignSpec
+    from vbl_robust.specs.settings import PipelineSettings
 
     sample = generate(1, seed=7)[0]
     box = ParameterBox({"roll_deg": (-5.0, 5.0)})
-    spec = CampaignSpec(name="s", blocks=(), monitor_sigma_m=1e-6)
-    assert CampaignSpec.from_dict(spec.to_dict()).monitor_sigma_m == 1e-6  # kept in the stored spec (job context)
-    assert spec.settings()["monitor_sigma_m"] == 1e-6
-    objective = build_objective(sample, _SureOracle(0.5), box, Settings.from_spec(spec))
+    spec = CampaignSpec(name="s", blocks=(), settings=PipelineSettings(monitor_sigma_m=1e-6))
+    assert CampaignSpec.from_dict(spec.to_dict()).settings.monitor_sigma_m == 1e-6  # kept in the stored spec (job context)
+    assert spec.settings.to_dict()["monitor_sigma_m"] == 1e-6
+    objective = build_objective(sample, _SureOracle(0.5), box, spec.settings)
     assert objective.evaluate(np.zeros((1, 1))).reason == ("monitor_rejected",)
-    details, corners = worst_details(build_objective(sample, _SureOracle(0.5), box, Settings(1000.0, 5000.0, 0.25,
-                                                                                              "ippe_lm")),
+    details, corners = worst_details(build_objective(sample, _SureOracle(0.5), box, PipelineSettings()),
                                      np.array([2.0]))
     assert corners is not None and details.corner_sigma_px == ((0.5, 0.5),) * 4
     assert details.position_sigma_m > 0 and details.to_json()["corner_sigma_px"] == [[0.5, 0.5]] * 4
-    plain, _ = worst_details(build_objective(sample, OracleDetector(), box, Settings(1000.0, 5000.0, 0.25, "ippe_lm")),
+    plain, _ = worst_details(build_objective(sample, OracleDetector(), box, PipelineSettings()),
                              np.array([2.0]))
     assert plain.corner_sigma_px is None and plain.position_sigma_m is None
     assert "corner_sigma_px" not in plain.to_json() and "position_sigma_m" not in plain.to_json()

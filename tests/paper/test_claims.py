@@ -120,19 +120,19 @@ def _spatial_1d_rows(root):
     with store:
         main = [r for r in main_rows(store, spec) if r.chain is None]
         ref = reference_rows(store.jobs(kind="search", role="reference", with_points=True), boxes_of(main),
-                             spec.eps_safe_m, spec.penalty_m)
+                             spec.settings.eps_safe_m, spec.settings.penalty_m)
     return spec, main, ref
 
 
 def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
     spec, main, ref = _spatial_1d_rows(root)
-    surv, true = _survival(main, spec.eps_safe_m), _survival(ref, spec.eps_safe_m)[REFERENCE_METHOD]
+    surv, true = _survival(main, spec.settings.eps_safe_m), _survival(ref, spec.settings.eps_safe_m)[REFERENCE_METHOD]
     row = claims[1]
     for m in ("georobust", "georobust-av", "random", "apgd"):
         assert f"{m} {'/'.join(fmt_num(v) for v in surv[m])}" in row.ours
     assert f"{REFERENCE_METHOD} {'/'.join(fmt_num(v) for v in true)}" in row.truth
     last = max(boxes_of(main), key=lambda b: b.level).label
-    found = [ln for ln in against_reference(main, ref, spec.eps_safe_m) if ln.box_label == last]
+    found = [ln for ln in against_reference(main, ref, spec.settings.eps_safe_m) if ln.box_label == last]
     assert found
     for ln in found:
         if ln.grid_breaches:
@@ -141,7 +141,7 @@ def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
             assert "breaches at" not in row.truth
     # the verdict is the tests': recomputed from the rows, each box a part
     labels = [b.label for b in sorted(boxes_of(main), key=lambda b: b.level)]
-    groups = survival_parts(main, spec.eps_safe_m, (("georobust", "random"), ("georobust", "apgd"),
+    groups = survival_parts(main, spec.settings.eps_safe_m, (("georobust", "random"), ("georobust", "apgd"),
                                                     ("random", "apgd")), labels)
     assert row.verdict == combine([o for out, _ in groups for o in out])
     assert all(text in row.reason for _, text in groups) and "p = " in row.reason
@@ -149,7 +149,7 @@ def test_spatial_1d_row_is_the_survival_table_of_the_store(root, claims):
 
 def test_the_report_shows_each_method_against_the_grid(root):
     spec, main, ref = _spatial_1d_rows(root)
-    lines = against_reference(main, ref, spec.eps_safe_m)
+    lines = against_reference(main, ref, spec.settings.eps_safe_m)
     assert {ln.method for ln in lines} == {"georobust", "georobust-av", "random", "apgd"}
     assert all(ln.n == N_IMAGES and ln.found + ln.missed == ln.grid_breaches for ln in lines)
     res = CliRunner().invoke(app, ["report", str(root / "spatial-1d")])
@@ -165,10 +165,10 @@ def test_roughness_row_reads_the_complete_runtime_grid(root, claims):
     assert len(grids) == N_IMAGES
     jumps = []
     for g in grids:
-        f = np.where(np.isfinite(g.points.fs), g.points.fs, spec.penalty_m)[np.argsort(g.points.xs[:, 0])]
+        f = np.where(np.isfinite(g.points.fs), g.points.fs, spec.settings.penalty_m)[np.argsort(g.points.xs[:, 0])]
         jumps.append(float(np.max(np.abs(np.diff(f)))))
     assert f"median largest jump {fmt_num(float(np.median(jumps)))} m" in claims[8].ours
-    verdict, why = rough_part(jumps, spec.eps_safe_m)
+    verdict, why = rough_part(jumps, spec.settings.eps_safe_m)
     assert claims[8].verdict == verdict and claims[8].reason == why + "." and "exact 95 %" in why
 
 

@@ -30,7 +30,7 @@ def test_evidence_counts_images_over_every_method_with_exact_intervals(run):
     with ResultStore.open_existing(run) as st:
         spec = st.spec()
         rows = main_rows(st, spec)
-    eps = spec.eps_safe_m
+    eps = spec.settings.eps_safe_m
     [box] = ev["boxes"]
     ids = {r.sample_id for r in rows}
     breached = {r.sample_id for r in rows if not survived(r, eps)}

@@ -16,6 +16,7 @@ from vbl_robust.report import build_report
 from vbl_robust.report.evidence import BoxEvidence, verdict_of, verdict_sentence
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import roll_box
+from vbl_robust.specs.settings import PipelineSettings
 from vbl_robust.stats import Rate
 from vbl_robust.store import ResultStore
 
@@ -33,7 +34,7 @@ def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("first")
     spec = audit_spec(roll_box(5), methods=("random", "georobust"), budget=Budget(max_evals=8))
     block = dataclasses.replace(spec.blocks[0], boxes=(roll_box(5), roll_box(20)))
-    spec = dataclasses.replace(spec, blocks=(block,), eps_safe_m=40.0)
+    spec = dataclasses.replace(spec, blocks=(block,)).with_settings(eps_safe_m=40.0)
     with ResultStore(out / "results.sqlite") as st:
         run_campaign(spec, list(generate(4, seed=5, width=128, height=128)), st,
                      detector=DetectorSpec("oracle", options={"noise_px": 1.0}), dataset_source=SOURCE)
@@ -140,7 +141,7 @@ def test_a_truth_run_stands_by_its_dense_grids(tmp_path):
     from vbl_robust.specs.campaign import Block, CampaignSpec
 
     blk = Block(boxes=(roll_box(20),), methods=("grid",), budgets=(Budget(max_evals=9),), role="reference")
-    spec = CampaignSpec("spatial-1d-truth", (blk,), figures=("landscape",), eps_safe_m=40.0)
+    spec = CampaignSpec("spatial-1d-truth", (blk,), figures=("landscape",), settings=PipelineSettings(eps_safe_m=40.0))
     with ResultStore(tmp_path / "results.sqlite") as st:
         run_campaign(spec, list(generate(3, seed=5, width=128, height=128)), st,
                      detector=DetectorSpec("oracle", options={"noise_px": 1.0}), dataset_source=SOURCE)

@@ -2,7 +2,6 @@
 flagged only, then the larger error), capped; the predicted corners stored with each job and drawn; an older store
 without them still reports; every id escaped."""
 
-import dataclasses
 import html
 import json
 import re
@@ -42,8 +41,8 @@ def samples():
 def run(tmp_path_factory, samples):
     """An audit where every image breaches (ε_safe = 1 m; the oracle's corners off by 0.5 px)."""
     out = tmp_path_factory.mktemp("gallery")
-    spec = dataclasses.replace(audit_spec(roll_contrast_box(10, (0.7, 1.4)), methods=("random",),
-                                          budget=Budget(max_evals=6)), eps_safe_m=1.0)
+    spec = audit_spec(roll_contrast_box(10, (0.7, 1.4)), methods=("random",),
+                      budget=Budget(max_evals=6)).with_settings(eps_safe_m=1.0)
     with ResultStore(out / "results.sqlite") as st:
         run_campaign(spec, samples, st, detector=DetectorSpec("oracle", options={"noise_px": 0.5}),
                      dataset_source=SOURCE)
@@ -60,7 +59,7 @@ def copy_store(run, to):
 
 
 def test_the_predicted_corners_are_stored_where_the_detector_put_them(run, samples):
-    from vbl_robust.campaigns.work import Settings, build_objective
+    from vbl_robust.campaigns.work import build_objective
 
     with ResultStore.open_existing(run) as st:
         rows = {r.sample_id: r for r in st.jobs(role="main")}
@@ -69,14 +68,14 @@ def test_the_predicted_corners_are_stored_where_the_detector_put_them(run, sampl
     for s in samples[:2]:
         r = rows[s.id]
         theta = np.array([[r.worst_x[n] for n in r.box.box.names]])
-        again = build_objective(s, detector, r.box.box, Settings.from_spec(spec)).evaluate(theta)
+        again = build_objective(s, detector, r.box.box, spec.settings).evaluate(theta)
         assert np.allclose(np.asarray(r.worst_corners), again.keypoints[0], atol=1e-6)
         # the oracle's corners: the true ones moved by the perturbation, off by its noise
         moved = Perturbation(r.box.box).points(s.corners_2d, theta, K=s.K)[0]
         assert np.abs(np.asarray(r.worst_corners) - moved).max() < 3.0
         assert r.payload["worst"]["conf"] == pytest.approx(float(again.conf[0]))
         # L(0): one evaluation at the identity θ (roll 0, contrast 1), stored with the job
-        nominal = build_objective(s, detector, r.box.box, Settings.from_spec(spec)).evaluate(
+        nominal = build_objective(s, detector, r.box.box, spec.settings).evaluate(
             np.array([[0.0, 1.0]]))
         stored = r.payload["nominal"]
         assert stored["error_m"] == pytest.approx(float(nominal.loss[0])) and stored["reason"] == nominal.reason[0]

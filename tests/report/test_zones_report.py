@@ -24,6 +24,7 @@ from vbl_robust.report.rows import Context
 from vbl_robust.search.zones import CLASSES
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box, roll_contrast_box
+from vbl_robust.specs.settings import PipelineSettings
 from vbl_robust.store import ResultStore
 from vbl_robust.store.digest import reseal
 
@@ -161,7 +162,7 @@ def test_a_run_with_a_lipschitz_constant_is_labelled_sound_1d(tmp_path, samples)
               options={"grid": {"counts": [30]}}),
         Block(boxes=(roll_box(10.0),), methods=("grid",), budgets=(Budget(max_evals=81, stop_at_breach=False),),
               role="landscape", max_samples=1, options={"grid": {"counts": [81]}}),
-    ), lipschitz=400.0, figures=("landscape",))
+    ), settings=PipelineSettings(lipschitz=400.0), figures=("landscape",))
     run = _run(tmp_path, spec, samples[:1])
     sec = _section(build_report(run).read_text())
     assert "sound under L = 400 (2-norm of real units)" in sec and "not sound" not in sec

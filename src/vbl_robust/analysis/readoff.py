@@ -64,4 +64,4 @@ def main_rows(store: Any, spec: Any, *, with_trace: bool = True, measured_only: 
     rows = store.jobs(kind="search", role="main", with_points=True, with_trace=with_trace or reads)
     if measured_only:
         rows = [r for r in rows if r.measured]
-    return read_off_rows(rows, spec.eps_safe_m, spec.penalty_m) if reads else rows
+    return read_off_rows(rows, spec.settings.eps_safe_m, spec.settings.penalty_m) if reads else rows

@@ -159,9 +159,9 @@ def summary_records(store: ResultStore) -> list[dict[str, Any]]:
     rows = main_rows(store, spec, with_trace=False, measured_only=False)  # counted apart (not_measured)
     boxes = list({r.box.label: r.box for r in rows if r.box is not None}.values())
     ref = store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
-    rows += reference_rows(ref, boxes, spec.eps_safe_m, spec.penalty_m)
+    rows += reference_rows(ref, boxes, spec.settings.eps_safe_m, spec.settings.penalty_m)
     out = []
-    for s in summarize(rows, spec.eps_safe_m):
+    for s in summarize(rows, spec.settings.eps_safe_m):
         ci = s.survival_rate.ci if s.measured else None
         out.append({
             "experiment": spec.name, "method": s.method, "box_label": s.box_label, "box_level": s.box_level,

@@ -22,6 +22,7 @@ from typing import Any
 from ..specs.budget import Budget
 from ..specs.campaign import Block, BoxSpec, CampaignSpec
 from ..specs.kinds import SourceKind
+from ..specs.settings import PipelineSettings
 from ..store import JobRow, JobStatus, ResultStore
 from .breach import budget_value, survived
 from .readoff import main_rows
@@ -63,7 +64,7 @@ def survivors_of_every_method(store: ResultStore) -> tuple[CampaignSpec, BoxSpec
         by.setdefault(r.sample_id, {})[r.method] = r
     index = {r.sample_id: r.sample_index for r in at}
     keep = [sid for sid, rs in by.items() if set(rs) == set(methods)
-            and all(survived(r, spec.eps_safe_m) for r in rs.values())]
+            and all(survived(r, spec.settings.eps_safe_m) for r in rs.values())]
     return spec, box, methods, sorted(keep, key=index.__getitem__)
 
 
@@ -78,8 +79,10 @@ def truth_spec(run_spec: CampaignSpec, box: BoxSpec, counts: Sequence[int]) -> C
     grid = {"counts": [int(c) for c in counts], "order": "center-out", "batch_size": BATCH}
     blk = Block(boxes=(box,), methods=("grid",), budgets=(Budget(max_evals=n, stop_at_breach=True),), role="reference",
                 options={"grid": grid})
-    return CampaignSpec(run_spec.name + TRUTH_SUFFIX, (blk,), seed=run_spec.seed, eps_safe_m=run_spec.eps_safe_m,
-                        penalty_m=run_spec.penalty_m, conf_threshold=run_spec.conf_threshold, pnp=run_spec.pnp,
+    s = run_spec.settings
+    return CampaignSpec(run_spec.name + TRUTH_SUFFIX, (blk,), seed=run_spec.seed,
+                        settings=PipelineSettings(eps_safe_m=s.eps_safe_m, penalty_m=s.penalty_m,
+                                                  conf_threshold=s.conf_threshold, pnp=s.pnp),
                         figures=("landscape",), notes=(
         f"Dense grid {' × '.join(map(str, counts))} over {box.label} (spacing {spacing}), centre-out, stopped at the "
         f"first breach, on the images every method of {run_spec.name} left surviving at that box."))
@@ -113,7 +116,7 @@ def true_survival(run: str | Path, truth: str | Path | None = None) -> TrueSurvi
         grids = {r.sample_id: r for r in tstore.jobs(role="reference", with_trace=False)
                  if r.status == JobStatus.DONE}
         counts = tuple(tstore.spec().blocks[0].options["grid"]["counts"])
-    eps = spec.eps_safe_m
+    eps = spec.settings.eps_safe_m
     done = [sid for sid in keep if sid in grids]
     hit = {sid for sid in done if not survived(grids[sid], eps)}
     ids = {r.sample_id for r in rows}

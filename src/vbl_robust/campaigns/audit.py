@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from ..constants import TARGETS
 from ..specs.budget import Budget
 from ..specs.campaign import Block, BoxSpec, CampaignSpec
+from ..specs.settings import PipelineSettings
 
 #: ``audit``'s and the demo's methods: georobust-av in place of GeoRobust (it found as many or more breaches at
 #: every spatial-2d box on 30 images, in fewer evaluations; BENCHMARKS.md, spatial-2d section).
@@ -52,8 +53,9 @@ def audit_spec(box: BoxSpec, *, methods: Sequence[str] = AUDIT_METHODS, budget: 
     figures = ("convergence", "landscape", "progress", "per_image")
     if sustain is not None:
         figures = ("sequences", *figures)
-    return CampaignSpec("audit", tuple(blocks), seed=seed, lipschitz=lipschitz, pnp=pnp, figures=figures,
-                        sustain=sustain, penalty_m=TARGETS[target], notes=(
+    return CampaignSpec("audit", tuple(blocks), seed=seed, figures=figures,
+                        settings=PipelineSettings(penalty_m=TARGETS[target], pnp=pnp, lipschitz=lipschitz,
+                                                  sustain=sustain), notes=(
         f"Box {box.label}; methods {', '.join(methods)}; budget per {unit}: {budget.label} ({stop})."
         + ("" if sustain is None else f" One θ held over each approach sequence; its error is the error sustained "
            f"over {sustain} consecutive frame(s).")
@@ -84,7 +86,7 @@ def risk_spec(box: BoxSpec, *, methods: Sequence[str] = ("mc", "guided"), max_ev
     options = {m: {**base, **({"guide_evals": guide_evals} if m == "guided" else {})} for m in methods}
     blk = Block(boxes=(box,), methods=tuple(methods), budgets=(Budget(max_evals=max_evals, stop_at_breach=False),),
                 kind="risk", options=options)
-    return CampaignSpec("risk", (blk,), seed=seed, pnp=pnp, figures=("risk",), notes=(
+    return CampaignSpec("risk", (blk,), seed=seed, settings=PipelineSettings(pnp=pnp), figures=("risk",), notes=(
         f"Failure probability p_fail = P(L > ε_safe) per image, θ ~ {d.text()} over {box.label}; estimators "
         f"{', '.join(methods)}, at most {max_evals} evaluations each; verdict on p_fail ≤ {tau:g} at confidence "
         f"{1 - delta:g}."))

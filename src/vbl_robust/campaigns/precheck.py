@@ -71,7 +71,7 @@ def check_run(spec: CampaignSpec, samples: Sequence[Any], detector: DetectorSpec
         check_images(samples)
     needs = gradient_methods(spec)
     if needs:
-        check_methods(needs, detector_for(detector), detector.name, monitor_sigma=spec.monitor_sigma_m is not None)
+        check_methods(needs, detector_for(detector), detector.name, monitor_sigma=spec.settings.monitor_sigma_m is not None)
     if detector.kind == DetectorKind.PLUGIN and samples:
         check_plugin(spec, samples[0], detector)
 
@@ -83,12 +83,12 @@ def check_plugin(spec: CampaignSpec, sample: Any, detector: DetectorSpec) -> Non
     measured; what it finds (no detection, a bad pose) is no refusal — that is the pipeline's outcome."""
     import numpy as np
 
-    from .work import Settings, build_objective, detector_for
+    from .work import build_objective, detector_for
 
     box = next(b.box for blk in spec.blocks for b in blk.boxes)
     centre = np.asarray(box.center, dtype=np.float64)[None]
     try:
-        build_objective(sample, detector_for(detector), box, Settings.from_spec(spec)).evaluate(centre)
+        build_objective(sample, detector_for(detector), box, spec.settings).evaluate(centre)
     except Exception as exc:  # noqa: BLE001 - whatever the user's code raises is one line here
         text = str(exc).splitlines()[0] if str(exc) else ""
         raise ValueError(f"--detector-plugin {detector.path}: {NotMeasured.DETECTOR_ERROR.value} on the run's first "

@@ -40,12 +40,12 @@ def refine_run(run: str | Path, samples: list, detector: Any, budget: int, *,
     from ..campaigns.replay import ReplayError, job_zones
     from ..search.zones import refine_zones
     from ..store import ResultStore
-    from .work import Settings, build_objective, detector_for
+    from .work import build_objective, detector_for
 
     with ResultStore.open_existing(run) as store:
         spec = store.spec()
         rows = store.jobs(kind="search", role="main", with_points=True, with_trace=False)
-    settings = Settings.from_spec(spec)
+    settings = spec.settings
     by_id = {str(s.id): s for s in samples}
     det = detector_for(detector)
     entries: list[dict[str, Any]] = []

@@ -65,9 +65,9 @@ def replay(row: JobRow, spec: CampaignSpec | None = None, *, eps_safe_m: float |
     pts = row.points
     if pts is None:
         raise ValueError(f"job {row.key}: the row holds no evaluated points (read it with with_points=True)")
-    eps = eps_safe_m if eps_safe_m is not None else (spec.eps_safe_m if spec is not None else EPS_SAFE_M)
+    eps = eps_safe_m if eps_safe_m is not None else (spec.settings.eps_safe_m if spec is not None else EPS_SAFE_M)
     opt = make_optimizer(row.method, row.box.box, **search_kwargs(
-        row.options, row.budget, eps_safe_m=eps, lipschitz=None if spec is None else spec.lipschitz, seed=row.seed))
+        row.options, row.budget, eps_safe_m=eps, lipschitz=None if spec is None else spec.settings.lipschitz, seed=row.seed))
     n, pos = len(pts), 0
     while pos < n:
         x = opt.ask()
@@ -147,7 +147,7 @@ def job_zones(row: JobRow, spec: CampaignSpec | None = None, *, threshold: float
     """
     from ..search import METHODS
 
-    eps = threshold if threshold is not None else (spec.eps_safe_m if spec is not None else EPS_SAFE_M)
+    eps = threshold if threshold is not None else (spec.settings.eps_safe_m if spec is not None else EPS_SAFE_M)
     base = dict(key=row.key, sample_id=row.sample_id, sample_index=row.sample_index, method=row.method, role=row.role,
                 box_label=row.box_label, box=None if row.box is None else row.box.box)
     if row.kind != JobKind.SEARCH:
@@ -163,8 +163,8 @@ def job_zones(row: JobRow, spec: CampaignSpec | None = None, *, threshold: float
     cells = opt.cells()
     if cells is None:
         return JobZones(**base, zones=None, note="no complete batch: no cells")
-    if lipschitz is None and not estimate and spec is not None and spec.lipschitz is not None:
-        lipschitz = spec.lipschitz
+    if lipschitz is None and not estimate and spec is not None and spec.settings.lipschitz is not None:
+        lipschitz = spec.settings.lipschitz
     zm = zones(cells, eps, lipschitz=lipschitz, norm=norm, estimate=estimate or None)
     pts = row.points
     with np.errstate(invalid="ignore"):

@@ -26,6 +26,7 @@ from typing import Any
 from ..constants import Verdict
 from ..specs.campaign import CampaignSpec, Job
 from ..specs.kinds import Role
+from ..specs.settings import PipelineSettings
 from ..store import JobRow, ResultStore, RunProvenance, RunStatus, SampleRecord, WriterLock
 from .precheck import check_run
 from .provenance import (
@@ -36,7 +37,7 @@ from .provenance import (
     machine_identity,
     sample_fingerprint,
 )
-from .work import SampleTask, Settings, detector_for, one_core, run_sample_task
+from .work import SampleTask, detector_for, one_core, run_sample_task
 
 logger = logging.getLogger(__name__)
 
@@ -329,7 +330,7 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
         code_version=code_version(), model_sha256=det_identity["sha256"], detector=det_identity,
         dataset_id=dataset["sha256"], dataset=dataset, seed=spec.seed, executor=executor,
         config={"campaign": spec.to_dict(), "user": config or {}, "executor": executor, "address": address,
-                "workers": workers if executor == "local" else None, "clock": spec.clock,
+                "workers": workers if executor == "local" else None, "clock": spec.settings.clock,
                 "libraries": library_versions(), "machine": machine_identity()},
         host=platform.node(), jobs_total=len(jobs), jobs_skipped=skipped,
     ))
@@ -341,7 +342,7 @@ def _run(spec: CampaignSpec, samples: Sequence[Any], store: ResultStore, detecto
         by_sample.setdefault(j.sample_id, []).append(j)
     sample_of = {s.id: s for s in samples}
     tasks = [SampleTask(sample_of[sid], js) for sid, js in by_sample.items()]
-    settings = Settings.from_spec(spec)
+    settings = spec.settings
 
     state = {"new": 0, "not_measured": 0, "breaches": _stored_breaches(store)}
 
@@ -386,7 +387,7 @@ def _stored_breaches(store: ResultStore) -> int:
 
 
 # -- worker processes ---------------------------------------------------------------------------------------------
-def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Settings, run_id: int,
+def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: PipelineSettings, run_id: int,
                workers: int) -> Iterator[list[JobRow]]:
     """Run the sample tasks in ``workers`` processes (spawned: a fresh interpreter each) and yield their rows in
     completion order. A worker that dies leaves its sample's unfinished jobs pending (a rerun resumes them)."""
@@ -439,14 +440,14 @@ def _pool_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Se
 
 
 # -- Ray -------------------------------------------------------------------------------------------------------
-def _ray_sample_task(task: SampleTask, detector: DetectorSpec, settings: Settings, run_id: int) -> Iterator[list[JobRow]]:
+def _ray_sample_task(task: SampleTask, detector: DetectorSpec, settings: PipelineSettings, run_id: int) -> Iterator[list[JobRow]]:
     """Body of a Ray task: the same code as the local executor, in a worker (one core, as its task asks of Ray;
     detector cached per worker)."""
     one_core()
     yield from run_sample_task(task, detector_for(detector), settings, run_id)
 
 
-def _ray_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: Settings, run_id: int,
+def _ray_rows(tasks: Sequence[SampleTask], detector: DetectorSpec, settings: PipelineSettings, run_id: int,
               address: str | None, num_cpus: int | None) -> Iterator[list[JobRow]]:
     """Submit one streaming task per sample and yield rows as they arrive (in completion order)."""
     if not tasks:

@@ -202,7 +202,7 @@ def _settings(store: ResultStore, spec: Any) -> tuple[float, float] | None:
         if not store.holds_campaign():
             return None
         spec = store.spec()
-    return float(spec.eps_safe_m), float(spec.penalty_m)
+    return float(spec.settings.eps_safe_m), float(spec.settings.penalty_m)
 
 
 def check_store(store: ResultStore, spec: Any = None) -> StoreCheck:

@@ -31,6 +31,7 @@ import numpy as np
 from ..constants import NotMeasured, NotMeasuredError, Verdict
 from ..specs.campaign import Job
 from ..specs.kinds import JobKind, Role
+from ..specs.settings import PipelineSettings
 from ..store import Corners, JobRow, JobStatus, Points, now_iso
 from ..store.payloads import (
     Nominal,
@@ -83,28 +84,8 @@ def detector_for(spec: DetectorSpec) -> Detector:
     return _DETECTORS[key]
 
 
-@dataclass
-class Settings:
-    """Pipeline settings shared by all jobs of a campaign (see :class:`~vbl_robust.specs.campaign.CampaignSpec`)."""
-
-    eps_safe_m: float
-    penalty_m: float
-    conf_threshold: float
-    pnp: str
-    lipschitz: float | tuple[float, ...] | None = None
-    clock: str = "wall"
-    sustain: int | None = None
-    monitor_px: float | None = None
-    monitor_sigma_m: float | None = None
-
-    @classmethod
-    def from_spec(cls, spec: Any) -> Settings:
-        return cls(spec.eps_safe_m, spec.penalty_m, spec.conf_threshold, spec.pnp, spec.lipschitz, spec.clock,
-                   spec.sustain, spec.monitor_px, spec.monitor_sigma_m)
-
-
 def build_objective(sample: Sample | ApproachSequence, detector: Detector, box: ParameterBox,
-                    settings: Settings) -> SearchObjective:
+                    settings: PipelineSettings) -> SearchObjective:
     """The objective a search job maximises over ``box``: the error of one image
     (:class:`~vbl_robust.pipeline.Objective`), or in a sequence campaign (``settings.sustain`` set) the error one θ
     sustains over ``sustain`` consecutive frames of an approach sequence
@@ -161,13 +142,13 @@ def not_measured_reason(exc: BaseException) -> tuple[NotMeasured, str]:
     return kind, f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
-def search_row(job: Job, result: Any, settings: Settings, run_id: int | None, job_s: float) -> JobRow:
+def search_row(job: Job, result: Any, settings: PipelineSettings, run_id: int | None, job_s: float) -> JobRow:
     """Row of a finished search (a :class:`~vbl_robust.search.SearchResult`)."""
     return _row(job, run_id, JobStatus.DONE, job_s=job_s,
                 **result_fields(result, settings.eps_safe_m, settings.penalty_m))
 
 
-def implied_row(job: Job, breach: JobRow, settings: Settings, run_id: int | None) -> JobRow:
+def implied_row(job: Job, breach: JobRow, settings: PipelineSettings, run_id: int | None) -> JobRow:
     """A larger box of a chain after a breach at a smaller, nested box: the same breach point lies in it."""
     return _row(job, run_id, JobStatus.IMPLIED, reason=f"breach found at {breach.box_label}", worst_m=breach.worst_m,
                 worst_x=breach.worst_x, verdict=Verdict.BREACH, worst_reason=breach.worst_reason,
@@ -222,7 +203,7 @@ def sequence_details(objective: SearchObjective, x: np.ndarray, eps_safe_m: floa
     return SequencePayload(frames, *facts)
 
 
-def run_search_job(job: Job, objective: SearchObjective, settings: Settings) -> SearchResult:
+def run_search_job(job: Job, objective: SearchObjective, settings: PipelineSettings) -> SearchResult:
     """Run one search job on a built objective; returns the :class:`~vbl_robust.search.SearchResult` (with the
     failure reason and completion time of every evaluated point).
 
@@ -246,7 +227,7 @@ def run_search_job(job: Job, objective: SearchObjective, settings: Settings) -> 
         return maximize(f, job.box.box, job.method, max_seconds=b.max_seconds, **timing, **kwargs)
 
 
-def risk_row(job: Job, objective: SearchObjective, settings: Settings, run_id: int | None, t0: float) -> JobRow:
+def risk_row(job: Job, objective: SearchObjective, settings: PipelineSettings, run_id: int | None, t0: float) -> JobRow:
     """Run a failure-probability job (:func:`vbl_robust.risk.estimate_risk`; options: ``dist``, ``tau``,
     ``delta``, ``guide_evals``) and its row: every draw as the row's points, the estimate, its interval and the
     verdict in the ``risk`` payload; worst error and verdict as a search row's (the largest L drawn), and the corners
@@ -311,7 +292,7 @@ class _SampleRun:
 
     task: SampleTask
     detector: Detector
-    settings: Settings
+    settings: PipelineSettings
     run_id: int | None
     objectives: dict[str, SearchObjective] = field(default_factory=dict)
     nominals: dict[str, Nominal] = field(default_factory=dict)
@@ -371,7 +352,7 @@ JOB_RUNNERS: dict[JobKind, Callable[[Job, _SampleRun, float], JobRow]] = {
 }
 
 
-def run_sample_task(task: SampleTask, detector: Detector, settings: Settings, run_id: int | None = None,
+def run_sample_task(task: SampleTask, detector: Detector, settings: PipelineSettings, run_id: int | None = None,
                     ) -> Iterator[list[JobRow]]:
     """Run a sample's jobs in order; yield the rows to commit after each job."""
     run = _SampleRun(task, detector, settings, run_id)

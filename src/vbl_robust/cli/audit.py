@@ -11,7 +11,6 @@ is built from the spec's settings, the sample and the detector by
 from __future__ import annotations
 
 import os
-from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -109,10 +108,10 @@ def audit(
     spec = with_method_options(spec, method_opts)
     if monitor_residual is not None:
         with one_line(ValueError):
-            spec = replace(spec, monitor_px=float(monitor_residual))
+            spec = spec.with_settings(monitor_px=float(monitor_residual))
     if monitor_sigma is not None:
         with one_line(ValueError):
-            spec = replace(spec, monitor_sigma_m=float(monitor_sigma))
+            spec = spec.with_settings(monitor_sigma_m=float(monitor_sigma))
             spec.check()
     spec, workers = run.settings(spec, device)
     exports = ExportRequest.of(params)

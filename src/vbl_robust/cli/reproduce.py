@@ -105,7 +105,7 @@ def reproduce(
         run_spec, n_workers = run.settings(exps[0].build(seed, opts), device)
         probe_samples = ImagesRequest.of(params, n=None).load(default=PROBE_IMAGES)[0]  # --images: the run's
         _estimate(exps, opts, seed, images, det, probe_samples, n_workers, experiment if group else "", probe_seconds,
-                  run_spec.clock, root)
+                  run_spec.settings.clock, root)
         return
     if resume_from is not None and not resume_from.is_dir():
         fail(f"--resume-from {resume_from}: not a directory")

@@ -12,7 +12,6 @@ from __future__ import annotations
 import fcntl
 import math
 import os
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +44,7 @@ def run_settings(spec: Any, clock: str, device: str, workers: int) -> tuple[Any,
     if workers < 0:
         fail(f"--workers must be >= 0 (0 = one per core), got {workers}")
     with one_line(ValueError):
-        return replace(spec, clock=clock), workers or default_workers()
+        return spec.with_settings(clock=clock), workers or default_workers()
 
 
 def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, executor: str, address: str | None,
@@ -276,10 +275,10 @@ def print_summary(spec: Any, rows: list) -> None:
 
     from vbl_robust.analysis.summary import summarize
 
-    lines = summarize(rows, spec.eps_safe_m)
+    lines = summarize(rows, spec.settings.eps_safe_m)
     cols = ["method"] + [c for c in ("box_label", "budget_label") if len({getattr(ln, c) for ln in lines}) > 1]
     fixed = ", ".join(str(getattr(lines[0], c)) for c in ("box_label", "budget_label") if c not in cols)
-    table = Table(title=f"{spec.name}: survival (worst error ≤ {spec.eps_safe_m:g} m)" + (f" — {fixed}" if fixed else ""))
+    table = Table(title=f"{spec.name}: survival (worst error ≤ {spec.settings.eps_safe_m:g} m)" + (f" — {fixed}" if fixed else ""))
     heads = {"method": "method", "box_label": "box", "budget_label": "budget"}
     for c in cols:  # a method's name is never cut (georobust and georobust-av must stay apart)
         table.add_column(heads[c], no_wrap=c == "method", min_width=max(len(str(ln.method)) for ln in lines)

@@ -100,7 +100,7 @@ def provenance(store: ResultStore) -> dict[str, Any]:
             "wall_s": sum(_wall_seconds(r, last_job) for r in runs),
             "worker_s": sum(float(r.job_s or 0.0) for r in jobs),
             "search_s": sum(float(r.search_s or 0.0) for r in jobs),
-            "clock": campaign.spec.clock,
+            "clock": campaign.spec.settings.clock,
             "workers": sorted({r.provenance.config.get("workers") for r in runs if r.provenance.config} - {None}),
         },
     }

@@ -273,7 +273,7 @@ def _runtime_1d(e: _Exp) -> ClaimResult:
     for m in dict.fromkeys(r.method for r in timed):
         rows = [r for r in timed if r.method == m]
         top = max(r.budget.max_seconds for r in rows)
-        t = {r.sample_id: first_breach_s(r, e.eps, e.ctx.spec.penalty_m) for r in rows if r.budget.max_seconds == top}
+        t = {r.sample_id: first_breach_s(r, e.eps, e.ctx.spec.settings.penalty_m) for r in rows if r.budget.max_seconds == top}
         t = {s: v for s, v in t.items() if not math.isnan(v)}  # rows stored before evaluations were stamped
         if not t:
             continue
@@ -456,7 +456,7 @@ def _av(s1: _Exp | None, s2: _Exp | None) -> ClaimResult:
 def _rough(e: _Exp) -> ClaimResult:
     grids = [r for r in e.jobs(kind="search", role="reference", with_points=True, with_trace=False)
              if r.status == JobStatus.DONE and r.points is not None and len(r.points) > 1 and grid_complete(r)]
-    got = [largest_jump(r.points.xs, r.points.fs, e.ctx.spec.penalty_m) for r in grids]
+    got = [largest_jump(r.points.xs, r.points.fs, e.ctx.spec.settings.penalty_m) for r in grids]
     jumps, slopes = [j for j, _ in got], [s for _, s in got]
     verdict, why = rough_part(jumps, e.eps)
     share = 100.0 * float(np.mean(np.asarray(jumps) > e.eps)) if jumps else math.nan

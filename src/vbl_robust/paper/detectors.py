@@ -143,7 +143,7 @@ def largest_box_survivors(root: str | Path, experiment: str) -> tuple[str, tuple
     methods = {r.method for r in rows}
     by_image: dict[str, dict[str, bool]] = {}
     for r in rows:
-        by_image.setdefault(r.sample_id, {})[r.method] = survived(r, spec.eps_safe_m)
+        by_image.setdefault(r.sample_id, {})[r.method] = survived(r, spec.settings.eps_safe_m)
     done = sorted(s for s, m in by_image.items() if set(m) == methods)
     alive = tuple(s for s in done if all(by_image[s].values()))
     return rows[0].box_label or "", tuple(done), alive

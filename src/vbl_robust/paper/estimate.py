@@ -255,7 +255,7 @@ def probe(det: Any, specs: Sequence[CampaignSpec], samples: Sequence[Any], *, po
     with _one_thread():  # the detector is built as the workers build theirs (an engine keeps its thread count)
         detector = detector_for(det)
         boxes = stopping_boxes(specs)
-        eps = specs[0].eps_safe_m if specs else 1000.0
+        eps = specs[0].settings.eps_safe_m if specs else 1000.0
         rng = np.random.default_rng(seed)
         breach: dict[str, list[float]] = {label: [] for label in boxes}
         for sample in samples:

@@ -122,7 +122,7 @@ def paired_comparison(before: str | Path, after: str | Path) -> Comparison:
     if pixels:
         raise ValueError(f"{after}: the image files of {pixels[:5]} differ from those {before} read (other pixels "
                          "under the same names): no paired comparison")
-    eps = spec.eps_safe_m
+    eps = spec.settings.eps_safe_m
     _, where = columns(rows_a)  # the box, and the budget where the run has several
 
     def index_rows(rows: Sequence[JobRow]) -> dict[tuple[str, str, str], JobRow]:
@@ -199,7 +199,7 @@ def compare_html(before: str | Path, after: str | Path, out: str | Path | None =
              "new": ln.new, "p": f"{ln.p_value:.4f}"} for ln in sorted(c.lines, key=line_order)]
     changes = [{"sample_id": ch.sample_id, "box": ch.box, "before": ch.before_m, "after": ch.after_m,
                 "change": ch.change} for ch in c.changes]
-    eps = c.spec.eps_safe_m
+    eps = c.spec.settings.eps_safe_m
     body = [
         f"<h1>vbl-robust — before and after <small>({esc(c.spec.name)}, seed {c.spec.seed})</small></h1>",
         f"<p>Before: <b>{esc(c.detectors[0])}</b> (<code>{esc(c.before)}</code>); after: <b>{esc(c.detectors[1])}"

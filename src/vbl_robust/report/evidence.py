@@ -239,7 +239,7 @@ def evidence_of(ctx: Context) -> Evidence:
     stored = None
     if any(r.read_from for r in rows):
         stored = {r.key: r for r in ctx.store.jobs(kind="search", role="main", with_trace=False)}
-    cases, breached = worst_cases(rows, ctx.eps, ctx.spec.penalty_m, stored=stored, nominal=ctx.nominal)
+    cases, breached = worst_cases(rows, ctx.eps, ctx.spec.settings.penalty_m, stored=stored, nominal=ctx.nominal)
     runs = ctx.store.runs()
     return Evidence(experiment=ctx.spec.name, eps_safe_m=ctx.eps, level=LEVEL, jobs_done=ctx.store.count(),
                     jobs_planned=runs[-1].provenance.jobs_total if runs else None,

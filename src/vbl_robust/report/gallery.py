@@ -54,7 +54,7 @@ NO_CANDIDATE = frozenset({FailureReason.NO_DETECTION, FailureReason.LOW_CONFIDEN
 
 def _samples(ctx: Context, ids: Sequence[str]) -> tuple[dict[str, Any], str]:
     """The samples ``ids`` rebuilt from the run's dataset source, or ({}, why not)."""
-    if getattr(ctx.spec, "sustain", None) is not None:
+    if ctx.spec.settings.sustain is not None:
         return {}, "a sequence campaign: each case is an approach sequence (its frames: the sequence section)"
     runs = ctx.store.runs()
     source = ((runs[-1].provenance.dataset if runs else None) or {}).get("source") or {}
@@ -171,8 +171,8 @@ def _facts(ctx: Context, rank: int, case: WorstCase, picture: str, sample: Any =
     """The text of one entry: what, where, how bad; with the rebuilt ``sample``, each corner's shift in pixels
     and what a pixel is worth."""
     outcome = ("unknown" if case.reason is None else "a confident pose" if not case.reason
-               else f"no pose: <code>{esc(case.reason)}</code> (counted as the {ctx.spec.penalty_m:g} m penalty)")
-    conf = "–" if case.conf is None else f"{case.conf:.2f} (τ_conf = {ctx.spec.conf_threshold:g})"
+               else f"no pose: <code>{esc(case.reason)}</code> (counted as the {ctx.spec.settings.penalty_m:g} m penalty)")
+    conf = "–" if case.conf is None else f"{case.conf:.2f} (τ_conf = {ctx.spec.settings.conf_threshold:g})"
     if case.corners is not None:
         corners = "drawn (red)"
     elif case.reason in NO_CANDIDATE:
@@ -180,7 +180,7 @@ def _facts(ctx: Context, rank: int, case: WorstCase, picture: str, sample: Any =
     else:
         corners = "not stored (a row written before schema 4, or read off a longer run)"
     items = [("kind", _kind_text(case)), ("error at θ*", f"{fmt_num(case.worst_m)} m (ε_safe = {ctx.eps:g} m)"),
-             ("unperturbed, L(0)", nominal_text(case, ctx.eps, ctx.spec.conf_threshold)),
+             ("unperturbed, L(0)", nominal_text(case, ctx.eps, ctx.spec.settings.conf_threshold)),
              ("θ*", esc(theta_text(case.theta) or "–")), ("the pipeline at θ*", outcome), ("confidence", conf),
              ("box", esc(case.box_label)),
              ("found by", esc(style(case.method)["label"]) + (f", {esc(case.budget_label)}" if case.budget_label
@@ -194,7 +194,7 @@ def _facts(ctx: Context, rank: int, case: WorstCase, picture: str, sample: Any =
         items.append(("corner shift unperturbed", esc(shifts_text(shift0))))
         items.append(("what a pixel is worth", esc(geometry_text(sample))))
     if case.position_sigma_m is not None:  # a detector that says how sure it is
-        monitor = ctx.spec.monitor_sigma_m
+        monitor = ctx.spec.settings.monitor_sigma_m
         verdict = "" if monitor is None else (f" — above the σ monitor's {monitor:g} m" if case.position_sigma_m >
                                               monitor else f" — within the σ monitor's {monitor:g} m")
         items.insert(5, ("position σ", f"{fmt_num(case.position_sigma_m)} m (the corners' σ through PnP){verdict}"))

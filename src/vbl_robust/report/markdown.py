@@ -145,7 +145,7 @@ def survival_markdown(run: str | Path, others: Sequence[str | Path] = ()) -> str
         per_image[r.sample_id].add((r.method, col(r)))
     done = sorted(s for s, k in per_image.items() if k == keys)
     rows = [r for r in rows if r.sample_id in done]
-    eps = spec.eps_safe_m
+    eps = spec.settings.eps_safe_m
     lines = summarize(rows, eps)
 
     def order(ln) -> tuple:  # boxes by size, then time budgets before evaluation budgets, each ascending
@@ -231,7 +231,7 @@ def families_markdown(run: str | Path, series: str = "all") -> str:
     rows = [r for r in main_rows if r.sample_id in done and family_of(r) is not None]
     if not rows:
         raise ValueError(f"{run}: no complete family jobs (a `reproduce families` run)")
-    profile = family_profile(rows + [r for r in ref if r.sample_id in done], spec.eps_safe_m)
+    profile = family_profile(rows + [r for r in ref if r.sample_id in done], spec.settings.eps_safe_m)
     order = rank_families(profile)
     lines = family_lines(profile, order)
     if series == "any":
@@ -297,7 +297,7 @@ def compare_markdown(before: str | Path, after: str | Path) -> str:
 
     c = paired_comparison(before, after)
     out = [f"before: {before} ({c.detectors[0]}); after: {after} ({c.detectors[1]}) ({c.spec.name}, seed "
-           f"{c.spec.seed}, ε_safe = {c.spec.eps_safe_m:g} m); paired per image: fixed = breached before and not "
+           f"{c.spec.seed}, ε_safe = {c.spec.settings.eps_safe_m:g} m); paired per image: fixed = breached before and not "
            "after, new = the other way, p = exact McNemar", ""]
     out += _table(["method", "box", "envelope", "images", "survival before % [95 % CI]", "survival after % [95 % CI]",
                    "fixed", "new breaches", "p"],

@@ -48,7 +48,7 @@ class Context:
 
     @property
     def eps(self) -> float:
-        return self.spec.eps_safe_m
+        return self.spec.settings.eps_safe_m
 
     @cached_property
     def risk(self) -> list[JobRow]:
@@ -112,7 +112,7 @@ def anchor(title: str) -> str:
 
 def reference(ctx: Context, boxes: Sequence[BoxSpec]) -> list[JobRow]:
     ref = ctx.store.jobs(kind="search", role="reference", with_points=True, with_trace=False)
-    return reference_rows(ref, boxes, ctx.eps, ctx.spec.penalty_m)
+    return reference_rows(ref, boxes, ctx.eps, ctx.spec.settings.penalty_m)
 
 
 def main_boxes(ctx: Context) -> list[BoxSpec]:

@@ -98,8 +98,8 @@ def section_overview(ctx: Context, title: str) -> Section:
     s.html.append(
         f"<p><b>{esc(title)}</b>. Detector: <b>{esc(det.get('name', '?'))}</b> ({esc(detector_facts(det))}); "
         f"{len(ctx.samples)} {ctx.spec.unit}s; "
-        f"ε_safe = {ctx.eps:g} m, τ_conf = {ctx.spec.conf_threshold:g}, failure penalty {ctx.spec.penalty_m:g} m, "
-        f"PnP solver <code>{esc(ctx.spec.pnp)}</code>, seed {ctx.spec.seed}. Jobs in the store: {n_done}"
+        f"ε_safe = {ctx.eps:g} m, τ_conf = {ctx.spec.settings.conf_threshold:g}, failure penalty {ctx.spec.settings.penalty_m:g} m, "
+        f"PnP solver <code>{esc(ctx.spec.settings.pnp)}</code>, seed {ctx.spec.seed}. Jobs in the store: {n_done}"
         + (f" of {total}" if total else "") + ".</p>")
     if ctx.spec.notes:
         s.html.append(f'<p class="note">{esc(ctx.spec.notes)}</p>')
@@ -137,7 +137,7 @@ def section_methods(ctx: Context) -> Section | None:
     summary = summarize([*ctx.main, *(r for r in ctx.unmeasured if r.kind == JobKind.SEARCH and r.role == Role.MAIN)],
                         ctx.eps)
     s.html.append(_summary_table(summary, ctx.spec.unit))
-    failures = _failures_table(summary, ctx.spec.penalty_m)
+    failures = _failures_table(summary, ctx.spec.settings.penalty_m)
     if failures:
         s.html.append(folded("Failed evaluations by reason", failures))
     return s
@@ -485,7 +485,7 @@ def section_per_image(ctx: Context) -> Section | None:
     cols += [("worst", "worst of all (m)", None), ("verdict", "verdict", None)]
     s = Section(f"Per {ctx.spec.unit}: worst case found")
     s.html.append(f"<p>L(0): the error of the {ctx.spec.unit} unperturbed (θ at its identity: roll 0, contrast 1, …; "
-                  f"the {ctx.spec.penalty_m:g} m penalty where the pipeline gives no pose; – in a run stored before "
+                  f"the {ctx.spec.settings.penalty_m:g} m penalty where the pipeline gives no pose; – in a run stored before "
                   "it was). An L(0) near ε_safe means the perturbation had little to break.</p>")
     s.html.append(table(lines, cols, row_class=lambda r: "breach" if r["verdict"] == Verdict.BREACH else "",
                         left=("sample_id", "envelope", "verdict", *[f"{m}_x" for m in methods]),

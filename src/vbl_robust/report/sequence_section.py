@@ -32,11 +32,11 @@ def section_sequences(ctx: Context) -> Section | None:
     rows = worst_per_sequence(ctx)
     if not rows:
         return None
-    k = ctx.spec.sustain
+    k = ctx.spec.settings.sustain
     s = Section(f"Along the approach: errors sustained over {k} frame(s)")
     curves = [{"sequence_id": r.sample_id, "distances_m": list(p.frames.distance_m), "nominal_m": _errors(p.nominal),
                "worst_m": _errors(p.worst)} for r, p in rows]
-    fig = plot_errors_along_approach(curves, eps_m=ctx.eps, penalty_m=ctx.spec.penalty_m,
+    fig = plot_errors_along_approach(curves, eps_m=ctx.eps, penalty_m=ctx.spec.settings.penalty_m,
                                      title=f"Error along the approach (sustain k = {k})")
     s.html.append(ctx.figure(fig, "sequence_errors", "Per-frame position error against the distance from the runway "
                              "threshold along each approach: the unperturbed θ (dashed) and the worst θ found over "

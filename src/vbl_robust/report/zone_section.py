@@ -65,11 +65,11 @@ def _zones_of(row: JobRow, spec: CampaignSpec) -> Zoned:
     zone). A replay that fails skips the job, with the reason, and never the report."""
     try:
         try:
-            jz = job_zones(row, spec, estimate=spec.lipschitz is None)  # else sound under the run's constant
+            jz = job_zones(row, spec, estimate=spec.settings.lipschitz is None)  # else sound under the run's constant
         except ReplayError:
             raise
         except ValueError:  # cells without a slope estimate (one evaluated cell): classified without a constant
-            if spec.lipschitz is not None:
+            if spec.settings.lipschitz is not None:
                 raise
             jz = job_zones(row, spec)
     except ReplayError as e:
@@ -140,7 +140,7 @@ def section_zones(ctx: Context) -> Section | None:
     g = grids[0] if grids else None
     jobs, left_out = zone_jobs(ctx, None if g is None else g.sample_id)
     s = Section("Vulnerability zones")
-    lip = ctx.spec.lipschitz
+    lip = ctx.spec.settings.lipschitz
     s.html.append(
         "<p>Each main search that keeps a cover of Θ (the DIRECT family, the grid) is replayed on its stored values "
         "(nothing is evaluated again) and each of its cells classified: <b>breached</b> — the cell's evaluated point "

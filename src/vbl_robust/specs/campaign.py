@@ -15,16 +15,15 @@ budget) by hashing, so it does not depend on the order of jobs or on which jobs 
 from __future__ import annotations
 
 import hashlib
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from ..constants import CONF_THRESHOLD, EPS_SAFE_M, PENALTY_M
 from ..digest import canonical_json, digest
 from ..space import ParameterBox
 from .budget import Budget
 from .kinds import JobKind, Role
+from .settings import PipelineSettings
 
 __all__ = ["FIGURES", "JOB_KINDS", "ROLES", "Block", "BoxSpec", "CampaignSpec", "Job", "box_label",
            "default_figures", "derive_seed", "levels_text", "range_text", "roll_box", "roll_contrast_box",
@@ -263,63 +262,29 @@ class CampaignSpec:
         name: experiment name ("audit", "spatial-1d", …); part of every job key.
         blocks: the cross products.
         seed: base of the seed stream.
-        eps_safe_m, penalty_m, conf_threshold, pnp: the pipeline settings (paper: 1000 m, 5000 m, 0.25).
-        lipschitz: optional Lipschitz constant of L in real units (m per unit of each parameter, or one number
-            for the Euclidean norm) — with it, searches that keep a cover of the box can *certify* a sample.
+        settings: the pipeline settings every job shares (:class:`~vbl_robust.specs.settings.PipelineSettings`:
+            ε_safe, the failure penalty, τ_conf, the PnP solver, the Lipschitz constant, the clock, a sequence
+            campaign's ``sustain``, the runtime monitors); part of every job's context.
         notes: free text for the report (budgets chosen, deviations from the paper).
         figures: the report's figures (names from :data:`FIGURES`; the report draws them in that order);
             empty: :func:`default_figures` of the blocks. Presentation only: not part of any job key.
-        clock: what time budgets are measured on (:data:`vbl_robust.search.CLOCKS`): ``"wall"``, or
-            ``"process"`` (CPU seconds of the evaluating process, which other work on the machine does not move).
-            Part of the job context when not ``"wall"`` (so the keys of wall-clock campaigns stay as they were).
-        sustain: ``None`` — every sample is one image and a search job maximises its error; an integer ``k`` — a
-            *sequence campaign*: every sample is an :class:`~vbl_robust.data.ApproachSequence`, one θ is held over
-            its frames and a search job maximises the error sustained over ``k`` consecutive frames
-            (:class:`~vbl_robust.sequences.SequenceObjective`). Part of the job context when set.
-        monitor_px: a runtime monitor of the pipeline: poses whose PnP reprojection residual is above this many
-            pixels become flagged failures (:class:`~vbl_robust.pipeline.Objective` ``max_reproj_px``). Part of the
-            job context when set.
-        monitor_sigma_m: a runtime monitor for a detector that says how sure it is: poses whose corners' σ,
-            propagated through PnP, is above this many metres become flagged failures (``Objective``
-            ``max_sigma_m``). Part of the job context when set.
     """
 
     name: str
     blocks: tuple[Block, ...]
     seed: int = 0
-    eps_safe_m: float = EPS_SAFE_M
-    penalty_m: float = PENALTY_M
-    conf_threshold: float = CONF_THRESHOLD
-    pnp: str = "ippe_lm"
-    lipschitz: float | tuple[float, ...] | None = None
+    settings: PipelineSettings = field(default_factory=PipelineSettings)
     notes: str = ""
     figures: tuple[str, ...] = ()
-    clock: str = "wall"
-    sustain: int | None = None
-    monitor_px: float | None = None
-    monitor_sigma_m: float | None = None
 
     def __post_init__(self) -> None:
-        from ..search import CLOCKS
-
-        if self.clock not in CLOCKS:
-            raise ValueError(f"CampaignSpec: clock must be one of {sorted(CLOCKS)}, got {self.clock!r}")
+        if not isinstance(self.settings, PipelineSettings):
+            raise TypeError(f"CampaignSpec: settings must be a PipelineSettings, got {type(self.settings).__name__}")
         unknown = [f for f in self.figures if f not in FIGURES]
         if unknown:
             raise ValueError(f"CampaignSpec: unknown figure(s) {unknown}; figures are {FIGURES}")
-        if self.sustain is not None and (isinstance(self.sustain, bool) or not isinstance(self.sustain, int)
-                                         or self.sustain < 1):
-            raise ValueError(f"sustain: need an integer >= 1 (frames), got {self.sustain!r}")
-        if self.sustain is not None and any(b.kind != JobKind.SEARCH for b in self.blocks):
+        if self.settings.sustain is not None and any(b.kind != JobKind.SEARCH for b in self.blocks):
             raise ValueError("CampaignSpec: a sequence campaign (sustain set) holds search blocks only")
-        if self.monitor_px is not None and not (math.isfinite(self.monitor_px) and self.monitor_px > 0):
-            raise ValueError(f"--monitor-residual must be a finite number of pixels > 0, got {self.monitor_px}")
-        if self.monitor_px is not None and self.sustain is not None:
-            raise ValueError("--monitor-residual applies to image campaigns, not to sequences (--sequences)")
-        if self.monitor_sigma_m is not None and not (math.isfinite(self.monitor_sigma_m) and self.monitor_sigma_m > 0):
-            raise ValueError(f"--monitor-sigma must be a finite number of metres > 0, got {self.monitor_sigma_m}")
-        if self.monitor_sigma_m is not None and self.sustain is not None:
-            raise ValueError("--monitor-sigma applies to image campaigns, not to sequences (--sequences)")
         object.__setattr__(self, "figures", tuple(self.figures))
 
     def check(self) -> None:
@@ -332,8 +297,8 @@ class CampaignSpec:
         from ..search import METHODS
         from ..search.bounds import check_lipschitz
 
-        if self.pnp not in SOLVERS:
-            raise ValueError(f"pnp: unknown solver {self.pnp!r}; solvers are {', '.join(SOLVERS)}")
+        if self.settings.pnp not in SOLVERS:
+            raise ValueError(f"pnp: unknown solver {self.settings.pnp!r}; solvers are {', '.join(SOLVERS)}")
         from ..risk import RISK_METHODS
 
         for blk in self.blocks:
@@ -347,13 +312,13 @@ class CampaignSpec:
             if twice:
                 raise ValueError(f"methods: {', '.join(twice)} given more than once")
             graded = [m for m in blk.methods if blk.kind != JobKind.RISK and METHODS[m].needs_gradient]
-            if self.monitor_sigma_m is not None and graded:  # the σ monitor reads the black-box path only
+            if self.settings.monitor_sigma_m is not None and graded:  # the σ monitor reads the black-box path only
                 raise ValueError(f"--monitor-sigma: a gradient search ({', '.join(graded)}) cannot run under the σ "
                                  "monitor; leave it out of --methods")
             for box in blk.boxes:
                 try:
                     Perturbation(box.box)
-                    check_lipschitz(self.lipschitz, "2", box.box.dim)
+                    check_lipschitz(self.settings.lipschitz, "2", box.box.dim)
                 except ValueError as exc:
                     raise ValueError(f"box {box.label}: {exc}") from None
             if "grid" in blk.methods:  # a lattice beyond MAX_GRID_POINTS is refused here, not as failed jobs
@@ -369,7 +334,7 @@ class CampaignSpec:
     @property
     def unit(self) -> str:
         """What one sample is, for tables and text: ``"image"``, or ``"sequence"`` in a sequence campaign."""
-        return "image" if self.sustain is None else "sequence"
+        return "image" if self.settings.sustain is None else "sequence"
 
     def check_samples(self, samples: Sequence[Any]) -> None:
         """Refuse, before any work, samples this campaign cannot run on: ``ValueError``, one line — images given to
@@ -377,14 +342,14 @@ class CampaignSpec:
         (every job of it would fail)."""
         for s in samples:
             frames = getattr(s, "samples", None)
-            if self.sustain is None and frames is not None:
+            if self.settings.sustain is None and frames is not None:
                 raise ValueError(f"sample {s.id!r} is an approach sequence: a campaign of sequences needs sustain")
-            if self.sustain is not None and frames is None:
-                raise ValueError(f"sample {s.id!r} is one image: a sequence campaign (sustain {self.sustain}) needs "
+            if self.settings.sustain is not None and frames is None:
+                raise ValueError(f"sample {s.id!r} is one image: a sequence campaign (sustain {self.settings.sustain}) needs "
                                  "approach sequences")
-            if self.sustain is not None and len(frames) < self.sustain:
+            if self.settings.sustain is not None and len(frames) < self.settings.sustain:
                 raise ValueError(f"sustain: need an integer k with 1 <= k <= {len(frames)} (sequence {s.id!r} has "
-                                 f"{len(frames)} frames), got {self.sustain}")
+                                 f"{len(frames)} frames), got {self.settings.sustain}")
 
     @property
     def report_figures(self) -> tuple[str, ...]:
@@ -392,26 +357,12 @@ class CampaignSpec:
         ``sequences`` for a sequence campaign)."""
         if self.figures:
             return self.figures
-        found = default_figures(self.blocks) + (("sequences",) if self.sustain is not None else ())
+        found = default_figures(self.blocks) + (("sequences",) if self.settings.sustain is not None else ())
         return tuple(f for f in FIGURES if f in found)
-
-    def settings(self) -> dict[str, Any]:
-        """The settings that change results (part of the job context)."""
-        out = {"eps_safe_m": self.eps_safe_m, "penalty_m": self.penalty_m, "conf_threshold": self.conf_threshold,
-               "pnp": self.pnp, "lipschitz": self.lipschitz}
-        if self.clock != "wall":
-            out["clock"] = self.clock
-        if self.sustain is not None:
-            out["sustain"] = self.sustain
-        if self.monitor_px is not None:
-            out["monitor_px"] = self.monitor_px
-        if self.monitor_sigma_m is not None:
-            out["monitor_sigma_m"] = self.monitor_sigma_m
-        return out
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "name": self.name, "seed": self.seed, **self.settings(), "notes": self.notes, "figures": list(self.figures),
+            "name": self.name, "seed": self.seed, **self.settings.to_dict(), "notes": self.notes, "figures": list(self.figures),
             "blocks": [
                 {"boxes": [b.to_dict() for b in blk.boxes], "methods": list(blk.methods),
                  "budgets": [b.to_dict() for b in blk.budgets], "role": blk.role.value, "kind": blk.kind.value,
@@ -428,16 +379,16 @@ class CampaignSpec:
                   max_samples=blk["max_samples"], chain=blk["chain"], options=blk["options"])
             for blk in d["blocks"]
         )
-        lip = d.get("lipschitz")
-        return cls(name=d["name"], blocks=blocks, seed=int(d["seed"]), eps_safe_m=float(d["eps_safe_m"]),
-                   penalty_m=float(d["penalty_m"]), conf_threshold=float(d["conf_threshold"]), pnp=d["pnp"],
-                   lipschitz=tuple(lip) if isinstance(lip, list) else lip, notes=d.get("notes", ""),
-                   figures=tuple(d.get("figures", ())), clock=d.get("clock", "wall"), sustain=d.get("sustain"),
-                   monitor_px=d.get("monitor_px"), monitor_sigma_m=d.get("monitor_sigma_m"))
+        return cls(name=d["name"], blocks=blocks, seed=int(d["seed"]), settings=PipelineSettings.from_dict(d),
+                   notes=d.get("notes", ""), figures=tuple(d.get("figures", ())))
+
+    def with_settings(self, **changes: Any) -> CampaignSpec:
+        """This campaign with ``changes`` to its pipeline settings (checked as a new :class:`PipelineSettings`)."""
+        return replace(self, settings=replace(self.settings, **changes))
 
     def context(self, detector_id: str) -> str:
         """Digest of what every job of this campaign shares: the settings and the detector identity."""
-        return digest({"settings": self.settings(), "detector": detector_id}, 24)
+        return digest({"settings": self.settings.to_dict(), "detector": detector_id}, 24)
 
     def search_methods(self) -> set[str]:
         """The methods its search blocks run."""
