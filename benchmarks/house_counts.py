@@ -9,6 +9,9 @@
   attribute called ``kind``, ``role``, ``status``, ``reason``, ``verdict`` or ``failure`` (or ending in ``_kind`` …)
   and whose right side is a string literal or a tuple/set/list of them — a vocabulary compared as text instead of
   through its enum;
+- ``settings_declarations``: classes that declare the pipeline settings as fields of their own (ε_safe, the
+  penalty, τ_conf and the PnP solver: ``eps_safe_m``, ``penalty_m``, ``conf_threshold``, ``pnp``) — "settings
+  declared once" is 1;
 - ``all_entries``: names listed in every ``__all__``;
 - ``cli_function_imports``: ``import`` statements inside functions under ``cli/``;
 - ``audit_parameters`` / ``audit_own_parameters``: parameters of the ``audit`` command function, and those of them
@@ -30,6 +33,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PKG = ROOT / "src" / "vbl_robust"
 VOCAB = ("kind", "role", "status", "reason", "verdict", "failure")
+#: The fields that make a class a declaration of the pipeline settings (``settings_declarations``).
+SETTINGS = {"eps_safe_m", "penalty_m", "conf_threshold", "pnp"}
 
 
 def _named(node: ast.AST) -> bool:
@@ -57,7 +62,7 @@ def counts() -> dict[str, float | int]:
     files = sorted(PKG.rglob("*.py"))
     out: dict[str, float | int] = {
         "lines": 0, "campaigns_lines": 0, "campaign_dict_sites": 0, "kind_literal_comparisons": 0,
-        "all_entries": 0, "cli_function_imports": 0, "audit_parameters": 0, "audit_own_parameters": 0,
+        "settings_declarations": 0, "all_entries": 0, "cli_function_imports": 0, "audit_parameters": 0, "audit_own_parameters": 0,
     }
     for path in files:
         text = path.read_text(encoding="utf-8")
@@ -87,6 +92,9 @@ def counts() -> dict[str, float | int]:
                       and value.args and isinstance(value.args[0], ast.Name)):
                     lazy = _lazy_size(tree, value.args[0].id)
                     out["all_entries"] += lazy
+            if isinstance(node, ast.ClassDef) and SETTINGS <= {
+                    f.target.id for f in node.body if isinstance(f, ast.AnnAssign) and isinstance(f.target, ast.Name)}:
+                out["settings_declarations"] += 1
             if rel.parts[0] == "cli" and isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
                 out["cli_function_imports"] += sum(1 for sub in ast.walk(node)
                                                    if isinstance(sub, ast.Import | ast.ImportFrom))
