@@ -23,7 +23,7 @@ WORKERS = 2  # the reproduction's workers on this 2-core machine (one per core)
 
 
 def _detectors(oracle_only: bool):
-    from vbl_robust.campaigns import DetectorSpec
+    from vbl_robust.detect.shipped import DetectorSpec
 
     oracle = DetectorSpec.oracle()
     return oracle, (oracle if oracle_only else DetectorSpec("default"))
@@ -41,14 +41,14 @@ def overhead(detector, n_images: int, max_evals: int) -> tuple[str, list[dict]]:
     """Same jobs twice: bare ``maximize`` on a prebuilt objective, and through ``run_campaign`` into a store."""
     import numpy as np
 
-    from vbl_robust.campaigns import run_campaign
+    from vbl_robust.campaigns.runner import run_campaign
     from vbl_robust.campaigns.work import detector_for
     from vbl_robust.pipeline import Objective
-    from vbl_robust.scenes import generate
-    from vbl_robust.search import maximize
+    from vbl_robust.scenes.generate import generate
+    from vbl_robust.search.api import maximize
     from vbl_robust.specs.budget import Budget
     from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     samples = generate(n_images, seed=11)
     methods = ("georobust", "random")
@@ -100,7 +100,7 @@ def durations(detector, bundle: Path, quick: bool) -> str:
     how far the estimate can be trusted, and what the run costs."""
     import json
 
-    from vbl_robust.campaigns import load_samples
+    from vbl_robust.campaigns.samples import load_samples
     from vbl_robust.paper.estimate import PROBE_IMAGES, Probe, expected_seconds, probe
     from vbl_robust.paper.experiments import EXPERIMENTS, PAPER, Options
 

@@ -32,7 +32,7 @@ def held_out(n: int, seed: int = BENCH_SEED) -> list:
     """``scenes.generate(n, seed)`` with lazily loaded pixels from the render cache (rendered and written once)."""
     import cv2
 
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     samples = generate(n, seed=seed)
     d = CACHE / f"seed{seed}"
@@ -93,14 +93,14 @@ def accuracy_section(dets: dict, samples: list) -> tuple[str, dict]:
 
 
 def throughput_section(dets: dict, sample, reps: int) -> str:
-    from vbl_robust.perturb import resize_image
+    from vbl_robust.perturb.resample import resize_image
     from vbl_robust.pipeline import Objective
     from vbl_robust.space import ParameterBox
 
     box = ParameterBox({"roll_deg": (-10, 10), "contrast": (0.7, 1.3)})
     rng = np.random.default_rng(0)
     lines = ["| detector | batch | end-to-end evals/s | bare detector images/s | e2e / bare |", "|---|---|---|---|---|"]
-    from vbl_robust.detect import DetectContext
+    from vbl_robust.detect.base import DetectContext
 
     for name, det in dets.items():
         obj = Objective(sample, det, box, batch_size=32)

@@ -41,7 +41,7 @@ def main(quick: bool = False) -> str:
     from vbl_robust.detect.offline import setup_offline
     from vbl_robust.detect.shipped import default_detector
     from vbl_robust.pipeline import Objective
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
     from vbl_robust.space import ParameterBox
 
     setup_offline()

@@ -25,13 +25,13 @@ def _rate(fn, n_items: int, reps: int) -> float:
 
 
 def main(quick: bool = False) -> str:
-    from vbl_robust.detect import DetectContext
+    from vbl_robust.detect.base import DetectContext
     from vbl_robust.detect.engines import installed_engines, with_engine
     from vbl_robust.detect.offline import setup_offline
     from vbl_robust.detect.shipped import DEFAULT_MODEL, with_design
     from vbl_robust.detect.ultralytics import UltralyticsDetector
     from vbl_robust.pipeline import Objective
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
     from vbl_robust.space import ParameterBox
 
     setup_offline()

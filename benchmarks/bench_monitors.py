@@ -12,7 +12,7 @@ confidence) for "this pose is off by more than ε_safe".
 
 **Corner σ** (a detector that says how sure it is: the YOLO26-pose pass-2 network of issue 49, behind v9's pass 1;
 ``SIGMA_MODEL``): each confident pose's corners' σ propagated through PnP to the position (metres,
-:func:`vbl_robust.pnp.position_sigma`). The limit is chosen on validation only — the 98th percentile of the σ of
+:func:`vbl_robust.pnp.differentiable.position_sigma`). The limit is chosen on validation only — the 98th percentile of the σ of
 the nominal poses (unperturbed, within ε_safe) of protocol seed 20261202 (510 approaches; aimed at rejecting ≤ 2 %)
 — and then applied to the test views: the audit's images (``generate(100, seed=0)``, the paper run's) on a grid of
 roll ±15° × contrast [0.5, 2] (7 × 5 views each, the unperturbed view among them). Measured there: the share of
@@ -55,7 +55,7 @@ def misleading_points(limit: int | None) -> list[tuple[str, object, np.ndarray]]
     from vbl_robust.analysis.breach import breach_kind
     from vbl_robust.analysis.readoff import main_rows
     from vbl_robust.constants import BreachKind
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     WORK.mkdir(parents=True, exist_ok=True)
     store = WORK / "spatial-2d.sqlite"
@@ -84,7 +84,7 @@ def measure(quick: bool) -> dict:
     torch.set_num_threads(1)
     from vbl_robust.campaigns.work import build_objective
     from vbl_robust.detect.shipped import DetectorSpec
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
     from vbl_robust.space import ParameterBox
     from vbl_robust.specs.settings import PipelineSettings
 
@@ -144,7 +144,7 @@ def grid_records(det, samples, settings) -> tuple[list, list, float]:
     import torch
 
     from vbl_robust.campaigns.work import build_objective
-    from vbl_robust.pnp import solve
+    from vbl_robust.pnp.solvers import solve
     from vbl_robust.space import ParameterBox
 
     box = ParameterBox({"roll_deg": (-15.0, 15.0), "contrast": (0.5, 2.0)})
@@ -179,7 +179,7 @@ def sigma_measure(quick: bool, model: Path = SIGMA_MODEL) -> dict:
     from vbl_robust.detect.shipped import default_detector
     from vbl_robust.detect.twostage import TwoStageDetector
     from vbl_robust.detect.ultralytics import UltralyticsDetector
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
     from vbl_robust.space import ParameterBox
     from vbl_robust.specs.settings import PipelineSettings
 

@@ -91,7 +91,7 @@ def _rates(quick: bool) -> list[str]:
     from vbl_robust.detect.engines import resolve_engine
     from vbl_robust.detect.shipped import DEFAULT_MODEL, default_detector
     from vbl_robust.pipeline import Objective
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
     from vbl_robust.space import ParameterBox
 
     box = ParameterBox(RATE_BOX)
@@ -146,8 +146,8 @@ def _first_breach(quick: bool) -> list[str]:
     from vbl_robust.constants import EPS_SAFE_M
     from vbl_robust.detect.shipped import default_detector
     from vbl_robust.pipeline import Objective
-    from vbl_robust.scenes import generate
-    from vbl_robust.search import maximize
+    from vbl_robust.scenes.generate import generate
+    from vbl_robust.search.api import maximize
     from vbl_robust.space import ParameterBox
 
     box = ParameterBox(BREACH_BOX)

@@ -22,8 +22,9 @@ import time
 import numpy as np
 import torch
 
-from vbl_robust.perturb import Perturbation, PixelScale, resize_image
-from vbl_robust.scenes import generate
+from vbl_robust.perturb.compose import Perturbation
+from vbl_robust.perturb.resample import PixelScale, resize_image
+from vbl_robust.scenes.generate import generate
 from vbl_robust.space import ParameterBox
 
 BOX = ParameterBox({"roll_deg": (-30, 30), "contrast": (0.4, 2.5)})

@@ -18,9 +18,9 @@ import time
 import numpy as np
 import torch
 
-from vbl_robust.detect import OracleDetector
+from vbl_robust.detect.oracle import OracleDetector
 from vbl_robust.pipeline import Objective
-from vbl_robust.scenes import generate
+from vbl_robust.scenes.generate import generate
 from vbl_robust.space import ParameterBox
 
 BOX = ParameterBox({"roll_deg": (-30, 30), "contrast": (0.4, 2.5)})

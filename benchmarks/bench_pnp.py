@@ -19,10 +19,9 @@ import numpy as np
 import torch
 
 from vbl_robust.geometry.camera import intrinsics, project
-from vbl_robust.pnp import SOLVERS, pnp_position_torch, solve
-from vbl_robust.pnp.differentiable import position_jacobian_fd
-from vbl_robust.pnp.solvers import ROWWISE
-from vbl_robust.scenes import sample_approaches
+from vbl_robust.pnp.differentiable import pnp_position_torch, position_jacobian_fd
+from vbl_robust.pnp.solvers import ROWWISE, SOLVERS, solve
+from vbl_robust.scenes.envelopes import sample_approaches
 
 ENVELOPES = ("far", "medium", "close")
 NOISE_PX = (0.0, 0.5, 2.0)

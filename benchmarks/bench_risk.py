@@ -43,7 +43,7 @@ BOXES = (15.0, 7.5)
 def _grids() -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], float]:
     """The paper's complete runtime-1d dense grids (sample id → sorted roll nodes and their L) and ε_safe."""
     from vbl_robust.analysis.reference import grid_complete
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     WORK.mkdir(parents=True, exist_ok=True)
     store = WORK / "runtime-1d.sqlite"
@@ -82,7 +82,7 @@ def run_case(case: dict) -> dict:
     from vbl_robust.campaigns.work import build_objective
     from vbl_robust.detect.shipped import DetectorSpec
     from vbl_robust.risk import ThetaDistribution, estimate_risk
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
     from vbl_robust.space import ParameterBox
     from vbl_robust.specs.campaign import derive_seed
     from vbl_robust.specs.settings import PipelineSettings

@@ -47,7 +47,8 @@ def _cold() -> dict:
 
 
 def main(quick: bool = False) -> str:
-    from vbl_robust.scenes import generate, textures
+    from vbl_robust.scenes import textures
+    from vbl_robust.scenes.generate import generate
 
     n = 6 if quick else 24
     default_threads = cv2.getNumThreads()

@@ -13,7 +13,7 @@ import time
 import numpy as np
 import torch
 
-from vbl_robust.search import METHODS, maximize
+from vbl_robust.search.api import METHODS, maximize
 from vbl_robust.search.classic import (
     CLASSIC,
     Anisotropic,

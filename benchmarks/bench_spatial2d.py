@@ -14,7 +14,8 @@ import tempfile
 from pathlib import Path
 
 from vbl_robust.report.markdown import survival_markdown
-from vbl_robust.store import PACKED, STORE, restore_store
+from vbl_robust.store.core import PACKED, STORE
+from vbl_robust.store.pack import restore_store
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLE = ROOT / "results" / "paper" / "spatial-2d"

@@ -39,7 +39,7 @@ def _side_by_side(obj, det, theta: np.ndarray, forwards: int, reps: int) -> tupl
     ``theta`` (one batch) with the OpenCV and with the torch kernel of the black-box views
     (``ViewSampler.opencv``), and ``forwards`` bare forwards of the pose network on as many 320-px views, in turn,
     the fastest of ``reps`` each, in seconds of the process clock."""
-    from vbl_robust.perturb import ViewSampler
+    from vbl_robust.perturb.views import ViewSampler
 
     net = det.first if hasattr(det, "first") else det
     views = torch.rand(len(theta), 3, net.imgsz, net.imgsz, generator=torch.Generator().manual_seed(0))
@@ -105,7 +105,7 @@ def main(quick: bool = False) -> str:
     from vbl_robust.detect.shipped import DEFAULT_MODEL, default_model_info, with_design
     from vbl_robust.detect.ultralytics import UltralyticsDetector
     from vbl_robust.pipeline import Objective
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
     from vbl_robust.space import ParameterBox
 
     setup_offline()

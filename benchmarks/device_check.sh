@@ -47,8 +47,8 @@ if [ "${1:-}" = "--paper" ]; then
       --device cuda --clock process --workers "${WORKERS:-12}" --no-report -q 2>&1 | tail -3 | tee -a "$OUT/paper.txt"
     [ -f "/tmp/paper/$e/results.sqlite" ] && python3 -c "
 import sys; from pathlib import Path
-from vbl_robust.store import pack_store
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
+from vbl_robust.store.pack import pack_store
 with ResultStore.open_existing(sys.argv[1]) as st: print(pack_store(st, Path(sys.argv[2])), st.count(), 'jobs')
 " "/tmp/paper/$e" "$OUT/$e.sqlite.xz" | tee -a "$OUT/paper.txt"
   done

@@ -1,7 +1,7 @@
 """The torch twin of a user's ONNX export against ONNX Runtime, and APGD on the ``.onnx`` against APGD on the ``.pt``.
 
 Exports the shipped model the way a user does (``yolo export format=onnx imgsz=320``: static batch 1, opset 18) into
-a temporary directory, builds the detector ``--model my_model.onnx`` gets (:class:`~vbl_robust.detect.DetectorSpec`,
+a temporary directory, builds the detector ``--model my_model.onnx`` gets (:class:`~vbl_robust.detect.shipped.DetectorSpec`,
 ONNX Runtime with its checked twin) and prints, on rendered approaches (``generate(n, seed=7)``, 512 × 512):
 
 - per image, on three θ of roll ±15° × contrast [0.7, 1.4]: max |Δ| keypoint (view px, every anchor NMS could
@@ -43,8 +43,8 @@ def main(images: int = 6, apgd: int = 3) -> None:
     from vbl_robust.detect.shipped import DEFAULT_MODEL, DetectorSpec
     from vbl_robust.detect.ultralytics import UltralyticsDetector
     from vbl_robust.pipeline import Objective
-    from vbl_robust.scenes import generate
-    from vbl_robust.search import maximize
+    from vbl_robust.scenes.generate import generate
+    from vbl_robust.search.api import maximize
     from vbl_robust.space import ParameterBox
 
     setup_offline()

@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def build_store(source: Path, copies: int, out: Path) -> Path:
     """``out/results.sqlite``: ``source``'s campaign with every sample and job row ``copies`` times."""
     from vbl_robust.digest import digest
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     out.mkdir(parents=True, exist_ok=True)
     with ResultStore.open_existing(source) as src, ResultStore(out / "results.sqlite") as dst:
@@ -86,7 +86,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, help="write the table here (Markdown) as well as printing it")
     ap.add_argument("--keep", type=Path, help="build the stores under this directory and keep them")
     args = ap.parse_args()
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     exe = str(Path(sys.executable).with_name("vbl-robust"))
     lines = ["| copies | jobs | store MB | report peak RSS MB | report s | bundle --stores peak RSS MB | bundle s |",

@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vbl_robust.detect import OracleDetector
+from vbl_robust.detect.oracle import OracleDetector
 from vbl_robust.pipeline import Objective
-from vbl_robust.search import maximize
+from vbl_robust.search.api import maximize
 from vbl_robust.space import ParameterBox
 
 BOX = ParameterBox({"roll_deg": (-20, 20), "pitch_deg": (-8, 8), "blur_px": (0, 4), "brightness": (-0.2, 0.2)})
@@ -17,7 +17,7 @@ BOX = ParameterBox({"roll_deg": (-20, 20), "pitch_deg": (-8, 8), "blur_px": (0, 
 
 @pytest.fixture(scope="module")
 def objective():
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     s = generate(1, seed=7, width=256, height=256)[0]
     return Objective(s, OracleDetector(noise_px=2.0, seed=1), BOX, pnp="ippe_lm")

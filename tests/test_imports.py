@@ -130,12 +130,12 @@ def test_the_declared_interfaces_are_implemented_where_the_code_relies_on_them()
     import numpy as np
     import torch
 
-    from vbl_robust.detect import DetectContext, OracleDetector, Views
-    from vbl_robust.detect.base import ImageViews
+    from vbl_robust.detect.base import DetectContext, ImageViews, Views
+    from vbl_robust.detect.oracle import OracleDetector
     from vbl_robust.pipeline import Objective, SearchObjective
-    from vbl_robust.scenes import generate, generate_sequences
-    from vbl_robust.sequences import SequenceObjective
-    from vbl_robust.sequences.objective import _StackedViews
+    from vbl_robust.scenes.generate import generate
+    from vbl_robust.scenes.sequences import generate_sequences
+    from vbl_robust.sequences.objective import SequenceObjective, _StackedViews
     from vbl_robust.space import ParameterBox
 
     box = ParameterBox({"roll_deg": (-5.0, 5.0)})

@@ -14,10 +14,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vbl_robust.constants import NotMeasured, NotMeasuredError
-from vbl_robust.data import Sample
-from vbl_robust.detect import OracleDetector
+from vbl_robust.data.sample import Sample
+from vbl_robust.detect.oracle import OracleDetector
 from vbl_robust.pipeline import Objective
-from vbl_robust.scenes import generate
+from vbl_robust.scenes.generate import generate
 from vbl_robust.space import ParameterBox
 
 # deterministic in CI, no example database written into the shared working tree

@@ -7,9 +7,10 @@ import torch
 
 from vbl_robust.constants import NotMeasured, NotMeasuredError
 from vbl_robust.data.sample import Sample
-from vbl_robust.detect import Detections, OracleDetector
+from vbl_robust.detect.base import Detections
+from vbl_robust.detect.oracle import OracleDetector
 from vbl_robust.geometry.camera import intrinsics, lard_rotation, project, runway_corners
-from vbl_robust.perturb import PixelScale, resize_image
+from vbl_robust.perturb.resample import PixelScale, resize_image
 from vbl_robust.pipeline import FAILURE_REASONS, EvalRecord, Objective
 from vbl_robust.space import ParameterBox
 
@@ -62,7 +63,7 @@ def test_oracle_ippe_lm_is_roll_and_contrast_invariant(samples):
 
 
 def test_oracle_on_generated_scenes_of_every_envelope():
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     theta = grid(n_roll=5)
     for env in ("close", "medium", "far"):
@@ -119,7 +120,7 @@ def test_every_failure_is_penalised_with_its_reason(samples):
 def test_a_search_for_misleading_poses_counts_flagged_failures_as_safe(samples):
     """--target misleading: a failure the system sees (here no detection) evaluates to 0 m with its reason kept, so a
     search maximises only the confident poses' errors; the audit spec carries that penalty and says so."""
-    from vbl_robust.campaigns import audit_spec
+    from vbl_robust.campaigns.audit import audit_spec
     from vbl_robust.constants import TARGETS
     from vbl_robust.specs.budget import Budget
     from vbl_robust.specs.campaign import BoxSpec

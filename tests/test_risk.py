@@ -106,7 +106,7 @@ def test_pooled_rates_and_the_command_end_to_end(tmp_path):
     assert "mc: 3 images, p_fail pooled" in res.output and "guided: 3 images" in res.output
     page = (out / "report.html").read_text()
     assert "Failure probability under the θ distribution" in page and "roll_deg normal(0, 10) truncated" in page
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     with ResultStore.open_existing(out) as st:
         pooled = {p.method: p for p in pooled_risk(st.jobs(kind="risk", with_points=True))}

@@ -3,9 +3,9 @@
 One helper for every package that re-exports names from heavy submodules (torch, ultralytics, onnxruntime): the
 command line's ``--help`` and the registries must not import them.
 
->>> import vbl_robust.perturb as p      # reads the registry without torch; p.Perturbation imports it
->>> p.PERTURBATIONS["haze"].unit
-'fraction'
+>>> import vbl_robust as vr             # imports no torch; vr.Sample imports its module on first use
+>>> vr.Sample.__module__
+'vbl_robust.data.sample'
 """
 
 from __future__ import annotations

@@ -8,13 +8,13 @@ parameter vectors θ ``(N, d)`` in real units (columns named by the box)::
     ŷ     = PnP(k, corners_3d, K)      camera position in the runway frame (pnp/)
     L     = ‖ŷ − y‖₂  (metres), or PENALTY_M (5000 m) on ANY failure
 
-One contract for every objective (this one and :class:`~vbl_robust.sequences.SequenceObjective`):
-``objective(theta)`` returns :class:`~vbl_robust.search.Evaluations` (values in metres and a failure reason per
+One contract for every objective (this one and :class:`~vbl_robust.sequences.objective.SequenceObjective`):
+``objective(theta)`` returns :class:`~vbl_robust.search.evaluations.Evaluations` (values in metres and a failure reason per
 row) and :meth:`Objective.evaluate` the full :class:`EvalRecord`; the type of θ picks the mode. A NumPy θ is the
 black box (no gradient, OpenCV PnP); a torch θ the differentiable path (the detector's ``detect_top`` and the
 implicit PnP gradient; the values are a float64 tensor attached to θ; penalised rows are constant with zero
 gradient, never NaN). Each chunk of θ is two steps: :meth:`Objective.select_at` (one detector call and σ_select →
-a :class:`~vbl_robust.detect.Selection`) and :meth:`Objective.locate` (PnP and the error → an
+a :class:`~vbl_robust.detect.base.Selection`) and :meth:`Objective.locate` (PnP and the error → an
 :class:`EvalRecord`); an objective over several frames batches the first step across frames and scores each
 frame with the second. Both modes record per row why an evaluation failed
 (:data:`vbl_robust.constants.FAILURE_REASONS`): ``no_detection``, ``low_confidence``, ``non_finite_keypoints``, ``pnp_failed``,
@@ -41,8 +41,11 @@ import torch
 from vbl_robust.constants import CONF_THRESHOLD, PENALTY_M, FailureReason, NotMeasured, NotMeasuredError
 from vbl_robust.data.sample import Sample
 from vbl_robust.detect.base import DetectContext, Detector, Selection, select
-from vbl_robust.perturb import Perturbation, PixelScale, ViewSampler, resize_image
-from vbl_robust.pnp import SOLVERS, pnp_position_torch, position_sigma, solve
+from vbl_robust.perturb.compose import Perturbation
+from vbl_robust.perturb.resample import PixelScale, resize_image
+from vbl_robust.perturb.views import ViewSampler
+from vbl_robust.pnp.differentiable import pnp_position_torch, position_sigma
+from vbl_robust.pnp.solvers import SOLVERS, solve
 from vbl_robust.search.evaluations import Evaluations
 from vbl_robust.space import ParameterBox
 
@@ -75,7 +78,7 @@ class EvalRecord:
         keypoint_sigma: ``(N, 4, 2)`` the selected corners' σ in the sample's pixels, from a detector with an
             uncertainty head (NaN elsewhere); None when the detector gives none.
         position_sigma_m: ``(N,)`` those σ propagated through PnP to the position, metres
-            (:func:`~vbl_robust.pnp.position_sigma`; NaN where no pose); None when the detector gives no σ.
+            (:func:`~vbl_robust.pnp.differentiable.position_sigma`; NaN where no pose); None when the detector gives no σ.
     """
 
     sample_id: str
@@ -154,7 +157,7 @@ class SearchObjective(Protocol):
     """What a campaign runs a search on: a batched function of θ over ``box`` (the black box for a NumPy θ, the
     differentiable path for a torch θ), evaluated in chunks of ``batch_size`` on ``device``; ``evaluate`` gives the
     full record of θ rows; ``image_error`` says why the pixels could not be loaded (a failed sample, not a breach).
-    :class:`Objective` (one image) and :class:`~vbl_robust.sequences.SequenceObjective` (an approach) implement it."""
+    :class:`Objective` (one image) and :class:`~vbl_robust.sequences.objective.SequenceObjective` (an approach) implement it."""
 
     box: ParameterBox
     batch_size: int
@@ -176,7 +179,7 @@ class Objective:
 
     Args:
         sample: the :class:`~vbl_robust.data.sample.Sample` (its pixels are loaded on the first evaluation).
-        detector: any :class:`~vbl_robust.detect.Detector` (``differentiable = True`` for a torch θ).
+        detector: any :class:`~vbl_robust.detect.base.Detector` (``differentiable = True`` for a torch θ).
         box: the :class:`~vbl_robust.space.ParameterBox` whose names select the perturbations.
         pnp: PnP solver name (``"ippe_lm"`` default, ``"iterative"``, ``"sqpnp"``, ``"ippe"``).
         conf_threshold: τ_conf of σ_select.
@@ -319,7 +322,7 @@ class Objective:
         return self._image_error
 
     def context(self, theta) -> DetectContext:
-        """The :class:`~vbl_robust.detect.DetectContext` of θ rows ``(B, d)`` (NumPy or a tensor)."""
+        """The :class:`~vbl_robust.detect.base.DetectContext` of θ rows ``(B, d)`` (NumPy or a tensor)."""
         self._load()
         sampler = ViewSampler(self.perturbation, self._base_t, theta, self._scale.to_scaled(self.sample.K[:2, 2]),
                               K=self._scale.intrinsics(self.sample.K), scale=self._scale, frame=self._base)
@@ -327,7 +330,7 @@ class Objective:
 
     # -- the contract: θ → Evaluations / EvalRecord (module docstring) -------------------------------------------
     def __call__(self, theta) -> Evaluations:
-        """``theta (N, d)`` real units → :class:`~vbl_robust.search.Evaluations`: ``L`` in metres (float64; a tensor
+        """``theta (N, d)`` real units → :class:`~vbl_robust.search.evaluations.Evaluations`: ``L`` in metres (float64; a tensor
         differentiable w.r.t. a torch θ) and the failure reason per row."""
         return self.evaluate(theta).evaluations()
 

@@ -262,7 +262,7 @@ def _mc(f: Callable, dist: ThetaDistribution, eps: float, tau: float, delta: flo
 def _guided(f: Callable, dist: ThetaDistribution, eps: float, tau: float, delta: float, max_evals: int,
             rng: np.random.Generator, seed: int, guide_evals: int, guide_fraction: float,
             share: float | None) -> RiskResult:
-    from .search import make_optimizer
+    from .search.api import make_optimizer
 
     guide = make_optimizer("georobust-av", dist.box, max_evals=min(guide_evals, max_evals - 2), seed=seed)
     xs, fs, reasons = [], [], []
@@ -355,7 +355,7 @@ def estimate_risk(f: Callable[[np.ndarray], Any], dist: ThetaDistribution, metho
                   tau: float = TAU, delta: float = DELTA, max_evals: int = 1024, seed: int = 0,
                   guide_evals: int = GUIDE_EVALS, guide_fraction: float = GUIDE_FRACTION,
                   share: float | None = SHARE) -> RiskResult:
-    """p_fail of ``f`` (a batched objective: ``(n, d)`` θ → values or :class:`~vbl_robust.search.Evaluations`)
+    """p_fail of ``f`` (a batched objective: ``(n, d)`` θ → values or :class:`~vbl_robust.search.evaluations.Evaluations`)
     under ``dist`` by ``method`` (:data:`RISK_METHODS`; module docstring), spending at most ``max_evals``."""
     if method not in RISK_METHODS:
         raise ValueError(f"risk method must be one of {', '.join(RISK_METHODS)}, got {method!r}")

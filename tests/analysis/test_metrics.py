@@ -11,11 +11,10 @@ from vbl_robust.analysis.metrics import convergence, pnp_summary
 from vbl_robust.analysis.reference import REFERENCE_METHOD, against_reference, lattice_covered, reference_rows
 from vbl_robust.analysis.summary import summarize
 from vbl_robust.constants import BreachKind
-from vbl_robust.search import TraceRow
+from vbl_robust.search.result import TraceRow
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import roll_box
-from vbl_robust.store import JobRow, Points
-from vbl_robust.store.rows import StoredPoints
+from vbl_robust.store.rows import JobRow, Points, StoredPoints
 
 
 def row(**kw):

@@ -9,15 +9,18 @@ import numpy as np
 import pytest
 
 import vbl_robust.search.base as base_module
-from vbl_robust import store as store_module
 from vbl_robust.analysis.readoff import main_rows, read_off, read_off_rows
 from vbl_robust.analysis.summary import summarize
 from vbl_robust.campaigns.work import search_row
 from vbl_robust.constants import Verdict
-from vbl_robust.search import at_budget, maximize
+from vbl_robust.search.anytime import at_budget
+from vbl_robust.search.api import maximize
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import BoxSpec, CampaignSpec, Job, roll_box
-from vbl_robust.store import JobStatus, Points, ResultStore, schema
+from vbl_robust.specs.kinds import JobStatus
+from vbl_robust.store import schema
+from vbl_robust.store.core import ResultStore
+from vbl_robust.store.rows import Points
 
 
 def test_a_budget_without_reads_keeps_its_dict_and_label():
@@ -62,7 +65,7 @@ def test_a_schema_2_store_opens_as_the_current_schema(tmp_path):
     with ResultStore(tmp_path / "r.sqlite") as st:
         assert st.count() == 0
     con = sqlite3.connect(tmp_path / "r.sqlite")
-    assert con.execute("PRAGMA user_version").fetchone()[0] == store_module.SCHEMA_VERSION
+    assert con.execute("PRAGMA user_version").fetchone()[0] == schema.SCHEMA_VERSION
 
 
 class Clock:

@@ -8,7 +8,7 @@ from vbl_robust.analysis.breach import survived
 from vbl_robust.analysis.readoff import main_rows
 from vbl_robust.analysis.truth import survivors_of_every_method, true_survival
 from vbl_robust.cli import app
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 runner = CliRunner()
 

@@ -61,9 +61,10 @@ def kill_campaign_spec():
 def main(out: str, n: int, delay: float, mode: str = "") -> None:
     import torch
 
-    from vbl_robust.campaigns import DetectorSpec, run_campaign
-    from vbl_robust.scenes import generate
-    from vbl_robust.store import ResultStore
+    from vbl_robust.campaigns.runner import run_campaign
+    from vbl_robust.detect.shipped import DetectorSpec
+    from vbl_robust.scenes.generate import generate
+    from vbl_robust.store.core import ResultStore
 
     torch.set_num_threads(1)
     samples = generate(n, seed=3, width=96, height=96)

@@ -14,6 +14,6 @@ SIZE = 128
 
 @pytest.fixture(scope="session")
 def small_samples():
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     return generate(6, seed=3, width=SIZE, height=SIZE)

@@ -8,11 +8,12 @@ import sys
 
 
 def main(out: str) -> None:
-    from vbl_robust.campaigns import DetectorSpec, run_campaign
-    from vbl_robust.scenes import generate
+    from vbl_robust.campaigns.runner import run_campaign
+    from vbl_robust.detect.shipped import DetectorSpec
+    from vbl_robust.scenes.generate import generate
     from vbl_robust.specs.budget import Budget
     from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     spec = CampaignSpec("start-up", (Block(boxes=(roll_box(5),), methods=("random",),
                                            budgets=(Budget(max_evals=8),)),), seed=5)

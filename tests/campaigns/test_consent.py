@@ -14,7 +14,8 @@ from vbl_robust.cli import app
 from vbl_robust.consent import CODE_KINDS, consent_needed, refuse_without_consent
 from vbl_robust.detect.oracle import OracleDetector
 from vbl_robust.detect.shipped import DetectorSpec
-from vbl_robust.store import ResultStore, pack_store
+from vbl_robust.store.core import ResultStore
+from vbl_robust.store.pack import pack_store
 
 runner = CliRunner()
 

@@ -4,12 +4,12 @@ import math
 
 import pytest
 
-from vbl_robust.campaigns import run_campaign
 from vbl_robust.campaigns.pnpcheck import TRUNCATED
+from vbl_robust.campaigns.runner import run_campaign
 from vbl_robust.paper.experiments import EXPERIMENTS, Options, experiment
-from vbl_robust.report import build_report
+from vbl_robust.report.build import build_report
 from vbl_robust.specs.campaign import FIGURES as FIGURE_NAMES
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 TINY = Options(max_evals=8, grid_step_deg=1.0, landscape=(9, 5), time_budgets=(0.02, 0.05), eval_budgets=(4, 8),
                iterations=6)

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import DetectorSpec, run_campaign
+from vbl_robust.campaigns.runner import run_campaign
 from vbl_robust.constants import EPS_SAFE_M, Verdict
+from vbl_robust.detect.shipped import DetectorSpec
 from vbl_robust.paper.experiments import (
     EXPERIMENTS,
     FAMILY_GRID_POINTS,
@@ -17,13 +18,13 @@ from vbl_robust.paper.experiments import (
     experiment,
     family_grid_count,
 )
-from vbl_robust.perturb import PERTURBATIONS
-from vbl_robust.report import build_report
+from vbl_robust.perturb.registry import PERTURBATIONS
+from vbl_robust.report.build import build_report
 from vbl_robust.report.evidence import SAFETY_FIGURE
 from vbl_robust.report.html import fmt_num
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, levels_text, range_text, roll_box
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 TINY = Options(methods=("georobust", "random"), max_evals=6, family_grid=21)
 

@@ -18,14 +18,14 @@ from vbl_robust.campaigns.harden import (
 )
 from vbl_robust.detect.base import Detections
 from vbl_robust.detect.oracle import OracleDetector
-from vbl_robust.perturb import Perturbation
-from vbl_robust.pnp import solve
+from vbl_robust.perturb.compose import Perturbation
+from vbl_robust.pnp.solvers import solve
 from vbl_robust.space import ParameterBox
 
 
 @pytest.fixture(scope="module")
 def sample():
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     return generate(1, seed=3, width=256, height=256)[0]
 
@@ -122,7 +122,7 @@ def test_harden_trains_on_the_worst_views_and_resumes(tmp_path, sample):
     import torch
 
     from vbl_robust.campaigns.harden import harden
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     torch.set_num_threads(1)
     tr, va = generate(4, seed=11, width=256, height=256), generate(2, seed=12, width=256, height=256)
@@ -200,7 +200,7 @@ def test_the_command_draws_its_approaches_from_the_data_it_names(tmp_path, monke
     from vbl_robust.cli import app
     from vbl_robust.detect.protocol import HARDEN_SEED
     from vbl_robust.detect.train import SHIPPED_DATA, VAL_SEED_OFFSET
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     seen = {}
     monkeypatch.setattr(harden_module, "harden", lambda out, box, **kw: seen.update(kw) or [])

@@ -5,10 +5,10 @@ from pathlib import Path
 
 import pytest
 
-from vbl_robust.campaigns import run_campaign
+from vbl_robust.campaigns.runner import run_campaign
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 HERE = Path(__file__).resolve().parent
 

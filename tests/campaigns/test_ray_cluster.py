@@ -33,7 +33,7 @@ from vbl_robust.campaigns.runner import (
     ray_rejects,
 )
 from vbl_robust.cli import app
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 #: The ``ray`` command of this environment (installed with the package), else the one on PATH.
 RAY_CLI = next((Path(p) for p in (Path(sys.executable).with_name("ray"), shutil.which("ray")) if p and Path(p).exists()),

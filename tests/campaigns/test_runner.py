@@ -3,12 +3,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from vbl_robust.campaigns import DetectorSpec, plan, run_campaign
+from vbl_robust.campaigns.runner import plan, run_campaign
 from vbl_robust.constants import FAILURE_REASONS, NotMeasured, Verdict
 from vbl_robust.data.sample import Sample
+from vbl_robust.detect.shipped import DetectorSpec
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
-from vbl_robust.store import JobStatus, ResultStore, RunStatus
+from vbl_robust.specs.kinds import JobStatus, RunStatus
+from vbl_robust.store.core import ResultStore
 
 
 def small_spec(name="t", methods=("georobust", "random"), **kw):
@@ -174,7 +176,7 @@ def test_one_writer_per_store(tmp_path, small_samples, oracle):
     """A second run on a store that another process is writing is refused with the writer's PID, not mixed in."""
     import os
 
-    from vbl_robust.store import WriterLock
+    from vbl_robust.store.lock import WriterLock
 
     with ResultStore(tmp_path / "r.sqlite") as st:
         with WriterLock(st.path):  # another writer (a lock taken on its own file descriptor)
@@ -222,7 +224,7 @@ def test_deleting_the_lock_file_does_not_let_a_second_writer_in(tmp_path):
     created anew by the second writer) does not make a second, free lock."""
     import os
 
-    from vbl_robust.store import WriterLock
+    from vbl_robust.store.lock import WriterLock
 
     store = tmp_path / "results.sqlite"
     with WriterLock(store):

@@ -1,6 +1,6 @@
 import pytest
 
-from vbl_robust.campaigns import find_lard_files, load_samples
+from vbl_robust.campaigns.samples import find_lard_files, load_samples
 
 
 def test_load_synthetic_samples_is_seeded():
@@ -13,7 +13,7 @@ def test_load_synthetic_samples_is_seeded():
 
 
 def test_lard_directory_round_trip_and_random_subset(tmp_path):
-    from vbl_robust.scenes import write_dataset
+    from vbl_robust.scenes.export import write_dataset
 
     write_dataset(tmp_path / "ds", 4, seed=2, width=96, height=96)
     samples, src = load_samples(2, 0, lard=tmp_path / "ds")

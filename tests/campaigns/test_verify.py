@@ -13,15 +13,19 @@ import pytest
 from typer.testing import CliRunner
 
 from vbl_robust.analysis.readoff import main_rows
-from vbl_robust.campaigns import run_campaign
+from vbl_robust.campaigns.runner import run_campaign
 from vbl_robust.campaigns.verify import banner_lines, check_store, screen
 from vbl_robust.cli import app
 from vbl_robust.constants import Verdict
-from vbl_robust.scenes import generate
+from vbl_robust.scenes.generate import generate
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
-from vbl_robust.store import JOB_COLUMNS, JobRow, JobStatus, ResultStore, merge_runs
+from vbl_robust.specs.kinds import JobStatus
+from vbl_robust.store.core import ResultStore
 from vbl_robust.store.digest import FindingKind, reseal
+from vbl_robust.store.merge import merge_runs
+from vbl_robust.store.rows import JobRow
+from vbl_robust.store.schema import JOB_COLUMNS
 
 runner = CliRunner()
 SPEC = CampaignSpec("verify-test", (
@@ -35,7 +39,7 @@ SPEC = CampaignSpec("verify-test", (
 @pytest.fixture(scope="module")
 def pristine(tmp_path_factory):
     """A tiny committed campaign: main searches, a chain with implied rows, PnP rows (the oracle detector)."""
-    from vbl_robust.campaigns import DetectorSpec
+    from vbl_robust.detect.shipped import DetectorSpec
 
     out = tmp_path_factory.mktemp("verify") / "run"
     with ResultStore(out / "results.sqlite") as store:
@@ -223,7 +227,7 @@ def test_an_unedited_store_verifies_clean_and_its_head_is_the_reported_one(prist
 
 
 def test_the_report_leaves_the_edited_row_out_says_so_and_prints_the_head(pristine, tmp_path):
-    from vbl_robust.report import build_report
+    from vbl_robust.report.build import build_report
 
     row = _raw(pristine, TARGETS["search"])
     run = _copy(pristine, tmp_path / "edited")
@@ -357,8 +361,8 @@ def test_zones_and_findings_are_typed(pristine, tmp_path):
 
 
 def test_risk_rows_agree_with_their_draws(tmp_path):
-    from vbl_robust.campaigns import DetectorSpec
     from vbl_robust.campaigns.audit import risk_spec
+    from vbl_robust.detect.shipped import DetectorSpec
 
     spec = risk_spec(roll_box(10), methods=("mc",), max_evals=32, guide_evals=8, seed=1)
     with ResultStore(tmp_path / "results.sqlite") as store:

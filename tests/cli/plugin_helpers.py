@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from vbl_robust.detect import OracleDetector
+from vbl_robust.detect.oracle import OracleDetector
 
 
 class NoisyCorners(OracleDetector):

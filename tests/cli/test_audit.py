@@ -201,11 +201,12 @@ def test_a_configuration_error_is_refused_before_any_work(tmp_path, args, messag
 
 
 def test_the_api_refuses_the_same_configuration_errors(tmp_path):
-    from vbl_robust.campaigns import DetectorSpec, run_campaign
+    from vbl_robust.campaigns.runner import run_campaign
+    from vbl_robust.detect.shipped import DetectorSpec
     from vbl_robust.space import ParameterBox
     from vbl_robust.specs.budget import Budget
     from vbl_robust.specs.campaign import Block, BoxSpec, CampaignSpec
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     box = BoxSpec(ParameterBox({"contrast": (-1.0, 2.0)}), "contrast [-1, 2]", 1.0)
     spec = CampaignSpec("t", (Block(boxes=(box,), methods=("random",), budgets=(Budget(max_evals=4),)),))
@@ -289,7 +290,7 @@ def test_a_store_refuses_a_detector_with_other_options(tmp_path):
     assert runner.invoke(app, [*base, "--oracle-noise", "1"]).exit_code == 0
     res = runner.invoke(app, [*base, "--oracle-noise", "3"])
     assert res.exit_code == 2 and "holds results of detector" in res.output and "noise" in res.output, res.output
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     with ResultStore.open_existing(out) as st:
         assert st.count() == 1
@@ -301,7 +302,7 @@ def test_a_full_disk_ends_the_run_in_one_line_and_keeps_the_stored_jobs(tmp_path
     exit 1, and a rerun resumes from the jobs committed before."""
     import errno
 
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     out = tmp_path / "run"
     real_commit, commits = ResultStore.commit, []

@@ -8,7 +8,7 @@ from typer.testing import CliRunner
 
 from vbl_robust.cli import app
 from vbl_robust.cli.common import parse_perturb
-from vbl_robust.perturb import PERTURBATIONS
+from vbl_robust.perturb.registry import PERTURBATIONS
 
 runner = CliRunner()
 SMALL = ["--oracle", "--oracle-noise", "0.5", "--width", "128", "--height", "128", "--quiet", "--no-report",

@@ -30,13 +30,12 @@ def test_a_count_beyond_its_bound_is_refused_before_any_work(tmp_path, args, msg
 
 
 def test_a_stored_blob_may_not_inflate_past_its_bound(monkeypatch):
-    from vbl_robust import store
     from vbl_robust.store import rows
 
     monkeypatch.setattr(rows, "MAX_BLOB_BYTES", 1000)
     bomb = zlib.compress(b"[" + b"0," * 5000 + b"0]")  # tiny compressed, 10 kB inflated
     with pytest.raises(ValueError, match="decompresses to more than 1000 bytes"):
-        store.Points.from_blob(bomb)
+        rows.Points.from_blob(bomb)
 
 
 def test_probes_that_gave_tracebacks_give_one_line(tmp_path):

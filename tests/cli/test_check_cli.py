@@ -15,7 +15,8 @@ from PIL import Image, ImageFile
 from typer.testing import CliRunner
 
 from vbl_robust.cli import app
-from vbl_robust.scenes import write_dataset, write_sequences
+from vbl_robust.scenes.export import write_dataset
+from vbl_robust.scenes.sequences import write_sequences
 
 runner = CliRunner()
 SIZE = 96

@@ -99,11 +99,12 @@ def test_an_empty_value_is_refused_not_read_as_the_current_directory(tmp_path, m
 def test_an_os_error_outside_a_campaign_is_one_line_without_the_resume_hint(tmp_path):
     """``zones RUN --out DIR`` was a traceback (IsADirectoryError); a command that stores no jobs says nothing of
     resuming."""
-    from vbl_robust.campaigns import DetectorSpec, run_campaign
-    from vbl_robust.scenes import generate
+    from vbl_robust.campaigns.runner import run_campaign
+    from vbl_robust.detect.shipped import DetectorSpec
+    from vbl_robust.scenes.generate import generate
     from vbl_robust.specs.budget import Budget
     from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     spec = CampaignSpec("zones-out", (Block(boxes=(roll_box(5),), methods=("georobust",),
                                             budgets=(Budget(max_evals=8),)),), seed=1)

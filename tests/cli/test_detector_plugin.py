@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 from vbl_robust.campaigns.runner import WORKERS_ENV
 from vbl_robust.cli import app
 from vbl_robust.digest import file_sha256
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 runner = CliRunner()
 HELPERS = Path(__file__).with_name("plugin_helpers.py")
@@ -88,9 +88,9 @@ def test_a_plugin_that_is_not_a_detector_is_refused_before_the_run(factory, word
 def test_an_exception_inside_a_plugin_during_the_run_is_not_measured(tmp_path):
     """Past the first image's check (here: skipped by the library API), the plug-in's exceptions are detector
     errors: jobs not measured, exit 1 — never breaches."""
-    from vbl_robust.campaigns import run_campaign
+    from vbl_robust.campaigns.runner import run_campaign
     from vbl_robust.detect.shipped import DetectorSpec
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
     from vbl_robust.specs.budget import Budget
     from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
 

@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 
 from vbl_robust.cli import app
 from vbl_robust.scenes.envelopes import fit_margin
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 runner = CliRunner()
 

@@ -7,7 +7,7 @@ import pytest
 from typer.testing import CliRunner
 
 from vbl_robust.cli import app
-from vbl_robust.perturb import Perturbation
+from vbl_robust.perturb.compose import Perturbation
 from vbl_robust.space import ParameterBox
 
 runner = CliRunner()

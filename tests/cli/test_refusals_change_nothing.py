@@ -95,7 +95,7 @@ _HELD: list = []
 
 def _hold_the_store(monkeypatch, root):
     """Another run writing the store (its writer lock held)."""
-    from vbl_robust.store import WriterLock
+    from vbl_robust.store.lock import WriterLock
 
     _HELD.append(WriterLock(root / "RUN" / "results.sqlite").acquire())
 

@@ -36,7 +36,7 @@ def test_reproduce_all_runs_every_experiment_and_resumes(tmp_path):
 
     import pyarrow.parquet as pq
 
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     bundle = tmp_path / "bundle"
     repro = tmp_path / "REPRODUCTION.md"
@@ -141,7 +141,7 @@ def test_bad_clock_and_workers_are_refused_before_any_work(tmp_path):
 
 
 def test_two_workers_and_the_process_clock_are_recorded(tmp_path):
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     out = tmp_path / "r"
     res = runner.invoke(app, ["reproduce", "runtime-1d", "--out", str(out), *SMALL, "--workers", "2", "--no-report"])

@@ -13,7 +13,7 @@ from vbl_robust.cli import app
 from vbl_robust.cli import options as o
 from vbl_robust.cli.config import run_config
 from vbl_robust.cli.requests import BoxRequest, DetectorRequest, ImagesRequest, RunRequest
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 runner = CliRunner()
 

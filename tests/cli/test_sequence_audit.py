@@ -9,12 +9,15 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import DetectorSpec, audit_spec, load_sequences, run_campaign
+from vbl_robust.campaigns.audit import audit_spec
 from vbl_robust.campaigns.replay import zones_of_run
+from vbl_robust.campaigns.runner import run_campaign
+from vbl_robust.campaigns.samples import load_sequences
 from vbl_robust.cli import app
+from vbl_robust.detect.shipped import DetectorSpec
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import roll_box
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 runner = CliRunner()
 SMALL = ["--oracle", "--width", "96", "--height", "96", "--quiet", "--workers", "1"]
@@ -127,7 +130,7 @@ def test_sequence_audit_user_errors(tmp_path, args, message):
 
 
 def test_a_campaign_refuses_samples_of_the_other_kind(tmp_path):
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     seqs, _ = load_sequences("1", frames=2, rate_hz=1.0, seed=0, width=96, height=96)
     images = list(generate(1, seed=0, width=96, height=96))

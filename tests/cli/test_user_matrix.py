@@ -20,7 +20,7 @@ from typer.testing import CliRunner
 from vbl_robust.campaigns.runner import WORKERS_ENV
 from vbl_robust.cli import app
 from vbl_robust.detect.shipped import DEFAULT_MODEL
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 runner = CliRunner()
 #: The work cut to test size (no user-path option: methods, workers, engine and device stay the defaults).

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from vbl_robust.campaigns.runner import WORKERS_ENV, default_workers
 from vbl_robust.cli import app
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 runner = CliRunner()
 
@@ -62,7 +62,7 @@ def _check_complete(res, out, jobs_expected):
 def test_a_lard_sample_pickles_with_its_image_loader(lard_dir):
     """What a worker process receives: the pickled sample loads the same pixels on the other side."""
     from vbl_robust.campaigns.samples import find_lard_files
-    from vbl_robust.data import read_lard
+    from vbl_robust.data.lard_read import read_lard
 
     sample = next(iter(read_lard(*find_lard_files(lard_dir))))
     copy = pickle.loads(pickle.dumps(sample))

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from vbl_robust.data import Sample
-from vbl_robust.geometry import RunwayFrame, intrinsics, lard_rotation, project, runway_db_entry
+from vbl_robust.data.sample import Sample
+from vbl_robust.geometry.camera import intrinsics, lard_rotation, project
+from vbl_robust.geometry.geodesy import RunwayFrame, runway_db_entry
 
 W, H = 160, 120
 

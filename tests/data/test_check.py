@@ -12,16 +12,19 @@ from lard_helpers import H, W, make_runway_db, make_samples
 from PIL import Image, ImageFile
 
 from vbl_robust.constants import MAX_IMAGE_SIDE
-from vbl_robust.data import (
-    ApproachSequence,
+from vbl_robust.data.check import (
+    CAMERA_CONVENTION,
+    MAX_IMAGE_FILE_BYTES,
+    check_image,
     check_images,
     check_labels,
+    describe_problems,
     first_problem,
     image_digests,
-    read_lard,
-    write_lard,
 )
-from vbl_robust.data.check import CAMERA_CONVENTION, MAX_IMAGE_FILE_BYTES, check_image, describe_problems
+from vbl_robust.data.lard_read import read_lard
+from vbl_robust.data.lard_write import write_lard
+from vbl_robust.data.sequence import ApproachSequence
 from vbl_robust.digest import file_sha256
 
 
@@ -174,7 +177,7 @@ def test_an_image_outside_the_root_is_refused(rows, tmp_path):
 
 def test_digests_are_the_files_sha256_and_spare_the_store_a_second_read(rows, tmp_path, monkeypatch):
     import vbl_robust.digest
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     root, samples = rows
     checks = check_images(samples, root=root, sha256=True)

@@ -23,7 +23,6 @@ from hypothesis import event, given, settings
 from hypothesis import strategies as st
 from lard_helpers import make_runway_db, make_samples
 
-from vbl_robust.data import normalize_runway, read_lard, resolve_within, write_lard
 from vbl_robust.data.lard import (
     CORNER_COLUMNS,
     DERIVED_COLUMNS,
@@ -31,6 +30,7 @@ from vbl_robust.data.lard import (
     REQUIRED_COLUMNS,
     approach_metrics,
     metrics_tolerance,
+    normalize_runway,
 )
 from vbl_robust.data.lard_read import (
     EXACT_TOL_PX,
@@ -39,8 +39,11 @@ from vbl_robust.data.lard_read import (
     MAX_IMAGE_SIZE_PX,
     RELATIVE_TOL_PX,
     RUNWAY_IN_CONE,
+    read_lard,
 )
-from vbl_robust.geometry import project
+from vbl_robust.data.lard_write import write_lard
+from vbl_robust.data.paths import resolve_within
+from vbl_robust.geometry.camera import project
 
 # deterministic in CI, no example database written into the shared working tree
 PROPS = settings(max_examples=80, deadline=None, derandomize=True, database=None)

@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 from lard_helpers import make_runway_db, make_samples
 
-from vbl_robust.data import normalize_runway, read_lard, write_lard
+from vbl_robust.data.lard import normalize_runway
+from vbl_robust.data.lard_read import read_lard
+from vbl_robust.data.lard_write import write_lard
 
 
 @pytest.fixture

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vbl_robust.data import read_lard
-from vbl_robust.geometry import project
+from vbl_robust.data.lard_read import read_lard
+from vbl_robust.geometry.camera import project
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "lard"
 
@@ -46,7 +46,7 @@ def test_real_row_geometry_is_a_plausible_approach(sample):
 
 def test_yaw_reference_matters(sample):
     """Referencing yaw to the sphere azimuth instead of the WGS84 heading shifts u by ≈ 1 px (docstring table)."""
-    from vbl_robust.geometry import lard_rotation
+    from vbl_robust.geometry.camera import lard_rotation
 
     m = sample.meta
     R_sphere = lard_rotation(m["yaw"], m["pitch"], m["roll"], m["runway_azimuth_deg"])

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from lard_helpers import H, W, make_runway_db, make_samples
 
-from vbl_robust.data import LARD_COLUMNS, read_lard, write_lard
-from vbl_robust.data.lard import METRES_PER_NM
+from vbl_robust.data.lard import LARD_COLUMNS, METRES_PER_NM
+from vbl_robust.data.lard_read import read_lard
+from vbl_robust.data.lard_write import write_lard
 
 
 @pytest.fixture

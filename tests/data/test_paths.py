@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from vbl_robust.data import resolve_within
+from vbl_robust.data.paths import resolve_within
 
 
 def test_inside_paths_resolve(tmp_path):

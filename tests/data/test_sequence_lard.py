@@ -6,15 +6,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from vbl_robust.data import (
-    SEQUENCE_COLUMNS,
-    ApproachSequence,
-    group_sequences,
-    read_lard,
-    read_lard_sequences,
-)
+from vbl_robust.data.lard import SEQUENCE_COLUMNS
+from vbl_robust.data.lard_read import read_lard
 from vbl_robust.data.lard_write import write_lard
-from vbl_robust.scenes import generate, generate_sequences, write_dataset, write_sequences
+from vbl_robust.data.sequence import ApproachSequence, group_sequences, read_lard_sequences
+from vbl_robust.scenes.export import write_dataset
+from vbl_robust.scenes.generate import generate
+from vbl_robust.scenes.sequences import generate_sequences, write_sequences
 
 SMALL = {"width": 96, "height": 96}
 

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.perturb import PERTURBATIONS, Perturbation
+from vbl_robust.perturb.compose import Perturbation
+from vbl_robust.perturb.registry import PERTURBATIONS
 from vbl_robust.perturb.resample import PixelScale
 from vbl_robust.perturb.views import ViewSampler
 from vbl_robust.space import ParameterBox
@@ -80,9 +81,9 @@ def test_views_are_made_on_the_source_device(names, differentiable):
 
 
 def test_objective_follows_the_detector_device():
-    from vbl_robust.detect import OracleDetector
+    from vbl_robust.detect.oracle import OracleDetector
     from vbl_robust.pipeline import Objective
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     sample = generate(1, seed=3)[0]
     box = ParameterBox({"roll_deg": (-5, 5)})

@@ -7,7 +7,7 @@ import pytest
 import torch
 from detect_helpers import runway_image
 
-from vbl_robust.detect import DetectContext
+from vbl_robust.detect.base import DetectContext
 from vbl_robust.detect.engines import EnginePose, exported_onnx, resolve_engine, with_engine
 from vbl_robust.detect.shipped import DetectorSpec
 from vbl_robust.detect.twostage import TwoStageDetector

@@ -24,7 +24,7 @@ from vbl_robust.detect.onnx_twin import (
 )
 from vbl_robust.detect.shipped import DEFAULT_MODEL, DetectorSpec
 from vbl_robust.pipeline import Objective
-from vbl_robust.search import maximize
+from vbl_robust.search.api import maximize
 from vbl_robust.space import ParameterBox
 
 IMGSZ = 320

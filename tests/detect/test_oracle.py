@@ -3,9 +3,12 @@ import pytest
 import torch
 
 from vbl_robust.data.sample import Sample
-from vbl_robust.detect import DetectContext, OracleDetector, select
+from vbl_robust.detect.base import DetectContext, select
+from vbl_robust.detect.oracle import OracleDetector
 from vbl_robust.geometry.camera import intrinsics, lard_rotation, project, runway_corners
-from vbl_robust.perturb import Perturbation, PixelScale, roll_points
+from vbl_robust.perturb.compose import Perturbation
+from vbl_robust.perturb.geometric import roll_points
+from vbl_robust.perturb.resample import PixelScale
 from vbl_robust.space import ParameterBox
 
 BOX = ParameterBox({"roll_deg": (-30, 30), "contrast": (0.4, 2.5)})

@@ -10,8 +10,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from vbl_robust.constants import FAILURE_REASONS, PENALTY_M
-from vbl_robust.detect import DetectContext, OracleDetector, select
-from vbl_robust.perturb import PERTURBATIONS, Perturbation, PixelScale
+from vbl_robust.detect.base import DetectContext, select
+from vbl_robust.detect.oracle import OracleDetector
+from vbl_robust.perturb.compose import Perturbation
+from vbl_robust.perturb.registry import PERTURBATIONS
+from vbl_robust.perturb.resample import PixelScale
 from vbl_robust.pipeline import Objective
 from vbl_robust.space import ParameterBox
 
@@ -20,7 +23,7 @@ ROTATION = ParameterBox({"roll_deg": (-30, 30), "pitch_deg": (-10, 10), "yaw_deg
 
 @pytest.fixture(scope="module")
 def scenes():
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     return generate(3, seed=3, width=256, height=256)
 

@@ -3,7 +3,7 @@ import pytest
 import torch
 
 from vbl_robust.constants import CONF_THRESHOLD
-from vbl_robust.detect import Detections, Detector, DifferentiableDetector, select
+from vbl_robust.detect.base import Detections, Detector, DifferentiableDetector, select
 
 
 def _dets(confs, offset=0.0):

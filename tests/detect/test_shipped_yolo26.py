@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vbl_robust.detect import TwoStageDetector
 from vbl_robust.detect.shipped import DEFAULT_MODEL, DetectorSpec, default_model_path
+from vbl_robust.detect.twostage import TwoStageDetector
 from vbl_robust.digest import file_sha256
 from vbl_robust.pipeline import Objective
-from vbl_robust.scenes import generate
+from vbl_robust.scenes.generate import generate
 from vbl_robust.space import ParameterBox
 
 

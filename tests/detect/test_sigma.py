@@ -13,9 +13,9 @@ from vbl_robust.detect.base import Detections, select
 from vbl_robust.detect.oracle import OracleDetector
 from vbl_robust.detect.pose import split_raw, split_sigma
 from vbl_robust.pipeline import Objective
-from vbl_robust.pnp import position_sigma, solve
-from vbl_robust.pnp.differentiable import position_jacobian_fd
-from vbl_robust.scenes import generate
+from vbl_robust.pnp.differentiable import position_jacobian_fd, position_sigma
+from vbl_robust.pnp.solvers import solve
+from vbl_robust.scenes.generate import generate
 from vbl_robust.space import ParameterBox
 
 IMGSZ = 64

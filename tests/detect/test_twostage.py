@@ -7,7 +7,7 @@ import pytest
 import torch
 from detect_helpers import approach_sample
 
-from vbl_robust.detect import DetectContext, DifferentiableDetector
+from vbl_robust.detect.base import DetectContext, DifferentiableDetector
 from vbl_robust.detect.twostage import TwoStageDetector
 from vbl_robust.detect.ultralytics import UltralyticsDetector
 from vbl_robust.space import ParameterBox

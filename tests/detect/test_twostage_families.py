@@ -8,10 +8,10 @@ import pytest
 import torch
 from detect_helpers import approach_sample
 
-from vbl_robust.detect import DetectContext
+from vbl_robust.detect.base import DetectContext
 from vbl_robust.detect.twostage import TwoStageDetector
 from vbl_robust.detect.ultralytics import UltralyticsDetector
-from vbl_robust.perturb import PERTURBATIONS
+from vbl_robust.perturb.registry import PERTURBATIONS
 from vbl_robust.pipeline import Objective
 from vbl_robust.space import ParameterBox
 

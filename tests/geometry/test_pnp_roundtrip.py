@@ -16,7 +16,7 @@ from vbl_robust.geometry.camera import (
     runway_corners,
     world_to_cv,
 )
-from vbl_robust.pnp import SOLVERS, solve
+from vbl_robust.pnp.solvers import SOLVERS, solve
 
 N_POSES = 400
 

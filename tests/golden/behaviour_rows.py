@@ -24,13 +24,13 @@ def audit_rows(config: str, n_samples: int = 2, max_evals: int = 20) -> list[dic
     """The rows of the fixed audit for one detector configuration, sorted by (sample, method)."""
     import torch
 
-    from vbl_robust.campaigns import DetectorSpec
     from vbl_robust.campaigns.audit import audit_spec
     from vbl_robust.campaigns.runner import run_campaign
-    from vbl_robust.scenes import generate
+    from vbl_robust.detect.shipped import DetectorSpec
+    from vbl_robust.scenes.generate import generate
     from vbl_robust.specs.budget import Budget
     from vbl_robust.specs.campaign import roll_contrast_box
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     torch.set_num_threads(1)
     det = DetectorSpec.oracle(1.0) if config == "oracle" else DetectorSpec("default", options={"design": config})
@@ -45,7 +45,7 @@ def audit_rows(config: str, n_samples: int = 2, max_evals: int = 20) -> list[dic
 
 
 def _plain_row(r) -> dict:
-    """The compared fields of a :class:`~vbl_robust.store.JobRow`, as JSON values."""
+    """The compared fields of a :class:`~vbl_robust.store.rows.JobRow`, as JSON values."""
     out = {k: getattr(r, k) for k in FIELDS}
     out["verdict"] = None if r.verdict is None else str(r.verdict.value)
     return out

@@ -9,7 +9,8 @@ import re
 import struct
 from pathlib import Path
 
-from vbl_robust.campaigns import DetectorSpec, run_campaign
+from vbl_robust.campaigns.runner import run_campaign
+from vbl_robust.detect.shipped import DetectorSpec
 from vbl_robust.paper.bundle import BEGIN, END, refresh_bundle, write_bundle
 from vbl_robust.paper.claim_rules import CONTRADICTED, HOLDS, TIE, Claim
 from vbl_robust.paper.claims_page import (
@@ -20,10 +21,10 @@ from vbl_robust.paper.claims_page import (
     verdict_sentence,
     write_index,
 )
-from vbl_robust.scenes import generate
+from vbl_robust.scenes.generate import generate
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 PAPER_ORDER = ["pnp-validation", "spatial-1d", "runtime-1d", "spatial-2d", "runtime-2d", "distance-profile",
                "convergence"]

@@ -5,12 +5,13 @@ from pathlib import Path
 
 import pytest
 
-from vbl_robust.campaigns import DetectorSpec, run_campaign
+from vbl_robust.campaigns.runner import run_campaign
+from vbl_robust.detect.shipped import DetectorSpec
 from vbl_robust.paper.bundle import provenance
-from vbl_robust.scenes import generate
+from vbl_robust.scenes.generate import generate
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 
 def test_a_killed_run_counts_up_to_its_last_stored_job_not_up_to_now(tmp_path):
@@ -63,7 +64,7 @@ def test_a_check_tells_a_changed_finding_from_numeric_drift(tmp_path):
 def test_bundle_index_links_stay_relative_and_a_bundle_never_overwrites_its_runs(tmp_path):
     from vbl_robust.paper.bundle import write_bundle
     from vbl_robust.paper.claims_page import write_index
-    from vbl_robust.store import restore_store
+    from vbl_robust.store.pack import restore_store
 
     name = "javascript:alert(1)"
     (tmp_path / name).mkdir()
@@ -84,9 +85,9 @@ def test_bundle_index_links_stay_relative_and_a_bundle_never_overwrites_its_runs
 def test_a_bundle_killed_midway_leaves_the_previous_bundle_whole(tmp_path, monkeypatch):
     """A bundle killed after its first experiment left experiments without index.html / claims.md; now it is
     written into a staging directory and published only when complete; a packed store is kept without --stores."""
-    import vbl_robust.report as report
+    import vbl_robust.report.build as report
     from vbl_robust.paper.bundle import write_bundle
-    from vbl_robust.store import PACKED
+    from vbl_robust.store.core import PACKED
 
     spec = CampaignSpec("bundle-kill", (Block(boxes=(roll_box(5),), methods=("random",),
                                               budgets=(Budget(max_evals=4),)),), seed=1)
@@ -128,7 +129,7 @@ def test_a_bundles_report_shows_its_figures_as_files_and_is_rebuilt_from_its_pac
     import re
 
     from vbl_robust.paper.bundle import refresh_bundle, write_bundle
-    from vbl_robust.store import PACKED
+    from vbl_robust.store.core import PACKED
 
     spec = CampaignSpec("bundle-files", (Block(boxes=(roll_box(5),), methods=("random",),
                                                budgets=(Budget(max_evals=4),)),), seed=1)

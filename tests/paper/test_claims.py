@@ -42,8 +42,10 @@ from vbl_robust.paper.claim_rules import (
 from vbl_robust.paper.claims_page import claims_html, claims_markdown
 from vbl_robust.report.html import fmt_num
 from vbl_robust.specs.campaign import roll_box
+from vbl_robust.specs.kinds import JobStatus
 from vbl_robust.stats import ClaimVerdict
-from vbl_robust.store import JobRow, JobStatus, Points, ResultStore
+from vbl_robust.store.core import ResultStore
+from vbl_robust.store.rows import JobRow, Points
 
 # 512 px, not 128: at 128 px the integer-truncated and detected corners of these far runways are degenerate and every
 # PnP solve fails, which would leave the PnP row nothing to compare. Oracle detector, 2 images, 4 evaluations, a 5°

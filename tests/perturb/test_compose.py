@@ -2,7 +2,10 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.perturb import PERTURBATIONS, Perturbation, contrast, roll, roll_points
+from vbl_robust.perturb.compose import Perturbation
+from vbl_robust.perturb.geometric import roll, roll_points
+from vbl_robust.perturb.photometric import contrast
+from vbl_robust.perturb.registry import PERTURBATIONS
 from vbl_robust.space import ParameterBox
 
 BOX = ParameterBox({"roll_deg": (-30, 30), "contrast": (0.4, 2.5)})

@@ -9,26 +9,15 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from vbl_robust.detect.windows import letterbox_window
-from vbl_robust.perturb import (
-    KINDS,
-    PERTURBATIONS,
-    Perturbation,
-    PixelScale,
-    ViewSampler,
-    attitude,
-    brightness,
-    contrast,
-    gamma,
-    gaussian_blur,
-    gaussian_noise,
-    haze,
-    motion_blur,
-    resize_image,
-)
+from vbl_robust.perturb.compose import Perturbation
 from vbl_robust.perturb.family import Family
-from vbl_robust.perturb.registry import family_of
-from vbl_robust.perturb.views import resample, to_tensor
-from vbl_robust.perturb.weather import noise_pattern_tensor
+from vbl_robust.perturb.optical import gaussian_blur, motion_blur
+from vbl_robust.perturb.photometric import brightness, contrast, gamma
+from vbl_robust.perturb.registry import KINDS, PERTURBATIONS, family_of
+from vbl_robust.perturb.resample import PixelScale, resize_image
+from vbl_robust.perturb.rotation import attitude
+from vbl_robust.perturb.views import ViewSampler, resample, to_tensor
+from vbl_robust.perturb.weather import gaussian_noise, haze, noise_pattern_tensor
 from vbl_robust.space import KNOWN_UNITS, ParameterBox
 
 NAMES = list(PERTURBATIONS)
@@ -126,7 +115,7 @@ def test_blur_lengths_are_in_the_samples_pixels(image):
 
 @pytest.fixture(scope="module")
 def scene():
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     return generate(1, seed=5, width=384, height=384)[0]
 

@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from vbl_robust.geometry.camera import intrinsics, lard_rotation, project, runway_corners
-from vbl_robust.perturb import Roll, roll, roll_numpy, roll_points
+from vbl_robust.perturb.geometric import Roll, roll, roll_numpy, roll_points
 
 CENTER = (83.0, 57.5)  # principal point, deliberately not the image centre (79.5, 59.5)
 

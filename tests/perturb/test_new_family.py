@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.perturb import PERTURBATIONS, Perturbation, PerturbationSpec, ViewSampler
+from vbl_robust.perturb.compose import Perturbation
 from vbl_robust.perturb.family import Family
-from vbl_robust.perturb.views import resample, to_tensor
+from vbl_robust.perturb.registry import PERTURBATIONS, PerturbationSpec
+from vbl_robust.perturb.views import ViewSampler, resample, to_tensor
 from vbl_robust.space import ParameterBox
 
 

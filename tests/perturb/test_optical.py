@@ -7,15 +7,18 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vbl_robust.perturb import (
+from vbl_robust.perturb.optical import (
     GaussianBlur,
     MotionBlur,
     gaussian_blur,
     gaussian_blur_numpy,
+    gaussian_kernel1d,
+    gaussian_radius,
     motion_blur,
     motion_blur_numpy,
+    motion_kernel1d,
+    motion_radius,
 )
-from vbl_robust.perturb.optical import gaussian_kernel1d, gaussian_radius, motion_kernel1d, motion_radius
 
 
 def _t(img: np.ndarray, dtype=torch.float32) -> torch.Tensor:

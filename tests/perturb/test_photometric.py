@@ -3,7 +3,7 @@ import pytest
 import torch
 import torchvision.transforms.functional as TF
 
-from vbl_robust.perturb import (
+from vbl_robust.perturb.photometric import (
     Brightness,
     Contrast,
     Gamma,

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.perturb import Perturbation, PixelScale, resize_image
+from vbl_robust.perturb.compose import Perturbation
+from vbl_robust.perturb.resample import PixelScale, resize_image
 from vbl_robust.space import ParameterBox
 
 

@@ -17,17 +17,16 @@ from vbl_robust.geometry.camera import (
     rot_z,
     runway_corners,
 )
-from vbl_robust.perturb import (
+from vbl_robust.perturb.compose import Perturbation
+from vbl_robust.perturb.geometric import roll_numpy, roll_points
+from vbl_robust.perturb.rotation import (
     Attitude,
-    Perturbation,
     attitude,
     attitude_homography,
     attitude_numpy,
     attitude_points,
-    roll_numpy,
-    roll_points,
+    attitude_source_coords,
 )
-from vbl_robust.perturb.rotation import attitude_source_coords
 from vbl_robust.space import ParameterBox
 
 # principal point deliberately off the image centre (79.5, 59.5); f for a 70° horizontal FOV

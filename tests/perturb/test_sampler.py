@@ -7,9 +7,9 @@ import pytest
 import torch
 
 from vbl_robust.detect.windows import letterbox_window
-from vbl_robust.perturb import Perturbation, ViewSampler
+from vbl_robust.perturb.compose import Perturbation
 from vbl_robust.perturb.photometric import gray_mean
-from vbl_robust.perturb.views import resample, to_tensor
+from vbl_robust.perturb.views import ViewSampler, resample, to_tensor
 from vbl_robust.space import ParameterBox
 
 BOX = ParameterBox({"roll_deg": (-30, 30), "contrast": (0.4, 2.5)})
@@ -17,7 +17,7 @@ BOX = ParameterBox({"roll_deg": (-30, 30), "contrast": (0.4, 2.5)})
 
 @pytest.fixture(scope="module")
 def scene():
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     return generate(1, seed=5)[0]
 

@@ -15,9 +15,9 @@ import pytest
 import torch
 
 from vbl_robust.detect.windows import letterbox_window
-from vbl_robust.perturb import PERTURBATIONS, Perturbation, ViewSampler
-from vbl_robust.perturb.registry import family_of
-from vbl_robust.perturb.views import reflect101
+from vbl_robust.perturb.compose import Perturbation
+from vbl_robust.perturb.registry import PERTURBATIONS, family_of
+from vbl_robust.perturb.views import ViewSampler, reflect101
 from vbl_robust.perturb.warp import empty_output, grid_matrix, reflect101_np
 from vbl_robust.space import ParameterBox
 
@@ -31,7 +31,7 @@ CASES = [(name,) for name in PERTURBATIONS] + COMBOS
 
 @pytest.fixture(scope="module")
 def scene():
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     return generate(1, seed=3)[0]
 

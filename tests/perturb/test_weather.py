@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.perturb import (
+from vbl_robust.perturb.weather import (
     HAZE_AIRLIGHT,
     NOISE_SEED,
     GaussianNoise,
@@ -14,8 +14,8 @@ from vbl_robust.perturb import (
     haze,
     haze_numpy,
     noise_pattern,
+    noise_pattern_tensor,
 )
-from vbl_robust.perturb.weather import noise_pattern_tensor
 
 
 def test_haze_is_the_airlight_blend(image):

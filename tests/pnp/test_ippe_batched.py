@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from vbl_robust.geometry.camera import intrinsics, project
-from vbl_robust.pnp import SOLVERS, solve
 from vbl_robust.pnp import ippe as ippe_mod
 from vbl_robust.pnp import solvers as solvers_mod
 from vbl_robust.pnp.ippe import ippe_poses
@@ -19,8 +18,8 @@ from vbl_robust.pnp.refine import (
     residuals,
     rotvec_to_matrix,
 )
-from vbl_robust.pnp.solvers import ROWWISE
-from vbl_robust.scenes import sample_approaches
+from vbl_robust.pnp.solvers import ROWWISE, SOLVERS, solve
+from vbl_robust.scenes.envelopes import sample_approaches
 
 NOISE_PX = (0.0, 0.5, 2.0)
 POSITION_TOL_M = 1e-6

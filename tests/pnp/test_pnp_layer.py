@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.pnp import PnPPosition, pnp_position_torch, solve
 from vbl_robust.pnp import differentiable as diff_mod
-from vbl_robust.pnp.differentiable import position_jacobian_fd
+from vbl_robust.pnp.differentiable import PnPPosition, pnp_position_torch, position_jacobian_fd
+from vbl_robust.pnp.solvers import solve
 
 FD_STEP_PX = 1e-3
 

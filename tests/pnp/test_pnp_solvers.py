@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.pnp import SOLVERS, PnPResult, solve
 from vbl_robust.pnp import solvers as solvers_mod
+from vbl_robust.pnp.solvers import SOLVERS, PnPResult, solve
 
 
 @pytest.fixture

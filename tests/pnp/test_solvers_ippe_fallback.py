@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 
 from vbl_robust.geometry.camera import intrinsics, lard_rotation, project, runway_corners
-from vbl_robust.pnp import solve
+from vbl_robust.pnp.solvers import solve
 
 
 def test_ippe_lm_recovers_pose_where_opencv_ippe_returns_nan():

@@ -3,17 +3,19 @@ import re
 
 import pytest
 
-from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.audit import audit_spec
-from vbl_robust.report import build_report
+from vbl_robust.campaigns.runner import run_campaign
+from vbl_robust.detect.shipped import DetectorSpec
+from vbl_robust.report.build import build_report
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box, roll_contrast_box
-from vbl_robust.store import ResultStore, RunProvenance
+from vbl_robust.store.core import ResultStore
+from vbl_robust.store.rows import RunProvenance
 
 
 @pytest.fixture(scope="module")
 def samples():
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     return generate(3, seed=5, width=128, height=128)
 
@@ -93,7 +95,7 @@ def test_figures_come_from_the_spec_not_from_the_experiment_name(tmp_path, sampl
 
 def test_report_shows_failed_evaluations_per_reason(tmp_path):
     from vbl_robust.constants import FAILURE_REASONS
-    from vbl_robust.store import JobRow
+    from vbl_robust.store.rows import JobRow
 
     spec = CampaignSpec("audit", (Block(boxes=(roll_box(5),), methods=("random",), budgets=(Budget(max_evals=10),)),))
     with ResultStore(tmp_path / "results.sqlite") as st:
@@ -114,7 +116,7 @@ def test_searches_with_no_evaluation_in_time_are_counted_apart_in_the_report_and
     from types import SimpleNamespace
 
     from vbl_robust.cli.run import finish
-    from vbl_robust.store import JobRow
+    from vbl_robust.store.rows import JobRow
 
     budget = Budget(max_seconds=0.1, stop_at_breach=False)
     spec = CampaignSpec("audit", (Block(boxes=(roll_box(5),), methods=("apgd", "random"), budgets=(budget,)),))
@@ -140,7 +142,7 @@ def test_searches_with_no_evaluation_in_time_are_counted_apart_in_the_report_and
 def test_markdown_survival_has_a_column_per_budget_when_the_run_has_several(tmp_path):
     """A runtime experiment's survival is per budget: pooling the budgets into one cell would mean nothing."""
     from vbl_robust.report.markdown import survival_markdown
-    from vbl_robust.store import JobRow
+    from vbl_robust.store.rows import JobRow
 
     short, long = Budget(max_seconds=0.5, stop_at_breach=False), Budget(max_evals=10, stop_at_breach=False)
     spec = CampaignSpec("runtime", (Block(boxes=(roll_box(5),), methods=("apgd", "random"), budgets=(long, short)),))

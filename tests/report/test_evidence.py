@@ -11,7 +11,7 @@ from vbl_robust.analysis.readoff import main_rows
 from vbl_robust.cli import app
 from vbl_robust.constants import BreachKind
 from vbl_robust.stats import Rate, breach_fraction_bound
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 
 @pytest.fixture(scope="module")

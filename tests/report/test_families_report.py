@@ -14,7 +14,7 @@ from vbl_robust.report import figures as F
 from vbl_robust.report.html import figure_png
 from vbl_robust.report.sections import family_lines
 from vbl_robust.specs.budget import Budget
-from vbl_robust.store import JobRow
+from vbl_robust.store.rows import JobRow
 
 N = 10
 #: family -> method -> the level each of the N images first breaches at (inf: never), chained: breached above it

@@ -142,7 +142,7 @@ def every_figure():
 
 def zone_map_2d():
     """The zones of a GeoRobust run over a 2-D box with a breach on its right."""
-    from vbl_robust.search import make_optimizer
+    from vbl_robust.search.api import make_optimizer
     from vbl_robust.search.zones import zones
     from vbl_robust.space import ParameterBox
 
@@ -207,7 +207,7 @@ def test_axes_name_parameters_by_their_display_names(name, drawn):
     """One table of display names ("roll φ (°)"), never a parameter's code name ("roll_deg (deg)")."""
     import re
 
-    from vbl_robust.perturb import PERTURBATIONS
+    from vbl_robust.perturb.registry import PERTURBATIONS
 
     raw = re.compile(r"\b(" + "|".join(n for n in PERTURBATIONS if "_" in n) + r")\b")
     labels = [t for ax in drawn[name].axes for t in (ax.get_xlabel(), ax.get_ylabel(), ax.get_title())]
@@ -276,7 +276,7 @@ def test_the_progress_median_never_falls_when_searches_start_late():
     image counts at every count."""
     from vbl_robust.report.sections import progress_curves
     from vbl_robust.search.result import TraceRow
-    from vbl_robust.store import JobRow
+    from vbl_robust.store.rows import JobRow
 
     def row(sid, nfev, best):
         trace = tuple(TraceRow(iteration=i, nfev=n, elapsed=0.0, best_value=b, best_x=None, batch_size=1, n_failed=0)

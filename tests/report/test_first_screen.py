@@ -10,15 +10,16 @@ import sqlite3
 
 import pytest
 
-from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.audit import audit_spec
-from vbl_robust.report import build_report
+from vbl_robust.campaigns.runner import run_campaign
+from vbl_robust.detect.shipped import DetectorSpec
+from vbl_robust.report.build import build_report
 from vbl_robust.report.evidence import BoxEvidence, verdict_of, verdict_sentence
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import roll_box
 from vbl_robust.specs.settings import PipelineSettings
 from vbl_robust.stats import Rate
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 
 SOURCE = {"kind": "synthetic", "n": 4, "seed": 5, "width": 128, "height": 128}
 MODEL = {"name": "runway-pose v9", "sha256": "ab12cd34ef56" + "0" * 52, "design": "two-stage", "input_size": 640,
@@ -29,7 +30,7 @@ MODEL = {"name": "runway-pose v9", "sha256": "ab12cd34ef56" + "0" * 52, "design"
 def run(tmp_path_factory):
     """An audit of two boxes where some images breach (ε_safe = 40 m; the oracle's corners off by 1 px), its stored
     detector identity that of a model file."""
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     out = tmp_path_factory.mktemp("first")
     spec = audit_spec(roll_box(5), methods=("random", "georobust"), budget=Budget(max_evals=8))
@@ -137,7 +138,7 @@ def test_one_sentence_per_box(b, verdict, says):
 def test_a_truth_run_stands_by_its_dense_grids(tmp_path):
     """A run of dense grids alone (``vbl-robust truth``) has a first screen too: the grid is its search; its card's
     figure stays the landscape."""
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
     from vbl_robust.specs.campaign import Block, CampaignSpec
 
     blk = Block(boxes=(roll_box(20),), methods=("grid",), budgets=(Budget(max_evals=9),), role="reference")

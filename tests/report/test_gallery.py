@@ -13,18 +13,20 @@ import textwrap
 import numpy as np
 import pytest
 
-from vbl_robust import store as store_module
-from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.audit import audit_spec
-from vbl_robust.perturb import Perturbation
-from vbl_robust.report import build_report
+from vbl_robust.campaigns.runner import run_campaign
+from vbl_robust.detect.shipped import DetectorSpec
+from vbl_robust.perturb.compose import Perturbation
+from vbl_robust.report.build import build_report
 from vbl_robust.report.evidence import WORST_CASES, worst_cases
 from vbl_robust.report.html import fmt_num
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import roll_contrast_box
 from vbl_robust.stats import Rate
-from vbl_robust.store import JobRow, Points, ResultStore
+from vbl_robust.store import schema
+from vbl_robust.store.core import ResultStore
 from vbl_robust.store.digest import reseal
+from vbl_robust.store.rows import JobRow, Points
 
 EVIL = '<img src=x onerror=alert(1)>&"'
 SOURCE = {"kind": "synthetic", "n": 3, "seed": 5, "width": 128, "height": 128}
@@ -32,7 +34,7 @@ SOURCE = {"kind": "synthetic", "n": 3, "seed": 5, "width": 128, "height": 128}
 
 @pytest.fixture(scope="module")
 def samples():
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     return list(generate(3, seed=5, width=128, height=128))
 
@@ -169,9 +171,9 @@ def test_every_id_is_escaped_and_a_sample_missing_from_the_rebuilt_dataset_is_sa
 def test_a_corner_shift_of_a_pixel_moves_the_position_by_what_the_gallery_says(samples):
     """The gallery's geometry line, D · δ / f · (D / W) per pixel, against PnP: one near corner moved 1 px
     sideways (the near edge's width changes by 1 px) moves the position by 0.5–1.5 × that, on 1024 px images."""
-    from vbl_robust.pnp import solve
+    from vbl_robust.pnp.solvers import solve
     from vbl_robust.report.gallery import geometry_text, metres_per_pixel
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     for s in generate(4, seed=0, width=1024, height=1024):
         m, D, W, f = metres_per_pixel(s)
@@ -186,10 +188,10 @@ def test_a_corner_shift_of_a_pixel_moves_the_position_by_what_the_gallery_says(s
 def test_an_old_store_without_corners_still_reports(run, tmp_path):
     old = tmp_path / "old"
     con = copy_store(run, old)
-    kept = ", ".join(c for c in store_module.JOB_COLUMNS if c != "worst_corners_json")
+    kept = ", ".join(c for c in schema.JOB_COLUMNS if c != "worst_corners_json")
     con.executescript(f"CREATE TABLE old_jobs AS SELECT {kept} FROM jobs; DROP TABLE jobs; "
                       "ALTER TABLE old_jobs RENAME TO jobs; DROP TABLE digests;")  # a store of schema 4 has none
-    con.execute(f"PRAGMA user_version = {store_module.SCHEMA_VERSION - 1}")
+    con.execute(f"PRAGMA user_version = {schema.SCHEMA_VERSION - 1}")
     for rowid, payload in con.execute("SELECT rowid, payload_json FROM jobs WHERE payload_json LIKE '%nominal%'").fetchall():
         data = json.loads(payload)
         del data["nominal"]  # a store from before L(0) was stored

@@ -15,17 +15,18 @@ import pytest
 import torch
 
 from vbl_robust.analysis.readoff import main_rows
-from vbl_robust.campaigns import DetectorSpec, run_campaign
 from vbl_robust.campaigns.replay import zones_of_run
-from vbl_robust.report import build_report
+from vbl_robust.campaigns.runner import run_campaign
+from vbl_robust.detect.shipped import DetectorSpec
 from vbl_robust.report import zone_section as B
+from vbl_robust.report.build import build_report
 from vbl_robust.report.html import fmt_num
 from vbl_robust.report.rows import Context
 from vbl_robust.search.zones import CLASSES
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box, roll_contrast_box
 from vbl_robust.specs.settings import PipelineSettings
-from vbl_robust.store import ResultStore
+from vbl_robust.store.core import ResultStore
 from vbl_robust.store.digest import reseal
 
 GATE = 4.0
@@ -44,7 +45,7 @@ def helpers_importable():
 
 @pytest.fixture(scope="module")
 def samples():
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     torch.set_num_threads(1)
     return generate(3, seed=1, width=96, height=96)
@@ -206,7 +207,7 @@ def test_a_search_stopped_at_its_first_point_has_no_estimate_and_rules_nothing_o
 
 def test_the_zone_figure_takes_a_2d_landscape_as_a_heat_map(tmp_path):
     from vbl_robust.report.zone_figure import plot_zones
-    from vbl_robust.search import make_optimizer
+    from vbl_robust.search.api import make_optimizer
     from vbl_robust.search.zones import zones
 
     box = BOX.box

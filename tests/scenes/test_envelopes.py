@@ -4,8 +4,13 @@ import numpy as np
 import pytest
 
 from vbl_robust.geometry.camera import intrinsics, lard_attitude, lard_rotation, to_camera
-from vbl_robust.scenes import ENVELOPES, corners_visible, sample_approaches
-from vbl_robust.scenes.envelopes import GLIDE_PATH_ANCHOR_M, approach_from_angles
+from vbl_robust.scenes.envelopes import (
+    ENVELOPES,
+    GLIDE_PATH_ANCHOR_M,
+    approach_from_angles,
+    corners_visible,
+    sample_approaches,
+)
 
 
 def _inside(x, lo_hi, tol=1e-9):

@@ -1,7 +1,8 @@
 import numpy as np
 
-from vbl_robust.data import read_lard
-from vbl_robust.scenes import generate, write_dataset
+from vbl_robust.data.lard_read import read_lard
+from vbl_robust.scenes.export import write_dataset
+from vbl_robust.scenes.generate import generate
 
 
 def test_write_dataset_round_trips_through_the_lard_reader(tmp_path):

@@ -3,7 +3,9 @@ import pytest
 
 import vbl_robust as vr
 from vbl_robust.geometry.camera import intrinsics, project, runway_corners, to_camera
-from vbl_robust.scenes import REFERENCE_LAT_LON_ALT, designation, generate, ground_homography, make_airports
+from vbl_robust.scenes.airports import REFERENCE_LAT_LON_ALT, designation, make_airports
+from vbl_robust.scenes.generate import generate
+from vbl_robust.scenes.render import ground_homography
 
 META_KEYS = {"envelope", "airport", "runway", "runway_azimuth_deg", "runway_length_m", "runway_width_m",
              "yaw", "pitch", "roll"}

@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from vbl_robust.scenes import generate
+from vbl_robust.scenes.generate import generate
 from vbl_robust.scenes.grid import hits, make_grid
 from vbl_robust.scenes.layout import paint, rect
 from vbl_robust.scenes.render import _placement, _warp, _warp_smooth

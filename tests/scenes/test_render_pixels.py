@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from vbl_robust.scenes import generate
+from vbl_robust.scenes.generate import generate
 
 
 def _edge_distances(quad: np.ndarray, width: int, height: int) -> np.ndarray:

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import vbl_robust as vr
-from vbl_robust.data import ApproachSequence
-from vbl_robust.scenes import envelope_of, generate_sequences
+from vbl_robust.data.sequence import ApproachSequence
 from vbl_robust.scenes.envelopes import GLIDE_PATH_ANCHOR_M
+from vbl_robust.scenes.sequences import envelope_of, generate_sequences
 
 SMALL = {"width": 96, "height": 96}
 

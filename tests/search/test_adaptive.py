@@ -12,9 +12,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vbl_robust.search import AdaptiveGeoRobust, GeoRobust, Status, at_budget, maximize
-from vbl_robust.search.adaptive import MAX_OFFSET
+from vbl_robust.search.adaptive import MAX_OFFSET, AdaptiveGeoRobust
+from vbl_robust.search.anytime import at_budget
+from vbl_robust.search.api import maximize
 from vbl_robust.search.classic import CLASSIC, Anisotropic, count_ours, evals_to_target
+from vbl_robust.search.direct import GeoRobust
+from vbl_robust.search.result import Status
 from vbl_robust.space import ParameterBox
 
 from .conftest import bumpy

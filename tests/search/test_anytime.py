@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import vbl_robust.search.base as base_module
-from vbl_robust.search import METHODS, Status, anytime_methods, at_budget, maximize
-from vbl_robust.search.api import DEFAULT_CHUNK
-from vbl_robust.search.result import PARTIAL, SearchResult
+from vbl_robust.search.anytime import at_budget
+from vbl_robust.search.api import DEFAULT_CHUNK, METHODS, anytime_methods, maximize
+from vbl_robust.search.result import PARTIAL, SearchResult, Status
 
 from .conftest import bumpy
 

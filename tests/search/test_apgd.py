@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.search import APGD, Status, apgd_checkpoints, maximize
+from vbl_robust.search.apgd import APGD, apgd_checkpoints
+from vbl_robust.search.api import maximize
+from vbl_robust.search.result import Status
 from vbl_robust.space import ParameterBox
 
 

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vbl_robust.search import METHODS, Cells, make_optimizer
+from vbl_robust.search.api import METHODS, make_optimizer
 from vbl_robust.search.bounds import sound_upper_bound
+from vbl_robust.search.cells import Cells
 from vbl_robust.space import ParameterBox
 
 from .conftest import bumpy

@@ -7,7 +7,9 @@ import time
 import numpy as np
 import pytest
 
-from vbl_robust.search import CLOCKS, Status, maximize, use_clock
+from vbl_robust.search.api import maximize
+from vbl_robust.search.base import CLOCKS, use_clock
+from vbl_robust.search.result import Status
 from vbl_robust.space import ParameterBox
 
 

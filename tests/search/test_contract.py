@@ -10,8 +10,10 @@ import torch
 
 import vbl_robust.search.base as base_module
 from vbl_robust.constants import Verdict
-from vbl_robust.search import METHODS, NON_FINITE, Evaluations, SearchResult, Status, maximize, method_options
-from vbl_robust.search import Verdict as SearchVerdict
+from vbl_robust.constants import Verdict as SearchVerdict
+from vbl_robust.search.api import METHODS, maximize, method_options
+from vbl_robust.search.evaluations import NON_FINITE, Evaluations
+from vbl_robust.search.result import SearchResult, Status
 from vbl_robust.space import ParameterBox
 
 from .conftest import bumpy
@@ -260,7 +262,7 @@ def test_gradient_methods_call_the_objective_with_a_tensor_the_others_with_an_ar
     """One callable serves both kinds of method (as the pipeline's objectives do): the type of θ picks the path."""
     import torch
 
-    from vbl_robust.search import maximize
+    from vbl_robust.search.api import maximize
     from vbl_robust.space import ParameterBox
 
     seen = []
@@ -283,7 +285,7 @@ def test_gradient_methods_call_the_objective_with_a_tensor_the_others_with_an_ar
 def test_every_method_names_and_labels_itself_once():
     """The registry key is the class's ``name``; its display label (figures, reports) lives on the class too."""
     from vbl_robust.report.figure_style import style
-    from vbl_robust.search import METHODS
+    from vbl_robust.search.api import METHODS
 
     labels = set()
     for key, cls in METHODS.items():

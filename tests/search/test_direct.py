@@ -5,17 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vbl_robust.search import (
-    Direct,
-    DirectL,
-    GeoRobust,
-    Status,
-    Verdict,
-    make_optimizer,
-    maximize,
-    potentially_optimal,
-)
+from vbl_robust.constants import Verdict
+from vbl_robust.search.api import make_optimizer, maximize
 from vbl_robust.search.classic import CLASSIC, count_nlopt, count_ours, count_scipy
+from vbl_robust.search.direct import Direct, DirectL, GeoRobust
+from vbl_robust.search.po import potentially_optimal
+from vbl_robust.search.result import Status
 from vbl_robust.space import ParameterBox
 
 UNIT1 = ParameterBox({"a": (0.0, 1.0)})
@@ -208,7 +203,7 @@ def test_classic_functions_reach_target_within_factor_of_peers():
 def test_georobust_po_set_stays_bounded_on_a_plateau(dim, method, surface):
     """A flat region (e.g. the 5000 m failure penalty everywhere, or past a cliff in one parameter) must not make
     |PO_k| explode, in 2-D and in 4-D (the perturbation families' boxes)."""
-    from vbl_robust.search import maximize
+    from vbl_robust.search.api import maximize
     from vbl_robust.space import ParameterBox
 
     box = ParameterBox({f"p{i}": (0, 1) for i in range(dim)})

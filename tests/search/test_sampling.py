@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 from scipy.stats import qmc
 
-from vbl_robust.search import GridSearch, Status, Verdict, maximize
+from vbl_robust.constants import Verdict
+from vbl_robust.search.api import maximize
+from vbl_robust.search.result import Status
+from vbl_robust.search.sampling import GridSearch
 from vbl_robust.space import ParameterBox
 
 BOX = ParameterBox({"roll_deg": (-15.0, 15.0), "contrast": (0.7, 1.4)})

@@ -12,12 +12,14 @@ from hypothesis import strategies as st
 import vbl_robust as vr
 from vbl_robust.campaigns.replay import ReplayError, job_zones, replay, zones_of_run
 from vbl_robust.report.zone_figure import plot_zones
-from vbl_robust.search import Cells, Evaluations, make_optimizer
+from vbl_robust.search.api import make_optimizer
+from vbl_robust.search.cells import Cells
+from vbl_robust.search.evaluations import Evaluations
 from vbl_robust.search.zones import CLASSES, refine_zones, zones
 from vbl_robust.space import ParameterBox
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import BoxSpec
-from vbl_robust.store import JobRow, Points
+from vbl_robust.store.rows import JobRow, Points
 
 EPS = 1000.0
 BOX1 = ParameterBox({"roll_deg": (-10.0, 10.0)})

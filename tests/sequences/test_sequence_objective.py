@@ -7,9 +7,9 @@ import torch
 
 import vbl_robust as vr
 from vbl_robust.detect.base import Detections
-from vbl_robust.scenes import generate_sequences
-from vbl_robust.search import METHODS, maximize
-from vbl_robust.sequences import SequenceObjective, nominal_theta
+from vbl_robust.scenes.sequences import generate_sequences
+from vbl_robust.search.api import METHODS, maximize
+from vbl_robust.sequences.objective import SequenceObjective, nominal_theta
 
 BOX = vr.ParameterBox({"roll_deg": (-15.0, 15.0), "contrast": (0.7, 1.4)})
 

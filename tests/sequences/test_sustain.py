@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from vbl_robust.sequences import breach_runs, breach_summary, sustained, sustained_torch
+from vbl_robust.sequences.sustain import breach_runs, breach_summary, sustained, sustained_torch
 
 
 def _brute(e, k):

@@ -3,22 +3,18 @@
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust.campaigns import DetectorSpec, run_campaign
+from vbl_robust.campaigns.runner import run_campaign
 from vbl_robust.cli import app
+from vbl_robust.detect.shipped import DetectorSpec
 from vbl_robust.paper.bundle import compare_runs
-from vbl_robust.scenes import generate
+from vbl_robust.scenes.generate import generate
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import Block, CampaignSpec, roll_box
-from vbl_robust.store import (
-    MergedSource,
-    MergeReport,
-    ResultStore,
-    RunStatus,
-    WriterLock,
-    merge_runs,
-    merge_store,
-    pack_store,
-)
+from vbl_robust.specs.kinds import RunStatus
+from vbl_robust.store.core import ResultStore
+from vbl_robust.store.lock import WriterLock
+from vbl_robust.store.merge import MergedSource, MergeReport, merge_runs, merge_store
+from vbl_robust.store.pack import pack_store
 
 DET = DetectorSpec.oracle(1.0)
 

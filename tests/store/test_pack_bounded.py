@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from vbl_robust.store import PACKED, ResultStore, pack_store, restore_store
+from vbl_robust.store.core import PACKED, ResultStore
+from vbl_robust.store.pack import pack_store, restore_store
 
 
 def _store(path: Path, megabytes: int) -> Path:
@@ -51,7 +52,8 @@ def test_packing_a_store_stays_in_bounded_memory(tmp_path, full):
     code = textwrap.dedent(f"""
         import resource, sys
         from pathlib import Path
-        from vbl_robust.store import ResultStore, pack_store, restore_store
+        from vbl_robust.store.core import ResultStore
+        from vbl_robust.store.pack import pack_store, restore_store
         peak = int(next(ln for ln in open("/proc/self/status") if ln.startswith("VmSize")).split()[1]) * 1024
         cap = peak + 400 * 2**20  # xz preset 6 needs ~100 MB; preset 9 on the whole file needs ~700 MB more
         resource.setrlimit(resource.RLIMIT_AS, (cap, cap))

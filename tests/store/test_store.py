@@ -10,24 +10,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from vbl_robust import store as store_module
 from vbl_robust.constants import Verdict
-from vbl_robust.search import TraceRow
+from vbl_robust.search.result import TraceRow
 from vbl_robust.space import ParameterBox
 from vbl_robust.specs.budget import Budget
 from vbl_robust.specs.campaign import JOB_KINDS, ROLES, BoxSpec
-from vbl_robust.store import (
-    JobRow,
-    JobStatus,
-    Points,
-    ResultStore,
-    RunProvenance,
-    RunStatus,
-    SampleRecord,
-    decode_points,
-    encode_points,
-    schema,
-)
+from vbl_robust.specs.kinds import JobStatus, RunStatus
+from vbl_robust.store import core, schema
+from vbl_robust.store.core import ResultStore
+from vbl_robust.store.rows import JobRow, Points, RunProvenance, SampleRecord, decode_points, encode_points
 
 
 def row(key, **kw):
@@ -177,7 +168,7 @@ def test_a_store_of_schema_1_opens_and_is_migrated(tmp_path):
         st.commit([row("new", n_failed=2, failures={"no_detection": 2}, worst_reason="")])
         assert st.jobs()[1].failures == {"no_detection": 2}
     con = sqlite3.connect(tmp_path / "r.sqlite")
-    assert con.execute("PRAGMA user_version").fetchone()[0] == store_module.SCHEMA_VERSION
+    assert con.execute("PRAGMA user_version").fetchone()[0] == schema.SCHEMA_VERSION
     con.execute("PRAGMA user_version = 99")
     con.commit()
     con.close()
@@ -267,7 +258,7 @@ def test_worst_corners_are_stored_and_a_schema_3_store_reads_them_as_none(tmp_pa
         st.commit([row("new", worst_corners=corners)])
         assert [r.worst_corners for r in st.jobs()] == [None, corners]
     con = sqlite3.connect(tmp_path / "old.sqlite")
-    assert con.execute("PRAGMA user_version").fetchone()[0] == store_module.SCHEMA_VERSION == 5
+    assert con.execute("PRAGMA user_version").fetchone()[0] == schema.SCHEMA_VERSION == 5
 
 
 def test_run_status_strings_are_the_stored_values_and_a_run_reads_back_flat(tmp_path):
@@ -325,7 +316,7 @@ def test_points_on_demand_hold_a_bounded_cache_and_the_stored_bytes(tmp_path, mo
     with ResultStore(tmp_path / "results.sqlite") as store:
         store.commit(made)
     one = made[0].points.xs.nbytes + made[0].points.fs.nbytes
-    monkeypatch.setattr(store_module.core, "POINTS_CACHE_BYTES", 5 * one)
+    monkeypatch.setattr(core, "POINTS_CACHE_BYTES", 5 * one)
     with ResultStore.open_existing(tmp_path, points_on_demand=True) as store:
         rows = store.jobs(with_points=True)
         assert all(type(r.points).__name__ == "StoredPoints" and r.trace == () for r in rows)

@@ -9,9 +9,9 @@ import sqlite3
 import pytest
 from typer.testing import CliRunner
 
-from vbl_robust import store as store_module
 from vbl_robust.cli import app
-from vbl_robust.store import ResultStore
+from vbl_robust.store import schema
+from vbl_robust.store.core import ResultStore
 
 runner = CliRunner()
 
@@ -53,7 +53,7 @@ def test_reading_commands_leave_the_store_untouched(run_dir, tmp_path):
 def test_an_older_layout_is_read_in_memory_and_not_migrated_on_disk(run_dir, tmp_path):
     d = _copy_store_alone(run_dir, tmp_path / "old")
     con = sqlite3.connect(d / "results.sqlite")
-    con.execute(f"PRAGMA user_version = {store_module.SCHEMA_VERSION - 1}")
+    con.execute(f"PRAGMA user_version = {schema.SCHEMA_VERSION - 1}")
     con.commit()
     con.close()
     before = _state(d)
@@ -61,7 +61,7 @@ def test_an_older_layout_is_read_in_memory_and_not_migrated_on_disk(run_dir, tmp
         assert st.readonly and st.count() > 0
     assert _state(d) == before
     con = sqlite3.connect(d / "results.sqlite")
-    assert con.execute("PRAGMA user_version").fetchone()[0] == store_module.SCHEMA_VERSION - 1
+    assert con.execute("PRAGMA user_version").fetchone()[0] == schema.SCHEMA_VERSION - 1
 
 
 def test_a_read_only_store_refuses_writes(run_dir, tmp_path):

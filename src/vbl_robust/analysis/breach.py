@@ -1,9 +1,9 @@
-"""Per-job facts over store rows (:class:`~vbl_robust.store.JobRow`): whether an image survived a box,
+"""Per-job facts over store rows (:class:`~vbl_robust.store.rows.JobRow`): whether an image survived a box,
 the kind of a breach (flagged failure or hazardously misleading pose), what "no breach found" is worth for a
 search of uniform points, a row's numeric budget and its failed evaluations per reason.
 
 An image *survives* a box when its worst error is ≤ ε_safe. A job the tool could not complete (not measured:
-:attr:`~vbl_robust.store.JobRow.measured` is False) has no survival at all: asking for it raises, and
+:attr:`~vbl_robust.store.rows.JobRow.measured` is False) has no survival at all: asking for it raises, and
 every group of rows leaves it out of its denominator (:func:`measured_rows`). Re-exported by :mod:`vbl_robust.analysis.metrics`.
 """
 
@@ -16,8 +16,9 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from ..constants import BreachKind
+from ..specs.kinds import JobStatus
 from ..stats import breach_fraction_bound
-from ..store import JobRow, JobStatus
+from ..store.rows import JobRow
 
 
 def survival_rate(worst: Sequence[float], eps_safe_m: float) -> float:

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..constants import Verdict
-from ..store import JobRow
+from ..store.rows import JobRow
 from .summary import summarize
 
 

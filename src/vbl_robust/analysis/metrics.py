@@ -1,4 +1,4 @@
-"""The paper's metrics over store rows (:class:`~vbl_robust.store.JobRow`): survival rate, median worst
+"""The paper's metrics over store rows (:class:`~vbl_robust.store.rows.JobRow`): survival rate, median worst
 error, φ_crit, |PO_k| and RA(k), failed evaluations per reason, PnP errors, the perturbation families' survival
 per budget level and their ranking.
 
@@ -10,7 +10,7 @@ measured) is in no rate, counted apart.
 Budgets read off a trace: a stored run whose budget reads smaller budgets (``Budget.reads``, the runtime
 experiments' anytime methods) stands for one result per read budget; :func:`.readoff.read_off_rows` derives those
 rows (``JobRow.read_from`` = the run's budget label) from the run's stamped evaluations
-(:func:`vbl_robust.search.at_budget`): at a time budget t only the evaluations completed by t count.
+(:func:`vbl_robust.search.anytime.at_budget`): at a time budget t only the evaluations completed by t count.
 
 The metrics live in modules by concern, each imported from the module that defines it: per-job facts
 (:mod:`.breach`), summaries (:mod:`.summary`), the grid reference (:mod:`.reference`), breach levels and families
@@ -26,7 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..store import JobRow, JobStatus
+from ..specs.kinds import JobStatus
+from ..store.rows import JobRow
 
 __all__ = ["ConvergenceLine", "PnpLine", "convergence", "pnp_summary"]
 

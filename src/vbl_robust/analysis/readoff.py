@@ -1,7 +1,7 @@
 """Budgets read off a trace: a stored run whose budget reads smaller budgets (``Budget.reads``, the runtime
 experiments' anytime methods) stands for one result per read budget; :func:`read_off_rows` derives those rows
 (``JobRow.read_from`` = the run's budget label) from the run's stamped evaluations
-(:func:`vbl_robust.search.at_budget`): at a time budget t only the evaluations completed by t count.
+(:func:`vbl_robust.search.anytime.at_budget`): at a time budget t only the evaluations completed by t count.
 Re-exported by :mod:`vbl_robust.analysis.metrics`.
 """
 
@@ -12,7 +12,8 @@ from typing import Any
 
 from ..campaigns.rebuild import result_fields, row_result
 from ..specs.budget import Budget
-from ..store import JobRow, JobStatus, Points
+from ..specs.kinds import JobStatus
+from ..store.rows import JobRow, Points
 
 __all__ = ["main_rows", "read_off", "read_off_rows", "reads_trace"]
 
@@ -21,7 +22,7 @@ def read_off(row: JobRow, budget: Budget, eps_safe_m: float, penalty_m: float) -
     """The row of ``budget`` (a time or an evaluation budget) read off the stored run ``row`` (with points): the
     best value and point, counts and trace of the evaluations within the budget; ``read_from`` = the run's
     budget label. A run not measured gives a row not measured for the budget."""
-    from ..search import at_budget
+    from ..search.anytime import at_budget
 
     base = row.replace(budget=budget, key=f"{row.key}@{budget.label}", read_from=row.budget_label, payload=None)
     if row.status != JobStatus.DONE:

@@ -15,9 +15,9 @@ import numpy as np
 
 from ..constants import Verdict
 from ..specs.campaign import BoxSpec
+from ..specs.kinds import JobStatus
 from ..stats import paired
-from ..store import JobRow, JobStatus, Points
-from ..store.rows import StoredPoints
+from ..store.rows import JobRow, Points, StoredPoints
 from .breach import survived
 
 #: ``method`` of the pseudo-rows of :func:`reference_rows`.

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..constants import BreachKind, Verdict
 from ..stats import Rate
-from ..store import JobRow
+from ..store.rows import JobRow
 from .breach import (
     breach_kind,
     budget_value,

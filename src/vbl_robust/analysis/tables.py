@@ -23,8 +23,9 @@ from pathlib import Path
 from typing import Any
 
 from ..specs.kinds import JobKind, Role
-from ..store import JobRow, ResultStore
+from ..store.core import ResultStore
 from ..store.payloads import RiskPayload, SequencePayload, WorstPayload
+from ..store.rows import JobRow
 
 COLUMNS = (
     "experiment", "kind", "role", "method", "sample_id", "sample_index", "slant_distance_m", "envelope", "box_label",

@@ -21,9 +21,10 @@ from typing import Any
 
 from ..specs.budget import Budget
 from ..specs.campaign import Block, BoxSpec, CampaignSpec
-from ..specs.kinds import SourceKind
+from ..specs.kinds import JobStatus, SourceKind
 from ..specs.settings import PipelineSettings
-from ..store import JobRow, JobStatus, ResultStore
+from ..store.core import ResultStore
+from ..store.rows import JobRow
 from .breach import budget_value, survived
 from .readoff import main_rows
 

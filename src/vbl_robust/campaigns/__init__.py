@@ -4,7 +4,7 @@ Ray) and its jobs, verification, replay and refinement of stored searches, harde
 (:mod:`vbl_robust.analysis`, :mod:`vbl_robust.report`, :mod:`vbl_robust.paper`) and the paper's experiments
 (:mod:`vbl_robust.paper.experiments`), which the engine runs as it runs an audit.
 
->>> from vbl_robust.campaigns import audit_spec
+>>> from vbl_robust.campaigns.audit import audit_spec
 >>> from vbl_robust.specs.budget import Budget
 >>> from vbl_robust.specs.campaign import roll_box
 >>> [b.methods for b in audit_spec(roll_box(5), budget=Budget(max_evals=10)).blocks]
@@ -28,13 +28,9 @@ from vbl_robust.lazy import lazy_names
 
 #: public name -> the submodule that defines it
 _LAZY: dict[str, str] = {
-    "audit_spec": ".audit",
-    "DetectorSpec": ".provenance",
-    "plan": ".runner",
+    "DetectorSpec": "vbl_robust.detect.shipped",
     "run_campaign": ".runner",
-    "find_lard_files": ".samples",
     "load_samples": ".samples",
-    "load_sequences": ".samples",
     "zones_of_run": ".replay",
 }
 

@@ -9,7 +9,7 @@ must stay inside the image after the perturbation (a runway turned out of the fr
 could do), so an untrainable θ is a failed evaluation (:data:`NOT_TRAINABLE`, never the worst) and the search
 keeps every point's failure reason and counts its evaluations. The previous round's worst θ of an image joins its
 candidates (``previous``), so the pressure keeps up as the model learns. The perturbations are the audit's
-(:class:`~vbl_robust.perturb.Perturbation`): the training view is ``T(x; θ)`` and its corner labels are the corners
+(:class:`~vbl_robust.perturb.compose.Perturbation`): the training view is ``T(x; θ)`` and its corner labels are the corners
 moved by the same map — exact for every family, since the attitude is a rotation about the optical centre (the
 camera position, hence the PnP target, does not move).
 
@@ -35,9 +35,10 @@ from ..atomic import atomic_write
 from ..constants import EPS_SAFE_M
 from ..data.sample import Sample
 from ..detect.shipped import DEFAULT_MODEL, DetectorSpec
-from ..perturb import Perturbation
+from ..perturb.compose import Perturbation
 from ..pipeline import Objective
-from ..search import Evaluations, maximize
+from ..search.api import maximize
+from ..search.evaluations import Evaluations
 from ..space import ParameterBox
 
 __all__ = ["NOT_TRAINABLE", "Round", "Worst", "candidate_seed", "harden", "perturbed_sample", "trainable",

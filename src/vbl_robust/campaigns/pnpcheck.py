@@ -3,7 +3,7 @@
 For the ground-truth corners (exact, and integer-truncated as LARD's labels are: what the paper's 2.2 % on
 ground truth measures, our exact labels give ≈ 1e-12 %) and for the detector's corners on the unperturbed image,
 every solver of
-:data:`vbl_robust.pnp.SOLVERS` gives a camera position; the payload holds its absolute error (m) and its error
+:data:`vbl_robust.pnp.solvers.SOLVERS` gives a camera position; the payload holds its absolute error (m) and its error
 relative to the slant distance (%). The differentiable layer's forward pass *is* a solver (``ippe_lm``), so its
 positions need no separate row; what differs between its ``exact`` and ``bpnp`` modes is the gradient, so the
 payload also holds the cosine between their Jacobians ``dC/dx`` (3 × 8) at the detector's corners.
@@ -23,7 +23,7 @@ TRUNCATED = "truncated ground truth"
 
 
 def _errors(kp: np.ndarray, sample: Any) -> dict[str, dict[str, float | None]]:
-    from ..pnp import SOLVERS, solve
+    from ..pnp.solvers import SOLVERS, solve
 
     out: dict[str, dict[str, float | None]] = {}
     dist = float(sample.slant_distance_m)
@@ -41,7 +41,7 @@ def jacobian_cosine(kp: np.ndarray, sample: Any) -> float | None:
     """Cosine between the Jacobians dC/dx (3 × 8) of the differentiable PnP in "exact" and "bpnp" modes."""
     import torch
 
-    from ..pnp import GRAD_MODES, pnp_position_torch
+    from ..pnp.differentiable import GRAD_MODES, pnp_position_torch
 
     if "bpnp" not in GRAD_MODES:
         return None

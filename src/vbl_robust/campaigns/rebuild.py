@@ -14,7 +14,7 @@ import numpy as np
 
 from ..constants import Verdict
 from ..search.result import verdict_for
-from ..store import JobRow, Points
+from ..store.rows import JobRow, Points
 
 __all__ = ["finite_or_none", "result_fields", "row_result", "search_kwargs"]
 
@@ -25,7 +25,7 @@ def finite_or_none(v: float | None) -> float | None:
 
 
 def result_fields(result: Any, eps_safe_m: float, penalty_m: float) -> dict[str, Any]:
-    """The :class:`JobRow` fields of a :class:`~vbl_robust.search.SearchResult` (worst error = the penalty when
+    """The :class:`JobRow` fields of a :class:`~vbl_robust.search.result.SearchResult` (worst error = the penalty when
     no evaluation was finite; None, verdict "no breach found", when none completed within a time budget)."""
     ub = result.upper_bound
     if result.nfev == 0:  # no evaluation completed within the budget: nothing found (no worst error)
@@ -45,9 +45,9 @@ def result_fields(result: Any, eps_safe_m: float, penalty_m: float) -> dict[str,
 
 
 def row_result(row: JobRow) -> Any:
-    """The :class:`~vbl_robust.search.SearchResult` a stored search row stands for, rebuilt from its points and
+    """The :class:`~vbl_robust.search.result.SearchResult` a stored search row stands for, rebuilt from its points and
     trace (``row`` needs ``points``: ``store.jobs(with_points=True)``)."""
-    from ..search import SearchResult, Status
+    from ..search.result import SearchResult, Status
 
     if row.points is None or row.box is None:
         raise ValueError(f"row {row.key}: a result needs the row's box and points (load with with_points=True)")

@@ -39,7 +39,7 @@ def refine_run(run: str | Path, samples: list, detector: Any, budget: int, *,
     """
     from ..campaigns.replay import ReplayError, job_zones
     from ..search.zones import refine_zones
-    from ..store import ResultStore
+    from ..store.core import ResultStore
     from .work import build_objective, detector_for
 
     with ResultStore.open_existing(run) as store:

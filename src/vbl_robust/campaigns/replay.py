@@ -30,7 +30,7 @@ from .rebuild import search_kwargs
 if TYPE_CHECKING:
     from ..search.base import Optimizer
     from ..specs.campaign import CampaignSpec
-    from ..store import JobRow
+    from ..store.rows import JobRow
 
 __all__ = ["JobZones", "ReplayError", "job_zones", "replay", "zones_of_run"]
 
@@ -52,13 +52,14 @@ def replay(row: JobRow, spec: CampaignSpec | None = None, *, eps_safe_m: float |
     ``spec`` (its ``eps_safe_m`` and ``lipschitz``; or ``eps_safe_m=``) — without a time budget, and told the
     stored values (with their failure reasons and times) batch by batch in evaluation order, until the stored
     points are used up. A batch of which only a first part is stored (cut by a time budget) is told as cut
-    (:meth:`~vbl_robust.search.Optimizer.tell_partial`): the method never sees it, as in the original run.
+    (:meth:`~vbl_robust.search.base.Optimizer.tell_partial`): the method never sees it, as in the original run.
 
     Raises :class:`ReplayError` when an asked point differs from the stored one by more than 1e-12 (relative to
     max(1, |x|)), or the method stops before the stored points are used up; ``ValueError`` for a row that holds
     no search points.
     """
-    from ..search import Evaluations, make_optimizer
+    from ..search.api import make_optimizer
+    from ..search.evaluations import Evaluations
 
     if row.kind != JobKind.SEARCH or row.box is None or row.budget is None:
         raise ValueError(f"job {row.key}: not a search job ({row.kind})")
@@ -145,7 +146,7 @@ def job_zones(row: JobRow, spec: CampaignSpec | None = None, *, threshold: float
     APGD) come back with ``zones=None`` and a note. A :class:`ReplayError` propagates (a store that does not replay
     is an error, not a note).
     """
-    from ..search import METHODS
+    from ..search.api import METHODS
 
     eps = threshold if threshold is not None else (spec.settings.eps_safe_m if spec is not None else EPS_SAFE_M)
     base = dict(key=row.key, sample_id=row.sample_id, sample_index=row.sample_index, method=row.method, role=row.role,
@@ -186,7 +187,7 @@ def zones_of_run(run: str | Path, *, roles: Sequence[str] | None = None, thresho
     """:func:`job_zones` of every search job of a run directory (or its ``results.sqlite``), in store order;
     ``roles`` keeps only those roles ("main", "reference", "landscape"). Rows inconsistent with their own
     evaluations or their digests are left out (:func:`vbl_robust.campaigns.verify.screen`; logged as a warning)."""
-    from ..store import ResultStore
+    from ..store.core import ResultStore
     from .verify import screen
 
     with ResultStore.open_existing(run) as store:

@@ -25,9 +25,11 @@ from typing import Any
 
 from ..constants import Verdict
 from ..specs.campaign import CampaignSpec, Job
-from ..specs.kinds import Role
+from ..specs.kinds import Role, RunStatus
 from ..specs.settings import PipelineSettings
-from ..store import JobRow, ResultStore, RunProvenance, RunStatus, SampleRecord, WriterLock
+from ..store.core import ResultStore
+from ..store.lock import WriterLock
+from ..store.rows import JobRow, RunProvenance, SampleRecord
 from .precheck import check_run
 from .provenance import (
     DetectorSpec,
@@ -291,7 +293,7 @@ def run_campaign(
         precheck: check before anything is stored that every image can be read at its stated size and every method
             can run on the detector (:func:`~vbl_robust.campaigns.precheck.check_run`; ``ValueError``, one line);
             False only for a caller that has just checked.
-        wait: when another process is writing ``store`` (:class:`~vbl_robust.store.WriterLock`), wait
+        wait: when another process is writing ``store`` (:class:`~vbl_robust.store.lock.WriterLock`), wait
             for it instead of refusing (``ValueError`` naming its PID).
     """
     if executor not in EXECUTORS:

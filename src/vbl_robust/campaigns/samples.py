@@ -50,11 +50,11 @@ def load_samples(n: int, seed: int, *, lard: str | Path | None = None, width: in
     if n < 1:
         raise ValueError(f"number of images must be >= 1, got {n}")
     if lard is None:
-        from ..scenes import generate
+        from ..scenes.generate import generate
 
         samples = list(generate(n, seed=seed, width=width, height=height))
         return samples, {"kind": SourceKind.SYNTHETIC.value, "n": n, "seed": seed, "width": width, "height": height}
-    from ..data import read_lard
+    from ..data.lard_read import read_lard
 
     csv_path, db_path = find_lard_files(lard)
     allrows = list(read_lard(csv_path, db_path, **read_options))
@@ -77,13 +77,13 @@ def load_samples(n: int, seed: int, *, lard: str | Path | None = None, width: in
 def load_sequences(source: str | Path, *, frames: int, rate_hz: float, seed: int, width: int = 1024,
                    height: int = 1024) -> tuple[list[Any], dict[str, Any]]:
     """The samples of a sequence campaign and their source (provenance): ``source`` a count N (N generated
-    approach sequences of ``frames`` frames at ``rate_hz``, :func:`vbl_robust.scenes.generate_sequences`) or a
+    approach sequences of ``frames`` frames at ``rate_hz``, :func:`vbl_robust.scenes.sequences.generate_sequences`) or a
     LARD V2 dataset directory grouped into sequences (:func:`vbl_robust.data.read_lard_sequences`; ``rate_hz``
     gives the times of data without them). ``ValueError`` / ``FileNotFoundError`` with one line naming
     ``--sequences`` for bad input."""
     text = str(source).strip()
     if text.isdigit():
-        from ..scenes import generate_sequences
+        from ..scenes.sequences import generate_sequences
 
         n = int(text)
         if n < 1:
@@ -93,7 +93,7 @@ def load_sequences(source: str | Path, *, frames: int, rate_hz: float, seed: int
                       "width": width, "height": height}
     if not Path(text).is_dir():
         raise ValueError(f"--sequences {source}: expected a number of sequences or a LARD V2 dataset directory")
-    from ..data import read_lard_sequences
+    from ..data.sequence import read_lard_sequences
 
     csv_path, db_path = find_lard_files(text)
     seqs = read_lard_sequences(csv_path, db_path, rate_hz=rate_hz)

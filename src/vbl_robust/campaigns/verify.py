@@ -34,9 +34,10 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..constants import Verdict
-from ..specs.kinds import JobKind
-from ..store import JobRow, JobStatus, ResultStore
+from ..specs.kinds import JobKind, JobStatus
+from ..store.core import ResultStore
 from ..store.digest import BEFORE, STORED, Finding, FindingKind, check_row, read_chains
+from ..store.rows import JobRow
 from ..store.schema import DIGESTS_SINCE, job_row
 
 __all__ = ["StoreCheck", "banner_lines", "check_store", "row_findings", "screen"]

@@ -5,7 +5,7 @@ The unit of work is a :class:`SampleTask` (one sample + its pending jobs): the o
 yields, job after job, the rows to commit together (usually one; a breach in a chain brings the implied rows
 of the larger boxes with it, so a chain is never half-recorded).
 
-Rows are :class:`~vbl_robust.store.JobRow` s. Every search evaluation carries its failure reason (no
+Rows are :class:`~vbl_robust.store.rows.JobRow` s. Every search evaluation carries its failure reason (no
 detection, PnP failure, …) from the objective into the search result and the row (``n_failed``, ``failures``,
 ``worst_reason``, the reason of every stored point); the search itself sees the penalty value, as before.
 
@@ -30,9 +30,8 @@ import numpy as np
 
 from ..constants import NotMeasured, NotMeasuredError, Verdict
 from ..specs.campaign import Job
-from ..specs.kinds import JobKind, Role
+from ..specs.kinds import JobKind, JobStatus, Role
 from ..specs.settings import PipelineSettings
-from ..store import Corners, JobRow, JobStatus, Points, now_iso
 from ..store.payloads import (
     Nominal,
     RiskPayload,
@@ -43,13 +42,14 @@ from ..store.payloads import (
     WorstPayload,
     WorstPoint,
 )
+from ..store.rows import Corners, JobRow, Points, now_iso
 from .provenance import DetectorSpec
 from .rebuild import finite_or_none, result_fields, search_kwargs
 
 if TYPE_CHECKING:  # typing only: the pipeline (torch) is imported where an objective is built
-    from ..data import Sample
+    from ..data.sample import Sample
     from ..data.sequence import ApproachSequence
-    from ..detect import Detector
+    from ..detect.base import Detector
     from ..pipeline import SearchObjective
     from ..risk import RiskResult, ThetaDistribution
     from ..search.result import SearchResult
@@ -89,9 +89,9 @@ def build_objective(sample: Sample | ApproachSequence, detector: Detector, box: 
     """The objective a search job maximises over ``box``: the error of one image
     (:class:`~vbl_robust.pipeline.Objective`), or in a sequence campaign (``settings.sustain`` set) the error one θ
     sustains over ``sustain`` consecutive frames of an approach sequence
-    (:class:`~vbl_robust.sequences.SequenceObjective`)."""
+    (:class:`~vbl_robust.sequences.objective.SequenceObjective`)."""
     if settings.sustain is not None:
-        from ..sequences import SequenceObjective
+        from ..sequences.objective import SequenceObjective
 
         return SequenceObjective(sample, detector, box, settings.pnp, sustain=settings.sustain,
                                  conf_threshold=settings.conf_threshold, penalty_m=settings.penalty_m)
@@ -143,7 +143,7 @@ def not_measured_reason(exc: BaseException) -> tuple[NotMeasured, str]:
 
 
 def search_row(job: Job, result: Any, settings: PipelineSettings, run_id: int | None, job_s: float) -> JobRow:
-    """Row of a finished search (a :class:`~vbl_robust.search.SearchResult`)."""
+    """Row of a finished search (a :class:`~vbl_robust.search.result.SearchResult`)."""
     return _row(job, run_id, JobStatus.DONE, job_s=job_s,
                 **result_fields(result, settings.eps_safe_m, settings.penalty_m))
 
@@ -176,7 +176,7 @@ def nominal_details(objective: SearchObjective) -> Nominal:
     """The unperturbed image's facts (one evaluation at the identity θ: roll 0, contrast 1, …), stored beside the
     worst point as the payload's ``nominal``: ``error_m`` = L(0) (the objective: the penalty where it failed),
     ``reason`` (``""``: a pose), ``conf`` and the predicted ``corners`` (sample's pixels, TR TL BL BR; None: none)."""
-    from ..sequences import nominal_theta
+    from ..sequences.objective import nominal_theta
 
     rec = objective.evaluate(nominal_theta(objective.box))
     kp = np.asarray(rec.keypoints[0], dtype=np.float64)
@@ -186,10 +186,10 @@ def nominal_details(objective: SearchObjective) -> Nominal:
 
 def sequence_details(objective: SearchObjective, x: np.ndarray, eps_safe_m: float) -> SequencePayload:
     """What a sequence job stores about its worst θ (two more evaluations of the sequence): the breach facts of the
-    worst θ and of the unperturbed θ (:meth:`~vbl_robust.sequences.SequenceRecord.summary` at ``eps_safe_m``, with
+    worst θ and of the unperturbed θ (:meth:`~vbl_robust.sequences.objective.SequenceRecord.summary` at ``eps_safe_m``, with
     each frame's error and failure reason) and the frames (image id, index, time, distance from the runway
     threshold); JSON-safe (non-finite numbers as None)."""
-    from ..sequences import nominal_theta
+    from ..sequences.objective import nominal_theta
 
     seq = objective.sequence
     frames = SequenceFrames(tuple(str(s.id) for s in seq.samples), tuple(int(i) for i in seq.frame_index),
@@ -204,7 +204,7 @@ def sequence_details(objective: SearchObjective, x: np.ndarray, eps_safe_m: floa
 
 
 def run_search_job(job: Job, objective: SearchObjective, settings: PipelineSettings) -> SearchResult:
-    """Run one search job on a built objective; returns the :class:`~vbl_robust.search.SearchResult` (with the
+    """Run one search job on a built objective; returns the :class:`~vbl_robust.search.result.SearchResult` (with the
     failure reason and completion time of every evaluated point).
 
     A time-budgeted job first warms the objective up with one evaluation of the box centre outside the search's
@@ -212,7 +212,8 @@ def run_search_job(job: Job, objective: SearchObjective, settings: PipelineSetti
     search evaluates in chunks of the objective's detector batch (``batch_size``) and stops between chunks. A
     budget that reads smaller budgets off the run (``Budget.reads``) passes them on: the run goes on until
     ``max(read_evals)`` evaluations are done and sizes its chunks against each of ``read_seconds``."""
-    from ..search import METHODS, maximize, use_clock
+    from ..search.api import METHODS, maximize
+    from ..search.base import use_clock
 
     b = job.budget
     needs_gradient = METHODS[job.method].needs_gradient

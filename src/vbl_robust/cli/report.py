@@ -49,7 +49,7 @@ def _held_back(run: Path) -> tuple[str, frozenset[str], list, int]:
     """What the report leaves out of its numbers: the unit, the rows inconsistent with their evaluations or digests,
     the jobs the tool could not measure, and the number of the other jobs."""
     from vbl_robust.campaigns.verify import screen
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     with one_line(), ResultStore.open_existing(run, points_on_demand=True) as store:
         unit = store.spec().unit if store.holds_campaign() else "image"
@@ -77,7 +77,7 @@ def _report(run: Path, out: Path | None, csv: Path | None, parquet: Path | None,
     from vbl_robust.analysis.tables import export
     from vbl_robust.paper.experiments import EXPERIMENT_TITLES
     from vbl_robust.report.build import build_report
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     if fmt not in ("html", "md", "csv", "json"):
         fail(f"--format {fmt}: choose html, md, csv or json")
@@ -186,7 +186,7 @@ def merge(sources: Sources, into: Into, trust_model: MergeTrust = False) -> None
     a GPU, a cluster without a shared disk): rows it lacks, their samples and runs; rows it holds stay. Refused
     while a run writes it, and for a detector that names code unless --trust-model."""
     from vbl_robust.campaigns.verify import screen
-    from vbl_robust.store import MergeReport, merge_runs, store_file
+    from vbl_robust.store.merge import MergeReport, merge_runs, store_file
 
     def merged(report: MergeReport) -> None:
         part = report.sources[-1]
@@ -208,7 +208,7 @@ def _summary(run: Path, fmt: str) -> None:
     """The run's summary table (:func:`vbl_robust.analysis.tables.summary_table`: survival, or a risk run's
     failure probability per estimator) on standard output."""
     from vbl_robust.analysis.tables import summary_table, write_records
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     with one_line(), ResultStore.open_existing(run) as store:
         records, columns = summary_table(store)
@@ -222,7 +222,7 @@ def _markdown(run: Path, others: list[Path], compare: Path | None) -> str:
         risk_markdown,
         survival_markdown,
     )
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     with one_line():
         if compare is not None:

@@ -110,7 +110,7 @@ def reproduce(
     if resume_from is not None and not resume_from.is_dir():
         fail(f"--resume-from {resume_from}: not a directory")
     if resume_from is not None:
-        from vbl_robust.store import PACKED
+        from vbl_robust.store.core import PACKED
 
         if not any((resume_from / exp.name / PACKED).is_file() for exp in exps):  # a run, or a bundle without --stores
             fail(f"--resume-from {resume_from}: holds no packed store of {', '.join(e.name for e in exps)} "
@@ -160,7 +160,7 @@ def _check_method_options(options: dict, specs: list) -> None:
 def _refuse_code(bundle: Path, names: list[str], trust: bool) -> None:
     """``--resume-from``: one line, before anything runs or is restored, when a packed store of the bundle names a
     detector that is code (a factory, a .pt outside the package) and ``trust`` (--trust-model) is not given."""
-    from vbl_robust.store import PACKED, ResultStore
+    from vbl_robust.store.core import PACKED, ResultStore
 
     for name in names:
         packed = bundle / name / PACKED
@@ -173,7 +173,8 @@ def _refuse_code(bundle: Path, names: list[str], trust: bool) -> None:
 
 def _restore(bundle: Path, name: str, out_dir: Path) -> None:
     """``--resume-from``: the bundle's packed store of experiment ``name`` seeds ``out_dir`` if it has none yet."""
-    from vbl_robust.store import PACKED, restore_store
+    from vbl_robust.store.core import PACKED
+    from vbl_robust.store.pack import restore_store
 
     packed = bundle / name / PACKED
     with one_line(ValueError, prefix=f"--resume-from {bundle}: "):
@@ -199,7 +200,7 @@ def _estimate(exps: list, opts: Any, seed: int, images: int | None, det: Any, pr
               group: str, probe_seconds: float, clock: str = "wall", root: Path | None = None) -> None:
     """Print each experiment's expected duration and its upper bound (:mod:`vbl_robust.paper.estimate`), the
     probe's rates measured on the run's ``clock`` (process: CPU seconds, the durations of an idle machine)."""
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     specs = [exp.build(seed, opts) for exp in exps]
     pr = probe(det, specs, probe_samples, seconds=probe_seconds, clock=clock)
@@ -233,7 +234,7 @@ def _reference(root: Path, name: str) -> Path:
     """``--check-against``: where experiment ``name``'s earlier rows are (``root/name`` or ``root`` itself: a run
     directory with a results store, a bundle's experiment directory with ``jobs.parquet``, or that file); refused
     before any work when there is none."""
-    from vbl_robust.store import STORE
+    from vbl_robust.store.core import STORE
 
     for p in (root / name, root):
         if (p.is_dir() and ((p / STORE).is_file() or (p / "jobs.parquet").is_file())) or (

@@ -85,7 +85,7 @@ def risk(
 def _print_pooled(out: Path) -> None:
     """Per estimator: the verdict counts and the failure rate pooled over the images."""
     from vbl_robust.analysis.risk import pooled_risk
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     with ResultStore.open_existing(out) as store:
         rows = store.jobs(kind="risk", with_points=True, with_trace=False)

@@ -65,7 +65,7 @@ def run_with_progress(spec: Any, samples: list, out: Path, detector: Any, *, exe
 
     from vbl_robust.campaigns.precheck import check_run
     from vbl_robust.campaigns.runner import run_campaign
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     with one_line(ValueError):
         spec.check()  # before anything is created or run
@@ -142,7 +142,7 @@ def check_store(out: Path, spec: Any, samples: list, detector: Any, *, wait: boo
     ``wait``), it holds results of another campaign or detector, or of other pixels of the same images — all read
     without writing, so a refusal leaves the run directory as it was."""
     from vbl_robust.campaigns.provenance import sample_fingerprint
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
     from vbl_robust.store.identity import check_same
 
     path = out / "results.sqlite"
@@ -165,7 +165,7 @@ def check_store(out: Path, spec: Any, samples: list, detector: Any, *, wait: boo
 
 def _refuse_in_use(path: Path) -> None:
     """``ValueError`` naming the PID when another process holds the store's writer lock
-    (:class:`~vbl_robust.store.WriterLock`), probed without writing the lock file."""
+    (:class:`~vbl_robust.store.lock.WriterLock`), probed without writing the lock file."""
     lock = Path(f"{path}.lock")
     try:
         fd = os.open(lock, os.O_RDONLY)
@@ -228,7 +228,7 @@ def finish(out: Path, summary: Any, *, csv: Path | None, parquet: Path | None, r
     from vbl_robust.analysis.tables import export
     from vbl_robust.paper.experiments import EXPERIMENT_TITLES
     from vbl_robust.report.build import build_report
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     with ResultStore.open_existing(out) as store:
         spec = store.spec()
@@ -312,7 +312,7 @@ def print_summary(spec: Any, rows: list) -> None:
 
 def load_sequence_samples(source: str, frames: int, rate: float, seed: int, width: int, height: int,
                           ) -> tuple[list, dict]:
-    """The approach sequences of ``--sequences`` (:func:`vbl_robust.campaigns.load_sequences`), or one line."""
+    """The approach sequences of ``--sequences`` (:func:`vbl_robust.campaigns.samples.load_sequences`), or one line."""
     from vbl_robust.campaigns.samples import load_sequences
 
     with one_line(ValueError, FileNotFoundError, RuntimeError):

@@ -32,7 +32,8 @@ def scenes(
     sequences: Sequences = None, frames: Frames = 20, rate: Rate = 10.0, speed: Speed = 70.0,
 ) -> None:
     """Generate approach scenes with exact ground truth, written in LARD V2 format."""
-    from vbl_robust import scenes as sc
+    from vbl_robust.scenes.export import write_dataset
+    from vbl_robust.scenes.sequences import write_sequences
 
     if out.exists() and not out.is_dir():
         fail(f"--out {out}: is a file, not a directory")
@@ -41,10 +42,10 @@ def scenes(
              "written into a new or empty directory, never over another")
     with one_line(ValueError, FileNotFoundError, RuntimeError):
         if sequences is not None:
-            csv_path = sc.write_sequences(out, sequences, frames, rate, seed=seed, width=width, height=height,
-                                          fov_deg=fov, ground_speed_mps=speed)
+            csv_path = write_sequences(out, sequences, frames, rate, seed=seed, width=width, height=height,
+                                       fov_deg=fov, ground_speed_mps=speed)
         else:
             envs = tuple(e.strip() for e in envelopes.split(",") if e.strip())
-            csv_path = sc.write_dataset(out, n, seed=seed, width=width, height=height, fov_deg=fov, envelopes=envs)
+            csv_path = write_dataset(out, n, seed=seed, width=width, height=height, fov_deg=fov, envelopes=envs)
     what = f"{sequences} sequences of {frames} frames at {rate:g} Hz" if sequences is not None else f"{n} scenes"
     typer.echo(f"wrote {what}: {csv_path}")

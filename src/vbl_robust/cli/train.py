@@ -200,7 +200,7 @@ def harden(
     from vbl_robust.campaigns.harden import harden as run_harden
     from vbl_robust.detect.protocol import HARDEN_FORBIDDEN_SEEDS, HARDEN_SEED
     from vbl_robust.detect.train import SHIPPED_DATA, VAL_SEED_OFFSET
-    from vbl_robust.scenes import generate
+    from vbl_robust.scenes.generate import generate
 
     scenes = {"audit": {}, "shipped": SHIPPED_DATA}
     if data not in scenes:

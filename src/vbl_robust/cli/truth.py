@@ -35,7 +35,8 @@ def truth(
         truth_spec,
     )
     from vbl_robust.detect.shipped import DetectorSpec
-    from vbl_robust.store import ResultStore, store_file
+    from vbl_robust.store.core import ResultStore
+    from vbl_robust.store.merge import store_file
 
     params = parameters()
     quiet = set_verbosity(quiet=quiet, verbose=verbose)

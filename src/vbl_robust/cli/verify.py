@@ -19,7 +19,7 @@ Head = Annotated[str | None, typer.Option("--head", help="The head digest a repo
 def verify(run: o.StoredRun, head: Head = None) -> None:
     """Check a run's rows against their own evaluations and their digests (exit 1 naming each row that disagrees)."""
     from vbl_robust.campaigns.verify import check_store
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     if head is not None and (len(head) != 64 or any(c not in "0123456789abcdef" for c in head.lower())):
         fail(f"--head {head}: not a SHA-256 (64 hex digits)")

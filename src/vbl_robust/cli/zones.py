@@ -50,7 +50,7 @@ def zones(
     # scipy, torch and matplotlib behind these: imported here, not for ``--help``
     from vbl_robust.campaigns.replay import ReplayError, zones_of_run
     from vbl_robust.report.zone_figure import plot_zones
-    from vbl_robust.store import ResultStore
+    from vbl_robust.store.core import ResultStore
 
     if fmt not in FORMATS:
         fail(f"--format {fmt}: choose json, csv or md")

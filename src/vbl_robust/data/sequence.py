@@ -2,7 +2,7 @@
 
 An :class:`ApproachSequence` is a list of :class:`~vbl_robust.data.sample.Sample` (one per frame, far to close as
 flown), the frame indices and the times. Synthetic sequences come from
-:func:`vbl_robust.scenes.generate_sequences`; a LARD V2 dataset is grouped into sequences by
+:func:`vbl_robust.scenes.sequences.generate_sequences`; a LARD V2 dataset is grouped into sequences by
 :func:`group_sequences` / :func:`read_lard_sequences`.
 
 How frames are grouped (first rule that applies to the whole dataset)

@@ -47,8 +47,9 @@ import numpy as np
 import torch
 
 from vbl_robust.constants import CONF_THRESHOLD, FailureReason
-from vbl_robust.perturb import Perturbation, PixelScale, ViewSampler
-from vbl_robust.perturb.views import to_tensor
+from vbl_robust.perturb.compose import Perturbation
+from vbl_robust.perturb.resample import PixelScale
+from vbl_robust.perturb.views import ViewSampler, to_tensor
 
 if TYPE_CHECKING:
     from vbl_robust.data.sample import Sample
@@ -120,7 +121,7 @@ class Detections:
 class Views(Protocol):
     """What a detector reads a batch of perturbed images through (:attr:`DetectContext.sampler`): ``len`` rows of
     ``theta`` (None for plain images) under ``perturbation``, full frames, views of windows, and points moved by the
-    perturbation. Implemented by :class:`~vbl_robust.perturb.ViewSampler`, :class:`ImageViews` and the sequence
+    perturbation. Implemented by :class:`~vbl_robust.perturb.views.ViewSampler`, :class:`ImageViews` and the sequence
     objective's stack of frames."""
 
     perturbation: Any
@@ -150,7 +151,7 @@ class DetectContext:
 
     Attributes:
         sample: the :class:`~vbl_robust.data.sample.Sample` (None for plain images, :meth:`of_images`).
-        sampler: the :class:`Views` of ``T(x; θ)`` (a :class:`~vbl_robust.perturb.ViewSampler`, or
+        sampler: the :class:`Views` of ``T(x; θ)`` (a :class:`~vbl_robust.perturb.views.ViewSampler`, or
             :class:`ImageViews` for plain images).
         scale: mapping from the sample's pixels to the source pixels of the sampler.
     """
@@ -171,7 +172,7 @@ class DetectContext:
         """The context of θ rows for ``sample``: its views sampled from ``image`` (the sample's pixels at ``scale``;
         None → a blank image, for detectors that read no pixels, such as the oracle). The sampler gets the
         sample's intrinsics at ``scale`` (:meth:`PixelScale.intrinsics
-        <vbl_robust.perturb.PixelScale.intrinsics>`: the attitude homography needs the focal length) and
+        <vbl_robust.perturb.resample.PixelScale.intrinsics>`: the attitude homography needs the focal length) and
         ``scale`` itself (blur lengths are in the sample's pixels)."""
         w, h = round(sample.width * scale.sx), round(sample.height * scale.sy)
         src = torch.zeros(1, 3, 1, 1).expand(1, 3, h, w) if image is None else image
@@ -220,7 +221,7 @@ class DetectContext:
 
 
 class ImageViews:
-    """The :class:`~vbl_robust.perturb.ViewSampler` interface over plain images ``(B, 3, H, W)`` (no perturbation)."""
+    """The :class:`~vbl_robust.perturb.views.ViewSampler` interface over plain images ``(B, 3, H, W)`` (no perturbation)."""
 
     perturbation = None
     theta = None

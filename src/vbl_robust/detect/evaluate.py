@@ -68,7 +68,7 @@ def evaluate_detector(
     pnp_methods: Sequence[str] = ("ippe_lm", "iterative"), batch: int = 8, drop_pixels: bool = True,
 ) -> EvalResult:
     """Run ``detector.detect`` on every sample (batches of same-size images) and score it."""
-    from ..pnp import solve
+    from ..pnp.solvers import solve
 
     n = len(samples)
     delta = np.full((n, 4, 2), np.nan)

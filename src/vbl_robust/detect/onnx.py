@@ -7,7 +7,7 @@ head (YOLO26-pose) is exported with its σ channels appended (B, 4 + nc + K·3 +
 drops that head, so :func:`export_onnx` traces :class:`~vbl_robust.detect.ultralytics.PoseWithSigma` itself
 (``torch.onnx.export``) and writes the same metadata. ONNX Runtime does not give
 gradients: :meth:`OnnxDetector.top` works as a (non-differentiable) black box. The detector a run builds from an
-``.onnx`` (:class:`~vbl_robust.detect.DetectorSpec`) adds a torch twin of the graph for gradient searches, checked
+``.onnx`` (:class:`~vbl_robust.detect.shipped.DetectorSpec`) adds a torch twin of the graph for gradient searches, checked
 against ONNX Runtime before it is used (:mod:`.onnx_twin`).
 """
 

@@ -1,6 +1,6 @@
 """A door for any detector: ``--detector-plugin MODULE:FACTORY`` (or ``path/to/file.py:FACTORY``).
 
-The factory is called with no argument and returns an object that satisfies the :class:`~vbl_robust.detect.Detector`
+The factory is called with no argument and returns an object that satisfies the :class:`~vbl_robust.detect.base.Detector`
 protocol (:mod:`vbl_robust.detect.base`): the capabilities ``input_size``, ``uses_pixels`` and ``differentiable``
 declared, a ``detect(context)`` returning one :class:`~vbl_robust.detect.Detections` per row of the context, and
 ``detect_top(context)`` when it says it is differentiable (then APGD can run on it).

@@ -106,7 +106,7 @@ def default_model_caveats(info: dict[str, Any] | None = None, name: str = "defau
 
 
 def with_design(detector: PoseDetector, design: str, **window):
-    """``detector`` as a single pass, or as both passes of a :class:`~vbl_robust.detect.TwoStageDetector`;
+    """``detector`` as a single pass, or as both passes of a :class:`~vbl_robust.detect.twostage.TwoStageDetector`;
     ``window``: its crop window (``margin``, ``min_side``: what the weights were trained on), two-stage only."""
     if design not in DESIGNS:
         raise ValueError(f"detector design must be one of {DESIGNS}, got {design!r}")
@@ -127,7 +127,7 @@ def default_detector(*, imgsz: int | None = None, chunk: int = 16, design: str |
     """The detector shipped with the package (``model``: which of :data:`SHIPPED_MODELS`); ``design``
     ``"twostage"`` / ``"single"`` (the paper's one pass),
     None → the shipped default (``default.json``, with its crop window ``"twostage": {"min_side": …}`` when the
-    weights were trained on another than :class:`~vbl_robust.detect.TwoStageDetector`'s default); ``engine`` of
+    weights were trained on another than :class:`~vbl_robust.detect.twostage.TwoStageDetector`'s default); ``engine`` of
     the black-box path (:mod:`.engines`); ``device`` ``auto``/``cpu``/``cuda[:N]`` (:mod:`.device`)."""
     from .engines import with_engine
     from .ultralytics import UltralyticsDetector

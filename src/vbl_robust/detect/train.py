@@ -1,6 +1,6 @@
 """Train the runway-corner keypoint model (YOLOv8n-pose) with ultralytics, offline, resumable and cumulative.
 
-Data: each :class:`~vbl_robust.data.Sample` gives square *views* (see :mod:`vbl_robust.perturb.views`), rendered
+Data: each :class:`~vbl_robust.data.sample.Sample` gives square *views* (see :mod:`vbl_robust.perturb.views`), rendered
 at the training size with the same resampling the detectors use at inference:
 
 - the letterboxed full image (what a single-pass detector, or the first pass of the two-stage one, sees);
@@ -407,7 +407,7 @@ def _split(samples: Sequence[Sample] | None, val_samples: Sequence[Sample] | Non
     """The training and validation samples of :func:`train`: generated (``samples`` None), given both, or
     ``samples`` split (a seeded fifth, at most ``n_val``, for validation)."""
     if samples is None:
-        from ..scenes import generate
+        from ..scenes.generate import generate
 
         gen = dict(generate_options or {})
         return (generate(n_train, seed=seed, n_airports=n_airports, **gen),

@@ -113,7 +113,7 @@ class UltralyticsDetector(PoseDetector):
     """A YOLO-pose ``.pt`` checkpoint as a runway-corner detector (single pass).
 
     Args:
-        path: checkpoint (the shipped one: :func:`vbl_robust.detect.default_detector`).
+        path: checkpoint (the shipped one: :func:`vbl_robust.detect.shipped.default_detector`).
         trust: required (True) to load a ``.pt`` from outside the package: a pickle runs code when loaded.
         imgsz: input side (multiple of 32); None → the size the model was trained at (or 640).
         device: ``auto``, ``cpu``, ``cuda`` or ``cuda:N`` (:func:`~vbl_robust.detect.device.resolve_device`).

@@ -1,12 +1,5 @@
-"""Camera model, runway frame, LARD attitude conventions and geodesy (see :mod:`.camera` for conventions)."""
+"""Camera model, runway frame, LARD attitude conventions and geodesy.
 
-from .camera import intrinsics, lard_rotation, project
-from .geodesy import RunwayFrame, runway_db_entry
-
-__all__ = [
-    "RunwayFrame",
-    "intrinsics",
-    "lard_rotation",
-    "project",
-    "runway_db_entry",
-]
+Modules: :mod:`.camera` (intrinsics, LARD attitude, projection; the conventions), :mod:`.geodesy` (geodetic ↔
+runway frame, the runway database).
+"""

@@ -49,7 +49,9 @@ from typing import Any
 
 from ..atomic import atomic_write
 from ..report.markdown import esc_md
-from ..store import PACKED, STORE, ResultStore, RunRecord, pack_store
+from ..store.core import PACKED, STORE, ResultStore
+from ..store.pack import pack_store
+from ..store.rows import RunRecord
 from .experiments import EXPERIMENT_TITLES
 
 #: Markers of the generated part of a REPRODUCTION.md (:func:`write_bundle`).
@@ -111,7 +113,7 @@ def write_experiment(run: Path, out: Path, stores: bool = False, keep: Path | No
     of the bundle ``keep`` — the experiment's previous bundle directory — when it has one); returns its provenance
     totals."""
     from ..analysis.tables import export
-    from ..report import build_report
+    from ..report.build import build_report
 
     out.mkdir(parents=True, exist_ok=True)
     with ResultStore.open_existing(run, points_on_demand=True) as store:  # bounded memory, whatever the store's size
@@ -130,7 +132,7 @@ def rebuild_report(experiment: Path) -> Path:
     """Rebuild a bundled experiment's report (:data:`REPORT_FILES`) from its own packed store, in place: built
     beside it first, then each file replaced (``figures/`` by two renames), a file the new report does not write
     removed; killed before that, the old report stays whole. Returns the report's path."""
-    from ..report import build_report
+    from ..report.build import build_report
 
     experiment = Path(experiment)
     stage = experiment.parent / f".{experiment.name}.report"

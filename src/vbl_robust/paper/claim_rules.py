@@ -27,7 +27,7 @@ from ..analysis.reference import REFERENCE_METHOD
 from ..report.html import fmt_num
 from ..search.api import METHODS as SEARCH_METHODS
 from ..stats import ALPHA, LEVEL, ClaimVerdict, Rate, claim_verdict, holm, paired
-from ..store import JobRow
+from ..store.rows import JobRow
 
 #: The verdicts of a claim, in the order the claims page counts them (:class:`~vbl_robust.stats.ClaimVerdict`).
 VERDICTS = tuple(ClaimVerdict)

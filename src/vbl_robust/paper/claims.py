@@ -90,9 +90,11 @@ from ..campaigns.pnpcheck import TRUNCATED
 from ..constants import Verdict
 from ..report.html import fmt_num
 from ..report.rows import Context, main_boxes, reference
-from ..search import direct_family
+from ..search.api import direct_family
+from ..specs.kinds import JobStatus
 from ..stats import Rate
-from ..store import PACKED, STORE, JobRow, JobStatus, ResultStore
+from ..store.core import PACKED, STORE, ResultStore
+from ..store.rows import JobRow
 from .claim_rules import (
     CROSS_BY_S,
     NEAR_M,

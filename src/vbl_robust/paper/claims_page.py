@@ -123,7 +123,7 @@ def _provenance(run: Path) -> dict[str, Any]:
         except (OSError, ValueError):
             return {}
     try:
-        from ..store import ResultStore
+        from ..store.core import ResultStore
 
         with ResultStore.open_existing(run) as store:
             return {"runs": [r.to_dict() for r in store.runs()], "totals": {"images": len(store.samples())}}

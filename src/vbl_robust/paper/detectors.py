@@ -37,7 +37,7 @@ from ..constants import EPS_SAFE_M
 from ..report.html import esc
 from ..report.markdown import esc_md
 from ..stats import Paired, Rate, paired
-from ..store import ResultStore
+from ..store.core import ResultStore
 from .claim_rules import Claim
 from .claims import claims_of
 

@@ -143,14 +143,14 @@ def probe_rate(det: Any, seconds: float = 5.0, *, gradient: bool = False, clock:
     """Evaluations per second of the audit objective (roll ± 15°, contrast) on one synthetic image, measured on the
     black-box path (or, ``gradient=True``, on the gradient path with a backward pass) in :data:`PROBE_REPEATS` short
     probes sharing ``seconds`` of wall time (:func:`best_of_probes`), in seconds of ``clock``
-    (:data:`vbl_robust.search.CLOCKS`): ``"process"`` counts this process's CPU time, so waiting for a core that other
+    (:data:`vbl_robust.search.base.CLOCKS`): ``"process"`` counts this process's CPU time, so waiting for a core that other
     work holds does not lower the rate. One thread, as a campaign's workers run (module docstring)."""
     import torch
 
     from ..campaigns.work import detector_for
     from ..pipeline import Objective
-    from ..scenes import generate
-    from ..search import CLOCKS
+    from ..scenes.generate import generate
+    from ..search.base import CLOCKS
     from ..space import ParameterBox
 
     box = ParameterBox({"roll_deg": (-15, 15), "contrast": (0.7, 1.4)})
@@ -176,7 +176,7 @@ def probe_rate(det: Any, seconds: float = 5.0, *, gradient: bool = False, clock:
 def stored_pace(rows: Sequence[Any]) -> dict[bool, tuple[int, int, float]]:
     """Per kind (``True``: methods that need a gradient) the stored main search jobs' ``(jobs, evaluations, seconds
     of search)`` — their evaluation rate as they ran on this machine (the run's clock)."""
-    from ..search import METHODS
+    from ..search.api import METHODS
 
     out: dict[bool, tuple[int, int, float]] = {}
     for r in rows:
@@ -282,7 +282,7 @@ def expected_evals(p: float, budget: int) -> float:
 
 def expected_seconds(spec: CampaignSpec, n_images: int, pr: Probe, workers: int = 1) -> float:
     """Expected seconds of ``spec`` on ``n_images`` with ``workers`` processes (see the module docstring)."""
-    from ..search import METHODS
+    from ..search.api import METHODS
 
     total = 0.0
     by_chain: dict[str, list[Job]] = {}

@@ -12,7 +12,7 @@ images, 1000 for the PnP validation), with georobust-av run beside the paper's G
   budget is read off their stamped trace, APGD runs once per budget;
 - distance profile: roll budgets 5°, 10°, …, 45° chained per image (a breach at ±b implies one at every larger
   budget, so larger budgets are not searched again), 200 evaluations each;
-- perturbation families (``families``): every family of :data:`vbl_robust.perturb.PERTURBATIONS` alone, at its five
+- perturbation families (``families``): every family of :data:`vbl_robust.perturb.registry.PERTURBATIONS` alone, at its five
   nested budget levels (the registry's ``levels``, mild to extreme; box level = the level index 1–5) chained per
   image like the distance profile, GeoRobust and random (APGD left out, see :func:`families`), 200 evaluations
   per level, and a dense-grid reference per family over its largest level;
@@ -111,7 +111,7 @@ def _runtime_blocks(box: BoxSpec, o: Options) -> list[Block]:
     """Anytime methods (their points do not depend on the budget): one run per image at the largest time budget
     that also reaches the largest evaluation budget, every budget read off its stamped evaluations. Others
     (APGD: its schedule is fitted to the budget): one run per budget."""
-    from ..search import anytime_methods
+    from ..search.api import anytime_methods
 
     readable = tuple(m for m in o.methods if m in anytime_methods())
     per_budget = tuple(m for m in o.methods if m not in readable)
@@ -131,7 +131,7 @@ def _runtime_blocks(box: BoxSpec, o: Options) -> list[Block]:
 
 
 def _runtime_note(o: Options) -> str:
-    from ..search import anytime_methods
+    from ..search.api import anytime_methods
 
     readable = [m for m in o.methods if m in anytime_methods()]
     per_budget = [m for m in o.methods if m not in readable]
@@ -223,7 +223,7 @@ def convergence(seed: int, o: Options) -> CampaignSpec:
 def family_boxes(name: str) -> tuple[BoxSpec, ...]:
     """The five nested budget levels of the perturbation family ``name`` as 1-D boxes; box level = the level index
     (1 = mild … 5 = extreme), label = the parameter and its range (``"blur_px [0, 0.5] px"``)."""
-    from ..perturb import PERTURBATIONS
+    from ..perturb.registry import PERTURBATIONS
     from ..space import ParameterBox
 
     spec = PERTURBATIONS[name]
@@ -251,7 +251,7 @@ def _family_grid(name: str, points: int) -> tuple[Block, str]:
     survival at every level for the cost of the breach's distance): centre-out when every level is centred on
     the identity (attitude, brightness), in ascending order when every level starts at it (blurs, haze, noise).
     Levels that are neither (contrast, gamma: multiplicatively symmetric about 1) get the complete grid."""
-    from ..perturb import PERTURBATIONS
+    from ..perturb.registry import PERTURBATIONS
 
     spec = PERTURBATIONS[name]
     levels = spec.levels
@@ -286,7 +286,7 @@ def families(seed: int, o: Options) -> CampaignSpec:
     a gradient through a blur's σ at 0 or a clamped photometric map adds little on a 1-D box), and the families'
     ranking should not depend on which families a gradient happens to suit. A dense-grid reference per family
     (:func:`_family_grid`) gives the true survival per level up to the grid spacing."""
-    from ..perturb import PERTURBATIONS
+    from ..perturb.registry import PERTURBATIONS
 
     methods = family_methods(o)
     budget = Budget(max_evals=o.max_evals)

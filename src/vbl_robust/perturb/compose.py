@@ -6,12 +6,12 @@ family's maths is its :class:`~vbl_robust.perturb.family.Family` (:mod:`.family`
 iterates the registry: it names no family. A parameter absent from the box keeps its identity value.
 
 Units: angles in degrees; ``blur_px`` and ``motion_blur_px`` in pixels **of the sample's image** (the composer
-scales them to a resized source with the :class:`~vbl_robust.perturb.PixelScale` it is given, so one θ means the
+scales them to a resized source with the :class:`~vbl_robust.perturb.resample.PixelScale` it is given, so one θ means the
 same physical blur for every detector resolution); ``brightness``, ``haze``, ``noise_std`` as fractions of full
 scale; ``contrast`` and ``gamma`` dimensionless.
 
 Camera: the attitude needs the pinhole ``K`` of the pixels it warps (``K=``, e.g.
-:meth:`PixelScale.intrinsics <vbl_robust.perturb.PixelScale.intrinsics>` of the sample's ``K``); roll needs only
+:meth:`PixelScale.intrinsics <vbl_robust.perturb.resample.PixelScale.intrinsics>` of the sample's ``K``); roll needs only
 the principal point (``center=``, or ``K``'s).
 """
 
@@ -59,7 +59,7 @@ class Perturbation:
       ``K``'s, else ``(W/2, H/2)``);
     * ``K`` — the ``(3, 3)`` pinhole matrix of the image's pixels; required by ``pitch_deg`` / ``yaw_deg``. When
       both are given they must agree;
-    * ``scale`` — the :class:`~vbl_robust.perturb.PixelScale` from the sample's pixels to the image's (blur
+    * ``scale`` — the :class:`~vbl_robust.perturb.resample.PixelScale` from the sample's pixels to the image's (blur
       lengths and the noise grid are in the sample's pixels); ``None`` = the image is the sample's.
     """
 
@@ -119,7 +119,7 @@ class Perturbation:
     def needs_frame(self) -> bool:
         """True when some family acts on whole perturbed frames (``optical`` convolutions, the ``noise`` pattern
         of the sensor grid): views must then be cut from rendered frames (see
-        :class:`~vbl_robust.perturb.ViewSampler`)."""
+        :class:`~vbl_robust.perturb.views.ViewSampler`)."""
         return bool(self._kinds() & {FamilyKind.OPTICAL, FamilyKind.NOISE})
 
     # -- θ handling --------------------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 """The contract of a perturbation family: the maps one registry entry carries.
 
 A family is one object (a :class:`Family`) in the module that holds its maths, named by one entry of
-:data:`vbl_robust.perturb.PERTURBATIONS` (``family="module:NAME"``). :class:`~vbl_robust.perturb.Perturbation`,
+:data:`vbl_robust.perturb.registry.PERTURBATIONS` (``family="module:NAME"``). :class:`~vbl_robust.perturb.compose.Perturbation`,
 the view sampler and the training augmentation only iterate the registry and call these methods; none of them
 names a family. A new family is therefore its module plus one registry line.
 
@@ -38,7 +38,7 @@ class FrameContext:
             or ``None`` (the roll then defaults to the frame's centre).
         K: the ``(3, 3)`` pinhole matrix of the frame's pixels (a tensor in :meth:`Family.source_coords`), or
             ``None``.
-        scale: the :class:`~vbl_robust.perturb.PixelScale` from the sample's pixels to the frame's.
+        scale: the :class:`~vbl_robust.perturb.resample.PixelScale` from the sample's pixels to the frame's.
         rng: training only: the noise family then draws a fresh standard-normal pattern from it instead of the
             audit's one fixed seeded pattern.
     """

@@ -14,7 +14,7 @@ The order matters where operations do not commute: the contrast's grey mean sees
 blurs and the haze; the clamps of contrast, brightness and noise; gamma bends what came before it.
 
 A new family is one module holding a :class:`~vbl_robust.perturb.family.Family` and one entry here;
-:class:`~vbl_robust.perturb.Perturbation`, the view sampler, the training augmentation and the command line's help
+:class:`~vbl_robust.perturb.compose.Perturbation`, the view sampler, the training augmentation and the command line's help
 read this table and nothing else. This module imports no torch (the command line's help reads it).
 
 Budget levels: every :class:`PerturbationSpec` carries a physically plausible ``default`` range (the CLI's

@@ -18,7 +18,7 @@ the CPU (a NumPy θ) samples the same views with OpenCV instead (:mod:`.warp`: b
 gradient, a small fraction of the cost).
 
 :class:`ViewSampler` is the one boundary between a perturbation and a detector: built from the unperturbed image,
-a :class:`~vbl_robust.perturb.Perturbation` and a batch θ, it gives the views of ``T(x; θ)`` a detector asks for
+a :class:`~vbl_robust.perturb.compose.Perturbation` and a batch θ, it gives the views of ``T(x; θ)`` a detector asks for
 and moves points as the perturbation moves the image content.
 """
 
@@ -201,16 +201,16 @@ class ViewSampler:
     """Views of the perturbed images ``T(x; θ_i)``, one per row of θ, sampled from the unperturbed image.
 
     Args:
-        perturbation: the :class:`~vbl_robust.perturb.Perturbation` (parameter names of the box).
+        perturbation: the :class:`~vbl_robust.perturb.compose.Perturbation` (parameter names of the box).
         image: ``(1, 3, H, W)`` or ``(3, H, W)`` unperturbed image, float in [0, 1] (the *source*: the sample's
             image, possibly resized to the detector's input size — see ``scale``).
         theta: ``(N, d)`` parameters in real units, NumPy (black box) or a tensor (differentiable w.r.t. θ).
         center: ``(2,)`` principal point in source pixels (the centre of camera rotations); ``None``: ``K``'s,
             else ``(W/2, H/2)``.
         K: ``(3, 3)`` pinhole matrix in source pixels (the sample's ``K`` through
-            :meth:`PixelScale.intrinsics <vbl_robust.perturb.PixelScale.intrinsics>`); required by the attitude
+            :meth:`PixelScale.intrinsics <vbl_robust.perturb.resample.PixelScale.intrinsics>`); required by the attitude
             homography (``pitch_deg``, ``yaw_deg``).
-        scale: the :class:`~vbl_robust.perturb.PixelScale` from the sample's pixels to the source's (blur lengths
+        scale: the :class:`~vbl_robust.perturb.resample.PixelScale` from the sample's pixels to the source's (blur lengths
             and the noise grid are in the sample's pixels); ``None`` = identity.
         frame: optionally the source as an ``(H, W, 3)`` float32 NumPy array (the OpenCV path reads it).
 

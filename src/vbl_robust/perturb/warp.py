@@ -1,9 +1,9 @@
 """Views without a gradient on the CPU: one OpenCV warp per view at the exact map (the black-box path).
 
-:class:`~vbl_robust.perturb.ViewSampler` samples a view of ``T(x; θ)`` by reading the source at the perturbation's
+:class:`~vbl_robust.perturb.views.ViewSampler` samples a view of ``T(x; θ)`` by reading the source at the perturbation's
 inverse map, reflected into the image (``BORDER_REFLECT_101``) and scaled to the average-pooled source. When the
 perturbation's geometry is one homography per θ (:meth:`Perturbation.source_matrices
-<vbl_robust.perturb.Perturbation.source_matrices>`; the camera attitude is), a view pixel ``(j, i)`` reads the pooled
+<vbl_robust.perturb.compose.Perturbation.source_matrices>`; the camera attitude is), a view pixel ``(j, i)`` reads the pooled
 source at ``P · H_θ · Q · (j, i, 1)``: ``Q`` maps view pixels to the perturbed frame (:func:`grid_matrix`), ``H_θ``
 the frame to the source, ``P`` the source to its pooled copy (:func:`pool_matrix`). So a view is
 

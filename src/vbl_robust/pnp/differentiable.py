@@ -6,7 +6,7 @@ points, and BPnP (not packaged) differentiates a depth-weighted constraint that 
 
 Forward
 -------
-Exactly :func:`vbl_robust.pnp.solve` (default ``"ippe_lm"``), so a white-box pipeline and the black-box one
+Exactly :func:`vbl_robust.pnp.solvers.solve` (default ``"ippe_lm"``), so a white-box pipeline and the black-box one
 compute the same positions and differ only in gradients.
 
 Backward (``grad="exact"``)
@@ -180,7 +180,7 @@ def pnp_position_torch(
             grad. An unbatched (4, 2) tensor gives B = 1.
         corners_3d: (4, 3) runway corners in the runway frame, metres (array or tensor; not differentiated).
         K: (3, 3) pinhole intrinsics (array or tensor; not differentiated).
-        method: forward solver, one of :data:`vbl_robust.pnp.SOLVERS` (same computation as ``solve``).
+        method: forward solver, one of :data:`vbl_robust.pnp.solvers.SOLVERS` (same computation as ``solve``).
         grad: ``"exact"`` (implicit gradient of the reprojection objective) or ``"bpnp"`` (BPnP's depth-weighted
             constraint, to measure its bias).
 

@@ -51,7 +51,7 @@ from typing import Any
 from ..analysis.readoff import main_rows, reads_trace
 from ..atomic import atomic_write
 from ..specs.campaign import FIGURES
-from ..store import ResultStore
+from ..store.core import ResultStore
 from .evidence import SAFETY_FIGURE, Evidence, evidence_of, section_evidence
 from .gallery import section_gallery
 from .html import esc, page

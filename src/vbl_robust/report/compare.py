@@ -29,7 +29,8 @@ from ..analysis.summary import columns
 from ..atomic import atomic_write
 from ..specs.campaign import CampaignSpec
 from ..stats import Paired, Rate, paired
-from ..store import JobRow, ResultStore
+from ..store.core import ResultStore
+from ..store.rows import JobRow
 
 __all__ = ["ALL", "ANY", "Change", "Comparison", "PairedLine", "check_alike", "compare_html", "line_order",
            "paired_comparison"]

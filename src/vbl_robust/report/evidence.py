@@ -30,11 +30,11 @@ import numpy as np
 from ..analysis import breach as br
 from ..atomic import atomic_write
 from ..constants import BreachKind, Verdict
-from ..search import direct_family
+from ..search.api import direct_family
 from ..specs.kinds import SourceKind
 from ..stats import LEVEL, Rate
-from ..store import JobRow
 from ..store.payloads import Nominal, WorstPayload, WorstPoint
+from ..store.rows import JobRow
 from . import figures as F
 from .figure_style import param_name
 from .html import esc, fmt_num, folded, table

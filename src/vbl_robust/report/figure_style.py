@@ -32,7 +32,7 @@ STYLE: dict[str, dict[str, Any]] = {
     REFERENCE: {"color": "black", "marker": "", "label": "grid (true worst case)", "linestyle": "--"},
     ANY_METHOD: {"color": "#7f7f7f", "marker": "", "label": "any method (grid included)", "linestyle": ":"},
 }
-#: The display name of each perturbation parameter (:data:`vbl_robust.perturb.PERTURBATIONS`), with its unit: the one
+#: The display name of each perturbation parameter (:data:`vbl_robust.perturb.registry.PERTURBATIONS`), with its unit: the one
 #: table every figure's axes and every table of the report take their names from (:func:`axis_label`,
 #: :func:`param_name`). A parameter missing here shows as its name with its unit.
 AXIS_LABELS = {
@@ -46,7 +46,7 @@ EPS_STYLE = {"color": "#d62728", "linestyle": ":", "linewidth": 1.2}
 
 def style(method: str) -> dict[str, Any]:
     """Plot style of a method (a grey default for unknown names); its label is the optimizer class's."""
-    from ..search import METHODS
+    from ..search.api import METHODS
 
     s = STYLE.get(method, {"color": "grey", "marker": "x"})
     label = s.get("label") or (METHODS[method].label if method in METHODS else method)

@@ -88,7 +88,7 @@ def _differs(ctx: Context, sample: Any, digests: dict[str, str]) -> str:
 
 def true_after(case: WorstCase, sample: Any) -> np.ndarray:
     """``(4, 2)`` the sample's true corners moved by the perturbation at θ* (its pixels)."""
-    from ..perturb import Perturbation
+    from ..perturb.compose import Perturbation
 
     theta = case.theta or {}
     if not theta:
@@ -106,7 +106,7 @@ def case_figure(case: WorstCase, sample: Any) -> Any:
     """The :func:`~vbl_robust.report.view_figure.worst_view` figure of ``case`` on its rebuilt ``sample``: the image
     perturbed at θ*, the corners predicted there and unperturbed (``ValueError``/``OSError`` when its pixels cannot
     be read)."""
-    from ..perturb import Perturbation
+    from ..perturb.compose import Perturbation
 
     image = np.asarray(sample.image)
     theta = case.theta or {}

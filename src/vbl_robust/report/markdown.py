@@ -33,7 +33,7 @@ from ..analysis.levels import ANY_METHOD, family_of, family_profile, rank_famili
 from ..analysis.summary import Summary, columns, summarize
 from ..specs.campaign import CampaignSpec
 from ..stats import Rate
-from ..store import ResultStore
+from ..store.core import ResultStore
 
 __all__ = ["compare_markdown", "families_markdown", "risk_markdown", "survival_markdown", "zones_markdown"]
 
@@ -84,7 +84,7 @@ def _unmeasured(run: str | Path, unit: str) -> list[str]:
 def _progress(run: str | Path) -> list[str]:
     """A line when the store holds fewer jobs than its last run planned — a run writing it now, or one stopped
     before its end — so a partial table is never read as the whole run; none otherwise."""
-    from ..store import RunStatus
+    from ..specs.kinds import RunStatus
 
     with ResultStore.open_existing(run) as store:
         runs = store.runs()

@@ -4,7 +4,7 @@ with its interval and the verdict counts, a figure of each image's p_fail with i
 from __future__ import annotations
 
 from ..analysis.risk import pooled_risk
-from ..store import JobStatus
+from ..specs.kinds import JobStatus
 from ..store.payloads import RiskPayload
 from . import figures as F
 from .html import esc, table

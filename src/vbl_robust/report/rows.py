@@ -16,8 +16,10 @@ import numpy as np
 from ..analysis.reference import reference_rows
 from ..atomic import atomic_write
 from ..specs.campaign import BoxSpec, CampaignSpec
-from ..store import JobRow, JobStatus, ResultStore, SampleRecord
+from ..specs.kinds import JobStatus
+from ..store.core import ResultStore
 from ..store.payloads import Nominal, WorstPayload
+from ..store.rows import JobRow, SampleRecord
 from .figure_style import method_order
 from .html import figure_png, img, img_file
 

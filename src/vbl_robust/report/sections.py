@@ -18,10 +18,10 @@ from ..analysis.reference import AgainstGrid, against_reference, grid_complete
 from ..analysis.summary import Summary, summarize
 from ..consent import DetectorKind
 from ..constants import FAILURE_REASONS, Verdict
-from ..search import NON_FINITE
+from ..search.evaluations import NON_FINITE
 from ..specs.campaign import range_text
-from ..specs.kinds import JobKind, Role
-from ..store import JobRow, JobStatus, RunProvenance
+from ..specs.kinds import JobKind, JobStatus, Role
+from ..store.rows import JobRow, RunProvenance
 from . import figures as F
 from .figure_style import method_order, style
 from .html import esc, fmt_num, folded, table
@@ -335,7 +335,7 @@ def section_families(ctx: Context) -> Section | None:
 
 
 def section_convergence(ctx: Context) -> Section | None:
-    from ..search import direct_family
+    from ..search.api import direct_family
 
     conv = convergence([r for r in ctx.main if r.method in direct_family()])
     if not conv:

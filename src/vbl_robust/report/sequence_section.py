@@ -10,8 +10,8 @@ approach the first run of at least ``sustain`` breached frames (a breach a filte
 from __future__ import annotations
 
 from ..constants import Verdict
-from ..store import JobRow
 from ..store.payloads import SequenceFacts, SequencePayload
+from ..store.rows import JobRow
 from .html import esc, table
 from .rows import Context, Section, theta_text
 from .sequence_figure import plot_errors_along_approach

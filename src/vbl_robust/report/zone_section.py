@@ -11,10 +11,11 @@ from typing import Any
 import numpy as np
 
 from ..campaigns.replay import JobZones, ReplayError, job_zones
-from ..search import METHODS
+from ..search.api import METHODS
 from ..search.zones import CLASSES, ZoneMap
 from ..specs.campaign import CampaignSpec
-from ..store import JobRow, JobStatus
+from ..specs.kinds import JobStatus
+from ..store.rows import JobRow
 from .figure_style import method_order, style
 from .html import esc, table
 from .rows import Context, Section, landscape_grids, landscape_runs, where

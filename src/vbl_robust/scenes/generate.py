@@ -96,7 +96,7 @@ def generate(
         debug: render a black world with a flat white runway (for pixel checks).
 
     Returns:
-        ``n`` :class:`vbl_robust.data.Sample` with ``corners_2d = project(corners_3d, R, position, K)`` exactly
+        ``n`` :class:`vbl_robust.data.sample.Sample` with ``corners_2d = project(corners_3d, R, position, K)`` exactly
         (floats) and ``meta`` keys ``envelope, airport, runway, runway_azimuth_deg, runway_length_m,
         runway_width_m, yaw, pitch, roll`` (LARD conventions: true heading, 90 + pitch, roll right wing down) plus
         ``distance_m, lateral_angle_deg, vertical_angle_deg`` (as sampled), ``ltp_lat, ltp_lon, ltp_alt``,

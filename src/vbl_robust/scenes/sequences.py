@@ -203,7 +203,7 @@ def generate_sequences(
         debug: black world with a flat white runway.
 
     Returns:
-        ``n`` :class:`~vbl_robust.data.ApproachSequence` with ``id = "synth_q<seed>_<i>"``, ``times = f / rate_hz``;
+        ``n`` :class:`~vbl_robust.data.sequence.ApproachSequence` with ``id = "synth_q<seed>_<i>"``, ``times = f / rate_hz``;
         frame samples ``"<id>_<f>"`` carry the :func:`.generate` meta keys (``envelope`` = the LARD envelope of the
         frame's distance, see :func:`envelope_of``) plus ``sequence_id``, ``frame_index``, ``time_s``,
         ``glide_path_deg``, ``ground_speed_mps``.
@@ -247,7 +247,7 @@ def write_sequences(out_dir: str | Path, n: int, frames: int, rate_hz: float, se
     """Generate ``n`` sequences (:func:`generate_sequences`) and write them as one LARD V2 dataset.
 
     Images are ``images/<sequence id>_<frame>.<fmt>``; the metadata CSV carries the sequence columns
-    ``sequence_id, frame_index, time_s`` (:data:`vbl_robust.data.SEQUENCE_COLUMNS`), so
+    ``sequence_id, frame_index, time_s`` (:data:`vbl_robust.data.lard.SEQUENCE_COLUMNS`), so
     :func:`vbl_robust.data.read_lard_sequences` gives the sequences back. Returns the metadata CSV path.
     """
     sequences = generate_sequences(n, frames, rate_hz, seed, **generate_kwargs)

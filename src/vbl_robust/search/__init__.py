@@ -1,16 +1,16 @@
 """Searches that maximise a batched function over a :class:`~vbl_robust.space.ParameterBox`.
 
 They know nothing of images: ``f`` maps ``(n, d)`` real-unit points to ``(n,)`` values, or to
-:class:`Evaluations` (values and a failure reason per point: a failed evaluation is a recorded state, counted
-per reason in :attr:`SearchResult.failures`). Every method has the
-same ask/tell interface (:class:`Optimizer`) and is registered by name in :data:`METHODS`:
-``"georobust"``, ``"direct"``, ``"direct-l"`` (the DIRECT family), ``"georobust-a"`` (GeoRobust whose division
-follows where the objective varies, :mod:`~vbl_robust.search.adaptive`), ``"georobust-av"`` (the same, plus the
-box's vertices in its first batch), ``"random"``, ``"sobol"``, ``"apgd"``
-(needs a torch-differentiable ``f``) and ``"grid"`` (ground truth in low dimension).
+:class:`~.evaluations.Evaluations` (values and a failure reason per point: a failed evaluation is a recorded
+state, counted per reason in :attr:`~.result.SearchResult.failures`). Every method has the same ask/tell
+interface (:class:`~.base.Optimizer`) and is registered by name in :data:`METHODS`: ``"georobust"``,
+``"direct"``, ``"direct-l"`` (the DIRECT family), ``"georobust-a"`` (GeoRobust whose division follows where the
+objective varies, :mod:`~vbl_robust.search.adaptive`), ``"georobust-av"`` (the same, plus the box's vertices in
+its first batch), ``"random"``, ``"sobol"``, ``"apgd"`` (needs a torch-differentiable ``f``) and ``"grid"``
+(ground truth in low dimension).
 
-Every evaluation is stamped with its completion time; :func:`at_budget` reads a result at any smaller time or
-evaluation budget off those stamps (one run of an *anytime* method answers every smaller budget, see
+Every evaluation is stamped with its completion time; :func:`~.anytime.at_budget` reads a result at any smaller
+time or evaluation budget off those stamps (one run of an *anytime* method answers every smaller budget, see
 :mod:`~vbl_robust.search.anytime`).
 
 >>> import numpy as np
@@ -21,46 +21,7 @@ evaluation budget off those stamps (one run of an *anytime* method answers every
 ('budget_exhausted', True, True)
 """
 
-from ..constants import Verdict
-from .adaptive import AdaptiveGeoRobust, AdaptiveGeoRobustV
-from .anytime import at_budget
-from .apgd import APGD, apgd_checkpoints
-from .api import METHODS, anytime_methods, direct_family, make_optimizer, maximize, method_options
-from .base import CLOCKS, Optimizer, use_clock
-from .cells import Cells
-from .direct import Direct, DirectL, GeoRobust
-from .evaluations import NON_FINITE, Evaluations
-from .po import potentially_optimal
-from .result import SearchResult, Status, TraceRow
-from .sampling import GridSearch, RandomSearch, SobolSearch
+from .api import METHODS, maximize
+from .direct import GeoRobust
 
-__all__ = [
-    "APGD",
-    "CLOCKS",
-    "AdaptiveGeoRobust",
-    "AdaptiveGeoRobustV",
-    "Cells",
-    "METHODS",
-    "NON_FINITE",
-    "Direct",
-    "DirectL",
-    "Evaluations",
-    "GeoRobust",
-    "GridSearch",
-    "Optimizer",
-    "RandomSearch",
-    "SearchResult",
-    "SobolSearch",
-    "Status",
-    "TraceRow",
-    "Verdict",
-    "anytime_methods",
-    "apgd_checkpoints",
-    "direct_family",
-    "at_budget",
-    "make_optimizer",
-    "maximize",
-    "use_clock",
-    "method_options",
-    "potentially_optimal",
-]
+__all__ = ["METHODS", "GeoRobust", "maximize"]

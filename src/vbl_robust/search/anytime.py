@@ -14,7 +14,7 @@ rectangles whose children all fit), so its last batch can differ.
 
 >>> import numpy as np
 >>> from vbl_robust.space import ParameterBox
->>> from vbl_robust.search import maximize
+>>> from vbl_robust.search.api import maximize
 >>> r = maximize(lambda x: -(x[:, 0] - 0.3) ** 2, ParameterBox({"a": (-1, 1)}), "random", max_evals=100)
 >>> r20 = at_budget(r, evals=20)
 >>> r20.nfev, bool(np.array_equal(r20.xs, r.xs[:20])), r20.status.value

@@ -11,7 +11,7 @@ sized against the same deadlines, the run's prefix at a mark is exactly the run 
 marks below it) would have made, and one run answers every time budget.
 Breaches: with ``stop_above`` (and no time budget) a batch is evaluated in chunks of ``chunk_size`` points in
 the order the method asks for them, and the search stops after the chunk holding its first breach; only the
-points up to that breach are recorded (:meth:`~vbl_robust.search.Optimizer.tell`), so the result does not depend
+points up to that breach are recorded (:meth:`~vbl_robust.search.base.Optimizer.tell`), so the result does not depend
 on the chunk size — the chunk size only bounds the evaluations computed beyond the breach (on a CPU a point costs
 about as much in a small chunk as in a large one: small chunks; on a GPU a whole batch costs about as much as one
 point: one chunk per batch).
@@ -119,7 +119,7 @@ def maximize(
             depending on its own row only (the gradient is taken of the sum). The pipeline's objectives
             (:class:`vbl_robust.Objective`) are both kinds: the type of θ picks their path. Either kind of ``f``
             may instead return
-            :class:`~vbl_robust.search.Evaluations` (the values as above, and a failure reason per point, ``""``
+            :class:`~vbl_robust.search.evaluations.Evaluations` (the values as above, and a failure reason per point, ``""``
             = success): the search uses the values, the result counts the failures per reason. NaN/inf values
             are failed evaluations, never errors.
         box: the search space.

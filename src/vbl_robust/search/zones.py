@@ -1,6 +1,6 @@
 """Vulnerability zones: which parts of Θ a search showed to breach, which it ruled out, which it left undecided.
 
-A search that keeps a cover of its box (the DIRECT family, the grid: :meth:`~vbl_robust.search.Optimizer.cells`)
+A search that keeps a cover of its box (the DIRECT family, the grid: :meth:`~vbl_robust.search.base.Optimizer.cells`)
 ends with cells that tile Θ, each with the value ``f_j`` at one evaluated point and a radius ``r_j`` around it.
 Each cell is a zone of one class, against the threshold ε (ε_safe = 1000 m by default):
 
@@ -27,7 +27,7 @@ box, largest first) and reclassifies.
 
 >>> import numpy as np
 >>> from vbl_robust.space import ParameterBox
->>> from vbl_robust.search import make_optimizer
+>>> from vbl_robust.search.api import make_optimizer
 >>> box = ParameterBox({"roll_deg": (-10, 10)})
 >>> f = lambda x: 2000 - 500 * np.abs(x[:, 0] - 3)  # breaches on (1, 5); Lipschitz constant 500
 >>> opt = make_optimizer("georobust", box, max_evals=60)
@@ -109,7 +109,7 @@ class ZoneMap:
         lipschitz, norm: the given constant and its norm (``basis == "sound"``).
         estimate: K̂ in unit-cube coordinates (``basis == "estimate"``).
         method: the search that made the cells.
-        cells: the classified :class:`~vbl_robust.search.Cells` (for :meth:`reclassify` and refinement).
+        cells: the classified :class:`~vbl_robust.search.cells.Cells` (for :meth:`reclassify` and refinement).
     """
 
     box: ParameterBox
@@ -179,7 +179,7 @@ def zones(cells: Cells, threshold: float = EPS_SAFE_M, *, lipschitz: float | Seq
     """Classify the cells of a cover into breached / undecided / ruled-out zones (see the module docstring).
 
     Args:
-        cells: from :meth:`Optimizer.cells <vbl_robust.search.Optimizer.cells>` (or :func:`replay`).
+        cells: from :meth:`Optimizer.cells <vbl_robust.search.base.Optimizer.cells>` (or :func:`replay`).
         threshold: ε; a zone breaches when its value is ``> threshold``.
         lipschitz: a *given* Lipschitz constant (real units): a number (with ``norm``) or one per parameter. The
             classification is then sound under that assumption.
@@ -300,9 +300,9 @@ def refine_zones(objective: Callable[[np.ndarray], Any], zone_map: ZoneMap, budg
     least as large), so zones the estimate had ruled out may come back undecided.
 
     ``objective``: batched, ``(n, d)`` real-unit points → ``(n,)`` values or
-    :class:`~vbl_robust.search.Evaluations` (as for :func:`vbl_robust.search.maximize`).
+    :class:`~vbl_robust.search.evaluations.Evaluations` (as for :func:`vbl_robust.search.maximize`).
     """
-    from . import METHODS, make_optimizer
+    from .api import METHODS, make_optimizer
 
     if not isinstance(budget, int | np.integer) or isinstance(budget, bool) or budget < 0:
         raise ValueError(f"refine_zones: budget must be an integer >= 0, got {budget!r}")

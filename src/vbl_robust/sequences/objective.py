@@ -4,7 +4,7 @@ One θ is held over the whole sequence (a steady bank, a lasting contrast change
 its own :class:`~vbl_robust.pipeline.Objective` (perturb → detect → select → PnP → error, failures count
 ``penalty_m``), and the θ row's value is the error sustained over ``sustain`` consecutive frames
 (:func:`.sustain.sustained`). The contract is the frame objective's (:mod:`vbl_robust.pipeline`):
-``objective(theta (n, d))`` returns :class:`~vbl_robust.search.Evaluations` and :meth:`SequenceObjective.evaluate`
+``objective(theta (n, d))`` returns :class:`~vbl_robust.search.evaluations.Evaluations` and :meth:`SequenceObjective.evaluate`
 the full :class:`SequenceRecord`; a torch θ gives values differentiable w.r.t. it (APGD), through each frame's
 differentiable path.
 
@@ -35,7 +35,7 @@ import torch
 from vbl_robust.constants import CONF_THRESHOLD, EPS_SAFE_M, PENALTY_M
 from vbl_robust.data.sample import Sample
 from vbl_robust.data.sequence import ApproachSequence
-from vbl_robust.perturb import PERTURBATIONS
+from vbl_robust.perturb.registry import PERTURBATIONS
 from vbl_robust.pipeline import EvalRecord, Objective, detector_name
 from vbl_robust.search.evaluations import Evaluations
 from vbl_robust.space import ParameterBox
@@ -151,7 +151,7 @@ class SequenceObjective:
     """``S_k(θ)`` of one approach sequence: ``objective(theta (n, d)) -> Evaluations`` (metres).
 
     Args:
-        sequence: an :class:`~vbl_robust.data.ApproachSequence` (or a list of samples in flight order).
+        sequence: an :class:`~vbl_robust.data.sequence.ApproachSequence` (or a list of samples in flight order).
         detector, box, pnp, conf_threshold, penalty_m, batch_size, resolution, pnp_grad: as for
             :class:`~vbl_robust.pipeline.Objective` (one per frame); ``batch_size`` also bounds the rows of one
             frame-batched detector call.
@@ -160,7 +160,8 @@ class SequenceObjective:
             size and camera (module docstring); False: call it per frame.
 
     >>> import vbl_robust as vr                                                          # doctest: +SKIP
-    >>> seq = vr.scenes.generate_sequences(1, 20, 10.0, seed=0)[0]                       # doctest: +SKIP
+    >>> from vbl_robust.scenes.sequences import generate_sequences                       # doctest: +SKIP
+    >>> seq = generate_sequences(1, 20, 10.0, seed=0)[0]                                 # doctest: +SKIP
     >>> f = SequenceObjective(seq, vr.OracleDetector(), box, sustain=5)                  # doctest: +SKIP
     >>> vr.search.maximize(f, box, "georobust", max_evals=100).fun                       # doctest: +SKIP
     """

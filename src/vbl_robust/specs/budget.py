@@ -18,7 +18,7 @@ class Budget:
     size of the worst error itself is measured (runtime experiments, convergence).
 
     ``read_seconds`` / ``read_evals``: smaller budgets *read off* this run's stamped evaluations instead of run
-    one by one (for anytime methods, :func:`vbl_robust.search.at_budget`): the run goes on until ``max_seconds``
+    one by one (for anytime methods, :func:`vbl_robust.search.anytime.at_budget`): the run goes on until ``max_seconds``
     has passed *and* ``max(read_evals)`` evaluations are done, sizing its chunks against each of
     ``read_seconds``; the report shows one result per read budget (:meth:`read_budgets`). Empty for an ordinary
     budget (and then absent from :meth:`to_dict`, so the keys of jobs without them do not change).

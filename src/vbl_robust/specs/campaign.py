@@ -292,9 +292,9 @@ class CampaignSpec:
         the setting and its value (a box outside a perturbation family's domain, an unknown PnP solver or search
         method, a method given twice in a block, a Lipschitz constant of the wrong length). Without this such a
         campaign would run and record every job as failed — "every image unsafe" from a typing error."""
-        from ..perturb import Perturbation
-        from ..pnp import SOLVERS
-        from ..search import METHODS
+        from ..perturb.compose import Perturbation
+        from ..pnp.solvers import SOLVERS
+        from ..search.api import METHODS
         from ..search.bounds import check_lipschitz
 
         if self.settings.pnp not in SOLVERS:
@@ -322,7 +322,7 @@ class CampaignSpec:
                 except ValueError as exc:
                     raise ValueError(f"box {box.label}: {exc}") from None
             if "grid" in blk.methods:  # a lattice beyond MAX_GRID_POINTS is refused here, not as failed jobs
-                from ..search import make_optimizer
+                from ..search.api import make_optimizer
 
                 for box in blk.boxes:
                     for budget in blk.budgets:
@@ -401,7 +401,7 @@ class CampaignSpec:
         when one option set serves several experiments), or a method rejects its options (checked here, on each
         block's first box, so that a campaign never starts with options its searches would refuse). The options
         are part of the job keys: a run with other options never resumes one without them."""
-        from ..search import make_optimizer
+        from ..search.api import make_optimizer
 
         blocks, used = [], set()
         for blk in self.blocks:

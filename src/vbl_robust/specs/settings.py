@@ -32,15 +32,15 @@ class PipelineSettings:
         eps_safe_m: the safety threshold ε_safe: a worst error above it is a breach (paper: 1000 m).
         penalty_m: the error a failure of the pipeline counts (no detection, low confidence, PnP failed; 5000 m).
         conf_threshold: τ_conf, the confidence below which a detection is not used (0.25).
-        pnp: the PnP solver (:data:`vbl_robust.pnp.SOLVERS`).
+        pnp: the PnP solver (:data:`vbl_robust.pnp.solvers.SOLVERS`).
         lipschitz: optional Lipschitz constant of L in real units (m per unit of each parameter, or one number for
             the Euclidean norm) — with it, searches that keep a cover of the box can *certify* a sample.
-        clock: what time budgets are measured on (:data:`vbl_robust.search.CLOCKS`): ``"wall"``, or ``"process"``
+        clock: what time budgets are measured on (:data:`vbl_robust.search.base.CLOCKS`): ``"wall"``, or ``"process"``
             (CPU seconds of the evaluating process, which other work on the machine does not move).
         sustain: ``None`` — every sample is one image and a search job maximises its error; an integer ``k`` — a
-            *sequence campaign*: every sample is an :class:`~vbl_robust.data.ApproachSequence`, one θ is held over
+            *sequence campaign*: every sample is an :class:`~vbl_robust.data.sequence.ApproachSequence`, one θ is held over
             its frames and a search job maximises the error sustained over ``k`` consecutive frames
-            (:class:`~vbl_robust.sequences.SequenceObjective`).
+            (:class:`~vbl_robust.sequences.objective.SequenceObjective`).
         monitor_px: a runtime monitor of the pipeline: poses whose PnP reprojection residual is above this many
             pixels become flagged failures (:class:`~vbl_robust.pipeline.Objective` ``max_reproj_px``).
         monitor_sigma_m: a runtime monitor for a detector that says how sure it is: poses whose corners' σ,
@@ -59,7 +59,7 @@ class PipelineSettings:
     monitor_sigma_m: float | None = None
 
     def __post_init__(self) -> None:
-        from ..search import CLOCKS
+        from ..search.base import CLOCKS
 
         if self.clock not in CLOCKS:
             raise ValueError(f"CampaignSpec: clock must be one of {sorted(CLOCKS)}, got {self.clock!r}")

@@ -16,48 +16,7 @@ Modules, each importing only those above it:
 - :mod:`.merge` — :func:`merge_runs`: parts of one campaign computed elsewhere joined into one store.
 """
 
-from .core import PACKED, STORE, ResultStore
-from .lock import WriterLock
-from .merge import MergedSource, MergeReport, merge_runs, merge_store, store_file
-from .pack import pack_store, restore_store
-from .rows import (
-    Corners,
-    JobRow,
-    JobStatus,
-    Points,
-    RunProvenance,
-    RunRecord,
-    RunStatus,
-    SampleRecord,
-    decode_points,
-    encode_points,
-    now_iso,
-)
-from .schema import JOB_COLUMNS, SCHEMA_VERSION
+from .core import ResultStore
+from .merge import merge_runs
 
-__all__ = [
-    "JOB_COLUMNS",
-    "PACKED",
-    "SCHEMA_VERSION",
-    "STORE",
-    "Corners",
-    "JobRow",
-    "JobStatus",
-    "MergeReport",
-    "MergedSource",
-    "Points",
-    "ResultStore",
-    "RunProvenance",
-    "RunRecord",
-    "RunStatus",
-    "SampleRecord",
-    "WriterLock",
-    "decode_points",
-    "encode_points",
-    "merge_runs",
-    "merge_store",
-    "now_iso",
-    "pack_store",
-    "restore_store",
-    "store_file",
-]
+__all__ = ["ResultStore", "merge_runs"]

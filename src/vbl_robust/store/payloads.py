@@ -167,7 +167,7 @@ class SequenceFacts:
     @classmethod
     def of_summary(cls, summary: Mapping[str, Any], errors_m: Sequence[float | None],
                    reasons: Sequence[str]) -> SequenceFacts:
-        """From a :meth:`~vbl_robust.sequences.SequenceRecord.summary` (θ: its keys that name no fact)."""
+        """From a :meth:`~vbl_robust.sequences.objective.SequenceRecord.summary` (θ: its keys that name no fact)."""
         head = ("sequence_id", "sustain", "frames")
         theta = {k: v for k, v in summary.items() if k not in (*head, *_FACTS, "errors_m", "reasons")}
         return cls(*(summary[k] for k in head), theta, *(summary.get(k) for k in _FACTS), tuple(errors_m),
