@@ -316,8 +316,8 @@ def select(detections: Sequence[Detections] | Detections, conf_threshold: float 
 
     >>> d = Detections(np.zeros((2, 4)), np.array([0.3, 0.9]), np.stack([np.zeros((4, 2)), np.ones((4, 2))]))
     >>> s = select([d, Detections.empty()])
-    >>> s.ok.tolist(), s.reason, s.keypoints[0, 0].tolist()
-    ([True, False], ('', 'no_detection'), [1.0, 1.0])
+    >>> s.ok.tolist(), [str(r) for r in s.reason], s.keypoints[0, 0].tolist()
+    ([True, False], ['', 'no_detection'], [1.0, 1.0])
     """
     if not (0.0 <= float(conf_threshold) <= 1.0):
         raise ValueError(f"select: conf_threshold must be in [0, 1], got {conf_threshold}")
