@@ -7,9 +7,14 @@ import doctest
 import importlib
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src"
+#: NumPy's default print options: the examples print arrays as a reader's fresh interpreter does (ultralytics, once
+#: imported by another test, sets a float formatter of its own).
+NUMPY_DEFAULTS = {"precision": 8, "threshold": 1000, "edgeitems": 3, "linewidth": 75, "suppress": False,
+                  "nanstr": "nan", "infstr": "inf", "formatter": None, "sign": "-", "floatmode": "maxprec"}
 #: Modules whose examples another test runs already.
 RUN_ELSEWHERE = {"vbl_robust.pnp.differentiable", "vbl_robust.pnp.ippe"}
 
@@ -34,6 +39,7 @@ def test_the_docstrings_hold_examples():
 @pytest.mark.parametrize("name", MODULES)
 def test_the_examples_of_a_docstring_run(name):
     module = importlib.import_module(name)
-    result = doctest.testmod(module, report=False, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    with np.printoptions(**NUMPY_DEFAULTS):
+        result = doctest.testmod(module, report=False, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
     assert result.failed == 0, f"{result.failed} of {result.attempted} example(s) of {name} failed (run " \
                                f"`python -m doctest -v` on it)"
