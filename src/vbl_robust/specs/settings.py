@@ -66,10 +66,10 @@ class PipelineSettings:
         if self.sustain is not None and (isinstance(self.sustain, bool) or not isinstance(self.sustain, int)
                                          or self.sustain < 1):
             raise ValueError(f"sustain: need an integer >= 1 (frames), got {self.sustain!r}")
-        for value, option in ((self.monitor_px, "--monitor-residual"), (self.monitor_sigma_m, "--monitor-sigma")):
+        for value, option, unit in ((self.monitor_px, "--monitor-residual", "pixels"),
+                                    (self.monitor_sigma_m, "--monitor-sigma", "metres")):
             if value is None:
                 continue
-            unit = "pixels" if option == "--monitor-residual" else "metres"
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{option} must be a finite number of {unit} > 0, got {value}")
             if self.sustain is not None:
